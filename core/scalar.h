@@ -1,0 +1,131 @@
+// Scalars for scalar-generic code: plain doubles and Ceres Jets, nested.
+//
+// Everything in dvm that is differentiated is written once as a template on the
+// scalar type T and evaluated with T = double, T = ceres::Jet<double, N> (first
+// derivatives) and T = ceres::Jet<ceres::Jet<double, N>, M> (second derivatives,
+// e.g. the Jacobian of the discrete Euler-Lagrange residual, which already holds a
+// first derivative of L_d).
+//
+// Ceres only defines arithmetic between a Jet<T, N> and its own scalar T, so with
+// nested Jets an expression such as `0.5 * v * v` does not compile: 0.5 is a
+// double, not a Jet<double, N>. This header closes that gap, so that a Lagrangian
+// can be written with ordinary numeric literals and double parameters:
+//   - arithmetic (+ - * /) between any Jet and any arithmetic type;
+//   - Eigen ScalarBinaryOpTraits so that Eigen expressions may mix a matrix of
+//     (nested) Jets with a double scalar;
+//   - dvm::constant<T>(c) builds the constant c as a scalar of type T;
+//   - dvm::value(x) reads the double at the bottom of a nested Jet.
+#pragma once
+
+#include <ceres/jet.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <type_traits>
+
+namespace dvm {
+
+template <class T>
+struct is_jet : std::false_type {};
+template <class T, int N>
+struct is_jet<ceres::Jet<T, N>> : std::true_type {};
+template <class T>
+inline constexpr bool is_jet_v = is_jet<T>::value;
+
+// Nesting depth: 0 for double, 1 for Jet<double, N>, 2 for Jet<Jet<double,N>,M>.
+template <class T>
+struct jet_depth : std::integral_constant<int, 0> {};
+template <class T, int N>
+struct jet_depth<ceres::Jet<T, N>>
+    : std::integral_constant<int, 1 + jet_depth<T>::value> {};
+
+// The constant c as a scalar of type T (all derivative parts zero).
+template <class T>
+inline T constant(double c) {
+  if constexpr (is_jet_v<T>) {
+    return T(constant<typename T::Scalar>(c));
+  } else {
+    return static_cast<T>(c);
+  }
+}
+
+// The double value at the bottom of a (possibly nested) Jet.
+template <class T>
+inline double value(const T& x) {
+  if constexpr (is_jet_v<T>) {
+    return value(x.a);
+  } else {
+    return static_cast<double>(x);
+  }
+}
+
+template <class T, int N>
+using Vec = Eigen::Matrix<T, N, 1>;
+template <class T, int R, int C>
+using Mat = Eigen::Matrix<T, R, C>;
+
+// Element-wise double values of a vector of scalars.
+template <class T, int N>
+inline Vec<double, N> values(const Vec<T, N>& x) {
+  Vec<double, N> out(x.rows());
+  for (int i = 0; i < x.rows(); ++i) out[i] = value(x[i]);
+  return out;
+}
+
+// Cast a double vector to scalars of type T (constants).
+template <class T, int N>
+inline Vec<T, N> constants(const Vec<double, N>& x) {
+  Vec<T, N> out(x.rows());
+  for (int i = 0; i < x.rows(); ++i) out[i] = constant<T>(x[i]);
+  return out;
+}
+
+// Infinity norm of the double values (used for convergence tests on any T).
+template <class Derived>
+inline double max_abs(const Eigen::MatrixBase<Derived>& x) {
+  double m = 0.0;
+  for (Eigen::Index j = 0; j < x.cols(); ++j)
+    for (Eigen::Index i = 0; i < x.rows(); ++i)
+      m = std::fmax(m, std::fabs(value(x(i, j))));
+  return m;
+}
+
+}  // namespace dvm
+
+// Mixed Jet / arithmetic operators, found by argument-dependent lookup on Jet.
+// Ceres already provides Jet<T,N> op T; these cover every other arithmetic type
+// (in particular double against a nested Jet) by converting it to T first.
+namespace ceres {
+
+#define DVM_JET_SCALAR_OPERATOR(op)                                            \
+  template <class T, int N, class S,                                           \
+            std::enable_if_t<std::is_arithmetic_v<S> && !std::is_same_v<S, T>, \
+                             int> = 0>                                         \
+  inline Jet<T, N> operator op(const Jet<T, N>& f, S s) {                      \
+    return f op dvm::constant<T>(static_cast<double>(s));                      \
+  }                                                                            \
+  template <class T, int N, class S,                                           \
+            std::enable_if_t<std::is_arithmetic_v<S> && !std::is_same_v<S, T>, \
+                             int> = 0>                                         \
+  inline Jet<T, N> operator op(S s, const Jet<T, N>& f) {                      \
+    return dvm::constant<T>(static_cast<double>(s)) op f;                      \
+  }
+DVM_JET_SCALAR_OPERATOR(+)
+DVM_JET_SCALAR_OPERATOR(-)
+DVM_JET_SCALAR_OPERATOR(*)
+DVM_JET_SCALAR_OPERATOR(/)
+#undef DVM_JET_SCALAR_OPERATOR
+
+}  // namespace ceres
+
+// Let Eigen expressions combine matrices of nested Jets with double scalars.
+namespace Eigen {
+template <class T, int N, int M, class BinaryOp>
+struct ScalarBinaryOpTraits<ceres::Jet<ceres::Jet<T, N>, M>, double, BinaryOp> {
+  using ReturnType = ceres::Jet<ceres::Jet<T, N>, M>;
+};
+template <class T, int N, int M, class BinaryOp>
+struct ScalarBinaryOpTraits<double, ceres::Jet<ceres::Jet<T, N>, M>, BinaryOp> {
+  using ReturnType = ceres::Jet<ceres::Jet<T, N>, M>;
+};
+}  // namespace Eigen

@@ -1,0 +1,88 @@
+// The integrate loop for one-step methods in (q, p) form.
+//
+// A step type S provides `static constexpr int N`, `double step_size() const` and
+//   StepSummary step(const V& q, const V& p, V& dq, V& dp) const
+// returning the increments; dq carries the starting guess on entry. The loop
+//   - starts the first step from dq = h v with v from the inverse Legendre map
+//     (passed in by the caller), later steps from the linear extrapolation
+//     2 dq_{k-1} - dq_{k-2} of the previous increments (error O(h^3));
+//   - accumulates q and p with compensated (Kahan) summation, so that round-off
+//     does not grow with the number of steps (DESIGN.md, "Speed");
+//   - computes t_k = t_0 + k h by multiplication, never by summation;
+//   - stops at the first step that fails and reports it, never passing a failed
+//     step on.
+// The observer is called as observer(k, t_k, q_k, p_k, summary_of_step_k) after
+// every completed step (k >= 1); it is a template parameter, so the loop has no
+// virtual call per step.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "solvers/newton.h"
+
+namespace dvm {
+
+// Compensated sum of vectors (Kahan-Babuska): sum + c carries the exact total to
+// about twice working precision.
+template <int N>
+struct CompensatedVector {
+  Vec<double, N> sum, c;
+  explicit CompensatedVector(const Vec<double, N>& start) : sum(start), c(Vec<double, N>::Zero(start.rows())) {}
+  void add(const Vec<double, N>& x) {
+    for (int i = 0; i < sum.rows(); ++i) {
+      const double y = x[i] - c[i];
+      const double t = sum[i] + y;
+      c[i] = (t - sum[i]) - y;
+      sum[i] = t;
+    }
+  }
+};
+
+struct RunSummary {
+  std::int64_t steps_done = 0;
+  bool failed = false;
+  std::int64_t failed_step = -1;  // index k of the step k -> k+1 that failed
+  double failed_time = NAN;       // t_k at the start of that step
+  StepSummary failure;            // the failed step's summary
+  std::int64_t solver_iterations = 0;
+  int max_step_iterations = 0;
+};
+
+template <class S, class Observer>
+RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<double, S::N>& p,
+                     const Vec<double, S::N>& v0, std::int64_t steps, Observer&& observer) {
+  constexpr int N = S::N;
+  using V = Vec<double, N>;
+  const double h = stepper.step_size();
+  CompensatedVector<N> Q(q), P(p);
+  V dq = h * v0, dq_prev = dq, dq_prev2 = dq, dp;
+  RunSummary run;
+  for (std::int64_t k = 0; k < steps; ++k) {
+    if (k >= 2)
+      dq = 2.0 * dq_prev - dq_prev2;
+    else if (k == 1)
+      dq = dq_prev;
+    const StepSummary s = stepper.step(Q.sum, P.sum, dq, dp);
+    run.solver_iterations += s.iterations;
+    if (s.iterations > run.max_step_iterations) run.max_step_iterations = s.iterations;
+    if (!s.converged) {
+      run.failed = true;
+      run.failed_step = k;
+      run.failed_time = t0 + static_cast<double>(k) * h;
+      run.failure = s;
+      break;
+    }
+    Q.add(dq);
+    P.add(dp);
+    dq_prev2 = dq_prev;
+    dq_prev = dq;
+    run.steps_done = k + 1;
+    observer(k + 1, t0 + static_cast<double>(k + 1) * h, Q.sum, P.sum, s);
+  }
+  q = Q.sum;
+  p = P.sum;
+  return run;
+}
+
+}  // namespace dvm

@@ -1,0 +1,144 @@
+// Solving the small fixed-size nonlinear systems of a step, F(x) = 0, x in R^N.
+//
+// F is a functor `template <class T> bool operator()(const T* x, T* r) const`, as
+// Ceres' autodiff expects; its Jacobian comes from ceres::Jet. Two solvers:
+//   newton  Newton's method, J dx = -F, one Jacobian evaluation per iteration;
+//   tiny    ceres::TinySolver (Levenberg-Marquardt on the normal equations).
+// Both report a StepSummary. Convergence is judged on the residual itself,
+// |F(x)|_inf <= residual_tolerance * scale, with `scale` the size of the terms that
+// make up F (given by the caller); a solve that stalls above that is accepted only
+// if its residual is below accept_tolerance * scale. TinySolver cannot report a
+// failure itself (its Status has no failure value), so its result is re-evaluated
+// and checked here.
+#pragma once
+
+#include <ceres/jet.h>
+#include <ceres/tiny_solver.h>
+#include <ceres/tiny_solver_autodiff_function.h>
+
+#include <cmath>
+#include <string>
+
+#include "core/dense_solve.h"
+#include "core/scalar.h"
+
+namespace dvm {
+
+enum class SolverKind { newton, tiny };
+
+inline const char* to_string(SolverKind k) { return k == SolverKind::newton ? "newton" : "tiny"; }
+
+struct StepOptions {
+  SolverKind solver = SolverKind::newton;
+  int max_iterations = 25;
+  // converged when |F|_inf <= residual_tolerance * scale
+  double residual_tolerance = 1e-13;
+  // a solve whose Newton updates have stalled at |dx| <= stall_tolerance |x| is
+  // accepted when |F|_inf <= accept_tolerance * scale
+  double stall_tolerance = 1e-15;
+  double accept_tolerance = 1e-10;
+  // added to the scale, so that a state at rest (all terms zero) can converge
+  double absolute_floor = 1e-300;
+};
+
+struct StepSummary {
+  bool converged = false;
+  int iterations = 0;     // Jacobian evaluations
+  double residual = NAN;  // |F|_inf at the returned x
+  double scale = NAN;     // the scale the residual was judged against
+  std::string message;    // why a solve failed
+};
+
+// Newton's method from x (updated in place). `scale_of(x, J)` gives the scale of
+// the residual terms at x.
+template <int N, class F, class Scale>
+StepSummary solve_newton(const F& f, Vec<double, N>& x, const StepOptions& opt, const Scale& scale_of) {
+  using D = ceres::Jet<double, N>;
+  StepSummary s;
+  Vec<D, N> xd, rd;
+  Vec<double, N> r;
+  Mat<double, N, N> J;
+  double dxn = INFINITY;
+  for (int it = 0; it < opt.max_iterations; ++it) {
+    for (int i = 0; i < N; ++i) xd[i] = D(x[i], i);
+    f(xd.data(), rd.data());
+    for (int i = 0; i < N; ++i) {
+      r[i] = rd[i].a;
+      J.row(i) = rd[i].v.transpose();
+    }
+    s.iterations = it + 1;
+    s.residual = max_abs(r);
+    s.scale = scale_of(x, J) + opt.absolute_floor;
+    if (!std::isfinite(s.residual) || !std::isfinite(max_abs(J))) {
+      s.message = "non-finite residual or Jacobian";
+      return s;
+    }
+    if (s.residual <= opt.residual_tolerance * s.scale) {
+      s.converged = true;
+      return s;
+    }
+    if (dxn <= opt.stall_tolerance * max_abs(x)) {
+      s.converged = s.residual <= opt.accept_tolerance * s.scale;
+      if (!s.converged) s.message = "Newton stalled above the residual tolerance";
+      return s;
+    }
+    Vec<double, N> dx;
+    if constexpr (N <= 4) {
+      bool invertible = false;
+      Mat<double, N, N> Jinv;
+      double det = 0.0;
+      J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
+      if (!invertible || !std::isfinite(det)) {
+        s.message = "singular step Jacobian";
+        return s;
+      }
+      dx = Jinv * r;
+    } else {
+      try {
+        dx = solve_dense<double, N, N>(J, r);
+      } catch (const std::domain_error&) {
+        s.message = "singular step Jacobian";
+        return s;
+      }
+    }
+    x -= dx;
+    dxn = max_abs(dx);
+  }
+  s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
+  return s;
+}
+
+// The same system solved by ceres::TinySolver, with the result checked here.
+template <int N, class F, class Scale>
+StepSummary solve_tiny(const F& f, Vec<double, N>& x, const StepOptions& opt, const Scale& scale_of) {
+  using AD = ceres::TinySolverAutoDiffFunction<F, N, N>;
+  AD fn(f);  // holds a reference to f, which outlives it
+  ceres::TinySolver<AD> solver;
+  solver.options.max_num_iterations = opt.max_iterations;
+  solver.options.gradient_tolerance = 0.0;
+  solver.options.function_tolerance = 0.0;
+  solver.options.parameter_tolerance = opt.stall_tolerance;
+  // cost = |F|^2/2; stop once |F| is below the tolerance for the current scale
+  Vec<double, N> r;
+  Mat<double, N, N> J;
+  fn(x.data(), r.data(), J.data());
+  const double scale0 = scale_of(x, J) + opt.absolute_floor;
+  const double target = opt.residual_tolerance * scale0;
+  solver.options.cost_threshold = 0.5 * target * target;
+  const auto& summary = solver.Solve(fn, &x);
+  StepSummary s;
+  s.iterations = summary.iterations + 1;
+  fn(x.data(), r.data(), J.data());
+  s.residual = max_abs(r);
+  s.scale = scale_of(x, J) + opt.absolute_floor;
+  s.converged = std::isfinite(s.residual) && s.residual <= opt.accept_tolerance * s.scale;
+  if (!s.converged) s.message = "TinySolver ended above the residual tolerance";
+  return s;
+}
+
+template <int N, class F, class Scale>
+StepSummary solve_step_system(const F& f, Vec<double, N>& x, const StepOptions& opt, const Scale& scale_of) {
+  return opt.solver == SolverKind::newton ? solve_newton<N>(f, x, opt, scale_of) : solve_tiny<N>(f, x, opt, scale_of);
+}
+
+}  // namespace dvm
