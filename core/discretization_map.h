@@ -28,6 +28,11 @@
 //   static constexpr bool provides_inverse;    // true if M has a member
 //   template <class T, int N>
 //   TangentPoint<T, N> inverse(const Vec<T, N>& q0, const Vec<T, N>& q1) const;
+// and optionally, to avoid the cancellation in forming q1 - q0 when q1 = q0 + dq
+// with dq much smaller than q0 (the step equations are solved for dq),
+//   template <class T, int N>
+//   TangentPoint<T, N> inverse_increment(const Vec<T, N>& q0, const Vec<T, N>& dq) const;
+//   returning R_d^{-1}(q0, q0 + dq).
 // operator() must be written for any scalar T (double and nested ceres::Jet). A map
 // that provides no inverse is inverted by Newton's method (see map_operations.h).
 #pragma once
@@ -83,6 +88,10 @@ class ThetaMap {
   template <class T, int N>
   TangentPoint<T, N> inverse(const Vec<T, N>& q0, const Vec<T, N>& q1) const {
     return {(1.0 - theta_) * q0 + theta_ * q1, q1 - q0};
+  }
+  template <class T, int N>
+  TangentPoint<T, N> inverse_increment(const Vec<T, N>& q0, const Vec<T, N>& dq) const {
+    return {q0 + theta_ * dq, dq};
   }
 
   // The adjoint of the theta map is the (1 - theta) map (Prop. 2.4).

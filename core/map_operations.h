@@ -33,6 +33,8 @@
 #include <Eigen/LU>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <utility>
 
 #include "core/dense_solve.h"
 #include "core/discretization_map.h"
@@ -152,6 +154,23 @@ TangentPoint<T, N> inverse(const M& map, const Vec<T, N>& q0, const Vec<T, N>& q
       }
       return {x, v};
     }
+  }
+}
+
+template <class M, class = void>
+struct has_inverse_increment : std::false_type {};
+template <class M>
+struct has_inverse_increment<M, std::void_t<decltype(std::declval<const M&>().inverse_increment(
+                                    std::declval<const Vec<double, 1>&>(), std::declval<const Vec<double, 1>&>()))>>
+    : std::true_type {};
+
+// R_d^{-1}(q0, q0 + dq), without forming q0 + dq when the map can avoid it.
+template <class M, class T, int N>
+TangentPoint<T, N> inverse_increment(const M& map, const Vec<T, N>& q0, const Vec<T, N>& dq) {
+  if constexpr (has_inverse_increment<M>::value) {
+    return map.inverse_increment(q0, dq);
+  } else {
+    return inverse(map, q0, Vec<T, N>(q0 + dq));
   }
 }
 

@@ -80,13 +80,17 @@ inline Vec<T, N> constants(const Vec<double, N>& x) {
   return out;
 }
 
-// Infinity norm of the double values (used for convergence tests on any T).
+// Infinity norm of the double values (used for convergence tests on any T). A NaN
+// anywhere gives NaN (std::fmax would drop it and hide a failure).
 template <class Derived>
 inline double max_abs(const Eigen::MatrixBase<Derived>& x) {
   double m = 0.0;
   for (Eigen::Index j = 0; j < x.cols(); ++j)
-    for (Eigen::Index i = 0; i < x.rows(); ++i)
-      m = std::fmax(m, std::fabs(value(x(i, j))));
+    for (Eigen::Index i = 0; i < x.rows(); ++i) {
+      const double a = std::fabs(value(x(i, j)));
+      if (std::isnan(a)) return a;
+      if (a > m) m = a;
+    }
   return m;
 }
 

@@ -12,8 +12,8 @@
 //   d L_d = h <dL/dq, dx> + <dL/dv, dv>,
 // which keeps the scalar one Jet level shallower. For the momentum update the
 // combination D1 L_d + D2 L_d (the derivative along a common shift of q0 and q1) is
-// computed directly, not as a difference: for the theta maps the shift leaves v
-// unchanged, so the increment p_{k+1} - p_k = (D1 + D2) L_d carries no cancellation.
+// computed directly, not as a sum of two large terms: for the theta maps the shift
+// leaves v unchanged, so p_{k+1} - p_k = (D1 + D2) L_d carries no cancellation.
 #pragma once
 
 #include <stdexcept>
@@ -45,12 +45,15 @@ class DiscreteLagrangian {
     return h_ * L_(t.x, V<T>(t.v * (1.0 / h_)));
   }
 
-  // Directional derivatives of L_d: q0 and q1 carry K derivative directions each;
-  // returns the K derivatives of L_d (the value is not computed).
+  // Directional derivatives of L_d at (q0, q1 = q0 + dq): q0 and dq carry K
+  // derivative directions each; returns the K derivatives of L_d (the value is not
+  // computed). Working with the increment dq lets maps that can (the theta maps)
+  // avoid the cancellation in q1 - q0, whose round-off, of size eps |q0| / h in
+  // the momentum, would otherwise dominate the step residual at small h.
   template <class T, int K>
-  Vec<T, K> slopes(const V<ceres::Jet<T, K>>& q0, const V<ceres::Jet<T, K>>& q1) const {
+  Vec<T, K> slopes(const V<ceres::Jet<T, K>>& q0, const V<ceres::Jet<T, K>>& dq) const {
     using D = ceres::Jet<T, K>;
-    const TangentPoint<D, N> t = inverse(R_, q0, q1);
+    const TangentPoint<D, N> t = inverse_increment(R_, q0, dq);
     if constexpr (has_gradient<System>::value) {
       V<T> x, u;
       for (int i = 0; i < N; ++i) {
@@ -68,16 +71,23 @@ class DiscreteLagrangian {
     }
   }
 
-  // D1 L_d(q0, q1).
+  // D1 L_d(q0, q0 + dq): moving q0 with q1 fixed moves dq the opposite way.
   template <class T>
-  V<T> D1Ld(const V<T>& q0, const V<T>& q1) const {
+  V<T> D1Ld_increment(const V<T>& q0, const V<T>& dq) const {
     using D = ceres::Jet<T, N>;
     V<D> a, b;
     for (int i = 0; i < N; ++i) {
       a[i] = seed<T, N>(q0[i], i);
-      b[i] = D(q1[i]);
+      b[i] = D(dq[i]);
+      b[i].v[i] = constant<T>(-1.0);
     }
     return slopes<T, N>(a, b);
+  }
+
+  // D1 L_d(q0, q1).
+  template <class T>
+  V<T> D1Ld(const V<T>& q0, const V<T>& q1) const {
+    return D1Ld_increment(q0, V<T>(q1 - q0));
   }
 
   // D2 L_d(q0, q1).
@@ -87,19 +97,19 @@ class DiscreteLagrangian {
     V<D> a, b;
     for (int i = 0; i < N; ++i) {
       a[i] = D(q0[i]);
-      b[i] = seed<T, N>(q1[i], i);
+      b[i] = seed<T, N>(q1[i] - q0[i], i);
     }
     return slopes<T, N>(a, b);
   }
 
-  // D2 L_d(q0, q1) and (D1 + D2) L_d(q0, q1) in one evaluation.
-  void D2Ld_and_shift(const V<double>& q0, const V<double>& q1, V<double>& d2, V<double>& shift) const {
+  // D2 L_d(q0, q0 + dq) and (D1 + D2) L_d(q0, q0 + dq) in one evaluation: the
+  // common shift of q0 and q1 moves q0 and leaves dq unchanged.
+  void D2Ld_and_shift(const V<double>& q0, const V<double>& dq, V<double>& d2, V<double>& shift) const {
     using D = ceres::Jet<double, 2 * N>;
     V<D> a, b;
     for (int i = 0; i < N; ++i) {
       a[i] = seed<double, 2 * N>(q0[i], N + i);
-      b[i] = seed<double, 2 * N>(q1[i], i);
-      b[i].v[N + i] = 1.0;
+      b[i] = seed<double, 2 * N>(dq[i], i);
     }
     const Vec<double, 2 * N> s = slopes<double, 2 * N>(a, b);
     d2 = s.template head<N>();

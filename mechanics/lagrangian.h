@@ -42,6 +42,20 @@ struct has_velocity<S, std::void_t<decltype(std::declval<const S&>().velocity(
                            std::declval<const Vec<double, S::dim>&>(), std::declval<const Vec<double, S::dim>&>()))>>
     : std::true_type {};
 
+// The same Lagrangian with its closed forms hidden: everything is then derived by
+// automatic differentiation. Used to check closed forms against the generic path,
+// and by anyone who wants to measure what the closed forms buy.
+template <class S>
+struct GenericOnly {
+  static constexpr int dim = S::dim;
+  S system;
+  std::string name() const { return system.name(); }
+  template <class T>
+  T operator()(const Vec<T, dim>& q, const Vec<T, dim>& v) const {
+    return system(q, v);
+  }
+};
+
 // dL/dq and dL/dv at (q, v), for any scalar T: the system's closed form if it has
 // one, automatic differentiation otherwise.
 template <class S, class T>

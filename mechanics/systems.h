@@ -106,6 +106,39 @@ struct Kepler {
   static double angular_momentum(const Vec<double, 2>& q, const Vec<double, 2>& p) {
     return q[0] * p[1] - q[1] * p[0];
   }
+
+  // The exact flow at time t from (q0, p0) on a bound (elliptic) orbit: Kepler's
+  // equation E - e sin E = M solved by Newton's method, then Lagrange's f and g
+  // functions in the eccentric-anomaly difference dE:
+  //   q = f q0 + g p0,  p = fdot q0 + gdot p0,
+  //   f = 1 - a/r0 (1 - cos dE),  g = t - (dE - sin dE)/n,
+  //   fdot = -sqrt(mu a) sin dE/(r r0),  gdot = 1 - a/r (1 - cos dE).
+  // Throws for an orbit that is not bound.
+  void exact(double t, const Vec<double, 2>& q0, const Vec<double, 2>& p0, Vec<double, 2>& q,
+             Vec<double, 2>& p) const {
+    const double r0 = q0.norm(), v2 = p0.squaredNorm(), rv = q0.dot(p0);
+    const double inv_a = 2.0 / r0 - v2 / mu;
+    if (!(inv_a > 0.0)) throw std::domain_error("kepler: exact solution needs a bound orbit (negative energy)");
+    const double a = 1.0 / inv_a, n = std::sqrt(mu * inv_a * inv_a * inv_a);
+    const double ecosE0 = 1.0 - r0 / a, esinE0 = rv / std::sqrt(mu * a);
+    const double e = std::hypot(ecosE0, esinE0);
+    const double E0 = std::atan2(esinE0, ecosE0);
+    const double M = (E0 - esinE0) + n * t;
+    double E = M + (e > 0.8 ? 0.0 : e * std::sin(M));
+    for (int it = 0; it < 100; ++it) {
+      const double dE = (E - e * std::sin(E) - M) / (1.0 - e * std::cos(E));
+      E -= dE;
+      if (std::fabs(dE) <= 1e-16 * std::fmax(1.0, std::fabs(E))) break;
+    }
+    const double d = E - E0;
+    const double r = a * (1.0 - e * std::cos(E));
+    const double f = 1.0 - a / r0 * (1.0 - std::cos(d));
+    const double g = t - (d - std::sin(d)) / n;
+    const double fdot = -std::sqrt(mu * a) * std::sin(d) / (r * r0);
+    const double gdot = 1.0 - a / r * (1.0 - std::cos(d));
+    q = f * q0 + g * p0;
+    p = fdot * q0 + gdot * p0;
+  }
 };
 
 }  // namespace dvm

@@ -56,7 +56,7 @@ RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<doub
   using V = Vec<double, N>;
   const double h = stepper.step_size();
   CompensatedVector<N> Q(q), P(p);
-  V dq = h * v0, dq_prev = dq, dq_prev2 = dq, dp;
+  V dq = h * v0, dq_prev = dq, dq_prev2 = dq, dp = V::Zero(q.rows());
   RunSummary run;
   for (std::int64_t k = 0; k < steps; ++k) {
     if (k >= 2)

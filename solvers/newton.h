@@ -13,8 +13,13 @@
 #pragma once
 
 #include <ceres/jet.h>
+// TinySolver leaves a member uninitialised until its first Update(); GCC 12 warns
+// about it at the header's own lines.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #include <ceres/tiny_solver.h>
 #include <ceres/tiny_solver_autodiff_function.h>
+#pragma GCC diagnostic pop
 
 #include <cmath>
 #include <string>
@@ -32,10 +37,12 @@ struct StepOptions {
   SolverKind solver = SolverKind::newton;
   int max_iterations = 25;
   // converged when |F|_inf <= residual_tolerance * scale
-  double residual_tolerance = 1e-13;
-  // a solve whose Newton updates have stalled at |dx| <= stall_tolerance |x| is
-  // accepted when |F|_inf <= accept_tolerance * scale
-  double stall_tolerance = 1e-15;
+  double residual_tolerance = 2e-15;
+  // a solve whose Newton updates have stalled at |dx| <= stall_tolerance (|x| + x0),
+  // with x0 the size of the point the unknown is an increment of (round-off in
+  // forming that point sets a floor under the residual), is accepted when
+  // |F|_inf <= accept_tolerance * scale
+  double stall_tolerance = 1e-14;
   double accept_tolerance = 1e-10;
   // added to the scale, so that a state at rest (all terms zero) can converge
   double absolute_floor = 1e-300;
@@ -50,9 +57,9 @@ struct StepSummary {
 };
 
 // Newton's method from x (updated in place). `scale_of(x, J)` gives the scale of
-// the residual terms at x.
+// the residual terms at x; x0 is the size of the point x is an increment of.
 template <int N, class F, class Scale>
-StepSummary solve_newton(const F& f, Vec<double, N>& x, const StepOptions& opt, const Scale& scale_of) {
+StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, const Scale& scale_of) {
   using D = ceres::Jet<double, N>;
   StepSummary s;
   Vec<D, N> xd, rd;
@@ -77,7 +84,7 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, const StepOptions& opt, 
       s.converged = true;
       return s;
     }
-    if (dxn <= opt.stall_tolerance * max_abs(x)) {
+    if (dxn <= opt.stall_tolerance * (max_abs(x) + x0)) {
       s.converged = s.residual <= opt.accept_tolerance * s.scale;
       if (!s.converged) s.message = "Newton stalled above the residual tolerance";
       return s;
@@ -110,17 +117,20 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, const StepOptions& opt, 
 
 // The same system solved by ceres::TinySolver, with the result checked here.
 template <int N, class F, class Scale>
-StepSummary solve_tiny(const F& f, Vec<double, N>& x, const StepOptions& opt, const Scale& scale_of) {
+StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, const Scale& scale_of) {
   using AD = ceres::TinySolverAutoDiffFunction<F, N, N>;
   AD fn(f);  // holds a reference to f, which outlives it
   ceres::TinySolver<AD> solver;
   solver.options.max_num_iterations = opt.max_iterations;
   solver.options.gradient_tolerance = 0.0;
   solver.options.function_tolerance = 0.0;
+  // TinySolver's own stall test is |dx| <= tol (|x| + tol), relative to x alone; the
+  // floor set by x0 is left to the residual check below.
+  (void)x0;
   solver.options.parameter_tolerance = opt.stall_tolerance;
   // cost = |F|^2/2; stop once |F| is below the tolerance for the current scale
-  Vec<double, N> r;
-  Mat<double, N, N> J;
+  Vec<double, N> r = Vec<double, N>::Zero();
+  Mat<double, N, N> J = Mat<double, N, N>::Zero();
   fn(x.data(), r.data(), J.data());
   const double scale0 = scale_of(x, J) + opt.absolute_floor;
   const double target = opt.residual_tolerance * scale0;
@@ -137,8 +147,10 @@ StepSummary solve_tiny(const F& f, Vec<double, N>& x, const StepOptions& opt, co
 }
 
 template <int N, class F, class Scale>
-StepSummary solve_step_system(const F& f, Vec<double, N>& x, const StepOptions& opt, const Scale& scale_of) {
-  return opt.solver == SolverKind::newton ? solve_newton<N>(f, x, opt, scale_of) : solve_tiny<N>(f, x, opt, scale_of);
+StepSummary solve_step_system(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt,
+                              const Scale& scale_of) {
+  return opt.solver == SolverKind::newton ? solve_newton<N>(f, x, x0, opt, scale_of)
+                                          : solve_tiny<N>(f, x, x0, opt, scale_of);
 }
 
 }  // namespace dvm

@@ -42,9 +42,9 @@ class PositionMomentumStep {
       Vec<T, N> a, b;
       for (int i = 0; i < N; ++i) {
         a[i] = constant<T>(q0[i]);
-        b[i] = q0[i] + dq[i];
+        b[i] = dq[i];
       }
-      const Vec<T, N> d1 = dl->D1Ld(a, b);
+      const Vec<T, N> d1 = dl->D1Ld_increment(a, b);
       for (int i = 0; i < N; ++i) r[i] = p0[i] + d1[i];
       return true;
     }
@@ -61,10 +61,10 @@ class PositionMomentumStep {
     };
     StepSummary s;
     try {
-      s = solve_step_system<N>(f, dq, options_, scale_of);
+      s = solve_step_system<N>(f, dq, max_abs(q0), options_, scale_of);
       if (s.converged) {
         V d2;
-        dl_.D2Ld_and_shift(q0, V(q0 + dq), d2, dp);
+        dl_.D2Ld_and_shift(q0, dq, d2, dp);
         if (!std::isfinite(max_abs(dp))) {
           s.converged = false;
           s.message = "non-finite momentum";

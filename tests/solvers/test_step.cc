@@ -1,0 +1,135 @@
+// The position-momentum step: closed-form special cases, both solvers, failures.
+#define BOOST_TEST_MODULE solvers
+#include <boost/test/unit_test.hpp>
+
+#include "mechanics/systems.h"
+#include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
+
+using namespace dvm;
+using V1 = Vec<double, 1>;
+using V2 = Vec<double, 2>;
+
+BOOST_AUTO_TEST_CASE(midpoint_step_is_the_implicit_midpoint_rule) {
+  // For the harmonic oscillator the implicit midpoint rule is the Cayley transform
+  // z1 = (I - hA/2)^{-1} (I + hA/2) z0 with A = [[0, 1], [-w^2, 0]].
+  const double w = 2.0, h = 0.1;
+  for (SolverKind kind : {SolverKind::newton, SolverKind::tiny}) {
+    StepOptions opt;
+    opt.solver = kind;
+    const PositionMomentumStep<HarmonicOscillator, ThetaMap> S(HarmonicOscillator(w), ThetaMap::midpoint(), h, opt);
+    Mat<double, 2, 2> A;
+    A << 0, 1, -w * w, 0;
+    const Mat<double, 2, 2> I = Mat<double, 2, 2>::Identity();
+    const Mat<double, 2, 2> C = (I - 0.5 * h * A).inverse() * (I + 0.5 * h * A);
+    const V1 q0(0.7), p0(-0.3);
+    V1 dq = V1::Zero(), dp = V1::Zero();
+    const StepSummary s = S.step(q0, p0, dq, dp);
+    BOOST_TEST(s.converged);
+    BOOST_TEST(s.residual <= 1e-13 * s.scale);
+    const V2 z1 = C * V2(q0[0], p0[0]);
+    // Newton overshoots its tolerance to round-off; TinySolver stops as soon as the
+    // residual meets the tolerance, which bounds the error in q1 by about
+    // tol * scale / |J| with |J| = 1/h here.
+    const double bound = kind == SolverKind::newton ? 1e-15 : opt.residual_tolerance * s.scale * h;
+    BOOST_TEST_CONTEXT(to_string(kind)) {
+      BOOST_TEST(std::fabs(q0[0] + dq[0] - z1[0]) <= bound);
+      BOOST_TEST(std::fabs(p0[0] + dp[0] - z1[1]) <= bound);
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(euler_maps_give_the_symplectic_euler_methods) {
+  // adjoint Euler (q - v, q):  q1 = q0 + h p0,         p1 = p0 - h V'(q1)
+  // explicit Euler (q, q + v): p1 = p0 - h V'(q0),      q1 = q0 + h p1
+  const Pendulum P(1.0, 1.0, 1.0);
+  const double h = 0.05;
+  const V1 q0(1.1), p0(0.4);
+  V1 dq = V1::Zero(), dp = V1::Zero();
+  const PositionMomentumStep<Pendulum, ThetaMap> A(P, ThetaMap::adjoint_euler(), h);
+  BOOST_TEST(A.step(q0, p0, dq, dp).converged);
+  const double qa = q0[0] + h * p0[0];
+  BOOST_TEST(std::fabs(q0[0] + dq[0] - qa) <= 1e-15);
+  BOOST_TEST(std::fabs(p0[0] + dp[0] - (p0[0] - h * std::sin(qa))) <= 1e-15);
+  dq.setZero();
+  const PositionMomentumStep<Pendulum, ThetaMap> E(P, ThetaMap::explicit_euler(), h);
+  BOOST_TEST(E.step(q0, p0, dq, dp).converged);
+  const double pe = p0[0] - h * std::sin(q0[0]);
+  BOOST_TEST(std::fabs(p0[0] + dp[0] - pe) <= 1e-15);
+  BOOST_TEST(std::fabs(q0[0] + dq[0] - (q0[0] + h * pe)) <= 1e-15);
+}
+
+BOOST_AUTO_TEST_CASE(generic_and_closed_form_paths_agree) {
+  // Kepler, theta = 0.3: closed-form map inverse and gradient against the Newton
+  // inverse and automatic differentiation; Newton against TinySolver.
+  const double h = 0.02;
+  StepOptions tiny;
+  tiny.solver = SolverKind::tiny;
+  const PositionMomentumStep<Kepler, ThetaMap> A(Kepler(), ThetaMap(0.3), h);
+  const PositionMomentumStep<GenericOnly<Kepler>, RetractionMap<EuclideanRetraction>> B(
+      GenericOnly<Kepler>{Kepler()}, RetractionMap<EuclideanRetraction>({}, 0.3), h);
+  const PositionMomentumStep<Kepler, ThetaMap> C(Kepler(), ThetaMap(0.3), h, tiny);
+  const V2 q0(0.4, 0.1), p0(0.2, 1.9);
+  V2 dqa = h * p0, dqb = h * p0, dqc = h * p0, dpa, dpb, dpc;
+  BOOST_TEST(A.step(q0, p0, dqa, dpa).converged);
+  BOOST_TEST(B.step(q0, p0, dqb, dpb).converged);
+  BOOST_TEST(C.step(q0, p0, dqc, dpc).converged);
+  BOOST_TEST(max_abs(dqa - dqb) <= 1e-15);
+  BOOST_TEST(max_abs(dpa - dpb) <= 1e-14);
+  BOOST_TEST(max_abs(dqa - dqc) <= 1e-15);
+  BOOST_TEST(max_abs(dpa - dpc) <= 1e-14);
+}
+
+BOOST_AUTO_TEST_CASE(a_step_that_cannot_converge_is_reported) {
+  // One Newton iteration from a poor guess cannot meet the tolerance.
+  StepOptions opt;
+  opt.max_iterations = 1;
+  const PositionMomentumStep<Pendulum, ThetaMap> S(Pendulum(), ThetaMap::midpoint(), 0.5, opt);
+  V1 dq(1.0), dp;
+  const StepSummary s = S.step(V1(2.0), V1(0.3), dq, dp);
+  BOOST_TEST(!s.converged);
+  BOOST_TEST(s.iterations == 1);
+  BOOST_TEST(s.residual > opt.residual_tolerance * s.scale);
+  BOOST_TEST(!s.message.empty());
+  // TinySolver's result is checked too: it has no failure status of its own.
+  opt.solver = SolverKind::tiny;
+  const PositionMomentumStep<Pendulum, ThetaMap> T(Pendulum(), ThetaMap::midpoint(), 0.5, opt);
+  dq = V1(1.0);
+  BOOST_TEST(!T.step(V1(2.0), V1(0.3), dq, dp).converged);
+}
+
+BOOST_AUTO_TEST_CASE(non_finite_states_are_reported) {
+  // Kepler started at the singularity q = 0: the residual is not finite.
+  const PositionMomentumStep<Kepler, ThetaMap> S(Kepler(), ThetaMap::explicit_euler(), 0.1);
+  V2 dq = V2::Zero(), dp = V2::Zero();
+  const StepSummary s = S.step(V2::Zero(), V2(1.0, 0.0), dq, dp);
+  BOOST_TEST(!s.converged);
+  BOOST_TEST(s.message.find("non-finite") != std::string::npos);
+}
+
+BOOST_AUTO_TEST_CASE(integrate_stops_at_the_failed_step) {
+  // A Kepler orbit with a huge step hits a step whose Newton solve fails: the run
+  // reports that step and leaves (q, p) at the last converged state.
+  StepOptions opt;
+  opt.max_iterations = 3;
+  const PositionMomentumStep<Kepler, ThetaMap> S(Kepler(), ThetaMap::midpoint(), 0.9, opt);
+  V2 q(0.4, 0.0), p(0.0, 2.0);
+  std::int64_t last = 0;
+  V2 q_last = q;
+  const RunSummary run = integrate(S, 0.0, q, p, p, 1000, [&](std::int64_t k, double, const V2& qk, const V2&, const StepSummary& s) {
+    BOOST_TEST(s.converged);
+    last = k;
+    q_last = qk;
+  });
+  BOOST_TEST(run.failed);
+  BOOST_TEST(run.failed_step == last);
+  BOOST_TEST(run.steps_done == last);
+  BOOST_TEST(!run.failure.converged);
+  BOOST_TEST(max_abs(q - q_last) == 0.0);
+}
+
+BOOST_AUTO_TEST_CASE(compensated_sum_keeps_the_low_bits) {
+  CompensatedVector<1> s(V1(1.0));
+  for (int i = 0; i < 1000000; ++i) s.add(V1(1e-16));
+  BOOST_TEST(std::fabs(s.sum[0] - (1.0 + 1e-10)) <= 2e-16);
+}
