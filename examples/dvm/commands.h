@@ -1,0 +1,23 @@
+// The commands of the dvm program. Exit statuses: 0 success, 1 a check that did not
+// pass (check-map), 2 bad input or usage, 3 a numerical failure during a run.
+#pragma once
+
+#include <string>
+
+#include "examples/dvm/scene.h"
+
+namespace dvm::cli {
+
+struct RunOptions {
+  std::string csv;  // overrides [output] csv
+  bool json = false;
+  bool quiet = false;
+};
+
+int run_scene(const Scene& scene, const RunOptions& options);
+
+// Prints the identity residuals of a map as JSON; returns 0 if every identity holds
+// to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.
+int check_map_command(const std::string& name, double theta, int dim, double tolerance);
+
+}  // namespace dvm::cli

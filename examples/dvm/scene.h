@@ -1,0 +1,76 @@
+// Scenes: what the `dvm run` command reads (a TOML file plus --set overrides),
+// validated once into plain values before anything runs.
+//
+//   [system]      builtin = "pendulum"    params = { m = 1.0, l = 1.0, g = 1.0 }
+//   [initial]     q = [...]   and one of   p = [...]   or   v = [...]
+//   [integrator]  map = "midpoint" | "explicit-euler" | "adjoint-euler" | "theta"
+//                 theta = 0.5 (map = "theta" only)   step = 0.01
+//                 steps = N   or   t_end = T
+//                 solver = "newton" | "tiny"        (optional, default newton)
+//                 max_iterations = 25   tolerance = 2e-15   (optional: the solver's
+//                 iteration bound and relative residual tolerance)
+//   [output]      csv = "out.csv"   every = 1        (both optional)
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+namespace dvm::cli {
+
+// Bad input: the message names the file, the key, the value and what was expected.
+struct InputError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+struct ParamInfo {
+  std::string name;
+  double default_value;
+  std::string meaning;
+};
+
+struct SystemInfo {
+  std::string name;
+  int dim;
+  std::string lagrangian;
+  std::vector<ParamInfo> params;
+};
+
+struct MapInfo {
+  std::string name;
+  std::string formula;
+  bool symmetric;  // for "theta": symmetric only at theta = 1/2
+  int order;
+  bool closed_inverse;
+  std::string note;
+};
+
+const std::vector<SystemInfo>& systems();
+const std::vector<MapInfo>& maps();
+const SystemInfo& find_system(const std::string& name, const std::string& where);
+const MapInfo& find_map(const std::string& name, const std::string& where);
+
+struct Scene {
+  std::string path;
+  std::string system;
+  std::map<std::string, double> params;  // every parameter, defaults filled in
+  std::vector<double> q, p, v;
+  bool momentum_given = false;  // p given (else v)
+  std::string map;
+  double theta = 0.5;
+  double step = 0.0;
+  std::int64_t steps = 0;
+  std::string solver = "newton";
+  int max_iterations = 25;
+  double tolerance = 2e-15;
+  std::string csv;  // empty: no CSV
+  std::int64_t every = 1;
+};
+
+// Loads and validates a scene; overrides are "section.key=value" with value written
+// as in TOML. Throws InputError.
+Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
+
+}  // namespace dvm::cli

@@ -1,0 +1,259 @@
+// End-to-end tests of the dvm program: scenes run, bad input is refused with exit
+// status 2 and a message naming the key, a failed solve exits with 3.
+#define BOOST_TEST_MODULE cli
+#include <boost/test/unit_test.hpp>
+
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+struct Output {
+  int status;
+  std::string out, err;
+};
+
+std::string temp_dir() {
+  static std::string dir = [] {
+    char tmpl[] = "/tmp/dvm_cli_XXXXXX";
+    const char* d = mkdtemp(tmpl);
+    BOOST_REQUIRE(d);
+    return std::string(d);
+  }();
+  return dir;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+// Runs dvm with the arguments (each single-quoted for the shell).
+Output dvm(const std::vector<std::string>& args) {
+  std::string cmd = DVM_BINARY;
+  for (const auto& a : args) {
+    std::string q = "'";
+    for (char c : a) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    cmd += " " + q + "'";
+  }
+  const std::string err_path = temp_dir() + "/stderr.txt";
+  cmd += " 2>" + err_path;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  BOOST_REQUIRE(pipe);
+  std::string out;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+  const int st = pclose(pipe);
+  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out, slurp(err_path)};
+}
+
+std::string scene(const std::string& name) { return std::string(DVM_SCENES) + "/" + name; }
+
+std::string write_scene(const std::string& name, const std::string& text) {
+  const std::string path = temp_dir() + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+// The number after "key": in a JSON text (NaN if absent).
+double json_number(const std::string& json, const std::string& key) {
+  const auto pos = json.find("\"" + key + "\":");
+  if (pos == std::string::npos) return NAN;
+  return std::strtod(json.c_str() + pos + key.size() + 3, nullptr);
+}
+
+bool file_exists(const std::string& path) { return std::ifstream(path).good(); }
+
+const char* kGood =
+    "[system]\nbuiltin = \"harmonic\"\nparams = { omega = 2.0 }\n"
+    "[initial]\nq = [1.0]\np = [0.0]\n"
+    "[integrator]\nmap = \"midpoint\"\nstep = 0.01\nsteps = 100\n";
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(shipped_scenes_run_and_keep_their_invariants) {
+  for (const char* s : {"harmonic.toml", "pendulum.toml", "kepler.toml"}) {
+    const std::string csv = temp_dir() + "/" + s + ".csv";
+    const Output o = dvm({"run", scene(s), "--json", "--csv", csv});
+    BOOST_TEST_CONTEXT(s << "\n" << o.out << o.err) {
+      BOOST_TEST(o.status == 0);
+      BOOST_TEST(o.out.find("\"status\": \"ok\"") != std::string::npos);
+      for (const char* key : {"steps", "t_final", "energy_initial", "energy_final", "max_abs_energy_error",
+                              "wall_seconds", "solver_iterations"})
+        BOOST_TEST(std::isfinite(json_number(o.out, key)), key);
+      BOOST_TEST(o.out.find("\"q_final\": [") != std::string::npos);
+      BOOST_TEST(o.out.find("\"p_final\": [") != std::string::npos);
+      BOOST_TEST(file_exists(csv));
+    }
+  }
+  // harmonic with midpoint: energy to round-off; kepler: angular momentum to round-off
+  BOOST_TEST(json_number(dvm({"run", scene("harmonic.toml"), "--json", "--csv", temp_dir() + "/h.csv"}).out,
+                         "max_abs_energy_error") <= 1e-13);
+  BOOST_TEST(json_number(dvm({"run", scene("kepler.toml"), "--json", "--csv", temp_dir() + "/k.csv"}).out,
+                         "max_abs_angular_momentum_error") <= 1e-13);
+}
+
+BOOST_AUTO_TEST_CASE(csv_columns_rows_and_thinning) {
+  const std::string path = write_scene("good.toml", kGood);
+  const std::string csv = temp_dir() + "/good.csv";
+  const Output o = dvm({"run", path, "--csv", csv, "--set", "output.every=10", "--quiet"});
+  BOOST_TEST(o.status == 0);
+  BOOST_TEST(o.out.empty());
+  std::ifstream f(csv);
+  std::string line;
+  std::getline(f, line);
+  BOOST_TEST(line == "t,q0,p0,energy");
+  int rows = 0;
+  double t = 0, q = 0, p = 0;
+  while (std::getline(f, line)) {
+    ++rows;
+    std::sscanf(line.c_str(), "%lf,%lf,%lf", &t, &q, &p);
+  }
+  BOOST_TEST(rows == 11);  // t = 0 and every 10th of 100 steps
+  BOOST_TEST(t == 1.0, boost::test_tools::tolerance(1e-14));
+  // midpoint is second order: at t = 1 with h = 0.01, q is within ~1e-4 of cos(2)
+  BOOST_TEST(std::fabs(q - std::cos(2.0)) <= 2e-4);
+  BOOST_TEST(std::fabs(q - std::cos(2.0)) > 1e-7);  // and not exact: it is a numerical method
+}
+
+BOOST_AUTO_TEST_CASE(set_overrides_and_velocity_input) {
+  const std::string path = write_scene("good2.toml", kGood);
+  Output o = dvm({"run", path, "--json", "--set", "integrator.step=0.001", "--set", "integrator.steps=1000"});
+  BOOST_TEST(o.status == 0);
+  BOOST_TEST(json_number(o.out, "t_final") == 1.0, boost::test_tools::tolerance(1e-14));
+  o = dvm({"run", path, "--json", "--set", "integrator.map=theta", "--set", "integrator.theta=0.3"});
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(o.out.find("\"map\": \"theta\"") != std::string::npos);
+  // v instead of p: for the harmonic oscillator p = v
+  const Output a = dvm({"run", path, "--json", "--set", "initial.p=[0.5]"});
+  const Output b = dvm({"run", write_scene("v.toml",
+                                           "[system]\nbuiltin = \"harmonic\"\nparams = { omega = 2.0 }\n"
+                                           "[initial]\nq = [1.0]\nv = [0.5]\n"
+                                           "[integrator]\nmap = \"midpoint\"\nstep = 0.01\nsteps = 100\n"),
+                        "--json"});
+  BOOST_TEST(json_number(a.out, "energy_final") == json_number(b.out, "energy_final"));
+}
+
+BOOST_AUTO_TEST_CASE(bad_input_exits_2_names_the_key_and_writes_nothing) {
+  struct Case {
+    std::string override_or_text;  // a --set, or a whole scene when it starts with '['
+    std::string expect;            // a fragment the message must contain
+  };
+  const std::vector<Case> cases = {
+      {"system.builtin=\"pendulm\"", "unknown system \"pendulm\""},
+      {"integrator.map=\"midpoit\"", "unknown map \"midpoit\""},
+      {"initial.q=[1.0, 2.0]", "initial.q"},
+      {"initial.q=[nan]", "finite"},
+      {"initial.p=[inf]", "finite"},
+      {"integrator.step=0.0", "integrator.step"},
+      {"integrator.step=-0.1", "positive"},
+      {"integrator.map=\"theta\"", ""},  // valid on its own: checked below with theta
+      {"system.params.omega=-1.0", "omega"},
+      {"system.params.mass=1.0", "unknown parameter"},
+      {"integrator.stepz=1", "unknown key"},
+      {"integrator.steps=0", "integrator.steps"},
+      {"integrator.steps=1.5", "whole number"},
+      {"[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0]\np = [0.0]\n[integrator]\nstep = 0.1\nsteps = 1\n",
+       "integrator.map"},
+      {"[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0]\np = [0.0]\n[integrator]\nmap = \"theta\"\n"
+       "theta = 1.5\nstep = 0.1\nsteps = 1\n",
+       "[0, 1]"},
+      {"[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.1\n"
+       "steps = 1\n",
+       "initial.p"},
+      {"[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0]\np = [0.0]\n[integrator]\nmap = \"midpoint\"\n"
+       "step = 0.1\nsteps = 1\nt_end = 1.0\n",
+       "not both"},
+      {"[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0]\np = [0.0]\n[integrator]\nmap = \"midpoint\"\n"
+       "step = 0.3\nt_end = 1.0\n",
+       "whole number of steps"},
+      {"[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0\n", "good.toml:4"},  // parse error: line
+      {"[system]\nbuiltin = \"kepler\"\n[initial]\nq = [0.0, 0.0]\np = [0.0, 1.0]\n[integrator]\n"
+       "map = \"midpoint\"\nstep = 0.1\nsteps = 1\n",
+       "not finite"},
+  };
+  int i = 0;
+  for (const auto& c : cases) {
+    if (c.expect.empty()) continue;
+    const std::string csv = temp_dir() + "/bad" + std::to_string(i++) + ".csv";
+    Output o;
+    if (c.override_or_text[0] == '[')
+      o = dvm({"run", write_scene("good.toml", c.override_or_text), "--csv", csv});
+    else
+      o = dvm({"run", write_scene("good.toml", kGood), "--csv", csv, "--set", c.override_or_text});
+    BOOST_TEST_CONTEXT(c.override_or_text << " -> " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find(c.expect) != std::string::npos);
+      BOOST_TEST(!file_exists(csv));
+    }
+  }
+  // a message names file, line and column for keys read from the file
+  const Output o = dvm({"run", write_scene("loc.toml", std::string(kGood) + "theta = 0.2\n")});
+  BOOST_TEST(o.status == 2);
+  BOOST_TEST(o.err.find("loc.toml:11:") != std::string::npos, o.err);
+  BOOST_TEST(dvm({"run", "/nonexistent/scene.toml"}).status == 2);
+  BOOST_TEST(dvm({"run", write_scene("good.toml", kGood), "--csv", "/nonexistent/dir/out.csv"}).status == 2);
+  BOOST_TEST(dvm({"frobnicate"}).status == 2);
+  BOOST_TEST(dvm({"run"}).status == 2);
+  BOOST_TEST(dvm({"run", write_scene("good.toml", kGood), "--bogus"}).status == 2);
+}
+
+BOOST_AUTO_TEST_CASE(non_convergence_exits_3_and_keeps_converged_steps) {
+  // The pendulum with h = 4: the midpoint step's Jacobian 1/h + (h/4) cos(q_mid)
+  // can vanish, and Newton's method fails on some step.
+  const std::string csv = temp_dir() + "/fail.csv";
+  const Output o = dvm({"run", scene("pendulum.toml"), "--json", "--csv", csv, "--set", "integrator.step=4.0",
+                        "--set", "integrator.t_end=400.0", "--set", "output.every=1"});
+  BOOST_TEST(o.status == 3, o.out << o.err);
+  BOOST_TEST(o.out.find("\"status\": \"failed\"") != std::string::npos);
+  BOOST_TEST(o.err.find("did not converge") != std::string::npos);
+  BOOST_TEST(o.err.find("residual") != std::string::npos);
+  const double steps = json_number(o.out, "steps");
+  BOOST_TEST(steps < 100);
+  std::ifstream f(csv);
+  std::string line;
+  int rows = -1;  // header
+  while (std::getline(f, line)) ++rows;
+  BOOST_TEST(rows == 1 + static_cast<int>(steps));  // t = 0 and each converged step
+  BOOST_TEST(std::isfinite(json_number(o.out, "residual")));
+  // the iteration bound is a scene key: one iteration cannot converge
+  const Output b = dvm({"run", scene("harmonic.toml"), "--quiet", "--csv", csv, "--set", "integrator.max_iterations=1"});
+  BOOST_TEST(b.status == 3);
+  BOOST_TEST(b.err.find("step 0 ") != std::string::npos, b.err);
+}
+
+BOOST_AUTO_TEST_CASE(maps_and_check_map) {
+  const Output m = dvm({"maps", "--json"});
+  BOOST_TEST(m.status == 0);
+  for (const char* name : {"explicit-euler", "adjoint-euler", "midpoint", "theta", "retraction-theta"})
+    BOOST_TEST(m.out.find(std::string("\"name\": \"") + name + "\"") != std::string::npos, name);
+  for (const char* name : {"explicit-euler", "adjoint-euler", "midpoint", "theta", "retraction-theta"}) {
+    for (const char* dim : {"1", "3"}) {
+      const Output c = dvm({"check-map", name, "--theta", "0.3", "--dim", dim});
+      BOOST_TEST_CONTEXT(name << " dim " << dim << "\n" << c.out) {
+        BOOST_TEST(c.status == 0);
+        BOOST_TEST(c.out.find("\"passed\": true") != std::string::npos);
+        for (const char* key : {"zero_section", "tangent_identity", "inverse_round_trip", "adjoint_involution",
+                                "cotangent_symplectic", "cotangent_round_trip"})
+          BOOST_TEST(json_number(c.out, key) <= 1e-13, key);
+      }
+    }
+  }
+  BOOST_TEST(dvm({"check-map", "nope"}).status == 2);
+  BOOST_TEST(dvm({"check-map", "theta", "--theta", "2"}).status == 2);
+  BOOST_TEST(dvm({"check-map", "theta", "--dim", "9"}).status == 2);
+  for (const char* cmd : {"run", "maps", "check-map"}) {
+    const Output h = dvm({cmd, "--help"});
+    BOOST_TEST(h.status == 0);
+    BOOST_TEST(h.out.find("example") != std::string::npos, cmd);
+  }
+}
