@@ -1,0 +1,272 @@
+// Discretization maps on S^2 and SO(3) (paper Ex. 2.7, 2.8, 3.5, 3.6, Sec. 5.1),
+// and the local representation that makes every R^n tool apply to them.
+//
+// All maps here are of the Prop. 2.3 form built from a retraction R and theta:
+//   R_d(x, v) = (R_x(-theta v), R_x((1 - theta) v)),
+// theta = 1/2 giving the midpoint forms and theta = 0 the fixed-first-point forms
+// (x, R_x(v)). The retractions are
+//   S^2:    exp_x(v) = cos|v| x + sin|v| v/|v|   and   (x + v)/|x + v|  (projection)
+//   SO(3):  R exp(hat w)   and   R cay(w)  (w the body angular velocity)
+// Closed-form inverses (the rest use Newton's method in local coordinates):
+//   S^2 exp, theta = 1/2:  x = (q0 + q1)/|q0 + q1|, v = angle(q0, q1) (q1 - q0)/|q1 - q0|
+//   S^2 projection, 1/2:   x = (q0 + q1)/|q0 + q1|, v = 2 (q1 - q0)/|q0 + q1|
+//   S^2 exp, theta = 0:    (q0, log_{q0} q1)
+//   S^2 projection, 0:     (q0, q1/(q0.q1) - q0), defined for q0.q1 > 0 only
+//   theta = 1 is theta = 0 with the roles of q0 and q1 exchanged and v negated;
+//   SO(3) exp, any theta:  w = log(q0^T q1), x = q0 exp(theta w)
+//   SO(3) Cayley, 0 and 1: w = cay^{-1}(q0^T q1), x = q0 or q1 (rotation < pi)
+//   SO(3) Cayley, 1/2:     with W = q0^T q1 and its unit quaternion (s, u), s >= 0:
+//                          w = 4 u/(1 + s), x = q0 cay(w/2)
+// Points outside a map's domain (antipodal points on the sphere, q0.q1 <= 0 for the
+// projection map, rotations by pi for Cayley) raise MapDomainError, never a NaN.
+//
+// LocalRepresentation<Map>: the map written in the chart centred at a point c,
+//   (eta, nu) -> (chart^{-1}(q0), chart^{-1}(q1)),  (q0, q1) = R_d(chart(eta), D chart(eta) nu),
+// is a discretization map on R^dim; the identities, lifts and checks of the R^n code
+// apply to it unchanged, and are the identities of the manifold map in coordinates.
+#pragma once
+
+#include <string>
+
+#include "core/manifolds.h"
+#include "core/map_operations.h"
+
+namespace dvm {
+
+template <class M, class T>
+struct ManifoldPair {
+  typename M::template Point<T> q0, q1;
+};
+template <class M, class T>
+struct ManifoldTangent {
+  typename M::template Point<T> x;
+  typename M::template Tangent<T> v;
+};
+
+enum class RetractionKind { exp, projection, cayley };
+
+inline std::string to_string(RetractionKind k) {
+  switch (k) {
+    case RetractionKind::exp: return "exp";
+    case RetractionKind::projection: return "projection";
+    default: return "cayley";
+  }
+}
+
+namespace detail {
+inline void check_theta(double theta) {
+  if (!(theta >= 0.0 && theta <= 1.0))
+    throw std::invalid_argument("theta must lie in [0, 1], got " + std::to_string(theta));
+}
+template <class P>
+P scaled(const P& x, double s) {
+  P out = x;
+  for (int i = 0; i < out.size(); ++i) out(i) = s * x(i);
+  return out;
+}
+}  // namespace detail
+
+template <class Map>
+ManifoldTangent<typename Map::Manifold, double> newton_manifold_inverse_values(
+    const Map& map, const typename Map::Manifold::template Point<double>& q0,
+    const typename Map::Manifold::template Point<double>& q1);
+
+// Discretization maps on S^2 from the exponential or the projection retraction.
+class SphereMap {
+ public:
+  using Manifold = Sphere;
+  SphereMap(RetractionKind kind, double theta, std::string name) : kind_(kind), theta_(theta), name_(std::move(name)) {
+    detail::check_theta(theta);
+    if (kind == RetractionKind::cayley) throw std::invalid_argument("S^2 maps use the exp or projection retraction");
+  }
+  RetractionKind kind() const { return kind_; }
+  double theta() const { return theta_; }
+  std::string name() const { return name_; }
+  bool symmetric() const { return theta_ == 0.5; }
+  int order() const { return symmetric() ? 2 : 1; }
+  bool closed_form_inverse() const { return theta_ == 0.0 || theta_ == 0.5 || theta_ == 1.0; }
+
+  template <class T>
+  Vec<T, 3> retract(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+    return kind_ == RetractionKind::exp ? Sphere::exp(x, v) : Sphere::projection(x, v);
+  }
+
+  template <class T>
+  ManifoldPair<Sphere, T> operator()(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+    return {retract(x, Vec<T, 3>(-theta_ * v)), retract(x, Vec<T, 3>((1.0 - theta_) * v))};
+  }
+
+  template <class T>
+  ManifoldTangent<Sphere, T> inverse(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const;
+
+ private:
+  template <class T>
+  ManifoldTangent<Sphere, T> fixed_first(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const {
+    if (kind_ == RetractionKind::exp) return {q0, Sphere::log(q0, q1)};
+    const T c = detail::dot(q0, q1);
+    if (!(value(c) > 1e-12))
+      throw MapDomainError(name_ + ": inverse needs q0.q1 > 0, got q0.q1 = " + std::to_string(value(c)));
+    return {q0, Vec<T, 3>(q1[0] / c - q0[0], q1[1] / c - q0[1], q1[2] / c - q0[2])};
+  }
+
+  RetractionKind kind_;
+  double theta_;
+  std::string name_;
+};
+
+template <class T>
+ManifoldTangent<Sphere, T> SphereMap::inverse(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const {
+  using std::sqrt;
+  if (theta_ == 0.0) return fixed_first(q0, q1);
+  if (theta_ == 1.0) {
+    const ManifoldTangent<Sphere, T> t = fixed_first(q1, q0);
+    return {t.x, Vec<T, 3>(-t.v)};
+  }
+  if (theta_ == 0.5) {
+    const Vec<T, 3> s(q0[0] + q1[0], q0[1] + q1[1], q0[2] + q1[2]);
+    const Vec<T, 3> d(q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2]);
+    const T c2 = detail::dot(s, s);
+    if (!(value(c2) > 1e-20)) throw MapDomainError(name_ + ": inverse undefined for antipodal points");
+    const T c = sqrt(c2);
+    const Vec<T, 3> x(s[0] / c, s[1] / c, s[2] / c);
+    T k;
+    if (kind_ == RetractionKind::projection) {
+      k = 2.0 / c;
+    } else {
+      // angle(q0, q1) / |q1 - q0| = (2/c) atan(u)/u with u = |q1 - q0|/c
+      using std::atan;
+      const T u2 = detail::dot(d, d) / c2;
+      T r;
+      if (value(u2) < 1e-6)
+        r = 1.0 - u2 / 3.0 + u2 * u2 / 5.0 - u2 * u2 * u2 / 7.0;
+      else
+        r = atan(sqrt(u2)) / sqrt(u2);
+      k = (2.0 / c) * r;
+    }
+    return {x, Vec<T, 3>(k * d[0], k * d[1], k * d[2])};
+  }
+  if constexpr (!is_jet_v<T>) {
+    return newton_manifold_inverse_values(*this, q0, q1);
+  } else {
+    throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
+  }
+}
+
+// Discretization maps on SO(3) from the group exponential or the Cayley map.
+class SO3Map {
+ public:
+  using Manifold = SO3;
+  SO3Map(RetractionKind kind, double theta, std::string name) : kind_(kind), theta_(theta), name_(std::move(name)) {
+    detail::check_theta(theta);
+    if (kind == RetractionKind::projection) throw std::invalid_argument("SO(3) maps use the exp or Cayley retraction");
+  }
+  RetractionKind kind() const { return kind_; }
+  double theta() const { return theta_; }
+  std::string name() const { return name_; }
+  bool symmetric() const { return theta_ == 0.5; }
+  int order() const { return symmetric() ? 2 : 1; }
+  bool closed_form_inverse() const {
+    return kind_ == RetractionKind::exp || theta_ == 0.0 || theta_ == 0.5 || theta_ == 1.0;
+  }
+
+  template <class T>
+  Mat<T, 3, 3> tau(const Vec<T, 3>& w) const {
+    return kind_ == RetractionKind::exp ? SO3::exp(w) : SO3::cay(w);
+  }
+  template <class T>
+  Mat<T, 3, 3> retract(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
+    return SO3::mul(R, tau(w));
+  }
+
+  template <class T>
+  ManifoldPair<SO3, T> operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
+    return {retract(R, Vec<T, 3>(-theta_ * w)), retract(R, Vec<T, 3>((1.0 - theta_) * w))};
+  }
+
+  template <class T>
+  ManifoldTangent<SO3, T> inverse(const Mat<T, 3, 3>& q0, const Mat<T, 3, 3>& q1) const {
+    using std::sqrt;
+    const Mat<T, 3, 3> W = SO3::transpose_mul(q0, q1);
+    if (kind_ == RetractionKind::exp) {
+      const Vec<T, 3> w = SO3::log(W);
+      return {SO3::mul(q0, SO3::exp(Vec<T, 3>(theta_ * w))), w};
+    }
+    if (theta_ == 0.0) return {q0, SO3::cay_inverse(W)};
+    if (theta_ == 1.0) return {q1, SO3::cay_inverse(W)};
+    if (theta_ == 0.5) {
+      const T d = 1.0 + W(0, 0) + W(1, 1) + W(2, 2);
+      if (!(value(d) > 1e-10)) throw MapDomainError(name_ + ": inverse undefined for a relative rotation by pi");
+      const T s = 0.5 * sqrt(d);
+      const T k = 1.0 / (s * (1.0 + s));
+      const Vec<T, 3> w(k * (W(2, 1) - W(1, 2)), k * (W(0, 2) - W(2, 0)), k * (W(1, 0) - W(0, 1)));
+      return {SO3::mul(q0, SO3::cay(Vec<T, 3>(0.5 * w))), w};
+    }
+    if constexpr (!is_jet_v<T>) {
+      return newton_manifold_inverse_values(*this, q0, q1);
+    } else {
+      throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
+    }
+  }
+
+ private:
+  RetractionKind kind_;
+  double theta_;
+  std::string name_;
+};
+
+// The map in the chart centred at c: a discretization map on R^dim.
+template <class Map>
+class LocalRepresentation {
+ public:
+  using M = typename Map::Manifold;
+  static constexpr bool provides_inverse = false;
+  LocalRepresentation(Map map, typename M::template Point<double> centre) : map_(std::move(map)), c_(std::move(centre)) {}
+  std::string name() const { return "local(" + map_.name() + ")"; }
+  bool symmetric() const { return map_.symmetric(); }
+  int order() const { return map_.order(); }
+
+  // x = chart(c, eta) and v = D chart(c, eta) nu, as the manifold stores them.
+  template <class T>
+  ManifoldTangent<M, T> point_and_velocity(const Vec<T, M::dim>& eta, const Vec<T, M::dim>& nu) const {
+    auto xv = M::chart_and_tangent(c_, eta, nu);
+    return {xv.first, xv.second};
+  }
+
+  template <class T, int N>
+  PointPair<T, N> operator()(const Vec<T, N>& eta, const Vec<T, N>& nu) const {
+    static_assert(N == M::dim, "a local representation lives in R^dim");
+    const ManifoldTangent<M, T> t = point_and_velocity<T>(eta, nu);
+    const ManifoldPair<M, T> r = map_(t.x, t.v);
+    return {M::chart_inverse(c_, r.q0), M::chart_inverse(c_, r.q1)};
+  }
+
+ private:
+  Map map_;
+  typename M::template Point<double> c_;
+};
+
+// Newton's method in the chart centred at q0.
+template <class Map>
+ManifoldTangent<typename Map::Manifold, double> newton_manifold_inverse_values(
+    const Map& map, const typename Map::Manifold::template Point<double>& q0,
+    const typename Map::Manifold::template Point<double>& q1) {
+  using M = typename Map::Manifold;
+  const LocalRepresentation<Map> local(map, q0);
+  const Vec<double, M::dim> a = Vec<double, M::dim>::Zero(), b = M::chart_inverse(q0, q1);
+  const TangentPoint<double, M::dim> t = dvm::inverse(local, a, b);
+  return local.point_and_velocity(t.x, t.v);
+}
+
+// Sample points and velocities for checks: x = chart(base, eta), v = tangent(x, nu).
+template <class M>
+typename M::template Point<double> base_point();
+template <>
+inline Vec<double, 3> base_point<Sphere>() {
+  return Vec<double, 3>(0.48, -0.6, 0.64);
+}
+template <>
+inline Mat<double, 3, 3> base_point<SO3>() {
+  return SO3::exp(Vec<double, 3>(0.3, -0.7, 1.1));
+}
+
+}  // namespace dvm

@@ -1,0 +1,129 @@
+// S^2 and SO(3): retractions, discretization maps, closed-form inverses and domains,
+// and every identity of the R^n checks on each map's local representation.
+#define BOOST_TEST_MODULE core_manifolds
+#include <boost/test/unit_test.hpp>
+
+#include "core/manifold_checks.h"
+
+using namespace dvm;
+
+namespace {
+
+std::vector<SphereMap> sphere_maps() {
+  std::vector<SphereMap> out;
+  for (auto k : {RetractionKind::exp, RetractionKind::projection})
+    for (double theta : {0.0, 0.5, 1.0, 0.3}) out.emplace_back(k, theta, "sphere-" + to_string(k));
+  return out;
+}
+std::vector<SO3Map> so3_maps() {
+  std::vector<SO3Map> out;
+  for (auto k : {RetractionKind::exp, RetractionKind::cayley})
+    for (double theta : {0.0, 0.5, 1.0, 0.3}) out.emplace_back(k, theta, "so3-" + to_string(k));
+  return out;
+}
+
+template <class Map>
+void expect_identities(const Map& map) {
+  const MapCheckReport r = check_manifold_map(map);
+  BOOST_TEST_CONTEXT(map.name() << " theta=" << map.theta()) {
+    for (const auto& name : identity_names()) BOOST_TEST(r.residual(name) <= 1e-12, name << " = " << r.residual(name));
+    BOOST_TEST(r.residual("manifold_round_trip") <= 1e-13);
+    BOOST_TEST(r.residual("closed_form_vs_newton") <= 1e-12);
+    if (map.symmetric())
+      BOOST_TEST(r.residual("adjoint_difference") <= 1e-12);
+    else
+      BOOST_TEST(r.residual("adjoint_difference") > 1e-3);
+  }
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(identities_of_every_sphere_map) {
+  for (const auto& m : sphere_maps()) expect_identities(m);
+}
+
+BOOST_AUTO_TEST_CASE(identities_of_every_so3_map) {
+  for (const auto& m : so3_maps()) expect_identities(m);
+}
+
+BOOST_AUTO_TEST_CASE(retractions_stay_on_the_manifold_and_are_retractions) {
+  const Vec<double, 3> x = base_point<Sphere>();
+  const Vec<double, 3> v = Sphere::tangent(x, Vec<double, 2>(0.7, -1.9));
+  BOOST_TEST(Sphere::point_defect(Sphere::exp(x, v)) <= 1e-15);
+  BOOST_TEST(Sphere::point_defect(Sphere::projection(x, v)) <= 1e-15);
+  // exp_x(v) is the great circle: angle between x and exp_x(v) is |v|
+  BOOST_TEST(std::acos(x.dot(Sphere::exp(x, v))) == v.norm(), boost::test_tools::tolerance(1e-13));
+  BOOST_TEST(max_abs(Sphere::log(x, Sphere::exp(x, v)) - v) <= 1e-14);
+  const Mat<double, 3, 3> R = base_point<SO3>();
+  const Vec<double, 3> w(0.4, 2.2, -1.0);
+  BOOST_TEST(SO3::point_defect(SO3::mul(R, SO3::exp(w))) <= 1e-15);
+  BOOST_TEST(SO3::point_defect(SO3::mul(R, SO3::cay(w))) <= 1e-15);
+  BOOST_TEST(max_abs(SO3::log(SO3::exp(w)) - w) <= 1e-14);
+  BOOST_TEST(max_abs(SO3::cay_inverse(SO3::cay(w)) - w) <= 1e-14);
+  // Cayley: rotation about w by 2 atan(|w|/2)
+  const double angle = 2 * std::atan(w.norm() / 2);
+  BOOST_TEST(SO3::log(SO3::cay(w)).norm() == angle, boost::test_tools::tolerance(1e-13));
+}
+
+BOOST_AUTO_TEST_CASE(small_angle_branches_keep_their_derivatives) {
+  // d/dt exp(t w) at t = 0 is hat(w), also exactly at zero and across the Taylor
+  // branch boundary; the same for the sphere and for log.
+  using J = ceres::Jet<double, 1>;
+  for (double t0 : {0.0, 1e-9, 0.99e-2, 1.01e-2}) {
+    const Vec<double, 3> w(0.3, -0.5, 0.8);
+    Vec<J, 3> wj;
+    for (int i = 0; i < 3; ++i) wj[i] = J(t0 * w[i], Vec<double, 1>::Constant(w[i]));
+    const Mat<J, 3, 3> E = SO3::exp(wj);
+    Mat<double, 3, 3> dE, E0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        dE(i, j) = E(i, j).v[0];
+        E0(i, j) = E(i, j).a;
+      }
+    // the body velocity of t -> exp(t w) is w for every t (same axis)
+    BOOST_TEST(max_abs(SO3::vee(Mat<double, 3, 3>(E0.transpose() * dE)) - w) <= 1e-12, "t0 = " << t0);
+    const Vec<double, 3> x(0.0, 0.0, 1.0), u(1.0, 0.0, 0.0);
+    Vec<J, 3> xj = constants<J>(x), uj;
+    for (int i = 0; i < 3; ++i) uj[i] = J(t0 * u[i], Vec<double, 1>::Constant(u[i]));
+    const Vec<J, 3> y = Sphere::exp(xj, uj);
+    // d/dt exp_x(t u) = -sin t x + cos t u
+    BOOST_TEST(std::fabs(y[0].v[0] - std::cos(t0)) <= 1e-12);
+    BOOST_TEST(std::fabs(y[2].v[0] + std::sin(t0)) <= 1e-12);
+    const Vec<J, 3> l = Sphere::log(xj, y);
+    BOOST_TEST(std::fabs(l[0].v[0] - 1.0) <= 1e-12, "t0 = " << t0);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(projection_map_closed_form_inverse_and_domain) {
+  // The paper's projection map R_d(x, v) = (x, (x + v)/|x + v|) has inverse
+  // R_d^{-1}(x0, x1) = (x0, x1/(x0.x1) - x0), defined where x0.x1 > 0.
+  const SphereMap m(RetractionKind::projection, 0.0, "sphere-projection-fixed");
+  const Vec<double, 3> x0 = base_point<Sphere>();
+  const Vec<double, 3> x1 = Sphere::exp(x0, Sphere::tangent(x0, Vec<double, 2>(0.4, 0.9)));
+  const auto t = m.inverse(x0, x1);
+  BOOST_TEST(max_abs(t.x - x0) == 0.0);
+  BOOST_TEST(max_abs(t.v - (x1 / x0.dot(x1) - x0)) <= 1e-15);
+  BOOST_TEST(Sphere::tangent_defect(x0, t.v) <= 1e-15);
+  const Vec<double, 3> far = Sphere::exp(x0, Sphere::tangent(x0, Vec<double, 2>(1.6, 0.3)));  // x0.far < 0
+  BOOST_CHECK_THROW(m.inverse(x0, far), MapDomainError);
+  // antipodal points for the midpoint maps; a rotation by pi for Cayley
+  const SphereMap mid(RetractionKind::exp, 0.5, "sphere-exp");
+  BOOST_CHECK_THROW(mid.inverse(x0, Vec<double, 3>(-x0)), MapDomainError);
+  const SO3Map cay(RetractionKind::cayley, 0.0, "so3-cayley-fixed");
+  const Mat<double, 3, 3> R = base_point<SO3>();
+  const Mat<double, 3, 3> Rpi = R * SO3::exp(Vec<double, 3>(M_PI, 0.0, 0.0));
+  BOOST_CHECK_THROW(cay.inverse(R, Rpi), MapDomainError);
+  BOOST_CHECK_THROW(SO3Map(RetractionKind::cayley, 0.5, "c").inverse(R, Rpi), MapDomainError);
+}
+
+BOOST_AUTO_TEST_CASE(sphere_midpoint_closed_form) {
+  // Exponential midpoint: the base point is the geodesic midpoint and |v| the angle.
+  const SphereMap m(RetractionKind::exp, 0.5, "sphere-exp");
+  const Vec<double, 3> q0(1.0, 0.0, 0.0), q1(0.0, 1.0, 0.0);
+  const auto t = m.inverse(q0, q1);
+  BOOST_TEST(max_abs(t.x - Vec<double, 3>(1.0, 1.0, 0.0) / std::sqrt(2.0)) <= 1e-15);
+  BOOST_TEST(max_abs(t.v - (M_PI / 2) * Vec<double, 3>(-1.0, 1.0, 0.0) / std::sqrt(2.0)) <= 1e-15);
+  // projection midpoint: v = 2 (q1 - q0)/|q0 + q1|
+  const auto p = SphereMap(RetractionKind::projection, 0.5, "sphere-projection").inverse(q0, q1);
+  BOOST_TEST(max_abs(p.v - 2.0 * (q1 - q0) / std::sqrt(2.0)) <= 1e-15);
+}
