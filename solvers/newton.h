@@ -4,7 +4,8 @@
 // Ceres' autodiff expects; its Jacobian comes from ceres::Jet. Two solvers:
 //   newton  Newton's method, J dx = -F, one Jacobian evaluation per iteration;
 //   tiny    ceres::TinySolver (Levenberg-Marquardt on the normal equations).
-// Both report a StepSummary. Convergence is judged on the residual itself,
+// Both report a StepSummary. Convergence is judged on the residual itself (Newton
+// then applies the correction from that last evaluation),
 // |F(x)|_inf <= residual_tolerance * scale, with `scale` the size of the terms that
 // make up F (given by the caller); a solve that stalls above that is accepted only
 // if its residual is below accept_tolerance * scale. TinySolver cannot report a
@@ -81,6 +82,23 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       return s;
     }
     if (s.residual <= opt.residual_tolerance * s.scale) {
+      // Apply the Newton correction already paid for: it takes the residual from
+      // the tolerance down to round-off. Without it the accepted residuals, all of
+      // one sign when the starting guess errs smoothly, would add up over many
+      // steps and show as a drift of conserved quantities. The reported residual
+      // is the one measured before this last correction (an upper bound).
+      bool invertible = false;
+      Mat<double, N, N> Jinv;
+      if constexpr (N <= 4) {
+        double det = 0.0;
+        J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
+        if (invertible && std::isfinite(det)) x -= Jinv * r;
+      } else {
+        try {
+          x -= solve_dense<double, N, N>(J, r);
+        } catch (const std::domain_error&) {
+        }
+      }
       s.converged = true;
       return s;
     }

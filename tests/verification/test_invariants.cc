@@ -56,6 +56,6 @@ BOOST_AUTO_TEST_CASE(angular_momentum_is_kept_by_every_theta_map) {
     });
     BOOST_TEST(!r.failed);
     BOOST_TEST_MESSAGE("kepler theta=" << theta << ", 1e5 steps: max |L - L0| = " << worst);
-    BOOST_TEST(worst <= 1e-13, "theta " << theta << ": " << worst);
+    BOOST_TEST(worst <= 1e-14, "theta " << theta << ": " << worst);
   }
 }

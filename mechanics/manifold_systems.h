@@ -1,0 +1,208 @@
+// Lagrangian systems on S^2 and SO(3), their discrete Lagrangians, and the Legendre
+// map in local coordinates.
+//
+// A system type S on a manifold M provides `using Manifold = M`, `dim = M::dim`,
+// `name()` and a scalar-generic L(x, v) with x a stored point and v a stored tangent
+// vector at x (an embedded 3-vector on S^2, the body angular velocity on SO(3)).
+//
+//   spherical pendulum  L = m l^2 |v|^2/2 - m g l x_3        on S^2 (x_3 upward)
+//   free rigid body     L = (I1 w1^2 + I2 w2^2 + I3 w3^2)/2   on SO(3), w body velocity
+//   heavy top           L = w.I w/2 - m g e3.(R chi)          on SO(3), chi the centre
+//                                                              of mass in the body frame
+// Symmetries: rotations about the vertical for the pendulum and the top (conserved:
+// the vertical component of the angular momentum), all rotations for the free rigid
+// body (conserved: the spatial angular momentum R I w).
+//
+// The discrete Lagrangian is L_d(q0, q1) = h L(R_d^{-1}(q0, q1)/h) as on R^n.
+// Momenta are covectors; D1 L_d and D2 L_d are taken in the charts centred at q0 and
+// q1 (their coordinates at the chart centre), and stored as the manifold stores
+// covectors (Sphere: tangent 3-vector; SO(3): body angular momentum).
+#pragma once
+
+#include <stdexcept>
+#include <string>
+
+#include "core/manifold_maps.h"
+#include "mechanics/lagrangian.h"
+
+namespace dvm {
+
+struct SphericalPendulum {
+  using Manifold = Sphere;
+  static constexpr int dim = 2;
+  double m = 1.0, l = 1.0, g = 1.0;
+  SphericalPendulum(double m_ = 1.0, double l_ = 1.0, double g_ = 1.0) : m(m_), l(l_), g(g_) {
+    if (!(m > 0 && l > 0 && std::isfinite(m) && std::isfinite(l) && std::isfinite(g)))
+      throw std::invalid_argument("spherical-pendulum: m and l must be positive and finite, g finite");
+  }
+  std::string name() const { return "spherical-pendulum"; }
+  template <class T>
+  T operator()(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+    return (0.5 * m * l * l) * (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]) - (m * g * l) * x[2];
+  }
+  // Vertical angular momentum (x cross p)_3: conserved.
+  static double vertical_momentum(const Vec<double, 3>& x, const Vec<double, 3>& p) { return x.cross(p)[2]; }
+};
+
+struct RigidBody {
+  using Manifold = SO3;
+  static constexpr int dim = 3;
+  Vec<double, 3> inertia;
+  explicit RigidBody(const Vec<double, 3>& I = Vec<double, 3>(1.0, 2.0, 3.0)) : inertia(I) {
+    for (int i = 0; i < 3; ++i)
+      if (!(I[i] > 0) || !std::isfinite(I[i]))
+        throw std::invalid_argument("rigid-body: principal moments of inertia must be positive and finite");
+    if (I[0] + I[1] < I[2] || I[1] + I[2] < I[0] || I[0] + I[2] < I[1])
+      throw std::invalid_argument("rigid-body: moments of inertia violate the triangle inequality");
+  }
+  std::string name() const { return "rigid-body"; }
+  template <class T>
+  T operator()(const Mat<T, 3, 3>&, const Vec<T, 3>& w) const {
+    return 0.5 * (inertia[0] * w[0] * w[0] + inertia[1] * w[1] * w[1] + inertia[2] * w[2] * w[2]);
+  }
+  // Spatial angular momentum R Pi: conserved.
+  static Vec<double, 3> spatial_momentum(const Mat<double, 3, 3>& R, const Vec<double, 3>& Pi) { return R * Pi; }
+};
+
+struct HeavyTop {
+  using Manifold = SO3;
+  static constexpr int dim = 3;
+  Vec<double, 3> inertia, chi;
+  double m = 1.0, g = 1.0;
+  HeavyTop(const Vec<double, 3>& I = Vec<double, 3>(1.0, 1.0, 0.5), double m_ = 1.0, double g_ = 1.0,
+           const Vec<double, 3>& chi_ = Vec<double, 3>(0.0, 0.0, 1.0))
+      : inertia(I), chi(chi_), m(m_), g(g_) {
+    for (int i = 0; i < 3; ++i)
+      if (!(I[i] > 0) || !std::isfinite(I[i]) || !std::isfinite(chi[i]))
+        throw std::invalid_argument("heavy-top: moments of inertia must be positive, chi finite");
+    if (!(m > 0) || !std::isfinite(g)) throw std::invalid_argument("heavy-top: m must be positive, g finite");
+  }
+  std::string name() const { return "heavy-top"; }
+  template <class T>
+  T operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
+    // e3.(R chi) = third row of R times chi
+    const T height = R(2, 0) * chi[0] + R(2, 1) * chi[1] + R(2, 2) * chi[2];
+    return 0.5 * (inertia[0] * w[0] * w[0] + inertia[1] * w[1] * w[1] + inertia[2] * w[2] * w[2]) -
+           (m * g) * height;
+  }
+  static double vertical_momentum(const Mat<double, 3, 3>& R, const Vec<double, 3>& Pi) { return (R * Pi)[2]; }
+};
+
+// Legendre map in local coordinates: p = d/dnu L(x, tangent(x, nu)), returned in the
+// manifold's stored covector form.
+template <class S>
+typename S::Manifold::template Tangent<double> manifold_legendre(
+    const S& L, const typename S::Manifold::template Point<double>& x,
+    const typename S::Manifold::template Tangent<double>& v) {
+  using M = typename S::Manifold;
+  constexpr int n = M::dim;
+  using D = ceres::Jet<double, n>;
+  const Vec<double, n> nu0 = M::tangent_coordinates(x, v);
+  Vec<D, n> nu;
+  for (int i = 0; i < n; ++i) nu[i] = seed<double, n>(nu0[i], i);
+  typename M::template Point<D> xd;
+  for (int i = 0; i < x.size(); ++i) xd(i) = D(x(i));
+  const D l = L(xd, M::tangent(x, nu));
+  return M::covector_from_local(x, Vec<double, n>(l.v));
+}
+
+// Energy <p, v> - L at (x, v).
+template <class S>
+double manifold_energy(const S& L, const typename S::Manifold::template Point<double>& x,
+                       const typename S::Manifold::template Tangent<double>& v) {
+  using M = typename S::Manifold;
+  const auto p = manifold_legendre(L, x, v);
+  return M::covector_to_local(x, p).dot(M::tangent_coordinates(x, v)) - L(x, v);
+}
+
+// The velocity with momentum p at x (Newton's method in local coordinates).
+template <class S>
+typename S::Manifold::template Tangent<double> manifold_legendre_inverse(
+    const S& L, const typename S::Manifold::template Point<double>& x,
+    const typename S::Manifold::template Tangent<double>& p) {
+  using M = typename S::Manifold;
+  constexpr int n = M::dim;
+  using D = ceres::Jet<double, n>;
+  const Vec<double, n> target = M::covector_to_local(x, p);
+  Vec<double, n> nu = Vec<double, n>::Zero();
+  typename M::template Point<D> xd;
+  for (int i = 0; i < x.size(); ++i) xd(i) = D(x(i));
+  const double scale = std::fmax(1e-300, max_abs(target));
+  for (int it = 0; it < 50; ++it) {
+    // gradient in nu by an outer Jet, Hessian by the inner one
+    using DD = ceres::Jet<D, n>;
+    Vec<DD, n> nud;
+    for (int i = 0; i < n; ++i) nud[i] = seed<D, n>(seed<double, n>(nu[i], i), i);
+    typename M::template Point<DD> xdd;
+    for (int i = 0; i < x.size(); ++i) xdd(i) = DD(D(x(i)));
+    const DD l = L(xdd, M::tangent(x, nud));
+    Vec<double, n> r;
+    Mat<double, n, n> H;
+    for (int i = 0; i < n; ++i) {
+      r[i] = l.v[i].a - target[i];
+      H.row(i) = l.v[i].v.transpose();
+    }
+    if (max_abs(r) <= 1e-14 * scale) break;
+    Vec<double, n> dnu;
+    try {
+      dnu = solve_dense<double, n, n>(H, r);
+    } catch (const std::domain_error&) {
+      throw DegenerateLagrangianError(L.name() + ": the velocity Hessian is singular");
+    }
+    nu -= dnu;
+    if (max_abs(dnu) <= 4e-16 * std::fmax(1.0, max_abs(nu))) break;
+  }
+  return M::tangent(x, nu);
+}
+
+template <class System, class Map>
+class ManifoldDiscreteLagrangian {
+ public:
+  using M = typename Map::Manifold;
+  static constexpr int n = M::dim;
+  template <class T>
+  using P = typename M::template Point<T>;
+  static_assert(std::is_same_v<typename System::Manifold, M>, "system and map live on different manifolds");
+
+  ManifoldDiscreteLagrangian(System L, Map R, double h) : L_(std::move(L)), R_(std::move(R)), h_(h) {
+    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+  }
+  const System& lagrangian() const { return L_; }
+  const Map& map() const { return R_; }
+  double step() const { return h_; }
+
+  template <class T>
+  T operator()(const P<T>& q0, const P<T>& q1) const {
+    const ManifoldTangent<M, T> t = R_.inverse(q0, q1);
+    typename M::template Tangent<T> u = t.v;
+    for (int i = 0; i < u.size(); ++i) u(i) = t.v(i) * (1.0 / h_);
+    return h_ * L_(t.x, u);
+  }
+
+  // D1 L_d(q0, q1) in the chart centred at q0 (q0 a double point, q1 any scalar).
+  template <class T>
+  Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1) const {
+    using D = ceres::Jet<T, n>;
+    Vec<D, n> eta;
+    for (int i = 0; i < n; ++i) eta[i] = seed<T, n>(constant<T>(0.0), i);
+    P<D> b;
+    for (int i = 0; i < q1.size(); ++i) b(i) = D(q1(i));
+    return (*this)(M::chart(q0, eta), b).v;
+  }
+  // D2 L_d(q0, q1) in the chart centred at q1.
+  Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1) const {
+    using D = ceres::Jet<double, n>;
+    Vec<D, n> eta;
+    for (int i = 0; i < n; ++i) eta[i] = seed<double, n>(0.0, i);
+    P<D> a;
+    for (int i = 0; i < q0.size(); ++i) a(i) = D(q0(i));
+    return (*this)(a, M::chart(q1, eta)).v;
+  }
+
+ private:
+  System L_;
+  Map R_;
+  double h_;
+};
+
+}  // namespace dvm

@@ -1,0 +1,130 @@
+// The position-momentum step on a manifold, solved in local coordinates:
+//
+//   given (q_k, p_k), find xi in R^dim with q_{k+1} = chart(q_k, xi) and
+//       p_k + D1 L_d(q_k, q_{k+1}) = 0         (in the chart centred at q_k),
+//   then p_{k+1} = D2 L_d(q_k, q_{k+1})        (in the chart centred at q_{k+1}).
+//
+// Because q_{k+1} is produced by the chart (a retraction), iterates stay on the
+// manifold up to round-off; `clean` removes that round-off each step (renormalising
+// a unit vector, one Newton-Schulz step for a rotation), so it cannot accumulate. A
+// chart result off the manifold by more than 1e-12 fails the step instead: cleaning
+// never hides an error of the method.
+// The starting guess for xi comes from the previous increment (second order in h).
+#pragma once
+
+#include <cstdint>
+
+#include "mechanics/manifold_systems.h"
+#include "solvers/integrate.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+template <class System, class Map>
+class ManifoldStep {
+ public:
+  using M = typename Map::Manifold;
+  static constexpr int n = M::dim;
+  using Point = typename M::template Point<double>;
+  using Covector = typename M::template Tangent<double>;
+  using DL = ManifoldDiscreteLagrangian<System, Map>;
+
+  ManifoldStep(System L, Map R, double h, StepOptions options = {})
+      : dl_(std::move(L), std::move(R), h), options_(options) {}
+  const DL& discrete_lagrangian() const { return dl_; }
+  double step_size() const { return dl_.step(); }
+
+  struct Residual {
+    const DL* dl;
+    Point q0;
+    Vec<double, n> p0;  // momentum in the chart centred at q0
+    template <class T>
+    bool operator()(const T* xi, T* r) const {
+      Vec<T, n> x;
+      for (int i = 0; i < n; ++i) x[i] = xi[i];
+      const Vec<T, n> d1 = dl->D1_local(q0, M::chart(q0, x));
+      for (int i = 0; i < n; ++i) r[i] = p0[i] + d1[i];
+      return true;
+    }
+  };
+
+  // One step: xi holds the guess on entry and the chart coordinates of q1 on return.
+  StepSummary step(const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
+    const Vec<double, n> p0l = M::covector_to_local(q0, p0);
+    Residual f{&dl_, q0, p0l};
+    const double pscale = max_abs(p0l);
+    auto scale_of = [pscale](const Vec<double, n>& x, const Mat<double, n, n>& J) {
+      return pscale + max_abs(J) * max_abs(x);
+    };
+    StepSummary s;
+    try {
+      s = solve_step_system<n>(f, xi, 1.0, options_, scale_of);
+      if (s.converged) {
+        const Point raw = M::chart(q0, xi);
+        const double defect = M::point_defect(raw);
+        if (!(defect <= 1e-12)) {
+          s.converged = false;
+          s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+          return s;
+        }
+        q1 = M::clean(raw);
+        p1 = M::covector_from_local(q1, dl_.D2_local(q0, q1));
+        if (!std::isfinite(max_abs(p1))) {
+          s.converged = false;
+          s.message = "non-finite momentum";
+        }
+      }
+    } catch (const std::domain_error& e) {
+      s.converged = false;
+      s.message = e.what();
+    }
+    return s;
+  }
+
+ private:
+  DL dl_;
+  StepOptions options_;
+};
+
+// A guess for the next chart coordinates from the last two points (second order):
+// on S^2 the coordinates of the reflection 2 q - q_prev (renormalised), on SO(3) the
+// last body increment log(q_prev^T q).
+inline Vec<double, 2> next_guess(const Vec<double, 3>& q_prev, const Vec<double, 3>& q) {
+  return Sphere::chart_inverse(q, Vec<double, 3>((2.0 * q - q_prev).normalized()));
+}
+inline Vec<double, 3> next_guess(const Mat<double, 3, 3>& q_prev, const Mat<double, 3, 3>& q) {
+  return SO3::log(Mat<double, 3, 3>(q_prev.transpose() * q));
+}
+
+// The integrate loop on a manifold. The observer is called as
+// observer(k, t_k, q_k, p_k, summary) after every completed step.
+template <class S, class Observer>
+RunSummary integrate_manifold(const S& stepper, double t0, typename S::Point& q, typename S::Covector& p,
+                              const typename S::Covector& v0, std::int64_t steps, Observer&& observer) {
+  using M = typename S::M;
+  const double h = stepper.step_size();
+  typename S::Point q_prev = q, q1 = q;
+  typename S::Covector p1 = p;
+  RunSummary run;
+  for (std::int64_t k = 0; k < steps; ++k) {
+    Vec<double, S::n> xi = k == 0 ? Vec<double, S::n>(h * M::tangent_coordinates(q, v0)) : next_guess(q_prev, q);
+    const StepSummary s = stepper.step(q, p, xi, q1, p1);
+    run.solver_iterations += s.iterations;
+    if (s.iterations > run.max_step_iterations) run.max_step_iterations = s.iterations;
+    if (!s.converged) {
+      run.failed = true;
+      run.failed_step = k;
+      run.failed_time = t0 + static_cast<double>(k) * h;
+      run.failure = s;
+      break;
+    }
+    q_prev = q;
+    q = q1;
+    p = p1;
+    run.steps_done = k + 1;
+    observer(k + 1, t0 + static_cast<double>(k + 1) * h, q, p, s);
+  }
+  return run;
+}
+
+}  // namespace dvm
