@@ -86,7 +86,11 @@ Result hand_written(const Pendulum& P, double h, std::int64_t steps) {
       const double J = M / h + 0.25 * h * k * c;
       ++iters;
       const double scale = std::fabs(p) + std::fabs(J) * std::fabs(d);
-      if (std::fabs(f) <= 2e-15 * scale || dx <= 1e-14 * (std::fabs(d) + std::fabs(q))) break;
+      if (std::fabs(f) <= 2e-15 * scale) {  // converged: apply the last correction, as dvm does
+        d -= f / J;
+        break;
+      }
+      if (dx <= 1e-14 * (std::fabs(d) + std::fabs(q))) break;
       dx = f / J;
       d -= dx;
     }
