@@ -15,6 +15,8 @@ struct RunOptions {
 };
 
 int run_scene(const Scene& scene, const RunOptions& options);
+// Systems on S^2 and SO(3) (run_manifold.cc).
+int run_manifold_scene(const Scene& scene, const RunOptions& options);
 
 // Prints the identity residuals of a map as JSON; returns 0 if every identity holds
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.

@@ -165,6 +165,7 @@ int run_system(const Scene& s, const System& L, const RunOptions& o) {
 
 int run_scene(const Scene& s, const RunOptions& o) {
   try {
+    if (s.space != "R^n") return run_manifold_scene(s, o);
     const auto& P = s.params;
     if (s.system == "harmonic") return run_system(s, HarmonicOscillator(P.at("omega")), o);
     if (s.system == "pendulum") return run_system(s, Pendulum(P.at("m"), P.at("l"), P.at("g")), o);

@@ -18,6 +18,30 @@ const std::vector<SystemInfo>& systems() {
        "L = m l^2 v^2/2 + m g l cos(q)   (q from the downward vertical)",
        {{"m", 1.0, "mass"}, {"l", 1.0, "length"}, {"g", 1.0, "gravitational acceleration"}}},
       {"kepler", 2, "L = |v|^2/2 + mu/|q|   (q in the plane)", {{"mu", 1.0, "gravitational parameter"}}},
+      {"spherical-pendulum",
+       3,
+       "L = m l^2 |v|^2/2 - m g l x_3   (x a unit vector, x_3 upward)",
+       {{"m", 1.0, "mass"}, {"l", 1.0, "length"}, {"g", 1.0, "gravitational acceleration"}},
+       "S^2"},
+      {"rigid-body",
+       3,
+       "L = (I1 w1^2 + I2 w2^2 + I3 w3^2)/2   (w the body angular velocity)",
+       {{"I1", 1.0, "principal moment of inertia"},
+        {"I2", 2.0, "principal moment of inertia"},
+        {"I3", 3.0, "principal moment of inertia"}},
+       "SO(3)"},
+      {"heavy-top",
+       3,
+       "L = w.I w/2 - m g e3.(R chi)   (chi the centre of mass in the body frame)",
+       {{"I1", 1.0, "principal moment of inertia"},
+        {"I2", 1.0, "principal moment of inertia"},
+        {"I3", 0.5, "principal moment of inertia"},
+        {"m", 1.0, "mass"},
+        {"g", 1.0, "gravitational acceleration"},
+        {"chi1", 0.0, "centre of mass, body frame"},
+        {"chi2", 0.0, "centre of mass, body frame"},
+        {"chi3", 1.0, "centre of mass, body frame"}},
+       "SO(3)"},
   };
   return list;
 }
@@ -31,11 +55,30 @@ const std::vector<MapInfo>& maps() {
        "symmetric and of order 2 only at theta = 1/2"},
       {"retraction-theta", "R_d(x, v) = (R_x(-theta v), R_x((1 - theta) v)), R_x(v) = x + v", false, 1, false,
        "Prop. 2.3 from the flat retraction; inverted by Newton's method (the generic path)"},
+      {"sphere-exp", "(exp_x(-v/2), exp_x(v/2)), exp_x(v) = cos|v| x + sin|v| v/|v|", true, 2, true,
+       "midpoint form on S^2 (Eq. 2.3)", "S^2"},
+      {"sphere-projection", "((x - v/2)/|x - v/2|, (x + v/2)/|x + v/2|)", true, 2, true,
+       "projection midpoint on S^2", "S^2"},
+      {"sphere-exp-fixed", "(x, exp_x(v))", false, 1, true, "fixed-first-point form on S^2", "S^2"},
+      {"sphere-projection-fixed", "(x, (x + v)/|x + v|)", false, 1, true,
+       "fixed-first-point projection map; inverse (x0, x1/(x0.x1) - x0) needs x0.x1 > 0", "S^2"},
+      {"so3-exp", "(R exp(-w/2), R exp(w/2))", true, 2, true, "group exponential midpoint on SO(3)", "SO(3)"},
+      {"so3-cayley", "(R cay(-w/2), R cay(w/2))", true, 2, true, "Cayley midpoint on SO(3) (Ex. 2.8)", "SO(3)"},
+      {"so3-exp-fixed", "(R, R exp(w))", false, 1, true, "fixed-first-point form on SO(3)", "SO(3)"},
+      {"so3-cayley-fixed", "(R, R cay(w))", false, 1, true,
+       "fixed-first-point Cayley map; undefined for relative rotations by pi", "SO(3)"},
   };
   return list;
 }
 
 namespace {
+
+std::string fmt(double x) {
+  std::ostringstream out;
+  out.precision(3);
+  out << x;
+  return out.str();
+}
 
 std::string join_names(const std::vector<std::string>& names) {
   std::string out;
@@ -209,6 +252,118 @@ void apply_override(toml::table& root, const std::string& spec) {
   t->insert_or_assign(parts.back(), *parsed.get("value"));
 }
 
+// [initial] for systems on R^n and S^2: q and one of p, v, each of length info.dim.
+void read_vector_initial(const Reader& r, const toml::table& ini, const std::string& path, const SystemInfo& info,
+                         Scene& s) {
+  r.only_keys(ini, "initial", {"q", "p", "v"});
+  const toml::node* q = ini.get("q");
+  if (!q) throw InputError(path + ": missing key 'initial.q'");
+  s.q = r.vector(*q, "initial.q");
+  const std::string n_expected = std::to_string(info.dim);
+  if (static_cast<int>(s.q.size()) != info.dim)
+    throw InputError(r.where(q, "initial.q") + ": got " + std::to_string(s.q.size()) + " numbers, expected " +
+                     n_expected + " (the dimension of " + info.name + ")");
+  const toml::node* p = ini.get("p");
+  const toml::node* v = ini.get("v");
+  if (p && v) throw InputError(r.where(v, "initial.v") + ": give either initial.p or initial.v, not both");
+  if (!p && !v) throw InputError(path + ": missing key 'initial.p' or 'initial.v'");
+  const toml::node* pv = p ? p : v;
+  const std::string pv_key = p ? "initial.p" : "initial.v";
+  (p ? s.p : s.v) = r.vector(*pv, pv_key);
+  s.momentum_given = p != nullptr;
+  if (static_cast<int>((p ? s.p : s.v).size()) != info.dim)
+    throw InputError(r.where(pv, pv_key) + ": got " + std::to_string((p ? s.p : s.v).size()) + " numbers, expected " +
+                     n_expected + " (the dimension of " + info.name + ")");
+  if (info.space == "S^2") {
+    // on the manifold, not projected onto it: the defect is reported
+    const double n2 = s.q[0] * s.q[0] + s.q[1] * s.q[1] + s.q[2] * s.q[2];
+    const double defect = std::fabs(std::sqrt(n2) - 1.0);
+    if (!(defect <= 1e-12))
+      throw InputError(r.where(q, "initial.q") + ": not a unit vector (| |q| - 1 | = " + fmt(defect) +
+                       "); expected a point of S^2 to 1e-12");
+    const auto& w = p ? s.p : s.v;
+    const double t = std::fabs(s.q[0] * w[0] + s.q[1] * w[1] + s.q[2] * w[2]);
+    if (!(t <= 1e-12))
+      throw InputError(r.where(pv, pv_key) + ": not tangent to S^2 at q (|q . " + (p ? "p" : "v") + "| = " + fmt(t) +
+                       "); expected a vector orthogonal to q to 1e-12");
+  }
+}
+
+// [initial] for systems on SO(3): rotation (unit quaternion) or R (3x3 matrix), and
+// omega (body angular velocity) or pi (body angular momentum).
+void read_rotation_initial(const Reader& r, const toml::table& ini, const std::string& path, Scene& s) {
+  r.only_keys(ini, "initial", {"rotation", "R", "omega", "pi"});
+  const toml::node* quat = ini.get("rotation");
+  const toml::node* mat = ini.get("R");
+  if (quat && mat) throw InputError(r.where(mat, "initial.R") + ": give either initial.rotation or initial.R, not both");
+  if (!quat && !mat) throw InputError(path + ": missing key 'initial.rotation' (quaternion [w, x, y, z]) or 'initial.R'");
+  if (quat) {
+    s.q = r.vector(*quat, "initial.rotation");
+    if (s.q.size() != 4)
+      throw InputError(r.where(quat, "initial.rotation") + ": got " + std::to_string(s.q.size()) +
+                       " numbers, expected 4 (a unit quaternion [w, x, y, z])");
+    const double n = std::sqrt(s.q[0] * s.q[0] + s.q[1] * s.q[1] + s.q[2] * s.q[2] + s.q[3] * s.q[3]);
+    if (!(std::fabs(n - 1.0) <= 1e-12))
+      throw InputError(r.where(quat, "initial.rotation") + ": not a unit quaternion (| |q| - 1 | = " +
+                       fmt(std::fabs(n - 1.0)) + "); expected norm 1 to 1e-12");
+  } else {
+    auto rows = mat->as_array();
+    if (!rows || rows->size() != 3)
+      throw InputError(r.where(mat, "initial.R") + ": expected a 3x3 matrix [[r11, r12, r13], [...], [...]]");
+    double R[3][3];
+    for (std::size_t i = 0; i < 3; ++i) {
+      const std::vector<double> row = r.vector(*rows->get(i), "initial.R[" + std::to_string(i) + "]");
+      if (row.size() != 3) throw InputError(r.where(mat, "initial.R") + ": expected 3 numbers in each row");
+      for (int j = 0; j < 3; ++j) R[i][j] = row[static_cast<std::size_t>(j)];
+    }
+    double defect = 0.0;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) {
+        double d = (i == j) ? -1.0 : 0.0;
+        for (int k = 0; k < 3; ++k) d += R[k][i] * R[k][j];
+        defect = std::fmax(defect, std::fabs(d));
+      }
+    const double det = R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1]) -
+                       R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0]) +
+                       R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]);
+    if (!(defect <= 1e-12) || !(std::fabs(det - 1.0) <= 1e-12))
+      throw InputError(r.where(mat, "initial.R") + ": not a rotation (|R^T R - I| = " + fmt(defect) +
+                       ", det R = " + fmt(det) + "); expected an orthogonal matrix with determinant 1 to 1e-12");
+    // store as the quaternion (w >= 0) of R
+    const double w = 0.5 * std::sqrt(std::fmax(0.0, 1.0 + R[0][0] + R[1][1] + R[2][2]));
+    double x, y, z;
+    if (w > 0.1) {
+      x = (R[2][1] - R[1][2]) / (4 * w);
+      y = (R[0][2] - R[2][0]) / (4 * w);
+      z = (R[1][0] - R[0][1]) / (4 * w);
+    } else {  // near a half turn: from the largest diagonal entry
+      const int k = R[0][0] >= R[1][1] && R[0][0] >= R[2][2] ? 0 : (R[1][1] >= R[2][2] ? 1 : 2);
+      const int i1 = (k + 1) % 3, i2 = (k + 2) % 3;
+      double a[3];
+      a[k] = 0.5 * std::sqrt(std::fmax(0.0, 1.0 + R[k][k] - R[i1][i1] - R[i2][i2]));
+      a[i1] = (R[i1][k] + R[k][i1]) / (4 * a[k]);
+      a[i2] = (R[i2][k] + R[k][i2]) / (4 * a[k]);
+      const double ww = (R[i2][i1] - R[i1][i2]) / (4 * a[k]);
+      x = a[0];
+      y = a[1];
+      z = a[2];
+      const double sign = ww < 0 ? -1.0 : 1.0;
+      s.q = {sign * ww, sign * x, sign * y, sign * z};
+    }
+    if (w > 0.1) s.q = {w, x, y, z};
+  }
+  const toml::node* om = ini.get("omega");
+  const toml::node* pi = ini.get("pi");
+  if (om && pi) throw InputError(r.where(pi, "initial.pi") + ": give either initial.omega or initial.pi, not both");
+  if (!om && !pi) throw InputError(path + ": missing key 'initial.omega' (body angular velocity) or 'initial.pi'");
+  const toml::node* n = om ? om : pi;
+  const std::string key = om ? "initial.omega" : "initial.pi";
+  (om ? s.v : s.p) = r.vector(*n, key);
+  s.momentum_given = pi != nullptr;
+  if ((om ? s.v : s.p).size() != 3)
+    throw InputError(r.where(n, key) + ": got " + std::to_string((om ? s.v : s.p).size()) + " numbers, expected 3");
+}
+
 }  // namespace
 
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
@@ -256,33 +411,27 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   }
 
   // [initial]
+  s.space = info.space;
   const toml::table& ini = r.section(root, "initial", true);
-  r.only_keys(ini, "initial", {"q", "p", "v"});
-  const toml::node* q = ini.get("q");
-  if (!q) throw InputError(path + ": missing key 'initial.q'");
-  s.q = r.vector(*q, "initial.q");
-  const std::string n_expected = std::to_string(info.dim);
-  if (static_cast<int>(s.q.size()) != info.dim)
-    throw InputError(r.where(q, "initial.q") + ": got " + std::to_string(s.q.size()) + " numbers, expected " +
-                     n_expected + " (the dimension of " + info.name + ")");
-  const toml::node* p = ini.get("p");
-  const toml::node* v = ini.get("v");
-  if (p && v) throw InputError(r.where(v, "initial.v") + ": give either initial.p or initial.v, not both");
-  if (!p && !v) throw InputError(path + ": missing key 'initial.p' or 'initial.v'");
-  const toml::node* pv = p ? p : v;
-  const std::string pv_key = p ? "initial.p" : "initial.v";
-  (p ? s.p : s.v) = r.vector(*pv, pv_key);
-  s.momentum_given = p != nullptr;
-  if (static_cast<int>((p ? s.p : s.v).size()) != info.dim)
-    throw InputError(r.where(pv, pv_key) + ": got " + std::to_string((p ? s.p : s.v).size()) + " numbers, expected " +
-                     n_expected + " (the dimension of " + info.name + ")");
+  if (info.space == "SO(3)")
+    read_rotation_initial(r, ini, path, s);
+  else
+    read_vector_initial(r, ini, path, info, s);
 
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance"});
   const toml::node* m = in.get("map");
   if (!m) throw InputError(path + ": missing key 'integrator.map'");
-  s.map = find_map(r.string(*m, "integrator.map"), r.where(m, "integrator.map")).name;
+  const MapInfo& map_info = find_map(r.string(*m, "integrator.map"), r.where(m, "integrator.map"));
+  s.map = map_info.name;
+  if (map_info.space != info.space) {
+    std::vector<std::string> fitting;
+    for (const auto& mi : maps())
+      if (mi.space == info.space) fitting.push_back(mi.name);
+    throw InputError(r.where(m, "integrator.map") + ": map \"" + s.map + "\" lives on " + map_info.space + " but " +
+                     info.name + " lives on " + info.space + "; expected one of: " + join_names(fitting));
+  }
   if (const toml::node* th = in.get("theta")) {
     if (s.map != "theta" && s.map != "retraction-theta")
       throw InputError(r.where(th, "integrator.theta") + ": theta applies only to map = \"theta\" or "

@@ -10,6 +10,12 @@
 //                 max_iterations = 25   tolerance = 2e-15   (optional: the solver's
 //                 iteration bound and relative residual tolerance)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
+//
+// Systems on S^2 take q = unit vector [x, y, z] and v or p tangent to it; systems on
+// SO(3) take   rotation = [w, x, y, z] (unit quaternion)  or  R = [[...], [...], [...]]
+// and          omega = [...] (body angular velocity)  or  pi = [...] (body momentum).
+// Points off the manifold and velocities that are not tangent are refused with the
+// size of the defect (never projected).
 #pragma once
 
 #include <cstdint>
@@ -33,9 +39,10 @@ struct ParamInfo {
 
 struct SystemInfo {
   std::string name;
-  int dim;
+  int dim;  // length of initial.q (S^2: 3, the embedded unit vector; SO(3): see Scene)
   std::string lagrangian;
   std::vector<ParamInfo> params;
+  std::string space = "R^n";  // "R^n", "S^2" or "SO(3)"
 };
 
 struct MapInfo {
@@ -45,6 +52,7 @@ struct MapInfo {
   int order;
   bool closed_inverse;
   std::string note;
+  std::string space = "R^n";  // where the map lives: "R^n", "S^2" or "SO(3)"
 };
 
 const std::vector<SystemInfo>& systems();
@@ -56,8 +64,9 @@ struct Scene {
   std::string path;
   std::string system;
   std::map<std::string, double> params;  // every parameter, defaults filled in
-  std::vector<double> q, p, v;
+  std::vector<double> q, p, v;  // SO(3): q is the unit quaternion [w, x, y, z], v omega, p pi
   bool momentum_given = false;  // p given (else v)
+  std::string space = "R^n";
   std::string map;
   double theta = 0.5;
   double step = 0.0;

@@ -257,3 +257,105 @@ BOOST_AUTO_TEST_CASE(maps_and_check_map) {
     BOOST_TEST(h.out.find("example") != std::string::npos, cmd);
   }
 }
+
+BOOST_AUTO_TEST_CASE(manifold_scenes_run_and_keep_their_invariants) {
+  struct Case {
+    const char* scene;
+    const char* momentum;
+    const char* header;
+  };
+  const std::vector<Case> cases = {
+      {"spherical-pendulum.toml", "max_abs_vertical_angular_momentum_error", "t,x,y,z,p0,p1,p2,energy,J3"},
+      {"rigid-body.toml", "max_abs_spatial_angular_momentum_error", "t,qw,qx,qy,qz,pi0,pi1,pi2,energy,m0,m1,m2"},
+      {"heavy-top.toml", "max_abs_vertical_angular_momentum_error", "t,qw,qx,qy,qz,pi0,pi1,pi2,energy,J3"}};
+  for (const auto& c : cases) {
+    const std::string csv = temp_dir() + "/" + c.scene + ".csv";
+    // a shorter run keeps the suite fast: 2000 steps
+    const Output o = dvm({"run", scene(c.scene), "--json", "--csv", csv, "--set", "integrator.steps=2000", "--set",
+                          "integrator.t_end=0"});
+    BOOST_TEST_CONTEXT(c.scene << "\n" << o.out << o.err) {
+      BOOST_TEST(o.status == 2);  // steps and t_end together are refused
+    }
+    const std::string path = write_scene(std::string("short-") + c.scene,
+                                         slurp(scene(c.scene)).replace(slurp(scene(c.scene)).find("t_end"), 5, "#t_end"));
+    const Output r = dvm({"run", path, "--json", "--csv", csv, "--set", "integrator.steps=2000"});
+    BOOST_TEST_CONTEXT(c.scene << "\n" << r.out << r.err) {
+      BOOST_TEST(r.status == 0);
+      BOOST_TEST(json_number(r.out, "max_point_defect") <= 1e-14);
+      BOOST_TEST(json_number(r.out, c.momentum) <= 1e-12);
+      BOOST_TEST(json_number(r.out, "max_abs_energy_error") <= 1e-4);
+      std::ifstream f(csv);
+      std::string header;
+      std::getline(f, header);
+      BOOST_TEST(header == c.header);
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(points_off_the_manifold_are_refused_with_the_defect) {
+  const std::string sphere =
+      "[system]\nbuiltin = \"spherical-pendulum\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 1.0, 0.0]\n"
+      "[integrator]\nmap = \"sphere-exp\"\nstep = 0.01\nsteps = 10\n";
+  const std::string body =
+      "[system]\nbuiltin = \"rigid-body\"\n[initial]\nrotation = [1.0, 0.0, 0.0, 0.0]\nomega = [0.1, 1.0, 0.0]\n"
+      "[integrator]\nmap = \"so3-cayley\"\nstep = 0.01\nsteps = 10\n";
+  const std::string sp = write_scene("sphere.toml", sphere), bp = write_scene("body.toml", body);
+  BOOST_TEST(dvm({"run", sp, "--quiet"}).status == 0);
+  BOOST_TEST(dvm({"run", bp, "--quiet"}).status == 0);
+  struct Case {
+    std::string path, set, expect;
+  };
+  const std::vector<Case> cases = {
+      {sp, "initial.q=[0.6, 0.0, -0.81]", "not a unit vector"},
+      {sp, "initial.v=[0.1, 1.0, 0.0]", "not tangent"},
+      {sp, "initial.q=[0.6, -0.8]", "expected 3"},
+      {sp, "integrator.map=so3-exp", "lives on SO(3)"},
+      {sp, "integrator.map=midpoint", "lives on R^n"},
+      {bp, "initial.rotation=[1.0, 0.1, 0.0, 0.0]", "not a unit quaternion"},
+      {bp, "initial.rotation=[1.0, 0.0, 0.0]", "expected 4"},
+      {bp, "initial.omega=[1.0, 0.0]", "expected 3"},
+      {bp, "integrator.map=sphere-exp", "lives on S^2"},
+      {bp, "system.params.I3=5.0", "triangle inequality"},
+  };
+  for (const auto& c : cases) {
+    const Output o = dvm({"run", c.path, "--set", c.set});
+    BOOST_TEST_CONTEXT(c.set << " -> " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find(c.expect) != std::string::npos);
+    }
+  }
+  // a rotation matrix that is not orthogonal
+  const std::string mat = write_scene(
+      "mat.toml", "[system]\nbuiltin = \"rigid-body\"\n[initial]\nR = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.01], [0.0, 0.0, 1.0]]\n"
+                  "pi = [0.1, 1.0, 0.0]\n[integrator]\nmap = \"so3-exp\"\nstep = 0.01\nsteps = 10\n");
+  const Output o = dvm({"run", mat});
+  BOOST_TEST(o.status == 2);
+  BOOST_TEST(o.err.find("not a rotation") != std::string::npos, o.err);
+  // and a proper one (a quarter turn about z) is accepted
+  const std::string good = write_scene(
+      "mat2.toml", "[system]\nbuiltin = \"rigid-body\"\n[initial]\nR = [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]\n"
+                   "pi = [0.1, 1.0, 0.0]\n[integrator]\nmap = \"so3-exp\"\nstep = 0.01\nsteps = 10\n");
+  const Output g = dvm({"run", good, "--json"});
+  BOOST_TEST(g.status == 0, g.err);
+  // spatial angular momentum R pi: the quarter turn maps (0.1, 1, 0) to (-1, 0.1, 0)
+  const auto pos = g.out.find("\"spatial_angular_momentum_initial\": [");
+  BOOST_REQUIRE(pos != std::string::npos);
+  char* end = nullptr;
+  const double m0 = std::strtod(g.out.c_str() + g.out.find('[', pos) + 1, &end);
+  const double m1 = std::strtod(end + 1, nullptr);
+  BOOST_TEST(m0 == -1.0, boost::test_tools::tolerance(1e-15));
+  BOOST_TEST(m1 == 0.1, boost::test_tools::tolerance(1e-14));
+}
+
+BOOST_AUTO_TEST_CASE(check_map_on_manifold_maps) {
+  for (const char* name : {"sphere-exp", "sphere-projection", "sphere-exp-fixed", "sphere-projection-fixed", "so3-exp",
+                           "so3-cayley", "so3-exp-fixed", "so3-cayley-fixed"}) {
+    const Output c = dvm({"check-map", name});
+    BOOST_TEST_CONTEXT(name << "\n" << c.out) {
+      BOOST_TEST(c.status == 0);
+      BOOST_TEST(c.out.find("\"passed\": true") != std::string::npos);
+      BOOST_TEST(json_number(c.out, "cotangent_symplectic") <= 1e-13);
+      BOOST_TEST(json_number(c.out, "manifold_round_trip") <= 1e-13);
+    }
+  }
+}

@@ -1,0 +1,201 @@
+// `dvm run` for systems on S^2 and SO(3): the step is solved in local coordinates
+// (solvers/manifold_step.h). Output:
+//   S^2    CSV  t, x, y, z, p0, p1, p2, energy, J3           (J3 = (x cross p)_3)
+//   SO(3)  CSV  t, qw, qx, qy, qz, pi0, pi1, pi2, energy, m0, m1, m2
+//               (unit quaternion of R, body momentum, spatial angular momentum R pi)
+// and the same JSON fields as on R^n (q_final is the unit vector or the quaternion,
+// p_final the momentum as stored), plus the largest distance from the manifold and the
+// error of the conserved momentum.
+#include <chrono>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+
+#include "examples/dvm/commands.h"
+#include "examples/dvm/json.h"
+#include "solvers/manifold_step.h"
+
+namespace dvm::cli {
+
+namespace {
+
+struct FileCloser {
+  void operator()(std::FILE* f) const {
+    if (f) std::fclose(f);
+  }
+};
+using File = std::unique_ptr<std::FILE, FileCloser>;
+using V3 = Vec<double, 3>;
+using M3 = Mat<double, 3, 3>;
+
+// Stored coordinates written to the CSV and JSON: the point itself on S^2, the
+// quaternion on SO(3).
+std::vector<double> coordinates(const V3& x) { return {x[0], x[1], x[2]}; }
+std::vector<double> coordinates(const M3& R) {
+  const Vec<double, 4> q = SO3::to_quaternion(R);
+  return {q[0], q[1], q[2], q[3]};
+}
+
+// The conserved momentum of each system (vertical or spatial angular momentum).
+std::vector<double> momentum_map(const SphericalPendulum&, const V3& x, const V3& p) {
+  return {SphericalPendulum::vertical_momentum(x, p)};
+}
+std::vector<double> momentum_map(const RigidBody&, const M3& R, const V3& p) {
+  const V3 m = RigidBody::spatial_momentum(R, p);
+  return {m[0], m[1], m[2]};
+}
+std::vector<double> momentum_map(const HeavyTop&, const M3& R, const V3& p) {
+  return {HeavyTop::vertical_momentum(R, p)};
+}
+const char* momentum_columns(const SphericalPendulum&) { return ",J3"; }
+const char* momentum_columns(const RigidBody&) { return ",m0,m1,m2"; }
+const char* momentum_columns(const HeavyTop&) { return ",J3"; }
+const char* point_columns(const V3&) { return "t,x,y,z,p0,p1,p2,energy"; }
+const char* point_columns(const M3&) { return "t,qw,qx,qy,qz,pi0,pi1,pi2,energy"; }
+
+template <class System, class Map>
+int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o) {
+  using M = typename Map::Manifold;
+  using Point = typename M::template Point<double>;
+  Point q;
+  if constexpr (std::is_same_v<M, SO3>)
+    q = SO3::from_quaternion(Vec<double, 4>(s.q[0], s.q[1], s.q[2], s.q[3]));
+  else
+    q = V3(s.q[0], s.q[1], s.q[2]);
+  V3 p, v0;
+  if (s.momentum_given) {
+    p = V3(s.p[0], s.p[1], s.p[2]);
+    v0 = manifold_legendre_inverse(L, q, p);
+  } else {
+    v0 = V3(s.v[0], s.v[1], s.v[2]);
+    p = manifold_legendre(L, q, v0);
+  }
+  auto energy_at = [&](const Point& qk, const V3& pk) {
+    return manifold_energy(L, qk, manifold_legendre_inverse(L, qk, pk));
+  };
+  const double E0 = manifold_energy(L, q, v0);
+  const std::vector<double> J0 = momentum_map(L, q, p);
+
+  StepOptions opt;
+  opt.solver = s.solver == "tiny" ? SolverKind::tiny : SolverKind::newton;
+  opt.max_iterations = s.max_iterations;
+  opt.residual_tolerance = s.tolerance;
+  opt.accept_tolerance = std::fmax(opt.accept_tolerance, s.tolerance);
+  const ManifoldStep<System, Map> stepper(L, R, s.step, opt);
+
+  const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
+  File csv;
+  if (!csv_path.empty()) {
+    csv.reset(std::fopen(csv_path.c_str(), "w"));
+    if (!csv) throw InputError("cannot open the CSV file '" + csv_path + "' for writing");
+    std::fprintf(csv.get(), "%s%s\n", point_columns(q), momentum_columns(L));
+  }
+  auto write_row = [&](double t, const Point& qk, const V3& pk, double e) {
+    std::fprintf(csv.get(), "%.17g", t);
+    for (double c : coordinates(qk)) std::fprintf(csv.get(), ",%.17g", c);
+    for (int i = 0; i < 3; ++i) std::fprintf(csv.get(), ",%.17g", pk[i]);
+    std::fprintf(csv.get(), ",%.17g", e);
+    for (double c : momentum_map(L, qk, pk)) std::fprintf(csv.get(), ",%.17g", c);
+    std::fputc('\n', csv.get());
+  };
+  if (csv) write_row(0.0, q, p, E0);
+
+  double max_energy_error = 0.0, E = E0, max_defect = M::point_defect(q), max_momentum_error = 0.0;
+  const auto start = std::chrono::steady_clock::now();
+  const RunSummary run =
+      integrate_manifold(stepper, 0.0, q, p, v0, s.steps, [&](std::int64_t k, double t, const Point& qk, const V3& pk, const StepSummary&) {
+        E = energy_at(qk, pk);
+        max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0));
+        max_defect = std::fmax(max_defect, M::point_defect(qk));
+        const std::vector<double> J = momentum_map(L, qk, pk);
+        for (std::size_t i = 0; i < J.size(); ++i) max_momentum_error = std::fmax(max_momentum_error, std::fabs(J[i] - J0[i]));
+        if (csv && (k % s.every == 0 || k == s.steps)) write_row(t, qk, pk, E);
+      });
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  if (csv && std::fflush(csv.get()) != 0) {
+    std::cerr << "dvm: error writing '" << csv_path << "'\n";
+    return 3;
+  }
+  const double t_final = static_cast<double>(run.steps_done) * s.step;
+  const char* momentum_name = std::is_same_v<System, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
+  if (o.json) {
+    Json::Object j;
+    j.str("status", run.failed ? "failed" : "ok")
+        .str("system", s.system)
+        .str("manifold", M::name)
+        .str("map", R.name())
+        .str("solver", s.solver)
+        .num("step", s.step)
+        .num("steps", static_cast<double>(run.steps_done))
+        .num("steps_requested", static_cast<double>(s.steps))
+        .num("t_final", t_final)
+        .arr("q_final", coordinates(q))
+        .arr("p_final", std::vector<double>{p[0], p[1], p[2]})
+        .num("energy_initial", E0)
+        .num("energy_final", E)
+        .num("max_abs_energy_error", max_energy_error)
+        .num("max_point_defect", max_defect)
+        .arr(std::string(momentum_name) + "_initial", J0)
+        .num(std::string("max_abs_") + momentum_name + "_error", max_momentum_error)
+        .num("wall_seconds", wall)
+        .num("solver_iterations", static_cast<double>(run.solver_iterations))
+        .num("max_step_iterations", run.max_step_iterations);
+    if (run.failed) {
+      Json::Object f;
+      f.num("step", static_cast<double>(run.failed_step))
+          .num("time", run.failed_time)
+          .num("residual", run.failure.residual)
+          .num("scale", run.failure.scale)
+          .num("iterations", run.failure.iterations)
+          .str("message", run.failure.message);
+      j.raw("failure", f.dump(4));
+    }
+    std::cout << j.dump() << "\n";
+  } else if (!o.quiet) {
+    std::printf("%s on %s with %s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), M::name,
+                R.name().c_str(), s.step, static_cast<long long>(run.steps_done), t_final, wall);
+    std::printf("  energy %.15g -> %.15g, max |E - E0| = %.3e\n", E0, E, max_energy_error);
+    std::printf("  %s: max error %.3e;  largest distance from %s %.1e\n", momentum_name, max_momentum_error, M::name,
+                max_defect);
+    std::printf("  solver iterations %lld (at most %d in a step)\n", static_cast<long long>(run.solver_iterations),
+                run.max_step_iterations);
+    if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
+  }
+  if (run.failed) {
+    std::fprintf(stderr,
+                 "dvm: step %lld (t = %.17g -> %.17g) did not converge: residual %.3e against scale %.3e after %d "
+                 "iterations (%s); stopped, output holds the %lld converged steps\n",
+                 static_cast<long long>(run.failed_step), run.failed_time, run.failed_time + s.step,
+                 run.failure.residual, run.failure.scale, run.failure.iterations, run.failure.message.c_str(),
+                 static_cast<long long>(run.steps_done));
+    return 3;
+  }
+  return 0;
+}
+
+SphereMap sphere_map(const std::string& name) {
+  const bool exp = name.find("exp") != std::string::npos;
+  const bool fixed = name.find("fixed") != std::string::npos;
+  return SphereMap(exp ? RetractionKind::exp : RetractionKind::projection, fixed ? 0.0 : 0.5, name);
+}
+SO3Map so3_map(const std::string& name) {
+  const bool exp = name.find("exp") != std::string::npos;
+  const bool fixed = name.find("fixed") != std::string::npos;
+  return SO3Map(exp ? RetractionKind::exp : RetractionKind::cayley, fixed ? 0.0 : 0.5, name);
+}
+
+}  // namespace
+
+int run_manifold_scene(const Scene& s, const RunOptions& o) {
+  const auto& P = s.params;
+  if (s.system == "spherical-pendulum")
+    return run_with(s, SphericalPendulum(P.at("m"), P.at("l"), P.at("g")), sphere_map(s.map), o);
+  const V3 I(P.at("I1"), P.at("I2"), P.at("I3"));
+  if (s.system == "rigid-body") return run_with(s, RigidBody(I), so3_map(s.map), o);
+  if (s.system == "heavy-top")
+    return run_with(s, HeavyTop(I, P.at("m"), P.at("g"), V3(P.at("chi1"), P.at("chi2"), P.at("chi3"))), so3_map(s.map),
+                    o);
+  throw InputError(s.path + ": system \"" + s.system + "\" has no runner");
+}
+
+}  // namespace dvm::cli
