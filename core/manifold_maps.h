@@ -257,16 +257,50 @@ ManifoldTangent<typename Map::Manifold, double> newton_manifold_inverse_values(
   return local.point_and_velocity(t.x, t.v);
 }
 
-// Sample points and velocities for checks: x = chart(base, eta), v = tangent(x, nu).
+// A generic point of M for checks.
 template <class M>
-typename M::template Point<double> base_point();
-template <>
-inline Vec<double, 3> base_point<Sphere>() {
-  return Vec<double, 3>(0.48, -0.6, 0.64);
+typename M::template Point<double> base_point() {
+  return M::sample_point();
 }
-template <>
-inline Mat<double, 3, 3> base_point<SO3>() {
-  return SO3::exp(Vec<double, 3>(0.3, -0.7, 1.1));
-}
+
+}  // namespace dvm
+
+namespace dvm {
+
+// A sphere map applied to each factor of (S^2)^K.
+template <int K>
+class SpherePowerMap {
+ public:
+  using Manifold = SpherePower<K>;
+  explicit SpherePowerMap(SphereMap factor) : f_(std::move(factor)) {}
+  std::string name() const { return f_.name(); }
+  double theta() const { return f_.theta(); }
+  bool symmetric() const { return f_.symmetric(); }
+  int order() const { return f_.order(); }
+
+  template <class T>
+  ManifoldPair<Manifold, T> operator()(const Vec<T, 3 * K>& x, const Vec<T, 3 * K>& v) const {
+    ManifoldPair<Manifold, T> out;
+    for (int i = 0; i < K; ++i) {
+      const ManifoldPair<Sphere, T> r = f_(Manifold::block(x, i), Manifold::block(v, i));
+      Manifold::template put<T, 3 * K>(out.q0, i, r.q0);
+      Manifold::template put<T, 3 * K>(out.q1, i, r.q1);
+    }
+    return out;
+  }
+  template <class T>
+  ManifoldTangent<Manifold, T> inverse(const Vec<T, 3 * K>& q0, const Vec<T, 3 * K>& q1) const {
+    ManifoldTangent<Manifold, T> out;
+    for (int i = 0; i < K; ++i) {
+      const ManifoldTangent<Sphere, T> t = f_.inverse(Manifold::block(q0, i), Manifold::block(q1, i));
+      Manifold::template put<T, 3 * K>(out.x, i, t.x);
+      Manifold::template put<T, 3 * K>(out.v, i, t.v);
+    }
+    return out;
+  }
+
+ private:
+  SphereMap f_;
+};
 
 }  // namespace dvm

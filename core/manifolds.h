@@ -199,6 +199,13 @@ struct Sphere {
   static double tangent_defect(const Vec<double, 3>& x, const Vec<double, 3>& v) { return std::fabs(x.dot(v)); }
   static double distance(const Vec<double, 3>& x, const Vec<double, 3>& y) { return (x - y).cwiseAbs().maxCoeff(); }
   static Vec<double, 3> clean(const Vec<double, 3>& x) { return x / x.norm(); }
+  // A generic point, for checks.
+  static Vec<double, 3> sample_point() { return Vec<double, 3>(0.48, -0.6, 0.64); }
+  // Chart coordinates at q of a second-order guess for the next point: the
+  // reflection 2 q - q_prev, renormalised.
+  static Vec<double, 2> next_guess(const Vec<double, 3>& q_prev, const Vec<double, 3>& q) {
+    return chart_inverse(q, Vec<double, 3>((2.0 * q - q_prev).normalized()));
+  }
 };
 
 struct SO3 {
@@ -342,6 +349,11 @@ struct SO3 {
   static Mat<double, 3, 3> clean(const Mat<double, 3, 3>& R) {
     return 0.5 * R * (3.0 * Mat<double, 3, 3>::Identity() - R.transpose() * R);
   }
+  static Mat<double, 3, 3> sample_point() { return exp(Vec<double, 3>(0.3, -0.7, 1.1)); }
+  // The last body increment log(q_prev^T q), a second-order guess for the next one.
+  static Vec<double, 3> next_guess(const Mat<double, 3, 3>& q_prev, const Mat<double, 3, 3>& q) {
+    return log(Mat<double, 3, 3>(q_prev.transpose() * q));
+  }
 
   template <class T>
   static Mat<T, 3, 3> constants3(const Mat<double, 3, 3>& c) {
@@ -365,6 +377,113 @@ struct SO3 {
     Vec<double, 4> out(q.w(), q.x(), q.y(), q.z());
     if (out[0] < 0) out = -out;
     return out;
+  }
+};
+
+}  // namespace dvm
+
+namespace dvm {
+
+// The product (S^2)^K: K unit vectors stacked in one 3K-vector (a chain of K
+// spherical pendulums). Everything acts block by block with the S^2 operations.
+template <int K>
+struct SpherePower {
+  static_assert(K >= 1, "(S^2)^K needs K >= 1");
+  static constexpr int dim = 2 * K;
+  static constexpr const char* name = "(S^2)^n";
+  template <class T>
+  using Point = Vec<T, 3 * K>;
+  template <class T>
+  using Tangent = Vec<T, 3 * K>;
+
+  template <class T>
+  static Vec<T, 3> block(const Vec<T, 3 * K>& x, int i) {
+    return Vec<T, 3>(x[3 * i], x[3 * i + 1], x[3 * i + 2]);
+  }
+  template <class T>
+  static Vec<T, 2> block2(const Vec<T, 2 * K>& x, int i) {
+    return Vec<T, 2>(x[2 * i], x[2 * i + 1]);
+  }
+  template <class T, int N>
+  static void put(Vec<T, N>& x, int i, const Vec<T, N / K>& b) {
+    for (int j = 0; j < N / K; ++j) x[(N / K) * i + j] = b[j];
+  }
+
+  template <class T, class U>
+  static Vec<T, 3 * K> tangent(const Vec<U, 3 * K>& x, const Vec<T, 2 * K>& nu) {
+    Vec<T, 3 * K> v;
+    for (int i = 0; i < K; ++i) put<T, 3 * K>(v, i, Sphere::tangent(block(x, i), block2(nu, i)));
+    return v;
+  }
+  template <class T>
+  static Vec<T, 2 * K> tangent_coordinates(const Vec<double, 3 * K>& x, const Vec<T, 3 * K>& v) {
+    Vec<T, 2 * K> nu;
+    for (int i = 0; i < K; ++i) put<T, 2 * K>(nu, i, Sphere::tangent_coordinates(block(x, i), block(v, i)));
+    return nu;
+  }
+  template <class T>
+  static Vec<T, 3 * K> tangent_from_derivative(const Vec<T, 3 * K>&, const Vec<T, 3 * K>& dx) {
+    return dx;
+  }
+  template <class T>
+  static Vec<T, 3 * K> chart(const Vec<double, 3 * K>& c, const Vec<T, 2 * K>& eta) {
+    Vec<T, 3 * K> x;
+    for (int i = 0; i < K; ++i) put<T, 3 * K>(x, i, Sphere::chart(block(c, i), block2(eta, i)));
+    return x;
+  }
+  template <class T>
+  static Vec<T, 2 * K> chart_inverse(const Vec<double, 3 * K>& c, const Vec<T, 3 * K>& y) {
+    Vec<T, 2 * K> eta;
+    for (int i = 0; i < K; ++i) put<T, 2 * K>(eta, i, Sphere::chart_inverse(block(c, i), block(y, i)));
+    return eta;
+  }
+  template <class T>
+  static std::pair<Vec<T, 3 * K>, Vec<T, 3 * K>> chart_and_tangent(const Vec<double, 3 * K>& c,
+                                                                   const Vec<T, 2 * K>& eta, const Vec<T, 2 * K>& nu) {
+    Vec<T, 3 * K> x, v;
+    for (int i = 0; i < K; ++i) {
+      const auto xv = Sphere::chart_and_tangent(block(c, i), block2(eta, i), block2(nu, i));
+      put<T, 3 * K>(x, i, xv.first);
+      put<T, 3 * K>(v, i, xv.second);
+    }
+    return {x, v};
+  }
+  static Vec<double, 2 * K> covector_to_local(const Vec<double, 3 * K>& x, const Vec<double, 3 * K>& p) {
+    return tangent_coordinates(x, p);
+  }
+  static Vec<double, 3 * K> covector_from_local(const Vec<double, 3 * K>& x, const Vec<double, 2 * K>& p) {
+    return tangent(x, p);
+  }
+  static double point_defect(const Vec<double, 3 * K>& x) {
+    double d = 0.0;
+    for (int i = 0; i < K; ++i) d = std::fmax(d, Sphere::point_defect(block(x, i)));
+    return d;
+  }
+  static double tangent_defect(const Vec<double, 3 * K>& x, const Vec<double, 3 * K>& v) {
+    double d = 0.0;
+    for (int i = 0; i < K; ++i) d = std::fmax(d, Sphere::tangent_defect(block(x, i), block(v, i)));
+    return d;
+  }
+  static double distance(const Vec<double, 3 * K>& x, const Vec<double, 3 * K>& y) {
+    return (x - y).cwiseAbs().maxCoeff();
+  }
+  static Vec<double, 3 * K> clean(const Vec<double, 3 * K>& x) {
+    Vec<double, 3 * K> y;
+    for (int i = 0; i < K; ++i) put<double, 3 * K>(y, i, Sphere::clean(block(x, i)));
+    return y;
+  }
+  static Vec<double, 3 * K> sample_point() {
+    Vec<double, 3 * K> x;
+    for (int i = 0; i < K; ++i) {
+      const double a = 0.4 + 0.3 * i;
+      put<double, 3 * K>(x, i, Vec<double, 3>(std::sin(a) * 0.6, std::sin(a) * 0.8, -std::cos(a)));
+    }
+    return x;
+  }
+  static Vec<double, 2 * K> next_guess(const Vec<double, 3 * K>& q_prev, const Vec<double, 3 * K>& q) {
+    Vec<double, 2 * K> g;
+    for (int i = 0; i < K; ++i) put<double, 2 * K>(g, i, Sphere::next_guess(block(q_prev, i), block(q, i)));
+    return g;
   }
 };
 

@@ -206,3 +206,48 @@ class ManifoldDiscreteLagrangian {
 };
 
 }  // namespace dvm
+
+namespace dvm {
+
+// A chain of K spherical pendulums (Q = (S^2)^K): link i has unit direction x_i, length
+// l_i and a point mass m_i at its end; the first link hangs from a fixed pivot. With
+// r_i = sum_{j <= i} l_j x_j (x_3 upward),
+//   L = sum_i m_i |dr_i/dt|^2 / 2 - g sum_i m_i (r_i)_3.
+// Rotations about the vertical are a symmetry: sum_i (r_i x m_i dr_i/dt)_3 is conserved.
+template <int K>
+struct SphericalChain {
+  using Manifold = SpherePower<K>;
+  static constexpr int dim = 2 * K;
+  Vec<double, K> m, l;
+  double g = 1.0;
+  SphericalChain(const Vec<double, K>& m_, const Vec<double, K>& l_, double g_) : m(m_), l(l_), g(g_) {
+    for (int i = 0; i < K; ++i)
+      if (!(m[i] > 0) || !(l[i] > 0) || !std::isfinite(m[i]) || !std::isfinite(l[i]))
+        throw std::invalid_argument("spherical-chain: masses and lengths must be positive and finite");
+    if (!std::isfinite(g)) throw std::invalid_argument("spherical-chain: g must be finite");
+  }
+  std::string name() const { return "spherical-chain"; }
+  template <class T>
+  T operator()(const Vec<T, 3 * K>& x, const Vec<T, 3 * K>& v) const {
+    T kinetic = constant<T>(0.0), height = constant<T>(0.0);
+    Vec<T, 3> u = Vec<T, 3>::Constant(constant<T>(0.0));
+    T z = constant<T>(0.0);
+    for (int i = 0; i < K; ++i) {
+      for (int j = 0; j < 3; ++j) u[j] = u[j] + l[i] * v[3 * i + j];
+      z = z + l[i] * x[3 * i + 2];
+      kinetic = kinetic + (0.5 * m[i]) * (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]);
+      height = height + m[i] * z;
+    }
+    return kinetic - g * height;
+  }
+  // The vertical angular momentum sum_i (r_i x p_i)_3 in terms of the stored momenta:
+  // rotations about e3 move every x_i by e3 x x_i, so J3 = sum_i (x_i x p_i)_3 with p_i
+  // the momentum conjugate to x_i.
+  static double vertical_momentum(const Vec<double, 3 * K>& x, const Vec<double, 3 * K>& p) {
+    double J = 0.0;
+    for (int i = 0; i < K; ++i) J += x[3 * i] * p[3 * i + 1] - x[3 * i + 1] * p[3 * i];
+    return J;
+  }
+};
+
+}  // namespace dvm

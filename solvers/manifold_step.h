@@ -86,16 +86,6 @@ class ManifoldStep {
   StepOptions options_;
 };
 
-// A guess for the next chart coordinates from the last two points (second order):
-// on S^2 the coordinates of the reflection 2 q - q_prev (renormalised), on SO(3) the
-// last body increment log(q_prev^T q).
-inline Vec<double, 2> next_guess(const Vec<double, 3>& q_prev, const Vec<double, 3>& q) {
-  return Sphere::chart_inverse(q, Vec<double, 3>((2.0 * q - q_prev).normalized()));
-}
-inline Vec<double, 3> next_guess(const Mat<double, 3, 3>& q_prev, const Mat<double, 3, 3>& q) {
-  return SO3::log(Mat<double, 3, 3>(q_prev.transpose() * q));
-}
-
 // The integrate loop on a manifold. The observer is called as
 // observer(k, t_k, q_k, p_k, summary) after every completed step.
 template <class S, class Observer>
@@ -107,7 +97,7 @@ RunSummary integrate_manifold(const S& stepper, double t0, typename S::Point& q,
   typename S::Covector p1 = p;
   RunSummary run;
   for (std::int64_t k = 0; k < steps; ++k) {
-    Vec<double, S::n> xi = k == 0 ? Vec<double, S::n>(h * M::tangent_coordinates(q, v0)) : next_guess(q_prev, q);
+    Vec<double, S::n> xi = k == 0 ? Vec<double, S::n>(h * M::tangent_coordinates(q, v0)) : M::next_guess(q_prev, q);
     const StepSummary s = stepper.step(q, p, xi, q1, p1);
     run.solver_iterations += s.iterations;
     if (s.iterations > run.max_step_iterations) run.max_step_iterations = s.iterations;

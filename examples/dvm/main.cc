@@ -166,15 +166,16 @@ int cmd_maps(const std::vector<std::string>& args) {
           .boolean("symmetric", m.symmetric)
           .num("order", m.order)
           .boolean("closed_form_inverse", m.closed_inverse)
+          .str("space", m.space)
           .str("note", m.note);
       out += "  " + j.dump(4) + (i + 1 < maps().size() ? ",\n" : "\n");
     }
     std::cout << out << "]\n";
   } else {
-    std::printf("%-18s %-9s %-5s %-8s %s\n", "name", "symmetric", "order", "inverse", "formula");
+    std::printf("%-24s %-6s %-9s %-5s %-8s %s\n", "name", "space", "symmetric", "order", "inverse", "formula");
     for (const auto& m : maps())
-      std::printf("%-18s %-9s %-5d %-8s %s   (%s)\n", m.name.c_str(), m.symmetric ? "yes" : "no", m.order,
-                  m.closed_inverse ? "closed" : "Newton", m.formula.c_str(), m.note.c_str());
+      std::printf("%-24s %-6s %-9s %-5d %-8s %s   (%s)\n", m.name.c_str(), m.space.c_str(), m.symmetric ? "yes" : "no",
+                  m.order, m.closed_inverse ? "closed" : "Newton", m.formula.c_str(), m.note.c_str());
   }
   return 0;
 }

@@ -30,7 +30,10 @@ using M3 = Mat<double, 3, 3>;
 
 // Stored coordinates written to the CSV and JSON: the point itself on S^2, the
 // quaternion on SO(3).
-std::vector<double> coordinates(const V3& x) { return {x[0], x[1], x[2]}; }
+template <int N>
+std::vector<double> coordinates(const Vec<double, N>& x) {
+  return std::vector<double>(x.data(), x.data() + N);
+}
 std::vector<double> coordinates(const M3& R) {
   const Vec<double, 4> q = SO3::to_quaternion(R);
   return {q[0], q[1], q[2], q[3]};
@@ -47,30 +50,49 @@ std::vector<double> momentum_map(const RigidBody&, const M3& R, const V3& p) {
 std::vector<double> momentum_map(const HeavyTop&, const M3& R, const V3& p) {
   return {HeavyTop::vertical_momentum(R, p)};
 }
+template <int K>
+std::vector<double> momentum_map(const SphericalChain<K>&, const Vec<double, 3 * K>& x, const Vec<double, 3 * K>& p) {
+  return {SphericalChain<K>::vertical_momentum(x, p)};
+}
+template <int K>
+const char* momentum_columns(const SphericalChain<K>&) {
+  return ",J3";
+}
+template <int K>
+std::string point_columns(const SphericalChain<K>&) {
+  std::string out = "t";
+  for (int i = 1; i <= K; ++i)
+    for (const char* c : {"x", "y", "z"}) out += "," + std::string(c) + std::to_string(i);
+  for (int i = 0; i < 3 * K; ++i) out += ",p" + std::to_string(i);
+  return out + ",energy";
+}
 const char* momentum_columns(const SphericalPendulum&) { return ",J3"; }
 const char* momentum_columns(const RigidBody&) { return ",m0,m1,m2"; }
 const char* momentum_columns(const HeavyTop&) { return ",J3"; }
-const char* point_columns(const V3&) { return "t,x,y,z,p0,p1,p2,energy"; }
-const char* point_columns(const M3&) { return "t,qw,qx,qy,qz,pi0,pi1,pi2,energy"; }
+std::string point_columns(const SphericalPendulum&) { return "t,x,y,z,p0,p1,p2,energy"; }
+std::string point_columns(const RigidBody&) { return "t,qw,qx,qy,qz,pi0,pi1,pi2,energy"; }
+std::string point_columns(const HeavyTop&) { return "t,qw,qx,qy,qz,pi0,pi1,pi2,energy"; }
 
 template <class System, class Map>
 int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o) {
   using M = typename Map::Manifold;
   using Point = typename M::template Point<double>;
+  using Covector = typename M::template Tangent<double>;
+  constexpr int C = Covector::RowsAtCompileTime;
   Point q;
   if constexpr (std::is_same_v<M, SO3>)
     q = SO3::from_quaternion(Vec<double, 4>(s.q[0], s.q[1], s.q[2], s.q[3]));
   else
-    q = V3(s.q[0], s.q[1], s.q[2]);
-  V3 p, v0;
+    q = Eigen::Map<const Point>(s.q.data());
+  Covector p, v0;
   if (s.momentum_given) {
-    p = V3(s.p[0], s.p[1], s.p[2]);
+    p = Eigen::Map<const Covector>(s.p.data());
     v0 = manifold_legendre_inverse(L, q, p);
   } else {
-    v0 = V3(s.v[0], s.v[1], s.v[2]);
+    v0 = Eigen::Map<const Covector>(s.v.data());
     p = manifold_legendre(L, q, v0);
   }
-  auto energy_at = [&](const Point& qk, const V3& pk) {
+  auto energy_at = [&](const Point& qk, const Covector& pk) {
     return manifold_energy(L, qk, manifold_legendre_inverse(L, qk, pk));
   };
   const double E0 = manifold_energy(L, q, v0);
@@ -88,12 +110,12 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   if (!csv_path.empty()) {
     csv.reset(std::fopen(csv_path.c_str(), "w"));
     if (!csv) throw InputError("cannot open the CSV file '" + csv_path + "' for writing");
-    std::fprintf(csv.get(), "%s%s\n", point_columns(q), momentum_columns(L));
+    std::fprintf(csv.get(), "%s%s\n", point_columns(L).c_str(), momentum_columns(L));
   }
-  auto write_row = [&](double t, const Point& qk, const V3& pk, double e) {
+  auto write_row = [&](double t, const Point& qk, const Covector& pk, double e) {
     std::fprintf(csv.get(), "%.17g", t);
     for (double c : coordinates(qk)) std::fprintf(csv.get(), ",%.17g", c);
-    for (int i = 0; i < 3; ++i) std::fprintf(csv.get(), ",%.17g", pk[i]);
+    for (int i = 0; i < C; ++i) std::fprintf(csv.get(), ",%.17g", pk[i]);
     std::fprintf(csv.get(), ",%.17g", e);
     for (double c : momentum_map(L, qk, pk)) std::fprintf(csv.get(), ",%.17g", c);
     std::fputc('\n', csv.get());
@@ -103,7 +125,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   double max_energy_error = 0.0, E = E0, max_defect = M::point_defect(q), max_momentum_error = 0.0;
   const auto start = std::chrono::steady_clock::now();
   const RunSummary run =
-      integrate_manifold(stepper, 0.0, q, p, v0, s.steps, [&](std::int64_t k, double t, const Point& qk, const V3& pk, const StepSummary&) {
+      integrate_manifold(stepper, 0.0, q, p, v0, s.steps, [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
         E = energy_at(qk, pk);
         max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0));
         max_defect = std::fmax(max_defect, M::point_defect(qk));
@@ -117,7 +139,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     return 3;
   }
   const double t_final = static_cast<double>(run.steps_done) * s.step;
-  const char* momentum_name = std::is_same_v<System, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
+  const char* momentum_name =
+      std::is_same_v<System, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
   if (o.json) {
     Json::Object j;
     j.str("status", run.failed ? "failed" : "ok")
@@ -130,7 +153,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .num("steps_requested", static_cast<double>(s.steps))
         .num("t_final", t_final)
         .arr("q_final", coordinates(q))
-        .arr("p_final", std::vector<double>{p[0], p[1], p[2]})
+        .arr("p_final", std::vector<double>(p.data(), p.data() + C))
         .num("energy_initial", E0)
         .num("energy_final", E)
         .num("max_abs_energy_error", max_energy_error)
@@ -188,6 +211,22 @@ SO3Map so3_map(const std::string& name) {
 
 int run_manifold_scene(const Scene& s, const RunOptions& o) {
   const auto& P = s.params;
+  if (s.system == "spherical-chain") {
+    const int n = static_cast<int>(P.at("n"));
+    auto chain = [&](auto k) {
+      constexpr int K = decltype(k)::value;
+      return run_with(s,
+                      SphericalChain<K>(Vec<double, K>::Constant(P.at("m")), Vec<double, K>::Constant(P.at("l")),
+                                        P.at("g")),
+                      SpherePowerMap<K>(sphere_map(s.map)), o);
+    };
+    switch (n) {
+      case 1: return chain(std::integral_constant<int, 1>{});
+      case 2: return chain(std::integral_constant<int, 2>{});
+      case 3: return chain(std::integral_constant<int, 3>{});
+      default: return chain(std::integral_constant<int, 4>{});
+    }
+  }
   if (s.system == "spherical-pendulum")
     return run_with(s, SphericalPendulum(P.at("m"), P.at("l"), P.at("g")), sphere_map(s.map), o);
   const V3 I(P.at("I1"), P.at("I2"), P.at("I3"));

@@ -23,6 +23,12 @@ const std::vector<SystemInfo>& systems() {
        "L = m l^2 |v|^2/2 - m g l x_3   (x a unit vector, x_3 upward)",
        {{"m", 1.0, "mass"}, {"l", 1.0, "length"}, {"g", 1.0, "gravitational acceleration"}},
        "S^2"},
+      {"spherical-chain",
+       3,
+       "L = sum_i m |dr_i/dt|^2/2 - g sum_i m (r_i)_3,  r_i = l (x_1 + ... + x_i)   (n links, x_i unit vectors)",
+       {{"n", 2.0, "number of links (1 to 4)"}, {"m", 1.0, "mass at the end of each link"},
+        {"l", 1.0, "length of each link"}, {"g", 1.0, "gravitational acceleration"}},
+       "S^2"},
       {"rigid-body",
        3,
        "L = (I1 w1^2 + I2 w2^2 + I3 w3^2)/2   (w the body angular velocity)",
@@ -254,13 +260,14 @@ void apply_override(toml::table& root, const std::string& spec) {
 
 // [initial] for systems on R^n and S^2: q and one of p, v, each of length info.dim.
 void read_vector_initial(const Reader& r, const toml::table& ini, const std::string& path, const SystemInfo& info,
-                         Scene& s) {
+                         int links, Scene& s) {
+  const int dim = info.dim * links;
   r.only_keys(ini, "initial", {"q", "p", "v"});
   const toml::node* q = ini.get("q");
   if (!q) throw InputError(path + ": missing key 'initial.q'");
   s.q = r.vector(*q, "initial.q");
-  const std::string n_expected = std::to_string(info.dim);
-  if (static_cast<int>(s.q.size()) != info.dim)
+  const std::string n_expected = std::to_string(dim);
+  if (static_cast<int>(s.q.size()) != dim)
     throw InputError(r.where(q, "initial.q") + ": got " + std::to_string(s.q.size()) + " numbers, expected " +
                      n_expected + " (the dimension of " + info.name + ")");
   const toml::node* p = ini.get("p");
@@ -271,21 +278,23 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   const std::string pv_key = p ? "initial.p" : "initial.v";
   (p ? s.p : s.v) = r.vector(*pv, pv_key);
   s.momentum_given = p != nullptr;
-  if (static_cast<int>((p ? s.p : s.v).size()) != info.dim)
+  if (static_cast<int>((p ? s.p : s.v).size()) != dim)
     throw InputError(r.where(pv, pv_key) + ": got " + std::to_string((p ? s.p : s.v).size()) + " numbers, expected " +
                      n_expected + " (the dimension of " + info.name + ")");
-  if (info.space == "S^2") {
+  for (int k = 0; info.space == "S^2" && k < links; ++k) {
     // on the manifold, not projected onto it: the defect is reported
-    const double n2 = s.q[0] * s.q[0] + s.q[1] * s.q[1] + s.q[2] * s.q[2];
+    const std::size_t o = 3 * static_cast<std::size_t>(k);
+    const std::string which = links > 1 ? " (link " + std::to_string(k + 1) + ")" : "";
+    const double n2 = s.q[o] * s.q[o] + s.q[o + 1] * s.q[o + 1] + s.q[o + 2] * s.q[o + 2];
     const double defect = std::fabs(std::sqrt(n2) - 1.0);
     if (!(defect <= 1e-12))
-      throw InputError(r.where(q, "initial.q") + ": not a unit vector (| |q| - 1 | = " + fmt(defect) +
+      throw InputError(r.where(q, "initial.q") + which + ": not a unit vector (| |q| - 1 | = " + fmt(defect) +
                        "); expected a point of S^2 to 1e-12");
     const auto& w = p ? s.p : s.v;
-    const double t = std::fabs(s.q[0] * w[0] + s.q[1] * w[1] + s.q[2] * w[2]);
+    const double t = std::fabs(s.q[o] * w[o] + s.q[o + 1] * w[o + 1] + s.q[o + 2] * w[o + 2]);
     if (!(t <= 1e-12))
-      throw InputError(r.where(pv, pv_key) + ": not tangent to S^2 at q (|q . " + (p ? "p" : "v") + "| = " + fmt(t) +
-                       "); expected a vector orthogonal to q to 1e-12");
+      throw InputError(r.where(pv, pv_key) + which + ": not tangent to S^2 at q (|q . " + (p ? "p" : "v") +
+                       "| = " + fmt(t) + "); expected a vector orthogonal to q to 1e-12");
   }
 }
 
@@ -410,13 +419,21 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
     }
   }
 
+  int links = 1;
+  if (info.name == "spherical-chain") {
+    const double n = s.params["n"];
+    if (n != std::floor(n) || n < 1 || n > 4)
+      throw InputError(path + ": key 'system.params.n': got " + fmt(n) + ", expected a whole number from 1 to 4");
+    links = static_cast<int>(n);
+  }
+
   // [initial]
   s.space = info.space;
   const toml::table& ini = r.section(root, "initial", true);
   if (info.space == "SO(3)")
     read_rotation_initial(r, ini, path, s);
   else
-    read_vector_initial(r, ini, path, info, s);
+    read_vector_initial(r, ini, path, info, links, s);
 
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);

@@ -127,3 +127,11 @@ BOOST_AUTO_TEST_CASE(sphere_midpoint_closed_form) {
   const auto p = SphereMap(RetractionKind::projection, 0.5, "sphere-projection").inverse(q0, q1);
   BOOST_TEST(max_abs(p.v - 2.0 * (q1 - q0) / std::sqrt(2.0)) <= 1e-15);
 }
+
+BOOST_AUTO_TEST_CASE(identities_of_the_product_maps) {
+  // (S^2)^2 with each sphere map applied factor by factor.
+  for (const auto& m : sphere_maps()) {
+    if (m.theta() == 0.3) continue;
+    expect_identities(SpherePowerMap<2>(m));
+  }
+}

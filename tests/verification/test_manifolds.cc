@@ -295,3 +295,38 @@ BOOST_AUTO_TEST_CASE(rigid_body_and_heavy_top_momenta_and_orthogonality) {
   BOOST_TEST_MESSAGE("heavy top, 1e5 steps: |dJ3| " << dJ);
   BOOST_TEST(dJ <= 1e-12);
 }
+
+BOOST_AUTO_TEST_CASE(spherical_chain) {
+  // One link is the spherical pendulum: the same trajectory to round-off.
+  const SphereMap map(RetractionKind::exp, 0.5, "sphere-exp");
+  const SphericalPendulum P(1.5, 0.7, 9.81);
+  const SphericalChain<1> C1(Vec<double, 1>(1.5), Vec<double, 1>(0.7), 9.81);
+  V3 qa = V3(0.6, 0.0, -0.8), qb = qa, v0(0.0, 0.9, 0.0);
+  V3 pa = manifold_legendre(P, qa, v0), pb = manifold_legendre(C1, qb, v0);
+  BOOST_TEST(max_abs(pa - pb) <= 1e-15);
+  run_manifold(P, map, 0.01, 500, qa, pa);
+  run_manifold(C1, SpherePowerMap<1>(map), 0.01, 500, qb, pb);
+  BOOST_TEST(std::fmax(max_abs(qa - qb), max_abs(pa - pb)) <= 1e-12);  // L written differently: round-off
+
+  // Two links: vertical angular momentum to round-off, energy bounded, links on S^2.
+  const SphericalChain<2> C2(Vec<double, 2>(1.0, 0.5), Vec<double, 2>(1.0, 0.8), 9.81);
+  using V6 = Vec<double, 6>;
+  V6 q, v;
+  q << 0.6, 0.0, -0.8, 0.0, 0.6, -0.8;
+  v << 0.0, 0.8, 0.0, 1.0, 0.0, 0.0;
+  V6 p = manifold_legendre(C2, q, v);
+  const double E0 = manifold_energy(C2, q, v), J0 = SphericalChain<2>::vertical_momentum(q, p);
+  const ManifoldStep<SphericalChain<2>, SpherePowerMap<2>> S(C2, SpherePowerMap<2>(map), 0.005);
+  double dJ = 0, dE = 0, defect = 0;
+  const std::int64_t n = 20000;
+  const RunSummary r = integrate_manifold(S, 0.0, q, p, v, n, [&](std::int64_t k, double, const V6& x, const V6& pk, const auto&) {
+    dJ = std::fmax(dJ, std::fabs(SphericalChain<2>::vertical_momentum(x, pk) - J0));
+    defect = std::fmax(defect, SpherePower<2>::point_defect(x) + SpherePower<2>::tangent_defect(x, pk));
+    if (k % 20 == 0) dE = std::fmax(dE, std::fabs(manifold_energy(C2, x, manifold_legendre_inverse(C2, x, pk)) - E0));
+  });
+  BOOST_TEST(!r.failed, r.failure.message);
+  BOOST_TEST_MESSAGE("spherical chain of 2, 2e4 steps: |dJ| " << dJ << ", |dE| " << dE << ", defect " << defect);
+  BOOST_TEST(dJ <= 2e-17 * n + 1e-14);
+  BOOST_TEST(defect <= 1e-12);
+  BOOST_TEST(dE <= 1e-2 * std::fabs(E0));
+}
