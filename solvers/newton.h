@@ -81,15 +81,22 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       s.message = "non-finite residual or Jacobian";
       return s;
     }
-    if (s.residual <= opt.residual_tolerance * s.scale) {
+    const bool small = s.residual <= opt.residual_tolerance * s.scale;
+    const bool stalled = dxn <= opt.stall_tolerance * (max_abs(x) + x0);
+    if (small || stalled) {
+      s.converged = small || s.residual <= opt.accept_tolerance * s.scale;
+      if (!s.converged) {
+        s.message = "Newton stalled above the residual tolerance";
+        return s;
+      }
       // Apply the Newton correction already paid for: it takes the residual from
-      // the tolerance down to round-off. Without it the accepted residuals, all of
-      // one sign when the starting guess errs smoothly, would add up over many
-      // steps and show as a drift of conserved quantities. The reported residual
-      // is the one measured before this last correction (an upper bound).
-      bool invertible = false;
-      Mat<double, N, N> Jinv;
+      // the tolerance (or the stall level) down to round-off. Without it the
+      // accepted residuals, all of one sign when the starting guess errs smoothly,
+      // would add up over many steps and show as a drift of conserved quantities.
+      // The reported residual is the one measured before this last correction.
       if constexpr (N <= 4) {
+        bool invertible = false;
+        Mat<double, N, N> Jinv;
         double det = 0.0;
         J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
         if (invertible && std::isfinite(det)) x -= Jinv * r;
@@ -99,12 +106,6 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
         } catch (const std::domain_error&) {
         }
       }
-      s.converged = true;
-      return s;
-    }
-    if (dxn <= opt.stall_tolerance * (max_abs(x) + x0)) {
-      s.converged = s.residual <= opt.accept_tolerance * s.scale;
-      if (!s.converged) s.message = "Newton stalled above the residual tolerance";
       return s;
     }
     Vec<double, N> dx;
