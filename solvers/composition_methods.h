@@ -14,7 +14,7 @@
 // A method Phi that is not symmetric enters through the symmetric method
 // Phi_{h/2} o Phi^*_{h/2} (with Phi = explicit Euler this is Stormer-Verlet, paper
 // Sec. 6), or, in McLachlan's form, through alternating stages of Phi and its
-// adjoint (HLW Sec. V.3.2, Eq. (3.6)):
+// adjoint (HLW Sec. V.3):
 //
 //   Psi_h = Phi_{alpha_s h} o Phi^*_{beta_s h} o ... o Phi_{alpha_1 h} o Phi^*_{beta_1 h}.
 //
@@ -149,13 +149,13 @@ struct Suzuki5 {
 };
 
 // Yoshida's order-6 compositions (7 stages), solutions A, B, C of Yoshida 1990,
-// Table 1 (w_1, w_2, w_3 as published; w_0 = 1 - 2 (w_1 + w_2 + w_3)).
+// (w_1, w_2, w_3 as published; w_0 = 1 - 2 (w_1 + w_2 + w_3)).
 struct Yoshida6A {
   static constexpr const char* name = "yoshida6a";
   static constexpr int order = 6;
   static constexpr int stages = 7;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 1, solution A";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution A";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({-1.17767998417887, 0.235573213359357, 0.784513610477560});
   }
@@ -165,7 +165,7 @@ struct Yoshida6B {
   static constexpr int order = 6;
   static constexpr int stages = 7;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 1, solution B";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution B";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({-2.13228522200144, 0.426068187079180e-2, 1.43984816797678});
   }
@@ -175,20 +175,20 @@ struct Yoshida6C {
   static constexpr int order = 6;
   static constexpr int stages = 7;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 1, solution C";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution C";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({0.152886228424922e-2, -2.14403531630539, 1.44778256239930});
   }
 };
 
 // Yoshida's order-8 compositions (15 stages), solutions A to E of Yoshida 1990,
-// Table 2 (w_1..w_7 as published; w_0 = 1 - 2 sum w_i).
+// (w_1..w_7 as published; w_0 = 1 - 2 sum w_i).
 struct Yoshida8A {
   static constexpr const char* name = "yoshida8a";
   static constexpr int order = 8;
   static constexpr int stages = 15;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 2, solution A";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution A";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({-0.161582374150097e1, -0.244699182370524e1, -0.716989419708120e-2,
                                                     0.244002732616735e1, 0.157739928123617e0, 0.182020630970714e1,
@@ -200,7 +200,7 @@ struct Yoshida8B {
   static constexpr int order = 8;
   static constexpr int stages = 15;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 2, solution B";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution B";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({-0.169248587770116e-2, 0.289195744315849e1, 0.378039588360192e-2,
                                                     -0.289688250328827e1, 0.289105148970595e1, -0.233864815101035e1,
@@ -212,7 +212,7 @@ struct Yoshida8C {
   static constexpr int order = 8;
   static constexpr int stages = 15;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 2, solution C";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution C";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({0.311790812418427e0, -0.155946803821447e1, -0.167896928259640e1,
                                                     0.166335809963315e1, -0.106458714789183e1, 0.136934946416871e1,
@@ -224,7 +224,7 @@ struct Yoshida8D {
   static constexpr int order = 8;
   static constexpr int stages = 15;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 2, solution D";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution D";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({0.102799849391985e0, -0.196061023297549e1, 0.193813913762276e1,
                                                     -0.158240635368243e0, -0.144485223686048e1, 0.253693336566229e0,
@@ -236,7 +236,7 @@ struct Yoshida8E {
   static constexpr int order = 8;
   static constexpr int stages = 15;
   static constexpr bool symmetric = true;
-  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, Table 2, solution E";
+  static constexpr const char* citation = "Yoshida, Phys. Lett. A 150 (1990) 262, solution E";
   static std::vector<double> gamma() {
     return composition_detail::yoshida_arrangement({0.227738840094906e-1, 0.252778927322839e1, -0.719180053552772e-1,
                                                     0.536018921307285e-2, -0.204809795887393e1, 0.107990467703699e0,
@@ -245,14 +245,14 @@ struct Yoshida8E {
 };
 
 // Kahan & Li's order-6 composition with 9 stages (s9odr6a), decimals as in HLW GNI
-// Sec. V.3.2, Eq. (3.11).
+// Sec. V.3.
 struct KahanLi6 {
   static constexpr const char* name = "kahan-li6";
   static constexpr int order = 6;
   static constexpr int stages = 9;
   static constexpr bool symmetric = true;
   static constexpr const char* citation =
-      "Kahan & Li, Math. Comp. 66 (1997) 1089, s9odr6a; decimals from HLW GNI Sec. V.3.2";
+      "Kahan & Li, Math. Comp. 66 (1997) 1089, s9odr6a; decimals from HLW GNI Sec. V.3";
   static std::vector<double> gamma() {
     return composition_detail::mirror({0.39216144400731413928, 0.33259913678935943860, -0.70624617255763935981,
                                        0.08221359629355080023, 0.79854399093482996340});
@@ -260,15 +260,15 @@ struct KahanLi6 {
 };
 
 // Suzuki & Umeno's order-8 composition with 15 stages (found also by McLachlan 1995),
-// decimals as in HLW GNI Sec. V.3.2.
+// decimals as in HLW GNI Sec. V.3.
 struct SuzukiUmeno8 {
   static constexpr const char* name = "suzuki-umeno8";
   static constexpr int order = 8;
   static constexpr int stages = 15;
   static constexpr bool symmetric = true;
   static constexpr const char* citation =
-      "Suzuki & Umeno, in Computer Simulation Studies in Condensed-Matter Physics VI (1993) 74; McLachlan, SIAM "
-      "J. Sci. Comput. 16 (1995) 151; decimals from HLW GNI Sec. V.3.2";
+      "Suzuki & Umeno, in Computer Simulation Studies in Condensed-Matter Physics VI, Springer (1993); McLachlan, SIAM "
+      "J. Sci. Comput. 16 (1995) 151; decimals from HLW GNI Sec. V.3";
   static std::vector<double> gamma() {
     return composition_detail::mirror({0.74167036435061295345, -0.40910082580003159400, 0.19075471029623837995,
                                        -0.57386247111608226666, 0.29906418130365592384, 0.33462491824529818378,
@@ -277,14 +277,14 @@ struct SuzukiUmeno8 {
 };
 
 // Kahan & Li's order-8 composition with 17 stages (s17odr8a), decimals as in HLW GNI
-// Sec. V.3.2, Eq. (3.12).
+// Sec. V.3.
 struct KahanLi8 {
   static constexpr const char* name = "kahan-li8";
   static constexpr int order = 8;
   static constexpr int stages = 17;
   static constexpr bool symmetric = true;
   static constexpr const char* citation =
-      "Kahan & Li, Math. Comp. 66 (1997) 1089, s17odr8a; decimals from HLW GNI Sec. V.3.2";
+      "Kahan & Li, Math. Comp. 66 (1997) 1089, s17odr8a; decimals from HLW GNI Sec. V.3";
   static std::vector<double> gamma() {
     return composition_detail::mirror({0.13020248308889008088, 0.56116298177510838456, -0.38947496264484728641,
                                        0.15884190655515560090, -0.39590389413323757734, 0.18453964097831570709,
@@ -293,7 +293,7 @@ struct KahanLi8 {
 };
 
 // McLachlan's symmetric composition of a method and its adjoint, order 4 with 5
-// pairs (HLW GNI Sec. V.3.2, Eq. (3.7)); closed forms:
+// pairs (HLW GNI Sec. V.3); closed forms:
 //   beta_1 = alpha_5 = (146 + 5 sqrt 19)/540,  beta_2 = alpha_4 = (-2 + 10 sqrt 19)/135,
 //   beta_3 = alpha_3 = 1/5,  beta_4 = alpha_2 = (-23 - 20 sqrt 19)/270,
 //   beta_5 = alpha_1 = (14 - sqrt 19)/108.
@@ -303,7 +303,7 @@ struct McLachlan4 {
   static constexpr int stages = 5;
   static constexpr bool symmetric = true;
   static constexpr const char* citation =
-      "McLachlan, SIAM J. Sci. Comput. 16 (1995) 151; HLW GNI Sec. V.3.2 (composition with the adjoint)";
+      "McLachlan, SIAM J. Sci. Comput. 16 (1995) 151; HLW GNI Sec. V.3 (composition with the adjoint)";
   static CompositionScheme scheme() {
     const double r = std::sqrt(19.0);
     CompositionScheme s;
@@ -325,7 +325,7 @@ struct McLachlan4 {
 // g = 1/(2 - 2^{1/(p+1)}) has order p + 2. Order 2k needs 3^{k-1} stages.
 struct RecursiveTripleJump {
   static constexpr const char* citation =
-      "Yoshida, Phys. Lett. A 150 (1990) 262, Eq. (4.14); Creutz & Gocksch, Phys. Rev. Lett. 63 (1989) 9";
+      "Yoshida, Phys. Lett. A 150 (1990) 262; Creutz & Gocksch, Phys. Rev. Lett. 63 (1989) 9";
   static constexpr int max_order = 12;
   static CompositionScheme scheme(int order) {
     if (order < 2 || order > max_order || order % 2 != 0)
