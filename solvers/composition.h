@@ -35,16 +35,21 @@ namespace dvm {
 // The substeps of "no composition": the map's own step.
 inline std::vector<Substep> single_substep() { return {{1.0, false}}; }
 
-// Route 1: a composition of position-momentum steps of a map and its adjoint.
-template <class System, class Map>
-class CompositionStep {
+// Route 1 for any basic method: substeps of a step type `Plain` and of a step type
+// `Dual` (its adjoint), each any type with N, step_size() and
+// step(q, p, dq, dp) (the contract of `integrate`), built by the caller for each
+// substep size w_k h. This is how a method of another form (a Hamiltonian step from a
+// cotangent lift, say) composes.
+template <class Plain, class Dual = Plain>
+class ComposedStep {
  public:
-  static constexpr int N = System::dim;
+  static constexpr int N = Plain::N;
+  static_assert(Dual::N == N, "the stages of a composition act on one space");
   using V = Vec<double, N>;
-  using Plain = PositionMomentumStep<System, Map>;
-  using Dual = PositionMomentumStep<System, Adjoint<Map>>;
 
-  CompositionStep(const System& L, const Map& R, double h, std::vector<Substep> substeps, StepOptions options = {})
+  // make_plain(hk) and make_dual(hk) build the step of size hk (possibly negative).
+  template <class MakePlain, class MakeDual>
+  ComposedStep(double h, std::vector<Substep> substeps, const MakePlain& make_plain, const MakeDual& make_dual)
       : h_(h), substeps_(std::move(substeps)) {
     if (substeps_.empty()) throw std::invalid_argument("a composition needs at least one substep");
     for (const Substep& s : substeps_) {
@@ -52,10 +57,10 @@ class CompositionStep {
         throw std::invalid_argument("composition substeps must have nonzero finite weights");
       if (s.adjoint) {
         index_.push_back(dual_.size());
-        dual_.emplace_back(L, adjoint(R), s.weight * h, options);
+        dual_.push_back(make_dual(s.weight * h));
       } else {
         index_.push_back(plain_.size());
-        plain_.emplace_back(L, R, s.weight * h, options);
+        plain_.push_back(make_plain(s.weight * h));
       }
     }
   }
@@ -65,7 +70,8 @@ class CompositionStep {
 
   // One step from (q0, p0): dq holds a guess of the increment over the whole step on
   // entry (about h v), the increment on return; dp receives p_S - p_0. The summary
-  // adds up the iterations; on failure its message names the substep.
+  // adds up the iterations and keeps the worst relative residual; on failure its
+  // message names the substep.
   StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary total;
     total.converged = true;
@@ -111,6 +117,21 @@ class CompositionStep {
   std::vector<std::size_t> index_;
   std::vector<Plain> plain_;
   std::vector<Dual> dual_;
+};
+
+// Route 1 for a map: position-momentum steps of R_d and of its adjoint R_d^*.
+template <class System, class Map>
+class CompositionStep
+    : public ComposedStep<PositionMomentumStep<System, Map>, PositionMomentumStep<System, Adjoint<Map>>> {
+ public:
+  using Plain = PositionMomentumStep<System, Map>;
+  using Dual = PositionMomentumStep<System, Adjoint<Map>>;
+  using Base = ComposedStep<Plain, Dual>;
+
+  CompositionStep(const System& L, const Map& R, double h, std::vector<Substep> substeps, StepOptions options = {})
+      : Base(
+            h, std::move(substeps), [&](double hk) { return Plain(L, R, hk, options); },
+            [&](double hk) { return Dual(L, adjoint(R), hk, options); }) {}
 };
 
 // Route 2: the composed discrete Lagrangian sum_k L_d^{(k)}(q_{k-1}, q_k), solved for
