@@ -196,6 +196,13 @@ class Adjoint {
     const TangentPoint<T, N> t = dvm::inverse(map_, q1, q0);
     return {t.x, -t.v};
   }
+  // R_d^*(x, v) = (q0, q0 + dq)  <=>  R_d(x, -v) = (q0 + dq, (q0 + dq) - dq): the base
+  // map's increment form, so that v = -(-dq) carries no cancellation.
+  template <class T, int N>
+  TangentPoint<T, N> inverse_increment(const Vec<T, N>& q0, const Vec<T, N>& dq) const {
+    const TangentPoint<T, N> t = dvm::inverse_increment(map_, Vec<T, N>(q0 + dq), Vec<T, N>(-dq));
+    return {t.x, -t.v};
+  }
 
  private:
   M map_;

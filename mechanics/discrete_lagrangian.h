@@ -31,7 +31,8 @@ class DiscreteLagrangian {
   using V = Vec<T, N>;
 
   DiscreteLagrangian(System L, Map R, double h) : L_(std::move(L)), R_(std::move(R)), h_(h) {
-    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    // A negative h is allowed: compositions take substeps of negative size gamma_i h.
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
 
   const System& lagrangian() const { return L_; }

@@ -22,4 +22,8 @@ int run_manifold_scene(const Scene& scene, const RunOptions& options);
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.
 int check_map_command(const std::string& name, double theta, int dim, double tolerance);
 
+// Lists the composition methods (order, stages, symmetry, stability threshold) as a
+// table or JSON; returns 0.
+int methods_command(bool json);
+
 }  // namespace dvm::cli

@@ -22,6 +22,7 @@ const char* kUsage =
     "  run SCENE.toml     integrate a scene (a system, initial state and integrator)\n"
     "  maps               list the discretization maps with their properties\n"
     "  check-map NAME     check the identities of a discretization map, as JSON\n"
+    "  methods            list the composition methods (order, stages, stability)\n"
     "\n"
     "'dvm <command> --help' describes a command. Exit status: 0 success, 1 a check\n"
     "that did not pass, 2 bad input or usage, 3 a numerical failure during a run.\n";
@@ -58,6 +59,11 @@ const char* kRunHelp =
     "                theta = 0.5  (map theta only)   step = 0.01   steps = N  or  t_end = T\n"
     "                solver = \"newton\" (default) | \"tiny\" (ceres::TinySolver)\n"
     "                max_iterations = 25   tolerance = 2e-15  (relative residual)\n"
+    "                composition = \"none\" (default) | \"stormer-verlet\" | \"triple-jump\"\n"
+    "                    | \"suzuki5\" | \"mclachlan4\" | \"yoshida6a\" ... | \"kahan-li8\"\n"
+    "                    | \"triple-jump:<even order>\"   (the map's step composed; a map\n"
+    "                    that is not symmetric enters as Phi_{h/2} o Phi*_{h/2}; see\n"
+    "                    'dvm methods')\n"
     "  [output]      csv = \"out.csv\"   every = 1\n"
     "\n"
     "Exit status: 0 complete run; 2 bad input (nothing is written); 3 a step did not\n"
@@ -75,6 +81,18 @@ const char* kMapsHelp =
     "\n"
     "example:\n"
     "  dvm maps --json\n";
+
+const char* kMethodsHelp =
+    "usage: dvm methods [--json]\n"
+    "\n"
+    "Lists the composition methods usable as [integrator] composition: name, order,\n"
+    "number of stages, symmetry, the largest stable h*omega on q'' = -omega^2 q when the\n"
+    "basic method is Stormer-Verlet (map explicit-euler or adjoint-euler), whether the\n"
+    "composition of midpoint steps is stable for every h*omega, and the source of the\n"
+    "coefficients.\n"
+    "\n"
+    "example:\n"
+    "  dvm methods --json\n";
 
 const char* kCheckHelp =
     "usage: dvm check-map NAME [--theta T] [--dim N] [--tolerance TOL]\n"
@@ -180,6 +198,21 @@ int cmd_maps(const std::vector<std::string>& args) {
   return 0;
 }
 
+int cmd_methods(const std::vector<std::string>& args) {
+  bool json = false;
+  for (const auto& a : args) {
+    if (is_help(a)) {
+      std::cout << kMethodsHelp;
+      return 0;
+    } else if (a == "--json") {
+      json = true;
+    } else {
+      usage_error("unknown argument " + a, kMethodsHelp);
+    }
+  }
+  return methods_command(json);
+}
+
 int cmd_check_map(const std::vector<std::string>& args) {
   std::string name;
   double theta = 0.5, tol = 1e-12;
@@ -232,6 +265,7 @@ int main(int argc, char** argv) {
     if (cmd == "run") return cmd_run(args);
     if (cmd == "maps") return cmd_maps(args);
     if (cmd == "check-map") return cmd_check_map(args);
+    if (cmd == "methods") return cmd_methods(args);
     usage_error("unknown command '" + cmd + "'", kUsage);
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";

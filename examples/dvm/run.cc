@@ -10,6 +10,7 @@
 
 #include "examples/dvm/json.h"
 #include "mechanics/systems.h"
+#include "solvers/composition.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 
@@ -59,7 +60,6 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   opt.max_iterations = s.max_iterations;
   opt.residual_tolerance = s.tolerance;
   opt.accept_tolerance = std::fmax(opt.accept_tolerance, s.tolerance);
-  const PositionMomentumStep<System, Map> stepper(L, R, s.step, opt);
 
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
   File csv;
@@ -83,15 +83,20 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   double J0 = 0.0, max_J_error = 0.0;
   if constexpr (has_angular_momentum<System>) J0 = System::angular_momentum(q, p);
   const auto start = std::chrono::steady_clock::now();
-  const RunSummary run = integrate(stepper, 0.0, q, p, v0, s.steps,
-                                   [&](std::int64_t k, double t, const V& qk, const V& pk, const StepSummary&) {
-                                     E = energy_at(qk, pk);
-                                     max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0));
-                                     if constexpr (has_angular_momentum<System>)
-                                       max_J_error = std::fmax(max_J_error,
-                                                               std::fabs(System::angular_momentum(qk, pk) - J0));
-                                     if (csv && (k % s.every == 0 || k == s.steps)) write_row(t, qk, pk, E);
-                                   });
+  auto observer = [&](std::int64_t k, double t, const V& qk, const V& pk, const StepSummary&) {
+    E = energy_at(qk, pk);
+    max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0));
+    if constexpr (has_angular_momentum<System>)
+      max_J_error = std::fmax(max_J_error, std::fabs(System::angular_momentum(qk, pk) - J0));
+    if (csv && (k % s.every == 0 || k == s.steps)) write_row(t, qk, pk, E);
+  };
+  // The map's own step, or its steps composed (resolved once, here).
+  const RunSummary run =
+      s.composition == "none"
+          ? integrate(PositionMomentumStep<System, Map>(L, R, s.step, opt), 0.0, q, p, v0, s.steps, observer)
+          : integrate(CompositionStep<System, Map>(L, R, s.step,
+                                                   substeps(find_composition(s.composition), R.symmetric()), opt),
+                      0.0, q, p, v0, s.steps, observer);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (csv && std::fflush(csv.get()) != 0) {
     std::cerr << "dvm: error writing '" << csv_path << "'\n";
@@ -104,6 +109,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     j.str("status", run.failed ? "failed" : "ok")
         .str("system", s.system)
         .str("map", R.name())
+        .str("composition", s.composition)
         .str("solver", s.solver)
         .num("step", s.step)
         .num("steps", static_cast<double>(run.steps_done))
@@ -131,7 +137,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     }
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
-    std::printf("%s with %s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), R.name().c_str(), s.step,
+    std::printf("%s with %s%s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), R.name().c_str(),
+                s.composition == "none" ? "" : (", composition " + s.composition).c_str(), s.step,
                 static_cast<long long>(run.steps_done), t_final, wall);
     std::printf("  energy %.15g -> %.15g, max |E - E0| = %.3e\n", E0, E, max_energy_error);
     if constexpr (has_angular_momentum<System>)

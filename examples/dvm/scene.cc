@@ -8,6 +8,8 @@
 
 #include <toml++/toml.h>
 
+#include "solvers/composition_methods.h"
+
 namespace dvm::cli {
 
 const std::vector<SystemInfo>& systems() {
@@ -437,7 +439,8 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
 
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);
-  r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance"});
+  r.only_keys(in, "integrator",
+              {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance", "composition"});
   const toml::node* m = in.get("map");
   if (!m) throw InputError(path + ": missing key 'integrator.map'");
   const MapInfo& map_info = find_map(r.string(*m, "integrator.map"), r.where(m, "integrator.map"));
@@ -501,6 +504,16 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
     if (!(s.tolerance > 0.0 && s.tolerance < 1.0))
       throw InputError(r.where(tol, "integrator.tolerance") + ": got " + Reader::describe(*tol) +
                        ", expected a number in (0, 1) (relative residual tolerance)");
+  }
+  if (const toml::node* co = in.get("composition")) {
+    s.composition = r.string(*co, "integrator.composition");
+    if (s.composition != "none") {
+      try {
+        find_composition(s.composition);
+      } catch (const std::invalid_argument& e) {
+        throw InputError(r.where(co, "integrator.composition") + ": got \"" + s.composition + "\"; " + e.what());
+      }
+    }
   }
 
   // [output]

@@ -9,6 +9,9 @@
 //                 solver = "newton" | "tiny"        (optional, default newton)
 //                 max_iterations = 25   tolerance = 2e-15   (optional: the solver's
 //                 iteration bound and relative residual tolerance)
+//                 composition = "none" | "stormer-verlet" | "triple-jump" | ... |
+//                 "triple-jump:<order>"   (optional: the map's step composed, see
+//                 `dvm methods`)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
 //
 // Systems on S^2 take q = unit vector [x, y, z] and v or p tangent to it; systems on
@@ -74,6 +77,9 @@ struct Scene {
   std::string solver = "newton";
   int max_iterations = 25;
   double tolerance = 2e-15;
+  // "none" or a composition method (solvers/composition_methods.h), its stages the
+  // map's steps (issue 5)
+  std::string composition = "none";
   std::string csv;  // empty: no CSV
   std::int64_t every = 1;
 };

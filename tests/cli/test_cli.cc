@@ -363,3 +363,94 @@ BOOST_AUTO_TEST_CASE(check_map_on_manifold_maps) {
     }
   }
 }
+
+// [integrator] composition and `dvm methods` (issue 5).
+BOOST_AUTO_TEST_CASE(composition_key_runs_and_raises_the_order) {
+  // Harmonic oscillator, omega = 2, q0 = 1, p0 = 0: exact q(1) = cos 2, p(1) = -2 sin 2.
+  // With h omega = 0.2 the midpoint map alone errs by about 6e-3 (phase error
+  // t h^2 omega^3/12), its triple jump by 2e-4, the order-6 triple jump by 1e-5, and
+  // Kahan-Li's order 8 by about 1e-12 (measured; the error constants of the triple
+  // jumps are large).
+  auto final_error = [](const std::vector<std::string>& sets) {
+    std::vector<std::string> args = {"run", write_scene("comp.toml", kGood), "--json", "--set", "integrator.step=0.1",
+                                     "--set", "integrator.steps=10"};
+    for (const auto& s : sets) {
+      args.push_back("--set");
+      args.push_back(s);
+    }
+    const Output o = dvm(args);
+    BOOST_TEST(o.status == 0, o.err);
+    const auto pos = o.out.find("\"q_final\": [");
+    const double q = std::strtod(o.out.c_str() + pos + 12, nullptr);
+    return std::fabs(q - std::cos(2.0));
+  };
+  const double none = final_error({}), tj = final_error({"integrator.composition=\"triple-jump\""}),
+               kl8 = final_error({"integrator.composition=\"kahan-li8\""}),
+               tj6 = final_error({"integrator.composition=\"triple-jump:6\""}),
+               sv = final_error({"integrator.map=\"explicit-euler\"", "integrator.composition=\"suzuki5\""});
+  BOOST_TEST_MESSAGE("q error at t = 1: none " << none << ", triple-jump " << tj << ", triple-jump:6 " << tj6
+                                               << ", kahan-li8 " << kl8 << ", suzuki5 of Stormer-Verlet " << sv);
+  BOOST_TEST(none > 1e-3);
+  BOOST_TEST(tj < 0.1 * none);
+  BOOST_TEST(tj6 < 0.1 * tj);
+  BOOST_TEST(kl8 < 1e-10);
+  BOOST_TEST(sv < 1e-5);
+  // the example scene: order 8 on Kepler, energy kept to 1e-10 over 100 time units
+  const Output k = dvm({"run", scene("kepler-composition.toml"), "--json", "--csv", temp_dir() + "/kc.csv"});
+  BOOST_TEST(k.status == 0, k.err);
+  BOOST_TEST(json_number(k.out, "max_abs_energy_error") <= 1e-10);
+  // the JSON names the composition
+  const Output o = dvm({"run", write_scene("comp.toml", kGood), "--json", "--set", "integrator.composition=yoshida6a"});
+  BOOST_TEST(o.status == 0);
+  BOOST_TEST(o.out.find("\"composition\": \"yoshida6a\"") != std::string::npos, o.out);
+}
+
+BOOST_AUTO_TEST_CASE(composition_key_is_validated) {
+  struct Case {
+    std::string set, expect;
+  };
+  const std::vector<Case> cases = {
+      {"integrator.composition=\"yoshida7\"", "unknown composition \"yoshida7\""},
+      {"integrator.composition=\"yoshida7\"", "expected one of: none"},
+      {"integrator.composition=\"triple-jump:5\"", "even"},
+      {"integrator.composition=\"triple-jump:\"", "triple-jump:<even order>"},
+      {"integrator.composition=4", "expected a string"},
+  };
+  for (const auto& c : cases) {
+    const std::string csv = temp_dir() + "/comp_bad.csv";
+    const Output o = dvm({"run", write_scene("good.toml", kGood), "--csv", csv, "--set", c.set});
+    BOOST_TEST_CONTEXT(c.set << " -> " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find("integrator.composition") != std::string::npos);
+      BOOST_TEST(o.err.find(c.expect) != std::string::npos);
+      BOOST_TEST(!file_exists(csv));
+    }
+  }
+  // from the file: the message names file, line and column
+  const Output o = dvm({"run", write_scene("comp_loc.toml", std::string(kGood) + "composition = \"nope\"\n")});
+  BOOST_TEST(o.status == 2);
+  BOOST_TEST(o.err.find("comp_loc.toml:11:") != std::string::npos, o.err);
+}
+
+BOOST_AUTO_TEST_CASE(methods_lists_every_method) {
+  const Output t = dvm({"methods"});
+  BOOST_TEST(t.status == 0);
+  for (const char* name : {"none", "stormer-verlet", "triple-jump", "suzuki5", "mclachlan4", "yoshida6a", "yoshida6b",
+                           "yoshida6c", "kahan-li6", "yoshida8a", "yoshida8b", "yoshida8c", "yoshida8d", "yoshida8e",
+                           "suzuki-umeno8", "kahan-li8", "triple-jump:6", "triple-jump:12"})
+    BOOST_TEST(t.out.find(std::string("\n") + name + " ") != std::string::npos, name);
+  const Output j = dvm({"methods", "--json"});
+  BOOST_TEST(j.status == 0);
+  BOOST_TEST(j.out.find("\"name\": \"kahan-li8\"") != std::string::npos);
+  // Stormer-Verlet is stable up to h omega = 2, the triple jump up to 1.5734
+  const auto sv = j.out.find("\"name\": \"stormer-verlet\"");
+  BOOST_TEST(std::fabs(json_number(j.out.substr(sv), "stability_threshold_explicit_euler") - 2.0) <= 1e-9);
+  const auto tj = j.out.find("\"name\": \"triple-jump\"");
+  BOOST_TEST(std::fabs(json_number(j.out.substr(tj), "stability_threshold_explicit_euler") - 1.5734) <= 1e-4);
+  BOOST_TEST(json_number(j.out.substr(tj), "order") == 4.0);
+  BOOST_TEST(json_number(j.out.substr(tj), "stages") == 3.0);
+  const Output h = dvm({"methods", "--help"});
+  BOOST_TEST(h.status == 0);
+  BOOST_TEST(h.out.find("example") != std::string::npos);
+  BOOST_TEST(dvm({"methods", "--bogus"}).status == 2);
+}

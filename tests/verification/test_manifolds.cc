@@ -326,7 +326,10 @@ BOOST_AUTO_TEST_CASE(spherical_chain) {
   });
   BOOST_TEST(!r.failed, r.failure.message);
   BOOST_TEST_MESSAGE("spherical chain of 2, 2e4 steps: |dJ| " << dJ << ", |dE| " << dE << ", defect " << defect);
-  BOOST_TEST(dJ <= 2e-17 * n + 1e-14);
+  // Round-off only: the relative positions carry eps |q|, a momentum noise of about
+  // eps (sum m l^2)/h per step that random-walks (solvers/manifold_step.h).
+  const double noise = 2.2e-16 * (1.0 * 1.0 + 0.5 * 1.8 * 1.8) / 0.005;
+  BOOST_TEST(dJ <= 5 * std::sqrt(double(n)) * noise);
   BOOST_TEST(defect <= 1e-12);
   BOOST_TEST(dE <= 1e-2 * std::fabs(E0));
 }

@@ -1,0 +1,82 @@
+// `dvm methods`: the composition methods, with their order, stages, symmetry and the
+// linear stability threshold of each, computed here from the trace of the one-step
+// matrix on q'' = -omega^2 q (solvers/stability.h).
+#include <cstdio>
+#include <iostream>
+
+#include "examples/dvm/commands.h"
+#include "examples/dvm/json.h"
+#include "solvers/composition_methods.h"
+#include "solvers/stability.h"
+
+namespace dvm::cli {
+
+namespace {
+
+struct MethodRow {
+  CompositionScheme scheme;
+  double threshold_verlet;     // basic method from map explicit-euler (Stormer-Verlet)
+  bool midpoint_unconditional;  // basic method midpoint: stable for every h omega
+};
+
+std::vector<MethodRow> method_rows() {
+  std::vector<CompositionScheme> list = composition_schemes();
+  for (int p = 6; p <= RecursiveTripleJump::max_order; p += 2) list.push_back(find_composition("triple-jump:" + std::to_string(p)));
+  std::vector<MethodRow> rows;
+  for (const CompositionScheme& s : list)
+    rows.push_back({s, composition_threshold(0.0, substeps(s, false)),
+                    std::isinf(composition_threshold(0.5, substeps(s, true)))});
+  return rows;
+}
+
+}  // namespace
+
+int methods_command(bool json) {
+  const std::vector<MethodRow> rows = method_rows();
+  const double euler = composition_threshold(0.0, {{1.0, false}});
+  if (json) {
+    std::string out = "[\n";
+    {
+      Json::Object j;
+      j.str("name", "none")
+          .str("order", "that of the map")
+          .num("stages", 1)
+          .str("symmetric", "as the map")
+          .num("stability_threshold_explicit_euler", euler)
+          .boolean("midpoint_unconditionally_stable", true)
+          .str("citation", NoComposition::citation);
+      out += "  " + j.dump(4) + ",\n";
+    }
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      const MethodRow& r = rows[i];
+      Json::Object j;
+      j.str("name", r.scheme.name)
+          .num("order", r.scheme.order)
+          .num("stages", r.scheme.stages)
+          .boolean("symmetric", r.scheme.symmetric)
+          .num("stability_threshold_explicit_euler", r.threshold_verlet)
+          .boolean("midpoint_unconditionally_stable", r.midpoint_unconditional)
+          .str("citation", r.scheme.citation);
+      out += "  " + j.dump(4) + (i + 1 < rows.size() ? ",\n" : "\n");
+    }
+    std::cout << out << "]\n";
+    return 0;
+  }
+  std::printf("%-16s %-5s %-6s %-9s %-13s %-9s %s\n", "name", "order", "stages", "symmetric", "threshold(SV)",
+              "midpoint", "source");
+  std::printf("%-16s %-5s %-6d %-9s %-13.6f %-9s %s\n", "none", "map", 1, "as map", euler, "stable",
+              "the map's own step (threshold: explicit-euler)");
+  for (const MethodRow& r : rows)
+    std::printf("%-16s %-5d %-6d %-9s %-13.6f %-9s %s\n", r.scheme.name.c_str(), r.scheme.order, r.scheme.stages,
+                r.scheme.symmetric ? "yes" : "no", r.threshold_verlet, r.midpoint_unconditional ? "stable" : "LIMITED",
+                r.scheme.citation.c_str());
+  std::printf(
+      "\nthreshold(SV): largest stable h*omega on q'' = -omega^2 q with map = \"explicit-euler\" (or\n"
+      "\"adjoint-euler\"), whose symmetric basic method is Stormer-Verlet; found from |trace| < 2 of\n"
+      "the one-step matrix. midpoint: with map = \"midpoint\" every composition is stable for all\n"
+      "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n",
+      RecursiveTripleJump::max_order);
+  return 0;
+}
+
+}  // namespace dvm::cli

@@ -1,0 +1,301 @@
+// Higher order by composition (paper Sec. 6), two ways that give one map.
+//
+// 1. Composition of one-step maps. With substeps (w_k, a_k), k = 1..S, the step is
+//      Psi_h = Phi^{(S)}_{w_S h} o ... o Phi^{(1)}_{w_1 h},
+//    Phi^{(k)} the position-momentum step of the map R_d (a_k false) or of its adjoint
+//    R_d^* (a_k true; Prop. 2.4: the discrete Lagrangian of R_d^* gives the adjoint
+//    method). Substep sizes may be negative.
+//
+// 2. Composition of discrete Lagrangians (generating functions). With
+//      L_d(q_0, q_S) = sum_k L_d^{(k)}(q_{k-1}, q_k),   L_d^{(k)} of size w_k h,
+//    and the micro-nodes q_1..q_{S-1} eliminated by stationarity, the step
+//      p_0 = -D1 L_d^{(1)}(q_0, q_1),
+//      0   = D2 L_d^{(k)}(q_{k-1}, q_k) + D1 L_d^{(k+1)}(q_k, q_{k+1}),  k = 1..S-1,
+//      p_S = D2 L_d^{(S)}(q_{S-1}, q_S)
+//    is solved for q_1..q_S together (one Newton iteration on S N unknowns with a
+//    block-tridiagonal Jacobian). The micro-node equations say that the momentum
+//    leaving substep k equals the one entering substep k + 1, so the solution is the
+//    map of route 1; tests check this to round-off.
+//
+// Both types plug into `integrate` (they have N, step_size() and step(q, p, dq, dp)).
+#pragma once
+
+#include <Eigen/LU>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "core/map_operations.h"
+#include "solvers/composition_methods.h"
+#include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
+
+namespace dvm {
+
+// The substeps of "no composition": the map's own step.
+inline std::vector<Substep> single_substep() { return {{1.0, false}}; }
+
+// Route 1 for any basic method: substeps of a step type `Plain` and of a step type
+// `Dual` (its adjoint), each any type with N, step_size() and
+// step(q, p, dq, dp) (the contract of `integrate`), built by the caller for each
+// substep size w_k h. This is how a method of another form (a Hamiltonian step from a
+// cotangent lift, say) composes.
+template <class Plain, class Dual = Plain>
+class ComposedStep {
+ public:
+  static constexpr int N = Plain::N;
+  static_assert(Dual::N == N, "the stages of a composition act on one space");
+  using V = Vec<double, N>;
+
+  // make_plain(hk) and make_dual(hk) build the step of size hk (possibly negative).
+  template <class MakePlain, class MakeDual>
+  ComposedStep(double h, std::vector<Substep> substeps, const MakePlain& make_plain, const MakeDual& make_dual)
+      : h_(h), substeps_(std::move(substeps)) {
+    if (substeps_.empty()) throw std::invalid_argument("a composition needs at least one substep");
+    for (const Substep& s : substeps_) {
+      if (!(s.weight != 0.0) || !std::isfinite(s.weight))
+        throw std::invalid_argument("composition substeps must have nonzero finite weights");
+      if (s.adjoint) {
+        index_.push_back(dual_.size());
+        dual_.push_back(make_dual(s.weight * h));
+      } else {
+        index_.push_back(plain_.size());
+        plain_.push_back(make_plain(s.weight * h));
+      }
+    }
+  }
+
+  double step_size() const { return h_; }
+  const std::vector<Substep>& substeps() const { return substeps_; }
+
+  // One step from (q0, p0): dq holds a guess of the increment over the whole step on
+  // entry (about h v), the increment on return; dp receives p_S - p_0. The summary
+  // adds up the iterations and keeps the worst relative residual; on failure its
+  // message names the substep.
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    StepSummary total;
+    total.converged = true;
+    total.iterations = 0;
+    total.residual = 0.0;
+    total.scale = 0.0;
+    CompensatedVector<N> Q(V::Zero()), P(V::Zero());  // increments since the start
+    // Each substep starts from the previous substep's increment rescaled to its size
+    // (the first from the caller's guess).
+    V prev = dq, d, e;
+    double prev_weight = 1.0;
+    for (std::size_t k = 0; k < substeps_.size(); ++k) {
+      const double w = substeps_[k].weight;
+      d = prev * (w / prev_weight);
+      const V q = q0 + Q.sum, p = p0 + P.sum;
+      const StepSummary s = substeps_[k].adjoint ? dual_[index_[k]].step(q, p, d, e) : plain_[index_[k]].step(q, p, d, e);
+      total.iterations += s.iterations;
+      if (!(s.residual / s.scale <= total.residual / std::fmax(total.scale, 1e-300))) {
+        total.residual = s.residual;
+        total.scale = s.scale;
+      }
+      if (!s.converged) {
+        total.converged = false;
+        total.residual = s.residual;
+        total.scale = s.scale;
+        total.message = "substep " + std::to_string(k + 1) + " of " + std::to_string(substeps_.size()) + ": " +
+                        s.message;
+        return total;
+      }
+      Q.add(d);
+      P.add(e);
+      prev = d;
+      prev_weight = w;
+    }
+    dq = Q.sum;
+    dp = P.sum;
+    return total;
+  }
+
+ private:
+  double h_;
+  std::vector<Substep> substeps_;
+  std::vector<std::size_t> index_;
+  std::vector<Plain> plain_;
+  std::vector<Dual> dual_;
+};
+
+// Route 1 for a map: position-momentum steps of R_d and of its adjoint R_d^*.
+template <class System, class Map>
+class CompositionStep
+    : public ComposedStep<PositionMomentumStep<System, Map>, PositionMomentumStep<System, Adjoint<Map>>> {
+ public:
+  using Plain = PositionMomentumStep<System, Map>;
+  using Dual = PositionMomentumStep<System, Adjoint<Map>>;
+  using Base = ComposedStep<Plain, Dual>;
+
+  CompositionStep(const System& L, const Map& R, double h, std::vector<Substep> substeps, StepOptions options = {})
+      : Base(
+            h, std::move(substeps), [&](double hk) { return Plain(L, R, hk, options); },
+            [&](double hk) { return Dual(L, adjoint(R), hk, options); }) {}
+};
+
+// Route 2: the composed discrete Lagrangian sum_k L_d^{(k)}(q_{k-1}, q_k), solved for
+// all nodes at once.
+template <class System, class Map>
+class ComposedLagrangianStep {
+ public:
+  static constexpr int N = System::dim;
+  using V = Vec<double, N>;
+  using PlainDL = DiscreteLagrangian<System, Map>;
+  using DualDL = DiscreteLagrangian<System, Adjoint<Map>>;
+
+  ComposedLagrangianStep(const System& L, const Map& R, double h, std::vector<Substep> substeps,
+                         StepOptions options = {})
+      : h_(h), substeps_(std::move(substeps)), options_(options) {
+    if (substeps_.empty()) throw std::invalid_argument("a composition needs at least one substep");
+    for (const Substep& s : substeps_) {
+      if (s.adjoint) {
+        index_.push_back(dual_.size());
+        dual_.emplace_back(L, adjoint(R), s.weight * h);
+      } else {
+        index_.push_back(plain_.size());
+        plain_.emplace_back(L, R, s.weight * h);
+      }
+    }
+  }
+
+  double step_size() const { return h_; }
+
+  // The composed discrete Lagrangian at the nodes q_0..q_S (for checks).
+  double value(const std::vector<V>& nodes) const {
+    double sum = 0.0;
+    for (std::size_t k = 0; k < substeps_.size(); ++k)
+      sum += substeps_[k].adjoint ? dual_[index_[k]](nodes[k], nodes[k + 1]) : plain_[index_[k]](nodes[k], nodes[k + 1]);
+    return sum;
+  }
+
+  // D1 and D2 of substep k's discrete Lagrangian at (a, a + d), and their Jacobians
+  // with respect to (q_{k-1}, q_k) (N x 2N each).
+  void pair(std::size_t k, const V& a, const V& d, V& D1, V& D2, Mat<double, N, 2 * N>& J1,
+            Mat<double, N, 2 * N>& J2) const {
+    if (substeps_[k].adjoint)
+      pair_of(dual_[index_[k]], a, d, D1, D2, J1, J2);
+    else
+      pair_of(plain_[index_[k]], a, d, D1, D2, J1, J2);
+  }
+
+  // One step: the same contract as CompositionStep::step. The nodes start from the
+  // guess split in proportion to the weights.
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    const std::size_t S = substeps_.size();
+    const int n = static_cast<int>(S) * N;
+    std::vector<V> inc(S);  // q_k - q_{k-1}
+    for (std::size_t k = 0; k < S; ++k) inc[k] = dq * substeps_[k].weight;
+    Eigen::VectorXd F(n);
+    Eigen::MatrixXd J(n, n);
+    StepSummary s;
+    double prev_step = INFINITY;
+    for (int it = 0; it < options_.max_iterations + 1; ++it) {
+      F.setZero();
+      J.setZero();
+      V a = q0;  // q_{k-1}
+      double scale = max_abs(p0);
+      for (std::size_t k = 0; k < S; ++k) {
+        V D1, D2;
+        Mat<double, N, 2 * N> J1, J2;
+        pair(k, a, inc[k], D1, D2, J1, J2);
+        const int r = static_cast<int>(k) * N;
+        // equation k (rows r..r+N): D1 of substep k, plus D2 of substep k-1 (or p0)
+        F.segment<N>(r) += D1;
+        if (k == 0) F.segment<N>(r) += p0;
+        // unknowns: node k (columns (k-1)N..) is q_{k-1} for k >= 1; node k+1 is q_k
+        if (k > 0) J.block<N, N>(r, r - N) += J1.template leftCols<N>();
+        J.block<N, N>(r, r) += J1.template rightCols<N>();
+        if (k + 1 < S) {
+          F.segment<N>(r + N) += D2;
+          if (k > 0) J.block<N, N>(r + N, r - N) += J2.template leftCols<N>();
+          J.block<N, N>(r + N, r) += J2.template rightCols<N>();
+        }
+        scale += max_abs(D1);
+        a = a + inc[k];
+      }
+      s.iterations = it + 1;
+      s.residual = F.lpNorm<Eigen::Infinity>();
+      s.scale = scale / static_cast<double>(S) + options_.absolute_floor;
+      if (!std::isfinite(s.residual)) {
+        s.message = "non-finite residual";
+        return s;
+      }
+      if (s.residual <= options_.residual_tolerance * s.scale) {
+        s.converged = true;
+        break;
+      }
+      if (prev_step <= options_.stall_tolerance * (max_abs(q0) + max_abs(dq))) {
+        s.converged = s.residual <= options_.accept_tolerance * s.scale;
+        if (!s.converged) s.message = "Newton stalled above the residual tolerance";
+        break;
+      }
+      if (it == options_.max_iterations) {
+        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+        return s;
+      }
+      const Eigen::PartialPivLU<Eigen::MatrixXd> lu(J);
+      const Eigen::VectorXd delta = lu.solve(F);  // change of the nodes q_1..q_S
+      if (!std::isfinite(delta.lpNorm<Eigen::Infinity>())) {
+        s.message = "singular composed Jacobian";
+        return s;
+      }
+      for (std::size_t k = 0; k < S; ++k) {
+        V dk = delta.segment<N>(static_cast<int>(k) * N);
+        if (k > 0) dk -= delta.segment<N>(static_cast<int>(k - 1) * N);
+        inc[k] -= dk;
+      }
+      prev_step = delta.lpNorm<Eigen::Infinity>();
+    }
+    if (!s.converged) return s;
+    CompensatedVector<N> Q(V::Zero());
+    for (std::size_t k = 0; k + 1 < S; ++k) Q.add(inc[k]);
+    V D1, D2;
+    Mat<double, N, 2 * N> J1, J2;
+    pair(S - 1, V(q0 + Q.sum), inc[S - 1], D1, D2, J1, J2);
+    Q.add(inc[S - 1]);
+    dq = Q.sum;
+    dp = D2 - p0;
+    return s;
+  }
+
+ private:
+  template <class DL>
+  static void pair_of(const DL& dl, const V& a, const V& d, V& D1, V& D2, Mat<double, N, 2 * N>& J1,
+                      Mat<double, N, 2 * N>& J2) {
+    // Jets in the 2N directions (q_{k-1}, q_k); the increment d = q_k - q_{k-1}.
+    using T = ceres::Jet<double, 2 * N>;
+    Vec<T, N> aj, dj;
+    for (int i = 0; i < N; ++i) {
+      aj[i] = T(a[i]);
+      aj[i].v[i] = 1.0;
+      dj[i] = T(d[i]);
+      dj[i].v[i] = -1.0;
+      dj[i].v[N + i] = 1.0;
+    }
+    const Vec<T, N> d1 = dl.D1Ld_increment(aj, dj);
+    // D2 at (a, a + d): the inner derivative moves d alone.
+    using U = ceres::Jet<T, N>;
+    Vec<U, N> a2, d2;
+    for (int i = 0; i < N; ++i) {
+      a2[i] = U(aj[i]);
+      d2[i] = seed<T, N>(dj[i], i);
+    }
+    const Vec<T, N> dd2 = dl.template slopes<T, N>(a2, d2);
+    for (int i = 0; i < N; ++i) {
+      D1[i] = d1[i].a;
+      D2[i] = dd2[i].a;
+      J1.row(i) = d1[i].v.transpose();
+      J2.row(i) = dd2[i].v.transpose();
+    }
+  }
+
+  double h_;
+  std::vector<Substep> substeps_;
+  StepOptions options_;
+  std::vector<std::size_t> index_;
+  std::vector<PlainDL> plain_;
+  std::vector<DualDL> dual_;
+};
+
+}  // namespace dvm
