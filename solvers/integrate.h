@@ -47,6 +47,19 @@ struct RunSummary {
   StepSummary failure;            // the failed step's summary
   std::int64_t solver_iterations = 0;
   int max_step_iterations = 0;
+
+  // Books the summary of step k (from t0 + k h); returns false, recording the
+  // failure, if the step did not converge.
+  bool record(const StepSummary& s, std::int64_t k, double t0, double h) {
+    solver_iterations += s.iterations;
+    if (s.iterations > max_step_iterations) max_step_iterations = s.iterations;
+    if (s.converged) return true;
+    failed = true;
+    failed_step = k;
+    failed_time = t0 + static_cast<double>(k) * h;
+    failure = s;
+    return false;
+  }
 };
 
 template <class S, class Observer>
@@ -64,15 +77,7 @@ RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<doub
     else if (k == 1)
       dq = dq_prev;
     const StepSummary s = stepper.step(Q.sum, P.sum, dq, dp);
-    run.solver_iterations += s.iterations;
-    if (s.iterations > run.max_step_iterations) run.max_step_iterations = s.iterations;
-    if (!s.converged) {
-      run.failed = true;
-      run.failed_step = k;
-      run.failed_time = t0 + static_cast<double>(k) * h;
-      run.failure = s;
-      break;
-    }
+    if (!run.record(s, k, t0, h)) break;
     Q.add(dq);
     P.add(dp);
     dq_prev2 = dq_prev;

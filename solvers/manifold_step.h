@@ -107,15 +107,7 @@ RunSummary integrate_manifold(const S& stepper, double t0, typename S::Point& q,
   for (std::int64_t k = 0; k < steps; ++k) {
     Vec<double, S::n> xi = k == 0 ? Vec<double, S::n>(h * M::tangent_coordinates(q, v0)) : M::next_guess(q_prev, q);
     const StepSummary s = stepper.step(q, p, xi, q1, p1);
-    run.solver_iterations += s.iterations;
-    if (s.iterations > run.max_step_iterations) run.max_step_iterations = s.iterations;
-    if (!s.converged) {
-      run.failed = true;
-      run.failed_step = k;
-      run.failed_time = t0 + static_cast<double>(k) * h;
-      run.failure = s;
-      break;
-    }
+    if (!run.record(s, k, t0, h)) break;
     q_prev = q;
     q = q1;
     p = p1;

@@ -9,6 +9,7 @@
 #include <memory>
 
 #include "examples/dvm/json.h"
+#include "examples/dvm/report.h"
 #include "mechanics/systems.h"
 #include "solvers/composition.h"
 #include "solvers/integrate.h"
@@ -18,12 +19,6 @@ namespace dvm::cli {
 
 namespace {
 
-struct FileCloser {
-  void operator()(std::FILE* f) const {
-    if (f) std::fclose(f);
-  }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
 
 template <int N>
 Vec<double, N> to_vec(const std::vector<double>& x) {
@@ -125,16 +120,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .num("max_step_iterations", run.max_step_iterations);
     if constexpr (has_angular_momentum<System>)
       j.num("angular_momentum_initial", J0).num("max_abs_angular_momentum_error", max_J_error);
-    if (run.failed) {
-      Json::Object f;
-      f.num("step", static_cast<double>(run.failed_step))
-          .num("time", run.failed_time)
-          .num("residual", run.failure.residual)
-          .num("scale", run.failure.scale)
-          .num("iterations", run.failure.iterations)
-          .str("message", run.failure.message);
-      j.raw("failure", f.dump(4));
-    }
+    if (run.failed) j.raw("failure", failure_json(run));
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
     std::printf("%s with %s%s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), R.name().c_str(),
@@ -148,12 +134,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
   }
   if (run.failed) {
-    std::fprintf(stderr,
-                 "dvm: step %lld (t = %.17g -> %.17g) did not converge: residual %.3e against scale %.3e after %d "
-                 "iterations (%s); stopped, output holds the %lld converged steps\n",
-                 static_cast<long long>(run.failed_step), run.failed_time, run.failed_time + s.step,
-                 run.failure.residual, run.failure.scale, run.failure.iterations, run.failure.message.c_str(),
-                 static_cast<long long>(run.steps_done));
+    print_failure(run, s.step);
     return 3;
   }
   return 0;

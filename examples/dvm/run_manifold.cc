@@ -13,18 +13,13 @@
 
 #include "examples/dvm/commands.h"
 #include "examples/dvm/json.h"
+#include "examples/dvm/report.h"
 #include "solvers/manifold_step.h"
 
 namespace dvm::cli {
 
 namespace {
 
-struct FileCloser {
-  void operator()(std::FILE* f) const {
-    if (f) std::fclose(f);
-  }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
 using V3 = Vec<double, 3>;
 using M3 = Mat<double, 3, 3>;
 
@@ -163,16 +158,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .num("wall_seconds", wall)
         .num("solver_iterations", static_cast<double>(run.solver_iterations))
         .num("max_step_iterations", run.max_step_iterations);
-    if (run.failed) {
-      Json::Object f;
-      f.num("step", static_cast<double>(run.failed_step))
-          .num("time", run.failed_time)
-          .num("residual", run.failure.residual)
-          .num("scale", run.failure.scale)
-          .num("iterations", run.failure.iterations)
-          .str("message", run.failure.message);
-      j.raw("failure", f.dump(4));
-    }
+    if (run.failed) j.raw("failure", failure_json(run));
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
     std::printf("%s on %s with %s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), M::name,
@@ -185,12 +171,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
   }
   if (run.failed) {
-    std::fprintf(stderr,
-                 "dvm: step %lld (t = %.17g -> %.17g) did not converge: residual %.3e against scale %.3e after %d "
-                 "iterations (%s); stopped, output holds the %lld converged steps\n",
-                 static_cast<long long>(run.failed_step), run.failed_time, run.failed_time + s.step,
-                 run.failure.residual, run.failure.scale, run.failure.iterations, run.failure.message.c_str(),
-                 static_cast<long long>(run.steps_done));
+    print_failure(run, s.step);
     return 3;
   }
   return 0;

@@ -2,6 +2,7 @@
 // solutions independent of the engine, and log-log order fits.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <vector>
 
@@ -43,6 +44,23 @@ inline double fit_order(const std::vector<double>& hs, const std::vector<double>
   }
   if (n < 3) return NAN;
   return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
+// Classical fourth-order Runge-Kutta in long double: n steps of y' = f(y) to t_end,
+// for reference solutions independent of the engine.
+template <std::size_t K, class F>
+void rk4(const F& f, std::array<long double, K>& y, double t_end, int n) {
+  using LD = long double;
+  const LD h = (LD)t_end / n;
+  auto add = [](const std::array<LD, K>& a, const std::array<LD, K>& b, LD c) {
+    std::array<LD, K> r;
+    for (std::size_t i = 0; i < K; ++i) r[i] = a[i] + c * b[i];
+    return r;
+  };
+  for (int k = 0; k < n; ++k) {
+    const auto k1 = f(y), k2 = f(add(y, k1, h / 2)), k3 = f(add(y, k2, h / 2)), k4 = f(add(y, k3, h));
+    for (std::size_t i = 0; i < K; ++i) y[i] += h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
+  }
 }
 
 // Classical fourth-order Runge-Kutta for the pendulum q' = p/(m l^2), p' = -m g l sin q,

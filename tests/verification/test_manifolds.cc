@@ -21,7 +21,6 @@ using M3 = Mat<double, 3, 3>;
 void pendulum_reference(double g_over_l, double t_end, const V3& x0, const V3& v0, V3& x, V3& v) {
   using LD = long double;
   const int n = 40000;
-  const LD h = (LD)t_end / n;
   std::array<LD, 6> y{x0[0], x0[1], x0[2], v0[0], v0[1], v0[2]};
   auto f = [&](const std::array<LD, 6>& s) {
     const LD u2 = s[3] * s[3] + s[4] * s[4] + s[5] * s[5];
@@ -29,15 +28,7 @@ void pendulum_reference(double g_over_l, double t_end, const V3& x0, const V3& v
     for (int i = 0; i < 3; ++i) d[3 + i] = -(LD)g_over_l * ((i == 2 ? 1 : 0) - s[2] * s[i]) - u2 * s[i];
     return d;
   };
-  for (int k = 0; k < n; ++k) {
-    auto add = [](const std::array<LD, 6>& a, const std::array<LD, 6>& b, LD c) {
-      std::array<LD, 6> r;
-      for (int i = 0; i < 6; ++i) r[i] = a[i] + c * b[i];
-      return r;
-    };
-    const auto k1 = f(y), k2 = f(add(y, k1, h / 2)), k3 = f(add(y, k2, h / 2)), k4 = f(add(y, k3, h));
-    for (int i = 0; i < 6; ++i) y[i] += h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
-  }
+  rk4(f, y, t_end, n);
   x = V3((double)y[0], (double)y[1], (double)y[2]);
   v = V3((double)y[3], (double)y[4], (double)y[5]);
 }
@@ -47,7 +38,6 @@ void pendulum_reference(double g_over_l, double t_end, const V3& x0, const V3& v
 void rigid_body_reference(const V3& I, double t_end, const M3& R0, const V3& Pi0, M3& R, V3& Pi) {
   using LD = long double;
   const int n = 40000;
-  const LD h = (LD)t_end / n;
   const Vec<double, 4> q0 = SO3::to_quaternion(R0);
   std::array<LD, 7> y{q0[0], q0[1], q0[2], q0[3], Pi0[0], Pi0[1], Pi0[2]};
   auto f = [&](const std::array<LD, 7>& s) {
@@ -62,15 +52,7 @@ void rigid_body_reference(const V3& I, double t_end, const M3& R0, const V3& Pi0
     d[6] = s[4] * w1 - s[5] * w0;
     return d;
   };
-  for (int k = 0; k < n; ++k) {
-    auto add = [](const std::array<LD, 7>& a, const std::array<LD, 7>& b, LD c) {
-      std::array<LD, 7> r;
-      for (int i = 0; i < 7; ++i) r[i] = a[i] + c * b[i];
-      return r;
-    };
-    const auto k1 = f(y), k2 = f(add(y, k1, h / 2)), k3 = f(add(y, k2, h / 2)), k4 = f(add(y, k3, h));
-    for (int i = 0; i < 7; ++i) y[i] += h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
-  }
+  rk4(f, y, t_end, n);
   Vec<double, 4> q((double)y[0], (double)y[1], (double)y[2], (double)y[3]);
   R = SO3::from_quaternion(q / q.norm());
   Pi = V3((double)y[4], (double)y[5], (double)y[6]);
@@ -81,7 +63,6 @@ void rigid_body_reference(const V3& I, double t_end, const M3& R0, const V3& Pi0
 void heavy_top_reference(const HeavyTop& top, double t_end, const M3& R0, const V3& Pi0, M3& R, V3& Pi) {
   using LD = long double;
   const int n = 40000;
-  const LD h = (LD)t_end / n;
   const Vec<double, 4> q0 = SO3::to_quaternion(R0);
   std::array<LD, 7> y{q0[0], q0[1], q0[2], q0[3], Pi0[0], Pi0[1], Pi0[2]};
   const LD mg = (LD)top.m * top.g;
@@ -100,15 +81,7 @@ void heavy_top_reference(const HeavyTop& top, double t_end, const M3& R0, const 
     r[6] = s[4] * w1 - s[5] * w0 + mg * (g0 * top.chi[1] - g1 * top.chi[0]);
     return r;
   };
-  for (int k = 0; k < n; ++k) {
-    auto add = [](const std::array<LD, 7>& u, const std::array<LD, 7>& v, LD c) {
-      std::array<LD, 7> r;
-      for (int i = 0; i < 7; ++i) r[i] = u[i] + c * v[i];
-      return r;
-    };
-    const auto k1 = f(y), k2 = f(add(y, k1, h / 2)), k3 = f(add(y, k2, h / 2)), k4 = f(add(y, k3, h));
-    for (int i = 0; i < 7; ++i) y[i] += h / 6 * (k1[i] + 2 * k2[i] + 2 * k3[i] + k4[i]);
-  }
+  rk4(f, y, t_end, n);
   Vec<double, 4> q((double)y[0], (double)y[1], (double)y[2], (double)y[3]);
   R = SO3::from_quaternion(q / q.norm());
   Pi = V3((double)y[4], (double)y[5], (double)y[6]);
