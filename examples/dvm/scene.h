@@ -10,6 +10,7 @@
 //                 max_iterations = 25   tolerance = 2e-15   (optional: the solver's
 //                 iteration bound and relative residual tolerance)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
+//   [problem]     kind = "initial-value" | "boundary-value"   q_final = [...]   steps = K
 #pragma once
 
 #include <cstdint>
@@ -67,6 +68,19 @@ struct Scene {
   double tolerance = 2e-15;
   std::string csv;  // empty: no CSV
   std::int64_t every = 1;
+
+  // Integrator forms and whole-trajectory problems (issue 3):
+  //   [integrator] form = "lagrangian" | "hamiltonian" | "sode1" | "sode2" | "newmark"
+  //                gamma = 0.5, beta = 0.25 (newmark only; newmark uses no map, and
+  //                ignores one named in the scene after validating its name)
+  //   [problem]    kind = "initial-value" | "boundary-value"
+  //                q_final = [...], steps = K (boundary-value only; then [initial] takes
+  //                q alone and [integrator] no steps/t_end)
+  std::string form = "lagrangian";
+  double newmark_gamma = 0.5, newmark_beta = 0.25;
+  std::string problem = "initial-value";
+  std::vector<double> q_final;
+  int dim = 0;  // the system's dimension (for chain: params.n)
 };
 
 // Loads and validates a scene; overrides are "section.key=value" with value written
