@@ -466,3 +466,23 @@ BOOST_AUTO_TEST_CASE(new_keys_are_validated) {
   // a degenerate Lagrangian is not reachable from the built-in systems; the check itself
   // is tested in tests/solvers/test_hamiltonian.cc
 }
+
+BOOST_AUTO_TEST_CASE(chain_of_ten_thousand_particles_runs_from_a_scene) {
+  const int n = 10000;
+  std::string q = "[", p = "[";
+  for (int i = 0; i < n; ++i) {
+    char buf[40];
+    std::snprintf(buf, sizeof buf, "%s%.17g", i ? ", " : "", 0.3 * std::sin(M_PI * (i + 1) / (n + 1.0)));
+    q += buf;
+    p += i ? ", 0.0" : "0.0";
+  }
+  const std::string path = write_scene("big_chain.toml", "[system]\nbuiltin = \"chain\"\nparams = { n = 10000, "
+                                                         "alpha = 0.25, beta = 1.0 }\n[initial]\nq = " +
+                                                             q + "]\np = " + p +
+                                                             "]\n[integrator]\nmap = \"midpoint\"\nstep = 0.02\n"
+                                                             "steps = 50\n");
+  const Output o = dvm({"run", path, "--json"});
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(json_number(o.out, "max_step_iterations") <= 4);
+  BOOST_TEST(json_number(o.out, "max_abs_energy_error") <= 1e-10 * json_number(o.out, "energy_initial"));
+}
