@@ -214,12 +214,16 @@ BOOST_AUTO_TEST_CASE(newmark_stability_thresholds) {
       }
     }
   // Conditionally stable (gamma >= 1/2 > ... 2 beta < gamma): threshold 1/sqrt(gamma/2 - beta).
-  for (const auto& [gamma, beta] : std::vector<std::pair<double, double>>{{0.5, 0.0}, {0.5, 1.0 / 6.0}, {0.6, 0.1}}) {
+  // (0.6, 0.29) sits just below the line 2 beta = gamma that bounds the unconditional
+  // region: its threshold is w h = 10.
+  for (const auto& [gamma, beta] :
+       std::vector<std::pair<double, double>>{{0.5, 0.0}, {0.5, 1.0 / 6.0}, {0.6, 0.1}, {0.6, 0.29}}) {
     const double crit = 1.0 / std::sqrt(gamma / 2.0 - beta);
     BOOST_TEST_CONTEXT("gamma " << gamma << " beta " << beta << " critical wh " << crit) {
       BOOST_TEST(newmark_spectral_radius(0.95 * crit, gamma, beta) <= 1.0 + tol);
       BOOST_TEST(newmark_amplitude(0.95 * crit, gamma, beta) <= 100.0);
-      BOOST_TEST(newmark_spectral_radius(1.05 * crit, gamma, beta) >= 1.05);
+      // unstable just above: rho > 1 by far more than round-off (1.035 at (0.6, 0.29))
+      BOOST_TEST(newmark_spectral_radius(1.05 * crit, gamma, beta) >= 1.0 + 1e-3);
       BOOST_TEST(newmark_amplitude(1.05 * crit, gamma, beta) >= 1e6);
     }
   }
