@@ -16,7 +16,9 @@
 // matrix does the same elimination plus symbolic analysis, permutation and, in Ceres,
 // the normal equations J^T J (pentadiagonal, squared condition number) and per-solve
 // setup of the trust-region machinery; the direct tridiagonal Newton costs a few
-// multiply-adds per particle per iteration and is exact Newton. The elimination has
+// multiply-adds per particle per iteration and is exact Newton. Measured in
+// examples/bench/bench_chain.cc: the same step as a reused ceres::Problem costs 44x,
+// 121x and 174x more at n = 1e2, 1e3, 1e4. The elimination has
 // no pivoting: it is stable when the Jacobian is diagonally dominant or definite,
 // which holds when every spring is convex where it is used (Hess V positive
 // semi-definite, so -J is positive definite) and also when h^2 |V''| stays below
