@@ -8,6 +8,7 @@
 #include "mechanics/systems.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
 
 using namespace dvm;
 using V1 = Vec<double, 1>;
@@ -314,4 +315,61 @@ BOOST_AUTO_TEST_CASE(orders_of_hamiltonian_steps) {
     const double order = std::log2(err[2] / err[3]);
     BOOST_TEST_CONTEXT(R.name()) { BOOST_TEST(std::fabs(order - R.order()) <= 0.05); }
   }
+}
+
+namespace {
+
+// The one-step Jacobian of the Lagrangian position-momentum step by the implicit
+// function theorem: F(q0, p0, dq) = p0 + D1 L_d(q0, q0 + dq) = 0 defines dq, and
+// p1 = D2 L_d(q0, q0 + dq).
+template <class System, class Map>
+double lagrangian_step_defect(const System& L, const Map& R, double h, const Vec<double, System::dim>& q0,
+                              const Vec<double, System::dim>& p0) {
+  constexpr int N = System::dim, K = 3 * N;
+  const PositionMomentumStep<System, Map> S(L, R, h);
+  Vec<double, N> dq = Vec<double, N>::Zero(), dp = Vec<double, N>::Zero();
+  BOOST_REQUIRE(S.step(q0, p0, dq, dp).converged);
+  using D = ceres::Jet<double, K>;
+  Vec<D, N> a, b, c;
+  for (int i = 0; i < N; ++i) {
+    a[i] = seed<double, K>(q0[i], i);
+    b[i] = seed<double, K>(p0[i], N + i);
+    c[i] = seed<double, K>(dq[i], 2 * N + i);
+  }
+  const auto& dl = S.discrete_lagrangian();
+  const Vec<D, N> F = b + dl.D1Ld_increment(a, c);
+  const Vec<D, N> p1 = dl.D2Ld(a, Vec<D, N>(a + c));
+  Mat<double, N, 2 * N> Fy, Py;
+  Mat<double, N, N> Fx, Px;
+  for (int i = 0; i < N; ++i) {
+    Fy.row(i) = F[i].v.template head<2 * N>().transpose();
+    Fx.row(i) = F[i].v.template tail<N>().transpose();
+    Py.row(i) = p1[i].v.template head<2 * N>().transpose();
+    Px.row(i) = p1[i].v.template tail<N>().transpose();
+  }
+  const Mat<double, N, 2 * N> dxdy = -Fx.partialPivLu().solve(Fy);
+  Mat<double, 2 * N, 2 * N> M;
+  M.template topRows<N>() = dxdy;
+  M.template topLeftCorner<N, N>() += Mat<double, N, N>::Identity();
+  M.template bottomRows<N>() = Py + Px * dxdy;
+  return symplectic_defect<N>(M);
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(lagrangian_position_momentum_steps_are_symplectic_too) {
+  // The same measurement on the discrete Legendre (position-momentum) step of
+  // L_d(q0, q1) = h L(R_d^{-1}(q0, q1)/h), for symmetric and non-symmetric maps.
+  const Pendulum P;
+  const Kepler K(1.0);
+  const RetractionMap<EuclideanRetraction> retr({}, 0.3);
+  double d = 0.0;
+  for (const ThetaMap& R : {ThetaMap::midpoint(), ThetaMap(0.3), ThetaMap::adjoint_euler()}) {
+    d = std::fmax(d, lagrangian_step_defect(P, R, 0.1, V1(2.0), V1(0.3)));
+    d = std::fmax(d, lagrangian_step_defect(K, R, 0.05, V2(0.9, 0.6), V2(-0.5, 0.7)));
+  }
+  d = std::fmax(d, lagrangian_step_defect(P, retr, 0.1, V1(2.0), V1(0.3)));
+  d = std::fmax(d, lagrangian_step_defect(K, retr, 0.05, V2(0.9, 0.6), V2(-0.5, 0.7)));
+  BOOST_TEST_MESSAGE("largest defect of the Lagrangian steps: " << d);
+  BOOST_TEST(d <= 1e-13);
 }
