@@ -117,8 +117,20 @@ namespace ceres {
 DVM_JET_SCALAR_OPERATOR(+)
 DVM_JET_SCALAR_OPERATOR(-)
 DVM_JET_SCALAR_OPERATOR(*)
-DVM_JET_SCALAR_OPERATOR(/)
 #undef DVM_JET_SCALAR_OPERATOR
+
+// Jet / number as a product with the reciprocal: Ceres' own Jet<T, N> / T builds
+// T(1.0), which does not compile once T is itself a nested Jet (depth 3 and more, as
+// met by a Hamiltonian of a Lagrangian differentiated twice).
+template <class T, int N, class S, std::enable_if_t<std::is_arithmetic_v<S>, int> = 0>
+inline Jet<T, N> operator/(const Jet<T, N>& f, S s) {
+  return f * dvm::constant<T>(1.0 / static_cast<double>(s));
+}
+template <class T, int N, class S,
+          std::enable_if_t<std::is_arithmetic_v<S> && !std::is_same_v<S, T>, int> = 0>
+inline Jet<T, N> operator/(S s, const Jet<T, N>& f) {
+  return dvm::constant<T>(static_cast<double>(s)) / f;
+}
 
 }  // namespace ceres
 

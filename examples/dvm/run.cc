@@ -10,6 +10,7 @@
 
 #include "examples/dvm/json.h"
 #include "examples/dvm/report.h"
+#include "examples/dvm/run_forms.h"
 #include "mechanics/systems.h"
 #include "solvers/composition.h"
 #include "solvers/integrate.h"
@@ -117,7 +118,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .num("max_abs_energy_error", max_energy_error)
         .num("wall_seconds", wall)
         .num("solver_iterations", static_cast<double>(run.solver_iterations))
-        .num("max_step_iterations", run.max_step_iterations);
+        .num("max_step_iterations", run.max_step_iterations)
+        .str("form", s.form);
     if constexpr (has_angular_momentum<System>)
       j.num("angular_momentum_initial", J0).num("max_abs_angular_momentum_error", max_J_error);
     if (run.failed) j.raw("failure", failure_json(run));
@@ -155,6 +157,10 @@ int run_scene(const Scene& s, const RunOptions& o) {
   try {
     if (s.space != "R^n") return run_manifold_scene(s, o);
     const auto& P = s.params;
+    // issue 3: boundary-value problems, the dynamic-size chain, the other forms
+    if (s.problem == "boundary-value") return run_boundary_value(s, o);
+    if (s.system == "chain") return run_chain(s, o);
+    if (s.form != "lagrangian") return run_form(s, o);
     if (s.system == "harmonic") return run_system(s, HarmonicOscillator(P.at("omega")), o);
     if (s.system == "pendulum") return run_system(s, Pendulum(P.at("m"), P.at("l"), P.at("g")), o);
     if (s.system == "kepler") return run_system(s, Kepler(P.at("mu")), o);

@@ -50,6 +50,16 @@ const std::vector<SystemInfo>& systems() {
         {"chi2", 0.0, "centre of mass, body frame"},
         {"chi3", 1.0, "centre of mass, body frame"}},
        "SO(3)"},
+      // dim 0: the dimension is params.n (a dynamic-size system)
+      {"chain",
+       0,
+       "L = sum m v_i^2/2 - sum_bonds (k r^2/2 + alpha r^3/3 + beta r^4/4),  r = q_i - q_{i-1}",
+       {{"n", 8.0, "number of particles"},
+        {"m", 1.0, "mass of each particle"},
+        {"k", 1.0, "linear spring constant"},
+        {"alpha", 0.0, "cubic (FPU-alpha) coefficient"},
+        {"beta", 0.0, "quartic (FPU-beta) coefficient"},
+        {"fixed", 1.0, "1: ends tied to walls; 0: free ends (total momentum conserved)"}}},
   };
   return list;
 }
@@ -260,10 +270,11 @@ void apply_override(toml::table& root, const std::string& spec) {
   t->insert_or_assign(parts.back(), *parsed.get("value"));
 }
 
-// [initial] for systems on R^n and S^2: q and one of p, v, each of length info.dim.
+// [initial] for systems on R^n and S^2: q and one of p, v, each of length dim (a
+// boundary-value problem takes q only).
 void read_vector_initial(const Reader& r, const toml::table& ini, const std::string& path, const SystemInfo& info,
-                         int links, Scene& s) {
-  const int dim = info.dim * links;
+                         int dim, bool boundary_value, Scene& s) {
+  const int links = info.space == "S^2" ? dim / 3 : 1;
   r.only_keys(ini, "initial", {"q", "p", "v"});
   const toml::node* q = ini.get("q");
   if (!q) throw InputError(path + ": missing key 'initial.q'");
@@ -275,6 +286,10 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   const toml::node* p = ini.get("p");
   const toml::node* v = ini.get("v");
   if (p && v) throw InputError(r.where(v, "initial.v") + ": give either initial.p or initial.v, not both");
+  if (boundary_value && (p || v))
+    throw InputError(r.where(p ? p : v, p ? "initial.p" : "initial.v") +
+                     ": a boundary-value problem takes initial.q and problem.q_final only");
+  if (boundary_value) return;
   if (!p && !v) throw InputError(path + ": missing key 'initial.p' or 'initial.v'");
   const toml::node* pv = p ? p : v;
   const std::string pv_key = p ? "initial.p" : "initial.v";
@@ -375,6 +390,85 @@ void read_rotation_initial(const Reader& r, const toml::table& ini, const std::s
     throw InputError(r.where(n, key) + ": got " + std::to_string((om ? s.v : s.p).size()) + " numbers, expected 3");
 }
 
+// The dimension of the scene's system: fixed, or params.n for the chain.
+int resolve_dimension(const std::string& path, const SystemInfo& info, const std::map<std::string, double>& params) {
+  if (info.dim > 0) return info.dim;
+  const double n = params.at("n");
+  if (!(n >= 1.0 && n <= 1e7) || n != std::floor(n))
+    throw InputError(path + ": key 'system.params.n': got " + std::to_string(n) +
+                     ", expected a whole number of particles from 1 to 10000000");
+  const double fixed = params.at("fixed");
+  if (fixed != 0.0 && fixed != 1.0)
+    throw InputError(path + ": key 'system.params.fixed': got " + std::to_string(fixed) +
+                     ", expected 1 (ends tied to walls) or 0 (free ends)");
+  return static_cast<int>(n);
+}
+
+// [problem] (issue 3): kind, and q_final and steps for a boundary-value problem.
+void read_problem(const Reader& r, const toml::table& root, Scene& s, int dim) {
+  const toml::table& pr = r.section(root, "problem", false);
+  r.only_keys(pr, "problem", {"kind", "q_final", "steps"});
+  if (const toml::node* k = pr.get("kind")) {
+    s.problem = r.string(*k, "problem.kind");
+    if (s.problem != "initial-value" && s.problem != "boundary-value")
+      throw InputError(r.where(k, "problem.kind") + ": got \"" + s.problem +
+                       "\", expected \"initial-value\" or \"boundary-value\"");
+  }
+  const toml::node* qf = pr.get("q_final");
+  const toml::node* st = pr.get("steps");
+  if (s.problem == "initial-value") {
+    if (qf) throw InputError(r.where(qf, "problem.q_final") + ": applies only to kind = \"boundary-value\"");
+    if (st) throw InputError(r.where(st, "problem.steps") + ": applies only to kind = \"boundary-value\"");
+    return;
+  }
+  if (!qf) throw InputError(r.path() + ": missing key 'problem.q_final' (the end point of a boundary-value problem)");
+  if (!st) throw InputError(r.path() + ": missing key 'problem.steps' (the number of steps between the end points)");
+  s.q_final = r.vector(*qf, "problem.q_final");
+  if (static_cast<int>(s.q_final.size()) != dim)
+    throw InputError(r.where(qf, "problem.q_final") + ": got " + std::to_string(s.q_final.size()) +
+                     " numbers, expected " + std::to_string(dim) + " (the dimension of " + s.system + ")");
+  s.steps = r.integer(*st, "problem.steps", 2);
+  if (s.steps > 100000000)
+    throw InputError(r.where(st, "problem.steps") + ": got " + Reader::describe(*st) +
+                     ", expected a whole number from 2 to 100000000");
+}
+
+// [integrator] form, gamma, beta (issue 3).
+void read_form(const Reader& r, const toml::table& in, Scene& s) {
+  if (const toml::node* f = in.get("form")) {
+    s.form = r.string(*f, "integrator.form");
+    if (s.form != "lagrangian" && s.form != "hamiltonian" && s.form != "sode1" && s.form != "sode2" &&
+        s.form != "newmark")
+      throw InputError(r.where(f, "integrator.form") + ": got \"" + s.form +
+                       "\", expected one of: lagrangian, hamiltonian, sode1, sode2, newmark");
+  }
+  for (const char* key : {"gamma", "beta"}) {
+    const toml::node* n = in.get(key);
+    if (!n) continue;
+    const std::string name = std::string("integrator.") + key;
+    if (s.form != "newmark")
+      throw InputError(r.where(n, name) + ": " + key + " applies only to form = \"newmark\", not \"" + s.form +
+                       "\"");
+    const double x = r.number(*n, name);
+    const bool gamma = std::string(key) == "gamma";
+    if (gamma ? !(x >= 0.0 && x <= 1.0) : !(x >= 0.0 && x <= 0.5))
+      throw InputError(r.where(n, name) + ": got " + Reader::describe(*n) + ", expected a number in " +
+                       (gamma ? "[0, 1]" : "[0, 0.5]"));
+    (gamma ? s.newmark_gamma : s.newmark_beta) = x;
+  }
+  if (s.problem == "boundary-value" && s.form != "lagrangian")
+    throw InputError(r.path() + ": key 'integrator.form': a boundary-value problem solves the discrete "
+                                "Euler-Lagrange equations; expected form = \"lagrangian\", got \"" +
+                     s.form + "\"");
+  if (s.system == "chain") {
+    if (s.form != "lagrangian")
+      throw InputError(r.path() + ": key 'integrator.form': the chain (a dynamic-size system) runs the "
+                                  "lagrangian form only, got \"" + s.form + "\"");
+    if (s.problem != "initial-value")
+      throw InputError(r.path() + ": key 'problem.kind': the chain runs initial-value problems only");
+  }
+}
+
 }  // namespace
 
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
@@ -395,8 +489,8 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   s.path = path;
   for (const auto& [k, v] : root) {
     const std::string name(k.str());
-    if (name != "system" && name != "initial" && name != "integrator" && name != "output")
-      throw InputError(r.where(&v, name) + ": unknown section; expected system, initial, integrator, output");
+    if (name != "system" && name != "initial" && name != "integrator" && name != "output" && name != "problem")
+      throw InputError(r.where(&v, name) + ": unknown section; expected system, initial, integrator, output, problem");
   }
 
   // [system]
@@ -421,6 +515,12 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
     }
   }
 
+  s.dim = resolve_dimension(path, info, s.params);
+  read_problem(r, root, s, s.dim);
+  const bool boundary_value = s.problem == "boundary-value";
+  if (boundary_value && info.space != "R^n")
+    throw InputError(path + ": key 'problem.kind': boundary-value problems run on R^n systems only, not on " +
+                     info.space + " (" + info.name + ")");
   int links = 1;
   if (info.name == "spherical-chain") {
     const double n = s.params["n"];
@@ -435,22 +535,35 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   if (info.space == "SO(3)")
     read_rotation_initial(r, ini, path, s);
   else
-    read_vector_initial(r, ini, path, info, links, s);
+    read_vector_initial(r, ini, path, info, s.dim * links, boundary_value, s);
 
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);
-  r.only_keys(in, "integrator",
-              {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance", "composition"});
+  r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
+                                  "composition", "form", "gamma", "beta"});
+  read_form(r, in, s);
+  if (info.space != "R^n" && s.form != "lagrangian")
+    throw InputError(path + ": key 'integrator.form': systems on " + info.space + " run the lagrangian form only, got \"" +
+                     s.form + "\"");
   const toml::node* m = in.get("map");
-  if (!m) throw InputError(path + ": missing key 'integrator.map'");
-  const MapInfo& map_info = find_map(r.string(*m, "integrator.map"), r.where(m, "integrator.map"));
-  s.map = map_info.name;
-  if (map_info.space != info.space) {
-    std::vector<std::string> fitting;
-    for (const auto& mi : maps())
-      if (mi.space == info.space) fitting.push_back(mi.name);
-    throw InputError(r.where(m, "integrator.map") + ": map \"" + s.map + "\" lives on " + map_info.space + " but " +
-                     info.name + " lives on " + info.space + "; expected one of: " + join_names(fitting));
+  if (!m && s.form != "newmark") throw InputError(path + ": missing key 'integrator.map'");
+  if (m) {
+    // newmark is its own discretization (gamma, beta) and uses no map; a map named in
+    // the scene is still validated, so that --set integrator.form=newmark works on
+    // any scene without hiding a typo.
+    const MapInfo& map_info = find_map(r.string(*m, "integrator.map"), r.where(m, "integrator.map"));
+    s.map = map_info.name;
+    if (map_info.space != info.space) {
+      std::vector<std::string> fitting;
+      for (const auto& mi : maps())
+        if (mi.space == info.space) fitting.push_back(mi.name);
+      throw InputError(r.where(m, "integrator.map") + ": map \"" + s.map + "\" lives on " + map_info.space + " but " +
+                       info.name + " lives on " + info.space + "; expected one of: " + join_names(fitting));
+    }
+    if (s.system == "chain" && s.map == "retraction-theta")
+      throw InputError(r.where(m, "integrator.map") +
+                       ": the chain runs the theta-family maps (explicit-euler, adjoint-euler, midpoint, theta), "
+                       "got \"retraction-theta\"");
   }
   if (const toml::node* th = in.get("theta")) {
     if (s.map != "theta" && s.map != "retraction-theta")
@@ -469,8 +582,13 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   const toml::node* n = in.get("steps");
   const toml::node* te = in.get("t_end");
   if (n && te) throw InputError(r.where(te, "integrator.t_end") + ": give either integrator.steps or integrator.t_end, not both");
-  if (!n && !te) throw InputError(path + ": missing key 'integrator.steps' or 'integrator.t_end'");
-  if (n) {
+  if (boundary_value && (n || te))
+    throw InputError(r.where(n ? n : te, n ? "integrator.steps" : "integrator.t_end") +
+                     ": a boundary-value problem takes its number of steps from problem.steps");
+  if (!n && !te && !boundary_value) throw InputError(path + ": missing key 'integrator.steps' or 'integrator.t_end'");
+  if (boundary_value) {
+    // s.steps was read from problem.steps
+  } else if (n) {
     s.steps = r.integer(*n, "integrator.steps", 1);
   } else {
     const double t_end = r.number(*te, "integrator.t_end");
@@ -513,6 +631,13 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
       } catch (const std::invalid_argument& e) {
         throw InputError(r.where(co, "integrator.composition") + ": got \"" + s.composition + "\"; " + e.what());
       }
+      // what the compositions are wired to so far: the position-momentum step on R^n
+      std::string why;
+      if (info.space != "R^n") why = "systems on " + info.space + " do not take compositions yet";
+      else if (s.form != "lagrangian") why = "compositions compose the lagrangian form's step, not form = \"" + s.form + "\"";
+      else if (s.problem != "initial-value") why = "a boundary-value problem takes no composition";
+      else if (s.system == "chain") why = "the chain (a dynamic-size system) takes no composition yet";
+      if (!why.empty()) throw InputError(r.where(co, "integrator.composition") + ": " + why);
     }
   }
 

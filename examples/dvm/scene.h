@@ -13,6 +13,7 @@
 //                 "triple-jump:<order>"   (optional: the map's step composed, see
 //                 `dvm methods`)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
+//   [problem]     kind = "initial-value" | "boundary-value"   q_final = [...]   steps = K
 //
 // Systems on S^2 take q = unit vector [x, y, z] and v or p tangent to it; systems on
 // SO(3) take   rotation = [w, x, y, z] (unit quaternion)  or  R = [[...], [...], [...]]
@@ -82,6 +83,19 @@ struct Scene {
   std::string composition = "none";
   std::string csv;  // empty: no CSV
   std::int64_t every = 1;
+
+  // Integrator forms and whole-trajectory problems (issue 3):
+  //   [integrator] form = "lagrangian" | "hamiltonian" | "sode1" | "sode2" | "newmark"
+  //                gamma = 0.5, beta = 0.25 (newmark only; newmark uses no map, and
+  //                ignores one named in the scene after validating its name)
+  //   [problem]    kind = "initial-value" | "boundary-value"
+  //                q_final = [...], steps = K (boundary-value only; then [initial] takes
+  //                q alone and [integrator] no steps/t_end)
+  std::string form = "lagrangian";
+  double newmark_gamma = 0.5, newmark_beta = 0.25;
+  std::string problem = "initial-value";
+  std::vector<double> q_final;
+  int dim = 0;  // the system's dimension (for chain: params.n)
 };
 
 // Loads and validates a scene; overrides are "section.key=value" with value written

@@ -1,0 +1,142 @@
+// Hamiltonians H : T*Q -> R on Q = R^n, and the Legendre transform that links them
+// to Lagrangians (paper Sec. 5.1; Abraham-Marsden, Foundations of Mechanics, Sec. 3.6).
+//
+//   Hamiltonian vector field   X_H(q, p) = (dH/dp, -dH/dq)        (i_{X_H} w_Q = dH)
+//   Legendre map               FL(q, v) = (q, dL/dv(q, v))
+//   Hamiltonian of L           H(q, p) = <p, v> - L(q, v),   v = FL^{-1}(q, p)
+//   regularity                 FL is a local diffeomorphism at (q, v) exactly when
+//                              the velocity Hessian d2L/dv2(q, v) is invertible; a
+//                              Lagrangian that is singular where it is used has no
+//                              Hamiltonian there and is rejected, never integrated.
+//
+// A Hamiltonian type H provides
+//   static constexpr int dim;   std::string name() const;
+//   template <class T> T operator()(const Vec<T, dim>& q, const Vec<T, dim>& p) const;
+// for any scalar T (double and nested ceres::Jet), exactly like a Lagrangian.
+//
+// LegendreHamiltonian<S> is the Hamiltonian of a regular Lagrangian S, scalar-generic:
+// v is found in doubles (closed form or Newton), then, for Jet scalars, refined by
+// fixed-point sweeps v <- v - (d2L/dv2)^{-1} (dL/dv(q, v) - p) with the double Hessian;
+// as for the generic inverse of a map (core/map_operations.h), derivative parts of
+// order k are exact after k + 1 sweeps (implicit function theorem).
+#pragma once
+
+#include <Eigen/LU>
+#include <sstream>
+#include <string>
+
+#include "core/dense_solve.h"
+#include "core/map_operations.h"
+#include "mechanics/lagrangian.h"
+
+namespace dvm {
+
+// dH/dq and dH/dp at (q, p) by automatic differentiation, for any scalar T.
+template <class H, class T>
+void hamiltonian_gradient(const H& ham, const Vec<T, H::dim>& q, const Vec<T, H::dim>& p, Vec<T, H::dim>& dHdq,
+                          Vec<T, H::dim>& dHdp) {
+  constexpr int N = H::dim;
+  using D = ceres::Jet<T, 2 * N>;
+  Vec<D, N> qd, pd;
+  for (int i = 0; i < N; ++i) {
+    qd[i] = seed<T, 2 * N>(q[i], i);
+    pd[i] = seed<T, 2 * N>(p[i], N + i);
+  }
+  const D e = ham(qd, pd);
+  dHdq = e.v.template head<N>();
+  dHdp = e.v.template tail<N>();
+}
+
+// The Hamiltonian vector field X_H(q, p) = (dH/dp, -dH/dq), as (qdot, pdot).
+template <class H, class T>
+void hamiltonian_vector_field(const H& ham, const Vec<T, H::dim>& q, const Vec<T, H::dim>& p,
+                              Vec<T, H::dim>& qdot, Vec<T, H::dim>& pdot) {
+  Vec<T, H::dim> dq, dp;
+  hamiltonian_gradient(ham, q, p, dq, dp);
+  qdot = dp;
+  pdot = -dq;
+}
+
+// Reciprocal condition number (in the max norm) of the velocity Hessian at (q, v):
+// 0 for a singular Hessian, 1 for a multiple of the identity.
+template <class S>
+double velocity_hessian_rcond(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
+  constexpr int N = S::dim;
+  const Mat<double, N, N> W = velocity_hessian(L, q, v);
+  const double norm = W.cwiseAbs().rowwise().sum().maxCoeff();
+  if (!(norm > 0.0) || !std::isfinite(norm)) return 0.0;
+  // An exactly singular W gives an infinite or NaN inverse, hence 0 below.
+  const Mat<double, N, N> Winv = W.partialPivLu().inverse();
+  const double rc = 1.0 / (norm * Winv.cwiseAbs().rowwise().sum().maxCoeff());
+  return std::isfinite(rc) ? rc : 0.0;
+}
+
+// Throws DegenerateLagrangianError, naming the point, when d2L/dv2 is singular (to
+// working precision, reciprocal condition below `rcond_floor`) at (q, v).
+template <class S>
+void require_regular(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v,
+                     double rcond_floor = 1e-12) {
+  const double rc = velocity_hessian_rcond(L, q, v);
+  if (!(rc > rcond_floor)) {
+    std::ostringstream msg;
+    msg << L.name() << " is not regular at q = [" << q.transpose() << "], v = [" << v.transpose()
+        << "]: the velocity Hessian d2L/dv2 is singular (reciprocal condition " << rc
+        << "), so the Legendre map cannot be inverted and there is no Hamiltonian there";
+    throw DegenerateLagrangianError(msg.str());
+  }
+}
+
+// The Legendre map FL(q, v) = (q, p) with the regularity check.
+template <class S>
+Vec<double, S::dim> legendre_checked(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
+  require_regular(L, q, v);
+  return legendre(L, q, v);
+}
+
+// Its inverse v = FL^{-1}(q, p), with the regularity check at the solution.
+template <class S>
+Vec<double, S::dim> legendre_inverse_checked(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& p,
+                                             const Vec<double, S::dim>& guess = Vec<double, S::dim>::Zero()) {
+  // Newton needs an invertible Hessian from the start; check there first, so that a
+  // degenerate Lagrangian is named as such rather than as a non-converging solve.
+  require_regular(L, q, guess);
+  const Vec<double, S::dim> v = legendre_inverse(L, q, p, guess);
+  require_regular(L, q, v);
+  return v;
+}
+
+// The Hamiltonian H(q, p) = <p, v> - L(q, v), v = FL^{-1}(q, p), of a regular Lagrangian.
+template <class S>
+struct LegendreHamiltonian {
+  static constexpr int dim = S::dim;
+  S lagrangian;
+
+  explicit LegendreHamiltonian(S L) : lagrangian(std::move(L)) {}
+  std::string name() const { return lagrangian.name(); }
+
+  template <class T>
+  T operator()(const Vec<T, dim>& q, const Vec<T, dim>& p) const {
+    constexpr int N = dim;
+    const Vec<double, N> q0 = values(q), p0 = values(p);
+    const Vec<double, N> v0 = legendre_inverse_checked(lagrangian, q0, p0);
+    Vec<T, N> v = constants<T>(v0);
+    if constexpr (is_jet_v<T>) {
+      const Mat<double, N, N> Winv = velocity_hessian(lagrangian, q0, v0).inverse();
+      for (int sweep = 0; sweep <= jet_depth<T>::value; ++sweep) {
+        Vec<T, N> a, b;
+        lagrangian_gradient(lagrangian, q, v, a, b);
+        const Vec<T, N> r = b - p;
+        for (int i = 0; i < N; ++i) {
+          T c = constant<T>(0.0);
+          for (int j = 0; j < N; ++j) c = c + Winv(i, j) * r[j];
+          v[i] = v[i] - c;
+        }
+      }
+    }
+    T pv = constant<T>(0.0);
+    for (int i = 0; i < N; ++i) pv = pv + p[i] * v[i];
+    return pv - lagrangian(q, v);
+  }
+};
+
+}  // namespace dvm

@@ -1,0 +1,82 @@
+// Whole-trajectory (boundary-value) problems: one sparse Ceres problem for all interior
+// nodes reproduces the one-step integrator, and a pendulum with 10^4 nodes solves.
+#define BOOST_TEST_MODULE boundary_value
+#include <boost/test/unit_test.hpp>
+
+#include "mechanics/systems.h"
+#include "solvers/boundary_value.h"
+#include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
+
+using namespace dvm;
+using V1 = Vec<double, 1>;
+
+namespace {
+
+template <class System, class Map>
+std::vector<V1> shoot(const System& L, const Map& R, double h, int K, const V1& q0, const V1& p0) {
+  const PositionMomentumStep<System, Map> S(L, R, h);
+  std::vector<V1> traj{q0};
+  V1 q = q0, p = p0;
+  const RunSummary run = integrate(S, 0.0, q, p, legendre_inverse(L, q0, p0), K,
+                                   [&](std::int64_t, double, const V1& qk, const V1&, const StepSummary&) {
+                                     traj.push_back(qk);
+                                   });
+  BOOST_REQUIRE(!run.failed);
+  return traj;
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(harmonic_boundary_value_reproduces_the_one_step_trajectory) {
+  // Shoot from (q0, p0) with the position-momentum step, keep the end node, solve the
+  // boundary-value problem between the two ends from a straight-line guess: the nodes
+  // and the momenta must be the shot ones.
+  const HarmonicOscillator H(1.0);
+  const double h = 0.01;
+  const int K = 200;  // T = 2 < pi: no conjugate points, the solution is unique
+  for (const ThetaMap& R : {ThetaMap::midpoint(), ThetaMap(0.3)}) {
+    const V1 q0(1.0), p0(0.3);
+    const std::vector<V1> traj = shoot(H, R, h, K, q0, p0);
+    const BoundaryValueProblem<HarmonicOscillator, ThetaMap> B(H, R, h);
+    const auto res = B.solve(traj.front(), traj.back(), K);
+    BOOST_TEST_CONTEXT(R.name()) {
+      BOOST_TEST(res.converged, res.message);
+      double dev = 0.0;
+      for (int k = 0; k <= K; ++k) dev = std::fmax(dev, std::fabs(res.q[k][0] - traj[k][0]));
+      BOOST_TEST_MESSAGE(R.name() << ": max |q_bvp - q_shot| = " << dev << ", DEL residual " << res.max_residual
+                                  << ", iterations " << res.iterations);
+      BOOST_TEST(dev <= 1e-12);
+      BOOST_TEST(std::fabs(res.p[0][0] - p0[0]) <= 1e-11);
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(pendulum_with_ten_thousand_nodes_solves) {
+  // q(0) = 0, q(2) = 1.5 rad (a large swing), h = 2e-4: 9999 unknown nodes.
+  const Pendulum P(1.0, 1.0, 1.0);
+  const double h = 2e-4;
+  const int K = 10000;
+  const BoundaryValueProblem<Pendulum, ThetaMap> B(P, ThetaMap::midpoint(), h);
+  const auto res = B.solve(V1(0.0), V1(1.5), K);
+  BOOST_TEST_MESSAGE("pendulum 1e4 nodes: DEL residual " << res.max_residual << " (scale " << res.scale
+                                                         << "), iterations " << res.iterations << "; "
+                                                         << res.message);
+  BOOST_TEST(res.converged, res.message);
+  BOOST_TEST(res.q.front()[0] == 0.0);
+  BOOST_TEST(res.q.back()[0] == 1.5);
+  // It is a trajectory: the energy of the midpoint states varies only at O(h^2), and
+  // shooting from (q_0, p_0) retraces the nodes.
+  double emin = INFINITY, emax = -INFINITY;
+  for (int k = 0; k <= K; ++k) {
+    const double E = 0.5 * res.p[k][0] * res.p[k][0] - std::cos(res.q[k][0]);
+    emin = std::fmin(emin, E);
+    emax = std::fmax(emax, E);
+  }
+  BOOST_TEST(emax - emin <= 1e-7);
+  const std::vector<V1> traj = shoot(P, ThetaMap::midpoint(), h, K, res.q[0], res.p[0]);
+  double dev = 0.0;
+  for (int k = 0; k <= K; ++k) dev = std::fmax(dev, std::fabs(res.q[k][0] - traj[k][0]));
+  BOOST_TEST_MESSAGE("pendulum: max |q_bvp - q_shot| = " << dev);
+  BOOST_TEST(dev <= 1e-8);
+}
