@@ -516,11 +516,15 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   }
 
   s.dim = resolve_dimension(path, info, s.params);
+  if (info.space != "R^n") {
+    const auto kind = root["problem"]["kind"].value<std::string>();
+    if (kind && *kind == "boundary-value")
+      throw InputError(r.where(root["problem"]["kind"].node(), "problem.kind") +
+                       ": boundary-value problems run on R^n systems only, not on " + info.space + " (" + info.name +
+                       ")");
+  }
   read_problem(r, root, s, s.dim);
   const bool boundary_value = s.problem == "boundary-value";
-  if (boundary_value && info.space != "R^n")
-    throw InputError(path + ": key 'problem.kind': boundary-value problems run on R^n systems only, not on " +
-                     info.space + " (" + info.name + ")");
   int links = 1;
   if (info.name == "spherical-chain") {
     const double n = s.params["n"];
