@@ -214,6 +214,13 @@ class SO3Map {
   std::string name_;
 };
 
+// The adjoint of a Prop. 2.3 map is the map of the same retraction with theta
+// replaced by 1 - theta (Prop. 2.4).
+inline SphereMap adjoint_map(const SphereMap& m) {
+  return SphereMap(m.kind(), 1.0 - m.theta(), m.name() + "*");
+}
+inline SO3Map adjoint_map(const SO3Map& m) { return SO3Map(m.kind(), 1.0 - m.theta(), m.name() + "*"); }
+
 // The map in the chart centred at c: a discretization map on R^dim.
 template <class Map>
 class LocalRepresentation {
@@ -278,6 +285,8 @@ class SpherePowerMap {
   bool symmetric() const { return f_.symmetric(); }
   int order() const { return f_.order(); }
 
+  const SphereMap& factor() const { return f_; }
+
   template <class T>
   ManifoldPair<Manifold, T> operator()(const Vec<T, 3 * K>& x, const Vec<T, 3 * K>& v) const {
     ManifoldPair<Manifold, T> out;
@@ -302,5 +311,10 @@ class SpherePowerMap {
  private:
   SphereMap f_;
 };
+
+template <int K>
+SpherePowerMap<K> adjoint_map(const SpherePowerMap<K>& m) {
+  return SpherePowerMap<K>(adjoint_map(m.factor()));
+}
 
 }  // namespace dvm

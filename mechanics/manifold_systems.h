@@ -165,7 +165,8 @@ class ManifoldDiscreteLagrangian {
   static_assert(std::is_same_v<typename System::Manifold, M>, "system and map live on different manifolds");
 
   ManifoldDiscreteLagrangian(System L, Map R, double h) : L_(std::move(L)), R_(std::move(R)), h_(h) {
-    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    // A negative h is allowed: compositions take substeps of negative size gamma_i h.
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
   const System& lagrangian() const { return L_; }
   const Map& map() const { return R_; }

@@ -1,0 +1,77 @@
+// Composition methods on manifolds: Psi_h = Phi_{gamma_s h} o ... o Phi_{gamma_1 h}
+// with Phi the position-momentum step of a map on S^2, (S^2)^n or SO(3) (paper Sec. 6;
+// the tables of solvers/composition_methods.h). A map that is not symmetric enters
+// with its adjoint, the map of the same retraction with theta replaced by 1 - theta
+// (Prop. 2.4), exactly as on R^n (solvers/composition.h). Each substep is a full
+// manifold step, so the composition stays on the manifold and keeps the symmetries
+// of its stages (discrete Noether holds stage by stage).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "solvers/composition_methods.h"
+#include "solvers/manifold_step.h"
+
+namespace dvm {
+
+template <class System, class Map>
+class ComposedManifoldStep {
+ public:
+  using Stage = ManifoldStep<System, Map>;
+  using M = typename Stage::M;
+  static constexpr int n = Stage::n;
+  using Point = typename Stage::Point;
+  using Covector = typename Stage::Covector;
+
+  ComposedManifoldStep(const System& L, const Map& R, double h, const std::vector<Substep>& substeps,
+                       StepOptions options = {})
+      : h_(h) {
+    if (substeps.empty()) throw std::invalid_argument("a composition needs at least one substep");
+    for (const Substep& s : substeps) {
+      weights_.push_back(s.weight);
+      stages_.emplace_back(L, s.adjoint ? adjoint_map(R) : R, s.weight * h, options);
+    }
+  }
+  double step_size() const { return h_; }
+  std::size_t stages() const { return stages_.size(); }
+
+  // The same contract as ManifoldStep::step; xi (the full step's chart coordinates at
+  // q0) seeds each stage's guess with its fraction of the step.
+  StepSummary step(const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
+    Point q = q0;
+    Covector p = p0;
+    StepSummary total;
+    total.converged = true;
+    total.residual = 0.0;
+    total.scale = 0.0;
+    for (std::size_t i = 0; i < stages_.size(); ++i) {
+      Vec<double, n> guess = weights_[i] * xi;
+      Point qn;
+      Covector pn;
+      const StepSummary s = stages_[i].step(q, p, guess, qn, pn);
+      total.iterations += s.iterations;
+      if (!s.converged) {
+        total = s;
+        total.message = "substep " + std::to_string(i + 1) + " of " + std::to_string(stages_.size()) + ": " + s.message;
+        return total;
+      }
+      if (s.residual / s.scale > total.residual / std::fmax(total.scale, 1e-300)) {
+        total.residual = s.residual;
+        total.scale = s.scale;
+      }
+      q = qn;
+      p = pn;
+    }
+    q1 = q;
+    p1 = p;
+    return total;
+  }
+
+ private:
+  double h_;
+  std::vector<double> weights_;
+  std::vector<Stage> stages_;
+};
+
+}  // namespace dvm
