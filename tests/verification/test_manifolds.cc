@@ -327,8 +327,10 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
       const Step S(L, map, h, sub);
       const auto v0 = manifold_legendre_inverse(L, q, p);
       const RunSummary r = integrate_manifold(S, 0.0, q, p, v0, std::llround(1.0 / h), [](auto&&...) {});
-      BOOST_TEST(!r.failed, scheme << ": " << r.failure.message);
-      errs.push_back(std::fmax(max_abs(q - q_ref), max_abs(p - p_ref)));
+      // a step too large for a method with big substeps may fail (reported, not
+      // passed on); that h then drops out of the fit, which needs three points
+      if (r.failed) BOOST_TEST_MESSAGE(scheme << ", h = " << h << ": " << r.failure.message);
+      errs.push_back(r.failed ? NAN : std::fmax(max_abs(q - q_ref), max_abs(p - p_ref)));
     }
     return fit_order(hs, errs, 1e-12);
   };
@@ -338,7 +340,16 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
     const V3 x0 = V3(0.6, 0.0, -0.8), v0(0.0, 0.9, 0.0), p0 = manifold_legendre(L, x0, v0);
     V3 xr, vr;
     pendulum_reference(1.0, 1.0, x0, v0, xr, vr);
-    for (const auto& c : std::vector<Case>{{"triple-jump", 4}, {"suzuki5", 4}, {"yoshida6a", 6}}) {
+    // every table up to order 6 with the midpoint map. The order-8 tables reach the
+    // round-off floor of manifold steps (a momentum noise eps M/h per substep, see
+    // solvers/manifold_step.h) before they show their asymptotic slope, at steps where
+    // their large substeps still converge: not measurable here until the manifold
+    // steps get the increment form of the R^n ones.
+    std::vector<Case> cases;
+    for (const CompositionScheme& sc : composition_schemes())
+      if (sc.order <= 6) cases.push_back({sc.name, double(sc.order)});
+    cases.push_back({"triple-jump:6", 6});
+    for (const auto& c : cases) {
       const double o = measure(L, SphereMap(RetractionKind::exp, 0.5, "sphere-exp"), c.scheme, hs, x0, p0, xr, vr);
       BOOST_TEST_MESSAGE("sphere-exp, " << c.scheme << ": measured order " << o);
       BOOST_TEST(std::fabs(o - c.order) <= 0.3, c.scheme << ": " << o);
