@@ -97,45 +97,59 @@ class SphereMap {
   }
 
   template <class T>
-  ManifoldTangent<Sphere, T> inverse(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const;
+  ManifoldTangent<Sphere, T> inverse(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const {
+    if (closed_form_inverse()) return inverse_relative(q0, Sphere::relative(q0, q1));
+    if constexpr (!is_jet_v<T>) {
+      return newton_manifold_inverse_values(*this, q0, q1);
+    } else {
+      throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
+    }
+  }
 
- private:
+  // R_d^{-1}(q0, q0 + d) from q0 and the difference d = q1 - q0, given accurately
+  // (Sphere::relative_chart), so that nothing is computed from q1 - q0 rounded.
+  // With |q0| = |q1| = 1: q0.q1 = 1 + q0.d and q1.d = -q0.d.
   template <class T>
-  ManifoldTangent<Sphere, T> fixed_first(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const {
-    if (kind_ == RetractionKind::exp) return {q0, Sphere::log(q0, q1)};
-    const T c = detail::dot(q0, q1);
-    if (!(value(c) > 1e-12))
-      throw MapDomainError(name_ + ": inverse needs q0.q1 > 0, got q0.q1 = " + std::to_string(value(c)));
-    return {q0, Vec<T, 3>(q1[0] / c - q0[0], q1[1] / c - q0[1], q1[2] / c - q0[2])};
-  }
-
-  RetractionKind kind_;
-  double theta_;
-  std::string name_;
-};
-
-template <class T>
-ManifoldTangent<Sphere, T> SphereMap::inverse(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const {
-  using std::sqrt;
-  if (theta_ == 0.0) return fixed_first(q0, q1);
-  if (theta_ == 1.0) {
-    const ManifoldTangent<Sphere, T> t = fixed_first(q1, q0);
-    return {t.x, Vec<T, 3>(-t.v)};
-  }
-  if (theta_ == 0.5) {
-    const Vec<T, 3> s(q0[0] + q1[0], q0[1] + q1[1], q0[2] + q1[2]);
-    const Vec<T, 3> d(q1[0] - q0[0], q1[1] - q0[1], q1[2] - q0[2]);
-    const T c2 = detail::dot(s, s);
+  ManifoldTangent<Sphere, T> inverse_relative(const Vec<T, 3>& q0, const Vec<T, 3>& d) const {
+    using std::sqrt;
+    if (!closed_form_inverse()) throw MapDomainError(name_ + ": the relative inverse needs theta in {0, 1/2, 1}");
+    const T a = detail::dot(q0, d);  // q0.q1 - 1
+    const Vec<T, 3> q1(q0[0] + d[0], q0[1] + d[1], q0[2] + d[2]);
+    if (theta_ == 0.0 || theta_ == 1.0) {
+      // fixed first point: (x, v) = (q0, R_{q0}^{-1}(q1)); theta = 1 exchanges the
+      // roles: (q1, -R_{q1}^{-1}(q0)), with q0 = q1 - d and q1.(-d) = a.
+      const bool first = theta_ == 0.0;
+      const Vec<T, 3>& base = first ? q0 : q1;
+      const Vec<T, 3> e = first ? d : Vec<T, 3>(-d);
+      const T be = a;  // base.e: q0.d = q1.(-d) = q0.q1 - 1
+      // w = other - (base.other) base = e - (base.e) base; c = base.other = 1 + base.e
+      const Vec<T, 3> w(e[0] - be * base[0], e[1] - be * base[1], e[2] - be * base[2]);
+      const T c = 1.0 + be;
+      T k;
+      if (kind_ == RetractionKind::exp) {
+        k = detail::angle_over_sin(detail::dot(w, w), c);
+      } else {
+        if (!(value(c) > 1e-12))
+          throw MapDomainError(name_ + ": inverse needs q0.q1 > 0, got q0.q1 = " + std::to_string(value(c)));
+        k = 1.0 / c;
+      }
+      const double sign = first ? 1.0 : -1.0;
+      return {base, Vec<T, 3>(sign * k * w[0], sign * k * w[1], sign * k * w[2])};
+    }
+    // theta = 1/2: x = (q0 + q1)/|q0 + q1| = (2 q0 + d)/c, c^2 = 4 + 4 a + |d|^2 = 4 - |d|^2
+    const Vec<T, 3> sum(2.0 * q0[0] + d[0], 2.0 * q0[1] + d[1], 2.0 * q0[2] + d[2]);
+    const T d2 = detail::dot(d, d);
+    const T c2 = 4.0 - d2;
     if (!(value(c2) > 1e-20)) throw MapDomainError(name_ + ": inverse undefined for antipodal points");
     const T c = sqrt(c2);
-    const Vec<T, 3> x(s[0] / c, s[1] / c, s[2] / c);
+    const Vec<T, 3> x(sum[0] / c, sum[1] / c, sum[2] / c);
     T k;
     if (kind_ == RetractionKind::projection) {
       k = 2.0 / c;
     } else {
-      // angle(q0, q1) / |q1 - q0| = (2/c) atan(u)/u with u = |q1 - q0|/c
+      // angle(q0, q1) / |d| = (2/c) atan(u)/u with u = |d|/c
       using std::atan;
-      const T u2 = detail::dot(d, d) / c2;
+      const T u2 = d2 / c2;
       T r;
       if (value(u2) < 1e-6)
         r = 1.0 - u2 / 3.0 + u2 * u2 / 5.0 - u2 * u2 * u2 / 7.0;
@@ -145,12 +159,12 @@ ManifoldTangent<Sphere, T> SphereMap::inverse(const Vec<T, 3>& q0, const Vec<T, 
     }
     return {x, Vec<T, 3>(k * d[0], k * d[1], k * d[2])};
   }
-  if constexpr (!is_jet_v<T>) {
-    return newton_manifold_inverse_values(*this, q0, q1);
-  } else {
-    throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
-  }
-}
+
+ private:
+  RetractionKind kind_;
+  double theta_;
+  std::string name_;
+};
 
 // Discretization maps on SO(3) from the group exponential or the Cayley map.
 class SO3Map {
@@ -185,27 +199,32 @@ class SO3Map {
 
   template <class T>
   ManifoldTangent<SO3, T> inverse(const Mat<T, 3, 3>& q0, const Mat<T, 3, 3>& q1) const {
-    using std::sqrt;
-    const Mat<T, 3, 3> W = SO3::transpose_mul(q0, q1);
-    if (kind_ == RetractionKind::exp) {
-      const Vec<T, 3> w = SO3::log(W);
-      return {SO3::mul(q0, SO3::exp(Vec<T, 3>(theta_ * w))), w};
-    }
-    if (theta_ == 0.0) return {q0, SO3::cay_inverse(W)};
-    if (theta_ == 1.0) return {q1, SO3::cay_inverse(W)};
-    if (theta_ == 0.5) {
-      const T d = 1.0 + W(0, 0) + W(1, 1) + W(2, 2);
-      if (!(value(d) > 1e-10)) throw MapDomainError(name_ + ": inverse undefined for a relative rotation by pi");
-      const T s = 0.5 * sqrt(d);
-      const T k = 1.0 / (s * (1.0 + s));
-      const Vec<T, 3> w(k * (W(2, 1) - W(1, 2)), k * (W(0, 2) - W(2, 0)), k * (W(1, 0) - W(0, 1)));
-      return {SO3::mul(q0, SO3::cay(Vec<T, 3>(0.5 * w))), w};
-    }
+    if (closed_form_inverse()) return inverse_relative(q0, SO3::relative(q0, q1));
     if constexpr (!is_jet_v<T>) {
       return newton_manifold_inverse_values(*this, q0, q1);
     } else {
       throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
     }
+  }
+
+  // R_d^{-1}(q0, q0 W) from q0 and the relative rotation W = q0^T q1, given
+  // accurately (SO3::relative_chart) rather than as a product of stored rotations.
+  template <class T>
+  ManifoldTangent<SO3, T> inverse_relative(const Mat<T, 3, 3>& q0, const Mat<T, 3, 3>& W) const {
+    using std::sqrt;
+    if (!closed_form_inverse()) throw MapDomainError(name_ + ": the relative inverse needs theta in {0, 1/2, 1}");
+    if (kind_ == RetractionKind::exp) {
+      const Vec<T, 3> w = SO3::log(W);
+      return {SO3::mul(q0, SO3::exp(Vec<T, 3>(theta_ * w))), w};
+    }
+    if (theta_ == 0.0) return {q0, SO3::cay_inverse(W)};
+    if (theta_ == 1.0) return {SO3::mul(q0, W), SO3::cay_inverse(W)};
+    const T d = 1.0 + W(0, 0) + W(1, 1) + W(2, 2);
+    if (!(value(d) > 1e-10)) throw MapDomainError(name_ + ": inverse undefined for a relative rotation by pi");
+    const T s = 0.5 * sqrt(d);
+    const T k = 1.0 / (s * (1.0 + s));
+    const Vec<T, 3> w(k * (W(2, 1) - W(1, 2)), k * (W(0, 2) - W(2, 0)), k * (W(1, 0) - W(0, 1)));
+    return {SO3::mul(q0, SO3::cay(Vec<T, 3>(0.5 * w))), w};
   }
 
  private:
@@ -302,6 +321,16 @@ class SpherePowerMap {
     ManifoldTangent<Manifold, T> out;
     for (int i = 0; i < K; ++i) {
       const ManifoldTangent<Sphere, T> t = f_.inverse(Manifold::block(q0, i), Manifold::block(q1, i));
+      Manifold::template put<T, 3 * K>(out.x, i, t.x);
+      Manifold::template put<T, 3 * K>(out.v, i, t.v);
+    }
+    return out;
+  }
+  template <class T>
+  ManifoldTangent<Manifold, T> inverse_relative(const Vec<T, 3 * K>& q0, const Vec<T, 3 * K>& d) const {
+    ManifoldTangent<Manifold, T> out;
+    for (int i = 0; i < K; ++i) {
+      const ManifoldTangent<Sphere, T> t = f_.inverse_relative(Manifold::block(q0, i), Manifold::block(d, i));
       Manifold::template put<T, 3 * K>(out.x, i, t.x);
       Manifold::template put<T, 3 * K>(out.v, i, t.v);
     }

@@ -180,24 +180,50 @@ class ManifoldDiscreteLagrangian {
     return h_ * L_(t.x, u);
   }
 
+  // L_d from q0 and the relative position rel of q1 (see Sphere::relative, SO3::relative).
+  template <class T, class Rel>
+  T evaluate_relative(const P<T>& q0, const Rel& rel) const {
+    const ManifoldTangent<M, T> t = R_.inverse_relative(q0, rel);
+    typename M::template Tangent<T> u = t.v;
+    for (int i = 0; i < u.size(); ++i) u(i) = t.v(i) * (1.0 / h_);
+    return h_ * L_(t.x, u);
+  }
+
   // D1 L_d(q0, q1) in the chart centred at q0 (q0 a double point, q1 any scalar).
-  template <class T>
-  Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1) const {
+  // `rel` is the relative position of q1 from q0, known more accurately than the
+  // stored points give it (the step has it from its unknown); it replaces the value
+  // of the relative position, whose derivatives come from the points.
+  template <class T, class Rel>
+  Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1, const Rel& rel) const {
     using D = ceres::Jet<T, n>;
     Vec<D, n> eta;
     for (int i = 0; i < n; ++i) eta[i] = seed<T, n>(constant<T>(0.0), i);
     P<D> b;
     for (int i = 0; i < q1.size(); ++i) b(i) = D(q1(i));
-    return (*this)(M::chart(q0, eta), b).v;
+    const P<D> a = M::chart(q0, eta);
+    auto r = M::relative(a, b);
+    for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
+    return evaluate_relative(a, r).v;
   }
-  // D2 L_d(q0, q1) in the chart centred at q1.
-  Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1) const {
+  // D2 L_d(q0, q1) in the chart centred at q1, with the relative position rel.
+  template <class Rel>
+  Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel) const {
     using D = ceres::Jet<double, n>;
     Vec<D, n> eta;
     for (int i = 0; i < n; ++i) eta[i] = seed<double, n>(0.0, i);
     P<D> a;
     for (int i = 0; i < q0.size(); ++i) a(i) = D(q0(i));
-    return (*this)(a, M::chart(q1, eta)).v;
+    auto r = M::relative(a, M::chart(q1, eta));
+    for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
+    return evaluate_relative(a, r).v;
+  }
+  // The same from the stored points alone.
+  template <class T>
+  Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1) const {
+    return D1_local(q0, q1, M::relative(q0, q1));
+  }
+  Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1) const {
+    return D2_local(q0, q1, M::relative(q0, q1));
   }
 
  private:

@@ -222,10 +222,9 @@ BOOST_AUTO_TEST_CASE(sphere_stays_on_the_manifold_with_bounded_energy_and_noethe
       BOOST_TEST(defect <= 1e-12);
       BOOST_TEST(e_first <= 1e-2);                              // bounded, O(h^2)
       BOOST_TEST(e_second <= 1.5 * e_first);                    // no drift
-      // Exact conservation up to round-off: what remains grows linearly at about
-      // 7e-18 per step (0.05 ulp of J), a rounding bias far below one ulp per step;
+      // Exact conservation up to round-off: a random walk of a few ulp per step;
       // a method that did not conserve J would drift by O(h^p) per step instead.
-      BOOST_TEST(dJ <= 2e-17 * n);
+      BOOST_TEST(dJ <= 1e-15 * std::sqrt(double(n)) * std::fmax(1.0, std::fabs(J0)));
     }
   }
 }
@@ -251,7 +250,7 @@ BOOST_AUTO_TEST_CASE(rigid_body_and_heavy_top_momenta_and_orthogonality) {
       BOOST_TEST(!r.failed);
       BOOST_TEST_MESSAGE(map.name() << ", " << n << " steps: |R^T R - I| " << defect << ", |dm| " << dm << ", |dE| " << de);
       BOOST_TEST(defect <= 1e-12);
-      BOOST_TEST(dm <= 2e-17 * n);  // round-off only, as for the pendulum above
+      BOOST_TEST(dm <= 1e-15 * std::sqrt(double(n)) * std::fmax(1.0, max_abs(m0)));  // round-off, as above
       BOOST_TEST(de <= 1e-2);
     }
   }
@@ -267,7 +266,7 @@ BOOST_AUTO_TEST_CASE(rigid_body_and_heavy_top_momenta_and_orthogonality) {
   });
   BOOST_TEST(!r.failed);
   BOOST_TEST_MESSAGE("heavy top, 1e5 steps: |dJ3| " << dJ);
-  BOOST_TEST(dJ <= 1e-12);
+  BOOST_TEST(dJ <= 1e-15 * std::sqrt(1e5) * std::fmax(1.0, std::fabs(J0)));
 }
 
 BOOST_AUTO_TEST_CASE(spherical_chain) {
@@ -300,10 +299,7 @@ BOOST_AUTO_TEST_CASE(spherical_chain) {
   });
   BOOST_TEST(!r.failed, r.failure.message);
   BOOST_TEST_MESSAGE("spherical chain of 2, 2e4 steps: |dJ| " << dJ << ", |dE| " << dE << ", defect " << defect);
-  // Round-off only: the relative positions carry eps |q|, a momentum noise of about
-  // eps (sum m l^2)/h per step that random-walks (solvers/manifold_step.h).
-  const double noise = 2.2e-16 * (1.0 * 1.0 + 0.5 * 1.8 * 1.8) / 0.005;
-  BOOST_TEST(dJ <= 5 * std::sqrt(double(n)) * noise);
+  BOOST_TEST(dJ <= 1e-15 * std::sqrt(double(n)) * std::fmax(1.0, std::fabs(J0)));  // round-off
   BOOST_TEST(defect <= 1e-12);
   BOOST_TEST(dE <= 1e-2 * std::fabs(E0));
 }
@@ -332,7 +328,7 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
       if (r.failed) BOOST_TEST_MESSAGE(scheme << ", h = " << h << ": " << r.failure.message);
       errs.push_back(r.failed ? NAN : std::fmax(max_abs(q - q_ref), max_abs(p - p_ref)));
     }
-    return fit_order(hs, errs, 1e-12);
+    return fit_order(hs, errs, 1e-13);
   };
   const std::vector<double> hs = {0.2, 0.1, 0.05, 0.025};
   {
@@ -340,17 +336,17 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
     const V3 x0 = V3(0.6, 0.0, -0.8), v0(0.0, 0.9, 0.0), p0 = manifold_legendre(L, x0, v0);
     V3 xr, vr;
     pendulum_reference(1.0, 1.0, x0, v0, xr, vr);
-    // every table up to order 6 with the midpoint map. The order-8 tables reach the
-    // round-off floor of manifold steps (a momentum noise eps M/h per substep, see
-    // solvers/manifold_step.h) before they show their asymptotic slope, at steps where
-    // their large substeps still converge: not measurable here until the manifold
-    // steps get the increment form of the R^n ones.
+    // every table up to order 6 with the midpoint map. Of the order-8 tables, on steps
+    // 0.25 to 0.1 yoshida8c/d/e and triple-jump:8 measure 8.04 to 8.20, yoshida8a/b
+    // 7.66/8.30 (not yet asymptotic), suzuki-umeno8 and kahan-li8 are at round-off
+    // already; larger steps make the large substeps fail. Not asserted here.
     std::vector<Case> cases;
     for (const CompositionScheme& sc : composition_schemes())
       if (sc.order <= 6) cases.push_back({sc.name, double(sc.order)});
     cases.push_back({"triple-jump:6", 6});
     for (const auto& c : cases) {
-      const double o = measure(L, SphereMap(RetractionKind::exp, 0.5, "sphere-exp"), c.scheme, hs, x0, p0, xr, vr);
+      const std::vector<double>& steps = hs;
+      const double o = measure(L, SphereMap(RetractionKind::exp, 0.5, "sphere-exp"), c.scheme, steps, x0, p0, xr, vr);
       BOOST_TEST_MESSAGE("sphere-exp, " << c.scheme << ": measured order " << o);
       BOOST_TEST(std::fabs(o - c.order) <= 0.3, c.scheme << ": " << o);
     }
