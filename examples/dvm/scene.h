@@ -14,11 +14,19 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+namespace dvm {
+struct WrittenSystem;  // mechanics/written_lagrangian.h
+}
+
 namespace dvm::cli {
+
+// Written Lagrangians are compiled for 1 to kMaxWrittenDim coordinates.
+constexpr int kMaxWrittenDim = 4;
 
 // Bad input: the message names the file, the key, the value and what was expected.
 struct InputError : std::runtime_error {
@@ -67,6 +75,12 @@ struct Scene {
   double tolerance = 2e-15;
   std::string csv;  // empty: no CSV
   std::int64_t every = 1;
+  // Added with written Lagrangians and the classic systems:
+  int dim = 0;                                   // the number of coordinates
+  std::shared_ptr<const WrittenSystem> written;  // system == "lagrangian": the parsed texts
+  std::string written_where;                     // "file:line:col: key 'system.lagrangian'"
+  std::vector<double> masses;                    // system == "nbody"
+  std::string npy;                               // [output] npy: empty for none
 };
 
 // Loads and validates a scene; overrides are "section.key=value" with value written
