@@ -272,7 +272,7 @@ void initial_state(const Scene& s, const System& L, Vec<double, System::dim>& q,
       if (!(std::fabs(H - E) <= 1e-9 * std::fmax(1.0, std::fabs(E)))) {
         std::ostringstream m;
         m.precision(17);
-        m << where << ": system.hamiltonian does not match the Legendre transform of the Lagrangian at the "
+        m << s.hamiltonian_where << ": system.hamiltonian does not match the Legendre transform of the Lagrangian at the "
           << "initial state: H(q, p) = " << H << " but E_L(q, v) = <p, v> - L = " << E;
         throw InputError(m.str());
       }

@@ -79,6 +79,7 @@ struct Scene {
   int dim = 0;                                   // the number of coordinates
   std::shared_ptr<const WrittenSystem> written;  // system == "lagrangian": the parsed texts
   std::string written_where;                     // "file:line:col: key 'system.lagrangian'"
+  std::string hamiltonian_where;                 // the same for 'system.hamiltonian'
   std::vector<double> masses;                    // system == "nbody"
   std::string npy;                               // [output] npy: empty for none
 };

@@ -145,6 +145,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Scene&
   parse("hamiltonian", WrittenSystem::Kind::hamiltonian, w->hamiltonian, false);
   const toml::node* L = sys.get("lagrangian");
   s.written_where = key_where(path, *L, "system.lagrangian");
+  if (const toml::node* H = sys.get("hamiltonian")) s.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
   s.system = "lagrangian";
   s.dim = w->dim();
   s.written = std::move(w);

@@ -333,3 +333,57 @@ BOOST_AUTO_TEST_CASE(fpu_oscillatory_energy_is_an_adiabatic_invariant) {
   BOOST_TEST(d50 / d100 > 1.6);
   BOOST_TEST(d50 / d100 < 2.5);
 }
+
+// Reverse mode on the tape against forward mode (Jets through operator()), for every
+// operation, also with Jet scalars (second derivatives), and the fallback for tapes
+// longer than Expression::kMaxTape.
+namespace {
+// dL/dq, dL/dv by Expression::gradient (reverse mode), forward mode if the tape is long.
+template <class T>
+void reverse_gradient(const WrittenLagrangian<2>& L, const Vec<T, 2>& q, const Vec<T, 2>& v, Vec<T, 2>& dLdq,
+                      Vec<T, 2>& dLdv) {
+  for (int i = 0; i < 2; ++i) dLdq[i] = dLdv[i] = constant<T>(0.0);
+  if (!L.system->lagrangian.gradient(q.data(), v.data(), dLdq.data(), dLdv.data()))
+    lagrangian_gradient(L, q, v, dLdq, dLdv);
+}
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operation) {
+  const std::vector<std::string> texts = {
+      "sin(x)*cos(y)", "tan(x) + y", "exp(x)*log(y)", "sqrt(x*y)", "abs(x - y)", "abs(y - x)", "atan2(x, y)",
+      "sinh(x)*cosh(y) + tanh(x*y)", "pow(x, y)", "x^y", "x^3*y^-2", "x^2.5/y", "asin(x/2) + acos(y/2) + atan(x*y)",
+      "cbrt(x*y)", "-x + 2/y - (3 - x)*y + 4 - x/5", "x_dot^2*y + y_dot*x",
+  };
+  for (const auto& text : texts) {
+    const WrittenLagrangian<2> L(written({"x", "y"}, {}, text));
+    for (const auto& [q, v] : {std::pair{Vec<double, 2>(0.7, 1.3), Vec<double, 2>(0.2, -0.4)},
+                               std::pair{Vec<double, 2>(1.1, 0.6), Vec<double, 2>(-0.9, 0.5)}}) {
+      Vec<double, 2> a1, b1, a2, b2;
+      reverse_gradient(L, q, v, a1, b1);
+      lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{L}, q, v, a2, b2);
+      BOOST_TEST(max_abs(a1 - a2) <= 1e-14 * std::fmax(1.0, max_abs(a2)), text);
+      BOOST_TEST(max_abs(b1 - b2) <= 1e-14 * std::fmax(1.0, max_abs(b2)), text);
+      // with Jets: the velocity Hessian and mixed second derivatives
+      using D = ceres::Jet<double, 4>;
+      Vec<D, 2> qd, vd, ga, gb, pa, pb;
+      for (int i = 0; i < 2; ++i) {
+        qd[i] = D(q[i], i);
+        vd[i] = D(v[i], 2 + i);
+      }
+      reverse_gradient(L, qd, vd, ga, pa);
+      lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{L}, qd, vd, gb, pb);
+      for (int i = 0; i < 2; ++i) {
+        BOOST_TEST(max_abs(ga[i].v - gb[i].v) <= 1e-13 * std::fmax(1.0, max_abs(gb[i].v)), text);
+        BOOST_TEST(max_abs(pa[i].v - pb[i].v) <= 1e-13 * std::fmax(1.0, max_abs(pb[i].v)), text);
+      }
+    }
+  }
+  // a tape longer than kMaxTape is refused
+  std::string longer = "0";
+  for (int i = 1; i <= 100; ++i) longer += " + sin(" + std::to_string(i) + "*x)*y_dot^2";
+  const WrittenLagrangian<2> L(written({"x", "y"}, {}, longer));
+  BOOST_TEST(static_cast<int>(L.system->lagrangian.tape().size()) > Expression::kMaxTape);
+  const Vec<double, 2> q(0.3, 0.1), v(0.5, 0.7);
+  Vec<double, 2> a1, b1;
+  BOOST_TEST(!L.system->lagrangian.gradient(q.data(), v.data(), a1.data(), b1.data()));
+}
