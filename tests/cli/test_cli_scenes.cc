@@ -293,3 +293,28 @@ BOOST_AUTO_TEST_CASE(systems_methods_converge_and_help) {
   for (const char* cmd : {"run", "maps", "methods", "systems", "check-map", "converge"})
     BOOST_TEST(top.out.find(std::string("  ") + cmd) != std::string::npos, cmd);
 }
+
+// Progress appears on a terminal (a pseudo-terminal made by script(1), when present)
+// and not with --quiet; without a terminal stderr stays empty (tested above).
+BOOST_AUTO_TEST_CASE(progress_on_a_terminal_only) {
+  if (!std::ifstream("/usr/bin/script").good()) {
+    BOOST_TEST_MESSAGE("script(1) not available: progress on a terminal not tested");
+    return;
+  }
+  auto on_terminal = [](const std::string& extra) {
+    const std::string cmd = std::string("/usr/bin/script -qec \"") + DVM_BINARY + " run " + scene("outer_solar_system.toml") +
+                            " --set integrator.t_end=100000.0 " + extra + " > /dev/null\" /dev/null";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    std::string out;
+    char buf[4096];
+    std::size_t n;
+    while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+    pclose(pipe);
+    return out;
+  };
+  const std::string shown = on_terminal("");
+  BOOST_TEST(shown.find("steps/s") != std::string::npos, shown);
+  BOOST_TEST(shown.find("/10000  t = ") != std::string::npos, shown);
+  BOOST_TEST(shown.find("left") != std::string::npos, shown);
+  BOOST_TEST(on_terminal("--quiet").find("steps/s") == std::string::npos);
+}
