@@ -28,6 +28,7 @@ int run_scene(const Scene& scene, const RunOptions& options);
 int run_classic(const Scene& scene, const RunOptions& options);
 int run_nbody(const Scene& scene, const RunOptions& options);
 int run_written(const Scene& scene, const RunOptions& options);
+int run_written_high(const Scene& scene, const RunOptions& options);
 
 // Prints the identity residuals of a map as JSON; returns 0 if every identity holds
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.

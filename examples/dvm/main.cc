@@ -64,7 +64,7 @@ const char* kRunHelp =
     "                name = \"...\"  (optional)\n"
     "                Expressions: + - * / ^ (or **), parentheses, numbers, pi, and\n"
     "                sin cos tan asin acos atan exp log sqrt cbrt abs sinh cosh tanh\n"
-    "                atan2(y, x) pow(x, y). Up to 4 coordinates.\n"
+    "                atan2(y, x) pow(x, y). Up to 6 coordinates.\n"
     "  [initial]     q = [...]   and   p = [...] or v = [...]\n"
     "  [integrator]  map = \"midpoint\" | \"explicit-euler\" | \"adjoint-euler\" | \"theta\"\n"
     "                    | \"retraction-theta\"\n"

@@ -1,25 +1,18 @@
 // `dvm run` for a Lagrangian written in the scene: the number of coordinates is
 // fixed at compile time (WrittenLagrangian<N>), so it is dispatched here, once per
-// run, over N = 1..kMaxWrittenDim.
+// run, over N = 1..kMaxWrittenDim. The counts are split over two translation units
+// (this one and run_written_high.cc) so that they compile in parallel.
 #include "examples/dvm/run_with.h"
 
 namespace dvm::cli {
 
-namespace {
-
-template <int N>
-int run_dim(const Scene& s, const RunOptions& o) {
-  if (s.dim == N) return run_system(s, WrittenLagrangian<N>(s.written), o);
-  if constexpr (N < kMaxWrittenDim) {
-    return run_dim<N + 1>(s, o);
-  } else {
-    throw InputError(s.path + ": a written Lagrangian takes 1 to " + std::to_string(kMaxWrittenDim) +
-                     " coordinates, got " + std::to_string(s.dim));
+int run_written(const Scene& s, const RunOptions& o) {
+  switch (s.dim) {
+    case 1: return run_system(s, WrittenLagrangian<1>(s.written), o);
+    case 2: return run_system(s, WrittenLagrangian<2>(s.written), o);
+    case 3: return run_system(s, WrittenLagrangian<3>(s.written), o);
+    default: return run_written_high(s, o);
   }
 }
-
-}  // namespace
-
-int run_written(const Scene& s, const RunOptions& o) { return run_dim<1>(s, o); }
 
 }  // namespace dvm::cli

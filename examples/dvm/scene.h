@@ -26,7 +26,7 @@ struct WrittenSystem;  // mechanics/written_lagrangian.h
 namespace dvm::cli {
 
 // Written Lagrangians are compiled for 1 to kMaxWrittenDim coordinates.
-constexpr int kMaxWrittenDim = 4;
+constexpr int kMaxWrittenDim = 6;
 
 // Bad input: the message names the file, the key, the value and what was expected.
 struct InputError : std::runtime_error {
