@@ -14,7 +14,8 @@
 //   power   := primary (('^' | '**') unary)?
 //   primary := number | name | name '(' expr (',' expr)* ')' | '(' expr ')'
 // Functions: sin cos tan asin acos atan exp log sqrt cbrt abs sinh cosh tanh (one
-// argument), atan2(y, x), pow(x, y), min? no (not differentiable). The constant pi.
+// argument), atan2(y, x), pow(x, y). The constant pi. (No min/max: a Lagrangian must
+// be smooth for its derivatives to mean anything; abs is there for |x| away from 0.)
 //
 // Names are resolved at parse time: each is a variable (an index into one of up to
 // three input blocks, e.g. q, v and p) or a constant (a parameter value). Constant

@@ -10,6 +10,11 @@
 //                 max_iterations = 25   tolerance = 2e-15   (optional: the solver's
 //                 iteration bound and relative residual tolerance)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
+//                 npy = "out.npy"                    (optional: NumPy float64 rows)
+// or, instead of builtin, a Lagrangian written in the scene (scene_written.h):
+//   [system]      coordinates = ["x"]   lagrangian = "x_dot^2/2 - x^2/2"
+//                 params = { ... }   energy = "..."   hamiltonian = "..."   name = "..."
+// and builtin = "nbody" takes masses = [m0, m1, ...] (2 to 6 bodies in R^3).
 #pragma once
 
 #include <cstdint>
