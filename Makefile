@@ -28,6 +28,7 @@ test: build
 
 bench: build
 	./$(BUILD)/examples/bench_midpoint_step
+	./$(BUILD)/examples/bench_written_lagrangian
 
 clean:
 	rm -rf $(BUILD)

@@ -2,7 +2,9 @@
 // pass (check-map), 2 bad input or usage, 3 a numerical failure during a run.
 #pragma once
 
+#include <cstdint>
 #include <string>
+#include <vector>
 
 #include "examples/dvm/scene.h"
 
@@ -12,11 +14,23 @@ struct RunOptions {
   std::string csv;  // overrides [output] csv
   bool json = false;
   bool quiet = false;
+  // Added with issue 6:
+  std::string npy;                       // overrides [output] npy
+  bool converge = false;                 // `dvm converge`: a convergence study instead of a run
+  std::vector<std::int64_t> steps_list;  // converge: the step counts (empty: the default)
+  double t_end = 0.0;                    // converge: the time span (0: the scene's)
 };
 
 int run_scene(const Scene& scene, const RunOptions& options);
 // Systems on S^2 and SO(3) (run_manifold.cc).
 int run_manifold_scene(const Scene& scene, const RunOptions& options);
+
+// The runners of the systems added with issue 6 (run_classic.cc, run_nbody.cc,
+// run_written.cc), called by run_scene.
+int run_classic(const Scene& scene, const RunOptions& options);
+int run_nbody(const Scene& scene, const RunOptions& options);
+int run_written(const Scene& scene, const RunOptions& options);
+int run_written_high(const Scene& scene, const RunOptions& options);
 
 // Prints the identity residuals of a map as JSON; returns 0 if every identity holds
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.

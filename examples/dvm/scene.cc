@@ -9,6 +9,7 @@
 #include <toml++/toml.h>
 
 #include "solvers/composition_methods.h"
+#include "examples/dvm/scene_written.h"
 
 namespace dvm::cli {
 
@@ -60,6 +61,30 @@ const std::vector<SystemInfo>& systems() {
         {"alpha", 0.0, "cubic (FPU-alpha) coefficient"},
         {"beta", 0.0, "quartic (FPU-beta) coefficient"},
         {"fixed", 1.0, "1: ends tied to walls; 0: free ends (total momentum conserved)"}}},
+      // the classic systems (mechanics/systems_classic.h)
+      {"double-pendulum",
+       2,
+       "L = (m1+m2) l1^2 w1^2/2 + m2 l2^2 w2^2/2 + m2 l1 l2 w1 w2 cos(q1-q2) + (m1+m2) g l1 cos q1 + m2 g l2 cos q2",
+       {{"m1", 1.0, "upper mass"},
+        {"m2", 1.0, "lower mass"},
+        {"l1", 1.0, "upper rod length"},
+        {"l2", 1.0, "lower rod length"},
+        {"g", 1.0, "gravitational acceleration"}}},
+      {"henon-heiles", 2, "L = |v|^2/2 - (x^2 + y^2)/2 - lambda (x^2 y - y^3/3)", {{"lambda", 1.0, "coupling"}}},
+      {"fpu",
+       6,
+       "GNI Sec. I.5.1, m = 3: L = |v|^2/2 - omega^2/4 sum (q_2i - q_2i-1)^2 - sum (q_2i+1 - q_2i)^4",
+       {{"omega", 50.0, "stiff spring frequency"}}},
+      {"duffing", 1, "L = v^2/2 - alpha q^2/2 - beta q^4/4",
+       {{"alpha", 1.0, "linear stiffness"}, {"beta", 1.0, "cubic stiffness"}}},
+      {"charged-particle",
+       2,
+       "L = m |v|^2/2 + (c B/2)(x v_y - y v_x) - k |q|^2/2   (uniform field B normal to the plane)",
+       {{"m", 1.0, "mass"}, {"c", 1.0, "charge"}, {"B", 1.0, "magnetic field"}, {"k", 0.0, "electric potential k |q|^2/2"}}},
+      {"nbody",
+       0,
+       "L = sum m_i |v_i|^2/2 + G sum_{i<j} m_i m_j/|q_i - q_j|   (in R^3; [system] masses = [...], 2 to 6 bodies)",
+       {{"G", 1.0, "gravitational constant"}}},
   };
   return list;
 }
@@ -495,13 +520,36 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
 
   // [system]
   const toml::table& sys = r.section(root, "system", true);
-  r.only_keys(sys, "system", {"builtin", "params"});
+  r.only_keys(sys, "system", {"builtin", "params", "lagrangian", "coordinates", "energy", "hamiltonian", "name", "masses"});
+  if (sys.get("lagrangian")) read_written_system(path, sys, s);
   const toml::node* b = sys.get("builtin");
-  if (!b) throw InputError(path + ": missing key 'system.builtin' (a built-in system name)");
-  const SystemInfo& info = find_system(r.string(*b, "system.builtin"), r.where(b, "system.builtin"));
-  s.system = info.name;
+  if (!b && !s.written)
+    throw InputError(path + ": missing key 'system.builtin' (a built-in system name) or 'system.lagrangian'");
+  static const SystemInfo written_info{"lagrangian", 0, "", {}};
+  const SystemInfo& info =
+      s.written ? written_info : find_system(r.string(*b, "system.builtin"), r.where(b, "system.builtin"));
+  if (!s.written) {
+    for (const char* k : {"coordinates", "energy", "hamiltonian", "name"})
+      if (const toml::node* n = sys.get(k))
+        throw InputError(r.where(n, std::string("system.") + k) + ": belongs to a written system (system.lagrangian)");
+    s.system = info.name;
+    s.dim = info.dim;
+    const toml::node* ms = sys.get("masses");
+    if (info.name == "nbody") {
+      if (!ms) throw InputError(path + ": missing key 'system.masses' (nbody: one mass per body, 2 to 6 bodies)");
+      s.masses = r.vector(*ms, "system.masses");
+      if (s.masses.size() < 2 || s.masses.size() > 6)
+        throw InputError(r.where(ms, "system.masses") + ": got " + std::to_string(s.masses.size()) +
+                         " masses, expected 2 to 6 bodies");
+      for (double m : s.masses)
+        if (!(m > 0.0)) throw InputError(r.where(ms, "system.masses") + ": expected positive masses");
+      s.dim = 3 * static_cast<int>(s.masses.size());
+    } else if (ms) {
+      throw InputError(r.where(ms, "system.masses") + ": only builtin = \"nbody\" takes masses");
+    }
+  }
   for (const auto& p : info.params) s.params[p.name] = p.default_value;
-  if (const toml::node* params = sys.get("params")) {
+  if (const toml::node* params = s.written ? nullptr : sys.get("params")) {
     if (!params->is_table()) throw InputError(r.where(params, "system.params") + ": expected a table of numbers");
     for (const auto& [k, v] : *params->as_table()) {
       const std::string name(k.str());
@@ -515,7 +563,7 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
     }
   }
 
-  s.dim = resolve_dimension(path, info, s.params);
+  if (info.name == "chain") s.dim = resolve_dimension(path, info, s.params);
   if (info.space != "R^n") {
     const auto kind = root["problem"]["kind"].value<std::string>();
     if (kind && *kind == "boundary-value")
@@ -647,7 +695,11 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
 
   // [output]
   const toml::table& out = r.section(root, "output", false);
-  r.only_keys(out, "output", {"csv", "every"});
+  r.only_keys(out, "output", {"csv", "every", "npy"});
+  if (const toml::node* c = out.get("npy")) {
+    s.npy = r.string(*c, "output.npy");
+    if (s.npy.empty()) throw InputError(r.where(c, "output.npy") + ": expected a file name, got an empty string");
+  }
   if (const toml::node* c = out.get("csv")) {
     s.csv = r.string(*c, "output.csv");
     if (s.csv.empty()) throw InputError(r.where(c, "output.csv") + ": expected a file name, got an empty string");

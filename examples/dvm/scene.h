@@ -13,6 +13,11 @@
 //                 "triple-jump:<order>"   (optional: the map's step composed, see
 //                 `dvm methods`)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
+//                 npy = "out.npy"                    (optional: NumPy float64 rows)
+// or, instead of builtin, a Lagrangian written in the scene (scene_written.h):
+//   [system]      coordinates = ["x"]   lagrangian = "x_dot^2/2 - x^2/2"
+//                 params = { ... }   energy = "..."   hamiltonian = "..."   name = "..."
+// and builtin = "nbody" takes masses = [m0, m1, ...] (2 to 6 bodies in R^3).
 //   [problem]     kind = "initial-value" | "boundary-value"   q_final = [...]   steps = K
 //
 // Systems on S^2 take q = unit vector [x, y, z] and v or p tangent to it; systems on
@@ -24,11 +29,19 @@
 
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+namespace dvm {
+struct WrittenSystem;  // mechanics/written_lagrangian.h
+}
+
 namespace dvm::cli {
+
+// Written Lagrangians are compiled for 1 to kMaxWrittenDim coordinates.
+constexpr int kMaxWrittenDim = 6;
 
 // Bad input: the message names the file, the key, the value and what was expected.
 struct InputError : std::runtime_error {
@@ -95,7 +108,13 @@ struct Scene {
   double newmark_gamma = 0.5, newmark_beta = 0.25;
   std::string problem = "initial-value";
   std::vector<double> q_final;
-  int dim = 0;  // the system's dimension (for chain: params.n)
+  // Added with written Lagrangians and the classic systems:
+  int dim = 0;  // the number of coordinates (chain: params.n; nbody: 3 x bodies)
+  std::shared_ptr<const WrittenSystem> written;  // system == "lagrangian": the parsed texts
+  std::string written_where;                     // "file:line:col: key 'system.lagrangian'"
+  std::string hamiltonian_where;                 // the same for 'system.hamiltonian'
+  std::vector<double> masses;                    // system == "nbody"
+  std::string npy;                               // [output] npy: empty for none
 };
 
 // Loads and validates a scene; overrides are "section.key=value" with value written

@@ -1,0 +1,129 @@
+// Cost per step of a Lagrangian written as text (mechanics/expression.h, evaluated
+// from its tape) against the same system built in, all measured in this process:
+//
+//   built-in           the system's C++ struct with its closed-form gradient and
+//                      inverse Legendre map (the path the engine takes by default);
+//   built-in, autodiff the same struct with its closed forms hidden (GenericOnly):
+//                      derivatives by nested Jets, exactly as for a written one;
+//   written            the Lagrangian parsed from text, derivatives by nested Jets.
+//
+// Each runs the midpoint map's position-momentum step with Newton's method, the same
+// tolerances and start, and reports ns/step, the ratio to the built-in row, and the
+// largest difference of the final state (round-off only: the equations are the same).
+//
+// usage: bench_written_lagrangian [--steps N] [--repeats R]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <memory>
+#include <string>
+
+#include "mechanics/systems.h"
+#include "mechanics/systems_classic.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
+
+using namespace dvm;
+
+namespace {
+
+struct Result {
+  double ns_per_step = INFINITY;
+  std::vector<double> state;
+};
+
+template <class System>
+Result measure(const System& L, const Vec<double, System::dim>& q0, const Vec<double, System::dim>& p0, double h,
+               std::int64_t steps, int repeats) {
+  constexpr int N = System::dim;
+  const PositionMomentumStep<System, ThetaMap> S(L, ThetaMap::midpoint(), h);
+  Result best;
+  for (int r = 0; r < repeats; ++r) {
+    Vec<double, N> q = q0, p = p0;
+    const Vec<double, N> v0 = legendre_inverse(L, q0, p0);
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [](auto&&...) {});
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                      static_cast<double>(steps);
+    if (run.failed) {
+      std::fprintf(stderr, "%s: run failed at step %lld\n", L.name().c_str(), static_cast<long long>(run.failed_step));
+      std::exit(3);
+    }
+    if (ns < best.ns_per_step) {
+      best.ns_per_step = ns;
+      best.state.assign(q.data(), q.data() + N);
+      best.state.insert(best.state.end(), p.data(), p.data() + N);
+    }
+  }
+  return best;
+}
+
+std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vector<std::pair<std::string, double>> params,
+                                       const std::string& L) {
+  auto s = std::make_shared<WrittenSystem>();
+  s->name = "written";
+  s->coordinates = std::move(coords);
+  s->params = std::move(params);
+  s->check_names();
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  return s;
+}
+
+template <class S>
+void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenSystem>& text,
+             const Vec<double, S::dim>& q0, const Vec<double, S::dim>& p0, double h, std::int64_t steps, int repeats) {
+  constexpr int N = S::dim;
+  const Result a = measure(builtin, q0, p0, h, steps, repeats);
+  const Result b = measure(GenericOnly<S>{builtin}, q0, p0, h, steps, repeats);
+  const Result c = measure(WrittenLagrangian<N>(text), q0, p0, h, steps, repeats);
+  auto diff = [&](const Result& r) {
+    double d = 0;
+    for (std::size_t i = 0; i < r.state.size(); ++i) d = std::fmax(d, std::fabs(r.state[i] - a.state[i]));
+    return d;
+  };
+  std::printf("%s, h = %g, %lld steps, best of %d\n  L = %s\n", title, h, static_cast<long long>(steps), repeats,
+              text->lagrangian.text().c_str());
+  std::printf("  %-28s %10s %8s %14s\n", "Lagrangian", "ns/step", "ratio", "|state diff|");
+  std::printf("  %-28s %10.1f %8.2f %14s\n", "built-in (closed forms)", a.ns_per_step, 1.0, "-");
+  std::printf("  %-28s %10.1f %8.2f %14.3e\n", "built-in, autodiff only", b.ns_per_step, b.ns_per_step / a.ns_per_step,
+              diff(b));
+  std::printf("  %-28s %10.1f %8.2f %14.3e\n", "written in the scene", c.ns_per_step, c.ns_per_step / a.ns_per_step,
+              diff(c));
+  std::printf("  written / built-in autodiff = %.2f\n\n", c.ns_per_step / b.ns_per_step);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::int64_t steps = 200000;
+  int repeats = 5;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--steps" && i + 1 < argc)
+      steps = std::atoll(argv[++i]);
+    else if (a == "--repeats" && i + 1 < argc)
+      repeats = std::atoi(argv[++i]);
+    else {
+      std::fprintf(stderr, "usage: bench_written_lagrangian [--steps N] [--repeats R]\n");
+      return 2;
+    }
+  }
+  if (steps < 1 || repeats < 1) {
+    std::fprintf(stderr, "bench_written_lagrangian: steps and repeats must be positive\n");
+    return 2;
+  }
+  compare("pendulum (m = l = g = 1), q0 = 2, p0 = 0", Pendulum(1.0, 1.0, 1.0),
+          written({"theta"}, {{"m", 1.0}, {"l", 1.0}, {"g", 1.0}}, "0.5*m*l^2*theta_dot^2 + m*g*l*cos(theta)"),
+          Vec<double, 1>(2.0), Vec<double, 1>(0.0), 0.01, steps, repeats);
+  compare("Kepler, e = 0.6", Kepler(1.0),
+          written({"x", "y"}, {{"mu", 1.0}}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)"), Vec<double, 2>(0.4, 0.0),
+          Vec<double, 2>(0.0, 2.0), 0.005, steps, repeats);
+  compare("double pendulum (all parameters 1), q0 = (0.5, 0.3), p0 = 0 (regular motion)", DoublePendulum(),
+          written({"a", "b"}, {{"m1", 1.0}, {"m2", 1.0}, {"l1", 1.0}, {"l2", 1.0}, {"g", 1.0}},
+                  "(m1 + m2)/2*l1^2*a_dot^2 + m2/2*l2^2*b_dot^2 + m2*l1*l2*a_dot*b_dot*cos(a - b)"
+                  " + (m1 + m2)*g*l1*cos(a) + m2*g*l2*cos(b)"),
+          Vec<double, 2>(0.5, 0.3), Vec<double, 2>(0.0, 0.0), 0.01, steps, repeats);
+  return 0;
+}

@@ -1,0 +1,154 @@
+#include "examples/dvm/scene_written.h"
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <vector>
+
+#include "mechanics/written_lagrangian.h"
+
+namespace dvm::cli {
+
+namespace {
+
+std::vector<std::string> read_lines(const std::string& path) {
+  std::ifstream f(path);
+  std::vector<std::string> lines;
+  std::string line;
+  while (std::getline(f, line)) lines.push_back(line);
+  return lines;
+}
+
+std::string key_where(const std::string& path, const toml::node& n, const std::string& key) {
+  std::ostringstream out;
+  out << path;
+  if (n.source().begin.line > 0)
+    out << ":" << n.source().begin.line << ":" << n.source().begin.column;
+  else
+    out << " (from --set)";
+  out << ": key '" << key << "'";
+  return out.str();
+}
+
+}  // namespace
+
+std::string string_location(const std::string& path, const toml::node& n, std::size_t offset) {
+  const auto begin = n.source().begin;
+  if (begin.line == 0) return path + " (from --set): character " + std::to_string(offset + 1) + " of the value";
+  const std::vector<std::string> lines = read_lines(path);
+  std::size_t line = begin.line - 1, col = begin.column - 1;  // 0-based, at the opening quote
+  auto at = [&](std::size_t l, std::size_t c) -> int {
+    if (l >= lines.size()) return -1;
+    if (c == lines[l].size()) return '\n';
+    if (c > lines[l].size()) return -1;
+    return static_cast<unsigned char>(lines[l][c]);
+  };
+  auto advance = [&]() {
+    if (at(line, col) == '\n') {
+      ++line;
+      col = 0;
+    } else {
+      ++col;
+    }
+  };
+  auto here = [&]() { return path + ":" + std::to_string(line + 1) + ":" + std::to_string(col + 1); };
+  const int quote = at(line, col);
+  if (quote != '"' && quote != '\'') return path + ":" + std::to_string(begin.line) + ":" + std::to_string(begin.column);
+  const bool basic = quote == '"';
+  const bool multi = at(line, col + 1) == quote && at(line, col + 2) == quote;
+  for (int i = 0; i < (multi ? 3 : 1); ++i) advance();
+  if (multi && at(line, col) == '\n') advance();  // a newline right after """ is trimmed
+  // Walk the raw text, counting decoded characters until `offset`.
+  for (std::size_t decoded = 0; decoded < offset;) {
+    const int ch = at(line, col);
+    if (ch < 0) break;
+    if (basic && ch == '\\') {
+      const int e = at(line, col + 1);
+      if (multi && (e == '\n' || e == ' ' || e == '\t')) {
+        // line-ending backslash: skips whitespace and newlines
+        advance();
+        while (at(line, col) == ' ' || at(line, col) == '\t' || at(line, col) == '\n') advance();
+        continue;
+      }
+      const int skip = e == 'u' ? 6 : e == 'U' ? 10 : 2;
+      for (int i = 0; i < skip; ++i) advance();
+      ++decoded;
+      continue;
+    }
+    advance();
+    ++decoded;
+  }
+  return here();
+}
+
+void read_written_system(const std::string& path, const toml::table& sys, Scene& s) {
+  auto w = std::make_shared<WrittenSystem>();
+  if (sys.get("builtin"))
+    throw InputError(key_where(path, *sys.get("builtin"), "system.builtin") +
+                     ": give either system.builtin or system.lagrangian, not both");
+  if (const toml::node* n = sys.get("masses"))
+    throw InputError(key_where(path, *n, "system.masses") + ": masses belong to builtin = \"nbody\"");
+  if (const toml::node* n = sys.get("name")) {
+    const auto v = n->value<std::string>();
+    if (!v || v->empty()) throw InputError(key_where(path, *n, "system.name") + ": expected a non-empty string");
+    w->name = *v;
+  }
+  const toml::node* c = sys.get("coordinates");
+  if (!c)
+    throw InputError(path + ": missing key 'system.coordinates' (the names of the coordinates, e.g. "
+                            "coordinates = [\"theta\"]; velocities are then named theta_dot)");
+  const toml::array* ca = c->as_array();
+  if (!ca || ca->empty())
+    throw InputError(key_where(path, *c, "system.coordinates") + ": expected a non-empty array of names");
+  for (std::size_t i = 0; i < ca->size(); ++i) {
+    const auto v = ca->get(i)->value<std::string>();
+    if (!ca->get(i)->is_string())
+      throw InputError(key_where(path, *ca->get(i), "system.coordinates[" + std::to_string(i) + "]") +
+                       ": expected a name (a string)");
+    w->coordinates.push_back(*v);
+  }
+  if (static_cast<int>(w->coordinates.size()) > kMaxWrittenDim)
+    throw InputError(key_where(path, *c, "system.coordinates") + ": got " + std::to_string(w->coordinates.size()) +
+                     " coordinates, at most " + std::to_string(kMaxWrittenDim) + " are supported");
+  if (const toml::node* params = sys.get("params")) {
+    if (!params->is_table()) throw InputError(key_where(path, *params, "system.params") + ": expected a table of numbers");
+    for (const auto& [k, v] : *params->as_table()) {
+      const std::string name(k.str());
+      const auto x = v.value<double>();
+      if (!(v.is_number()) || !x || !std::isfinite(*x))
+        throw InputError(key_where(path, v, "system.params." + name) + ": expected a finite number");
+      w->params.emplace_back(name, *x);
+      s.params[name] = *x;
+    }
+  }
+  try {
+    w->check_names();
+  } catch (const std::invalid_argument& e) {
+    throw InputError(key_where(path, *c, "system.coordinates") + ": " + e.what());
+  }
+  auto parse = [&](const char* key, WrittenSystem::Kind kind, Expression& out, bool required) {
+    const toml::node* n = sys.get(key);
+    if (!n) {
+      if (required) throw InputError(path + ": missing key 'system." + std::string(key) + "'");
+      return;
+    }
+    if (!n->is_string()) throw InputError(key_where(path, *n, std::string("system.") + key) + ": expected a string");
+    const std::string text = *n->value<std::string>();
+    try {
+      out = Expression::parse(text, w->symbols(kind));
+    } catch (const ExpressionError& e) {
+      throw InputError(string_location(path, *n, e.offset) + ": in system." + key + ": " + e.what());
+    }
+  };
+  parse("lagrangian", WrittenSystem::Kind::lagrangian, w->lagrangian, true);
+  parse("energy", WrittenSystem::Kind::energy, w->energy, false);
+  parse("hamiltonian", WrittenSystem::Kind::hamiltonian, w->hamiltonian, false);
+  const toml::node* L = sys.get("lagrangian");
+  s.written_where = key_where(path, *L, "system.lagrangian");
+  if (const toml::node* H = sys.get("hamiltonian")) s.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
+  s.system = "lagrangian";
+  s.dim = w->dim();
+  s.written = std::move(w);
+}
+
+}  // namespace dvm::cli

@@ -1,0 +1,31 @@
+// Reading a written system from a scene's [system] table:
+//
+//   [system]
+//   name = "double pendulum"                     # optional, shown in the output
+//   coordinates = ["a", "b"]
+//   lagrangian = "... a, b, a_dot, b_dot, parameters ..."
+//   params = { m1 = 1.0, ... }                   # any names, all numbers
+//   energy = "..."                               # optional: q, q_dot and p_q names
+//   hamiltonian = "..."                          # optional: q and p_q names
+//
+// Errors in an expression are reported at the line and column of the scene file
+// where they are: the string's own position plus the offset inside it, following
+// the TOML string syntax (escapes, multi-line strings).
+#pragma once
+
+#include <string>
+
+#include <toml++/toml.h>
+
+#include "examples/dvm/scene.h"
+
+namespace dvm::cli {
+
+// Fills s.system, s.params, s.written and s.dim from `sys`. Throws InputError.
+void read_written_system(const std::string& path, const toml::table& sys, Scene& s);
+
+// "file:line:column" of the character at `offset` of the string value `n` (or a
+// description of the --set override when the value did not come from the file).
+std::string string_location(const std::string& path, const toml::node& n, std::size_t offset);
+
+}  // namespace dvm::cli

@@ -1,0 +1,335 @@
+// End-to-end tests of what issue 6 added to the dvm program: every shipped scene runs
+// with its invariants checked, written Lagrangians agree with the built-in systems,
+// expression errors point at the scene's line and column, .npy output, and the
+// systems / methods / converge commands.
+#define BOOST_TEST_MODULE cli_scenes
+#include <boost/test/unit_test.hpp>
+
+#include <sys/wait.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+struct Output {
+  int status;
+  std::string out, err;
+};
+
+std::string temp_dir() {
+  static std::string dir = [] {
+    char tmpl[] = "/tmp/dvm_cli6_XXXXXX";
+    const char* d = mkdtemp(tmpl);
+    BOOST_REQUIRE(d);
+    return std::string(d);
+  }();
+  return dir;
+}
+
+std::string slurp(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::stringstream s;
+  s << f.rdbuf();
+  return s.str();
+}
+
+Output dvm(const std::vector<std::string>& args) {
+  std::string cmd = DVM_BINARY;
+  for (const auto& a : args) {
+    std::string q = "'";
+    for (char c : a) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    cmd += " " + q + "'";
+  }
+  const std::string err_path = temp_dir() + "/stderr.txt";
+  cmd += " 2>" + err_path;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  BOOST_REQUIRE(pipe);
+  std::string out;
+  char buf[4096];
+  std::size_t n;
+  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+  const int st = pclose(pipe);
+  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out, slurp(err_path)};
+}
+
+std::string scene(const std::string& name) { return std::string(DVM_SCENES) + "/" + name; }
+
+std::string write_scene(const std::string& name, const std::string& text) {
+  const std::string path = temp_dir() + "/" + name;
+  std::ofstream(path) << text;
+  return path;
+}
+
+double json_number(const std::string& json, const std::string& key, std::size_t from = 0) {
+  const auto pos = json.find("\"" + key + "\":", from);
+  if (pos == std::string::npos) return NAN;
+  return std::strtod(json.c_str() + pos + key.size() + 3, nullptr);
+}
+
+// max_abs_error of the named invariant in a run's JSON.
+double invariant_error(const std::string& json, const std::string& name) {
+  const auto pos = json.find("\"" + name + "\": {");
+  if (pos == std::string::npos) return NAN;
+  return json_number(json, "max_abs_error", pos);
+}
+
+std::vector<double> json_array(const std::string& json, const std::string& key) {
+  std::vector<double> out;
+  auto pos = json.find("\"" + key + "\": [");
+  if (pos == std::string::npos) return out;
+  const char* c = json.c_str() + pos + key.size() + 5;
+  while (*c && *c != ']') {
+    char* end;
+    out.push_back(std::strtod(c, &end));
+    c = end;
+    while (*c == ',' || *c == ' ') ++c;
+  }
+  return out;
+}
+
+double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
+  if (a.size() != b.size() || a.empty()) return INFINITY;
+  double d = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+  return d;
+}
+
+Output run_json(const std::string& s, std::vector<std::string> extra = {}) {
+  std::vector<std::string> args = {"run", scene(s), "--json", "--csv", temp_dir() + "/" + s + ".csv"};
+  args.insert(args.end(), extra.begin(), extra.end());
+  return dvm(args);
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(every_shipped_scene_runs_and_keeps_its_invariants) {
+  struct Case {
+    const char* scene;
+    std::vector<std::string> sets;  // shortened where the full run is long
+    double energy_bound;            // max |E - E0|
+  };
+  const std::vector<Case> cases = {
+      {"harmonic.toml", {}, 1e-13},
+      {"pendulum.toml", {}, 1e-4},
+      {"pendulum_written.toml", {}, 1e-4},
+      {"kepler.toml", {}, 1e-3},
+      {"double_pendulum.toml", {}, 5e-3},
+      {"double_pendulum_written.toml", {}, 5e-3},
+      {"henon_heiles.toml", {}, 1e-4},
+      {"fpu.toml", {"--set", "integrator.t_end=20.0"}, 1e-4},
+      {"duffing.toml", {}, 1e-3},
+      {"charged_particle.toml", {}, 1e-13},  // quadratic energy: the midpoint rule keeps it
+      {"figure_eight.toml", {"--set", "integrator.t_end=6.0"}, 1e-5},
+      {"outer_solar_system.toml", {"--set", "integrator.t_end=20000.0"}, 1e-12},
+  };
+  for (const auto& c : cases) {
+    const Output o = run_json(c.scene, c.sets);
+    BOOST_TEST_CONTEXT(c.scene << "\n" << o.out << o.err) {
+      BOOST_TEST(o.status == 0);
+      BOOST_TEST(o.out.find("\"status\": \"ok\"") != std::string::npos);
+      BOOST_TEST(o.err.empty());  // no progress when stderr is not a terminal
+      BOOST_TEST(json_number(o.out, "max_abs_energy_error") <= c.energy_bound);
+      const bool quadratic = std::string(c.scene) == "harmonic.toml" || std::string(c.scene) == "charged_particle.toml";
+      BOOST_TEST((quadratic || json_number(o.out, "max_abs_energy_error") > 0.0));
+    }
+  }
+  // momenta where a symmetry gives them: kept to round-off (discrete Noether)
+  const Output cp = run_json("charged_particle.toml");
+  BOOST_TEST(json_number(cp.out, "max_abs_angular_momentum_error") <= 1e-13);
+  BOOST_TEST(json_number(cp.out, "angular_momentum_initial") == 2.5);  // x p_y = 1 (v_y + B/2 x) = 0.5 + 2
+  const Output f8 = run_json("figure_eight.toml", {"--set", "integrator.t_end=6.0"});
+  for (const char* n : {"momentum x", "momentum y", "angular momentum z"})
+    BOOST_TEST(invariant_error(f8.out, n) <= 1e-13, n);
+  const Output os = run_json("outer_solar_system.toml", {"--set", "integrator.t_end=20000.0"});
+  for (const char* n : {"momentum x", "momentum y", "momentum z"}) BOOST_TEST(invariant_error(os.out, n) <= 1e-18, n);
+  for (const char* n : {"angular momentum x", "angular momentum y", "angular momentum z"})
+    BOOST_TEST(invariant_error(os.out, n) <= 1e-15, n);
+  // FPU: the oscillatory energy is an adiabatic invariant, O(1/omega) = 0.02, not exact
+  const Output fpu = run_json("fpu.toml", {"--set", "integrator.t_end=20.0"});
+  const double dI = invariant_error(fpu.out, "oscillatory energy (adiabatic, O(1/omega))");
+  BOOST_TEST(dI < 0.1);
+  BOOST_TEST(dI > 1e-3);
+}
+
+BOOST_AUTO_TEST_CASE(written_lagrangians_match_the_built_in_systems) {
+  const Output a = run_json("pendulum.toml");
+  const Output b = run_json("pendulum_written.toml");
+  BOOST_TEST(max_diff(json_array(a.out, "q_final"), json_array(b.out, "q_final")) <= 1e-12);
+  BOOST_TEST(max_diff(json_array(a.out, "p_final"), json_array(b.out, "p_final")) <= 1e-12);
+  // the double pendulum is chaotic: compare before round-off has been amplified
+  const Output c = run_json("double_pendulum.toml", {"--set", "integrator.t_end=10.0"});
+  const Output d = run_json("double_pendulum_written.toml", {"--set", "integrator.t_end=10.0"});
+  BOOST_TEST(max_diff(json_array(c.out, "q_final"), json_array(d.out, "q_final")) <= 1e-10);
+  BOOST_TEST(max_diff(json_array(c.out, "p_final"), json_array(d.out, "p_final")) <= 1e-10);
+  // six coordinates: the FPU chain written out against the built-in one
+  const std::string fpu = write_scene(
+      "fpu_written.toml",
+      "[system]\ncoordinates = [\"a\", \"b\", \"c\", \"d\", \"e\", \"f\"]\nparams = { w = 50.0 }\n"
+      "lagrangian = \"\"\"(a_dot^2 + b_dot^2 + c_dot^2 + d_dot^2 + e_dot^2 + f_dot^2)/2\n"
+      "  - w^2/4*((b - a)^2 + (d - c)^2 + (f - e)^2)\n"
+      "  - (a^4 + (c - b)^4 + (e - d)^4 + f^4)\"\"\"\n"
+      "[initial]\nq = [0.6929646455628166, 0.7212489168102785, 0.0, 0.0, 0.0, 0.0]\n"
+      "p = [0.0, 1.4142135623730951, 0.0, 0.0, 0.0, 0.0]\n"
+      "[integrator]\nmap = \"midpoint\"\nstep = 0.002\nsteps = 2000\n");
+  const Output fw = dvm({"run", fpu, "--json"});
+  const Output fb = run_json("fpu.toml", {"--set", "integrator.t_end=4.0"});
+  BOOST_TEST(fw.status == 0, fw.err);
+  BOOST_TEST(max_diff(json_array(fw.out, "q_final"), json_array(fb.out, "q_final")) <= 1e-12);
+  BOOST_TEST(max_diff(json_array(fw.out, "p_final"), json_array(fb.out, "p_final")) <= 1e-11);
+  // a written Lagrangian with a cyclic coordinate reports its momentum as an invariant
+  const std::string free2d = write_scene(
+      "central.toml",
+      "[system]\ncoordinates = [\"r\", \"phi\"]\n"
+      "lagrangian = \"(r_dot^2 + r^2*phi_dot^2)/2 + 1/r\"\n"
+      "[initial]\nq = [0.4, 0.0]\nv = [0.0, 5.0]\n"
+      "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = 2000\n");
+  const Output e = dvm({"run", free2d, "--json"});
+  BOOST_TEST(e.status == 0, e.err);
+  BOOST_TEST(invariant_error(e.out, "p_phi (cyclic)") <= 1e-13, e.out);
+  // polar Kepler against Cartesian Kepler: same energy
+  const Output k = run_json("kepler.toml");
+  BOOST_TEST(std::fabs(json_number(e.out, "energy_initial") - json_number(k.out, "energy_initial")) <= 1e-14);
+}
+
+BOOST_AUTO_TEST_CASE(expression_errors_point_at_line_and_column) {
+  struct Case {
+    std::string system;  // the [system] table, from line 2 on
+    std::string expect;
+  };
+  const std::string rest = "[initial]\nq = [1.0]\np = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n";
+  const std::vector<Case> cases = {
+      // line 3: lagrangian = "x_dot^2/2 - k*y^2": 'y' at column 29
+      {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2/2 - k*y^2\"\nparams = { k = 1.0 }\n",
+       ":3:29: in system.lagrangian: unknown name 'y'; known names: x, x_dot, k, pi"},
+      // multi-line string: the error is on line 5, column 9
+      {"coordinates = [\"x\"]\nlagrangian = \"\"\"\n  x_dot^2\n  - 2 * * x\"\"\"\n",
+       ":5:9: in system.lagrangian: expected a number, name or '(' after '*', got '*'"},
+      {"coordinates = [\"x\"]\nlagrangian = \"sin(x\"\n", ":3:20: in system.lagrangian: expected ',' or ')'"},
+      {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2 + atan2(x)\"\n", ":3:25: in system.lagrangian: function 'atan2' takes 2"},
+      {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2\"\nenergy = \"x_dot^2 + p_y\"\n",
+       ":4:21: in system.energy: unknown name 'p_y'; known names: x, x_dot, p_x, pi"},
+      {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2\"\nhamiltonian = \"x_dot^2\"\n",
+       ":4:16: in system.hamiltonian: unknown name 'x_dot'; known names: x, p_x, pi"},
+      {"lagrangian = \"x_dot^2\"\n", "missing key 'system.coordinates'"},
+      {"coordinates = [\"x\", \"x\"]\nlagrangian = \"x_dot^2\"\n", "used twice"},
+      {"coordinates = [\"x\"]\nbuiltin = \"harmonic\"\nlagrangian = \"x_dot^2\"\n", "not both"},
+      {"coordinates = [\"a\", \"b\", \"c\", \"d\", \"e\", \"f\", \"g\"]\nlagrangian = \"a_dot^2\"\n", "at most 6"},
+      // degenerate: L = x x_dot has a zero velocity Hessian
+      {"coordinates = [\"x\"]\nlagrangian = \"x*x_dot + x^2\"\n",
+       "the Lagrangian is degenerate at the initial state: the velocity Hessian d2L/dv2 is singular"},
+      // degenerate only where x = 1 (the initial state): x_dot^2 (x - 1)^2
+      {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2*(x - 1)^2 - x^2\"\n", "degenerate at the initial state"},
+      // a Hamiltonian with the wrong sign of the potential disagrees with L
+      {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2/2 - x^2/2\"\nhamiltonian = \"p_x^2/2 - x^2/2\"\n",
+       "system.hamiltonian does not match the Legendre transform"},
+  };
+  int i = 0;
+  for (const auto& c : cases) {
+    const std::string path = write_scene("expr" + std::to_string(i++) + ".toml", "[system]\n" + c.system + rest);
+    const Output o = dvm({"run", path});
+    BOOST_TEST_CONTEXT(c.system << " -> " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find(c.expect) != std::string::npos);
+    }
+  }
+  // a consistent Hamiltonian and a written energy are accepted and the energy monitored
+  const std::string ok = write_scene("ok.toml", "[system]\ncoordinates = [\"x\"]\nlagrangian = \"x_dot^2/2 - x^2/2\"\n"
+                                                "hamiltonian = \"p_x^2/2 + x^2/2\"\nenergy = \"3*(x_dot^2 + x^2)\"\n" + rest);
+  const Output o = dvm({"run", ok, "--json"});
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(json_number(o.out, "energy_initial") == 3.0);  // the written energy, not E_L = 1/2
+}
+
+BOOST_AUTO_TEST_CASE(npy_output_holds_the_csv_rows) {
+  const std::string npy = temp_dir() + "/k.npy";
+  const Output o = dvm({"run", scene("kepler.toml"), "--json", "--npy", npy, "--set", "output.every=100"});
+  BOOST_TEST(o.status == 0, o.err);
+  const std::string bytes = slurp(npy);
+  BOOST_REQUIRE(bytes.size() > 10);
+  BOOST_TEST(bytes.compare(0, 6, "\x93NUMPY") == 0);
+  BOOST_TEST(bytes[6] == 1);
+  const std::size_t hlen = static_cast<unsigned char>(bytes[8]) + 256u * static_cast<unsigned char>(bytes[9]);
+  BOOST_TEST((10 + hlen) % 16 == 0u);
+  const std::string header = bytes.substr(10, hlen);
+  BOOST_TEST(header.find("'descr': '<f8'") != std::string::npos);
+  BOOST_TEST(header.back() == '\n');
+  long long rows = 0;
+  int cols = 0;
+  BOOST_REQUIRE(std::sscanf(header.c_str() + header.find("'shape': (") + 10, "%lld, %d", &rows, &cols) == 2);
+  BOOST_TEST(rows == 201);  // t = 0 and every 100th of 20000 steps
+  BOOST_TEST(cols == 6);
+  BOOST_TEST(bytes.size() == 10 + hlen + static_cast<std::size_t>(rows * cols) * 8);
+  std::vector<double> last(6);
+  std::memcpy(last.data(), bytes.data() + bytes.size() - 48, 48);
+  BOOST_TEST(last[0] == 100.0);
+  BOOST_TEST(max_diff({last[1], last[2]}, json_array(o.out, "q_final")) == 0.0);
+  BOOST_TEST(max_diff({last[3], last[4]}, json_array(o.out, "p_final")) == 0.0);
+}
+
+BOOST_AUTO_TEST_CASE(systems_methods_converge_and_help) {
+  const Output s = dvm({"systems", "--json"});
+  BOOST_TEST(s.status == 0);
+  for (const char* n : {"harmonic", "pendulum", "kepler", "double-pendulum", "henon-heiles", "fpu", "duffing",
+                        "charged-particle", "nbody"})
+    BOOST_TEST(s.out.find(std::string("\"name\": \"") + n + "\"") != std::string::npos, n);
+  BOOST_TEST(json_number(s.out, "omega", s.out.find("\"fpu\"")) == 50.0);
+  BOOST_TEST(dvm({"systems"}).out.find("stiff spring frequency") != std::string::npos);
+  BOOST_TEST(dvm({"methods"}).status == 0);
+  // converge against exact solutions: second order for the midpoint map, first for theta 0.3
+  const Output c = dvm({"converge", scene("charged_particle.toml"), "--steps-list", "50,100,200,400", "--t-end", "1",
+                        "--json"});
+  BOOST_TEST(c.status == 0, c.err);
+  BOOST_TEST(c.out.find("\"reference\": \"exact solution\"") != std::string::npos);
+  BOOST_TEST(json_number(c.out, "fitted_order") == 2.0, boost::test_tools::tolerance(0.05));
+  const Output d = dvm({"converge", scene("duffing.toml"), "--steps-list", "100,200,400,800", "--t-end", "1",
+                        "--set", "integrator.map=theta", "--set", "integrator.theta=0.3", "--json"});
+  BOOST_TEST(d.status == 0, d.err);
+  BOOST_TEST(json_number(d.out, "fitted_order") == 1.0, boost::test_tools::tolerance(0.1));
+  // without an exact solution: a Runge-Kutta reference
+  const Output h = dvm({"converge", scene("henon_heiles.toml"), "--steps-list", "20,40,80,160", "--t-end", "2",
+                        "--json"});
+  BOOST_TEST(h.status == 0, h.err);
+  BOOST_TEST(h.out.find("RK4") != std::string::npos);
+  BOOST_TEST(json_number(h.out, "fitted_order") == 2.0, boost::test_tools::tolerance(0.05));
+  BOOST_TEST(dvm({"converge", scene("duffing.toml"), "--steps-list", "100"}).status == 2);
+  BOOST_TEST(dvm({"converge"}).status == 2);
+  for (const char* cmd : {"run", "maps", "methods", "systems", "check-map", "converge"}) {
+    const Output o = dvm({cmd, "--help"});
+    BOOST_TEST(o.status == 0, cmd);
+    BOOST_TEST(o.out.find("example") != std::string::npos, cmd);
+  }
+  const Output top = dvm({"--help"});
+  for (const char* cmd : {"run", "maps", "methods", "systems", "check-map", "converge"})
+    BOOST_TEST(top.out.find(std::string("  ") + cmd) != std::string::npos, cmd);
+}
+
+// Progress appears on a terminal (a pseudo-terminal made by script(1), when present)
+// and not with --quiet; without a terminal stderr stays empty (tested above).
+BOOST_AUTO_TEST_CASE(progress_on_a_terminal_only) {
+  if (!std::ifstream("/usr/bin/script").good()) {
+    BOOST_TEST_MESSAGE("script(1) not available: progress on a terminal not tested");
+    return;
+  }
+  auto on_terminal = [](const std::string& extra) {
+    const std::string cmd = std::string("/usr/bin/script -qec \"") + DVM_BINARY + " run " + scene("outer_solar_system.toml") +
+                            " --set integrator.t_end=100000.0 " + extra + " > /dev/null\" /dev/null";
+    FILE* pipe = popen(cmd.c_str(), "r");
+    std::string out;
+    char buf[4096];
+    std::size_t n;
+    while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
+    pclose(pipe);
+    return out;
+  };
+  const std::string shown = on_terminal("");
+  BOOST_TEST(shown.find("steps/s") != std::string::npos, shown);
+  BOOST_TEST(shown.find("/10000  t = ") != std::string::npos, shown);
+  BOOST_TEST(shown.find("left") != std::string::npos, shown);
+  BOOST_TEST(on_terminal("--quiet").find("steps/s") == std::string::npos);
+}
