@@ -110,4 +110,17 @@ struct WrittenLagrangian {
   bool cyclic(int i) const { return !system->lagrangian.uses(0, i); }
 };
 
+// The Hamiltonian written in a scene, H(q, p), for the Hamiltonian form (Eq. 5.1):
+// evaluated for any scalar like the written Lagrangian.
+template <int N>
+struct WrittenHamiltonian {
+  static constexpr int dim = N;
+  std::shared_ptr<const WrittenSystem> system;
+  std::string name() const { return system->name.empty() ? "hamiltonian" : system->name; }
+  template <class T>
+  T operator()(const Vec<T, N>& q, const Vec<T, N>& p) const {
+    return system->hamiltonian(q.data(), static_cast<const T*>(nullptr), p.data());
+  }
+};
+
 }  // namespace dvm

@@ -19,8 +19,10 @@
 #include <memory>
 
 #include "examples/dvm/json.h"
+#include "examples/dvm/report.h"
 #include "mechanics/chain.h"
 #include "mechanics/hamiltonian.h"
+#include "mechanics/written_lagrangian.h"
 #include "mechanics/systems.h"
 #include "solvers/boundary_value.h"
 #include "solvers/chain_step.h"
@@ -32,12 +34,6 @@ namespace dvm::cli {
 
 namespace {
 
-struct FileCloser {
-  void operator()(std::FILE* f) const {
-    if (f) std::fclose(f);
-  }
-};
-using File = std::unique_ptr<std::FILE, FileCloser>;
 
 template <int N>
 Vec<double, N> to_vec(const std::vector<double>& x) {
@@ -133,16 +129,7 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
       j.num(invariant_name + "_initial", J0).num("max_abs_" + invariant_name + "_error", max_J_error);
     j.str("form", s.form);
     if (s.form == "newmark") j.num("gamma", s.newmark_gamma).num("beta", s.newmark_beta);
-    if (run.failed) {
-      Json::Object f;
-      f.num("step", static_cast<double>(run.failed_step))
-          .num("time", run.failed_time)
-          .num("residual", run.failure.residual)
-          .num("scale", run.failure.scale)
-          .num("iterations", run.failure.iterations)
-          .str("message", run.failure.message);
-      j.raw("failure", f.dump(4));
-    }
+    if (run.failed) j.raw("failure", failure_json(run));
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
     std::printf("%s with %s, %s form (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), method.c_str(),
@@ -155,16 +142,16 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
     if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
   }
   if (run.failed) {
-    std::fprintf(stderr,
-                 "dvm: step %lld (t = %.17g -> %.17g) did not converge: residual %.3e against scale %.3e after %d "
-                 "iterations (%s); stopped, output holds the %lld converged steps\n",
-                 static_cast<long long>(run.failed_step), run.failed_time, run.failed_time + s.step,
-                 run.failure.residual, run.failure.scale, run.failure.iterations, run.failure.message.c_str(),
-                 static_cast<long long>(run.steps_done));
+    print_failure(run, s.step);
     return 3;
   }
   return 0;
 }
+
+template <class S>
+struct is_written : std::false_type {};
+template <int N>
+struct is_written<WrittenLagrangian<N>> : std::true_type {};
 
 template <class System>
 int run_form_with_system(const Scene& s, const System& L, const RunOptions& o) {
@@ -192,19 +179,41 @@ int run_form_with_system(const Scene& s, const System& L, const RunOptions& o) {
   auto with_map = [&](const auto& R) -> int {
     using Map = std::decay_t<decltype(R)>;
     if (s.form == "hamiltonian") {
-      using H = LegendreHamiltonian<System>;
-      const HamiltonianStep<H, Map> step(H(L), R, s.step, opt);
+      if constexpr (is_written<System>::value) {
+        // The scene's own H. (H from a written L by the Legendre transform would need
+        // a third level of nested Jets, which Ceres' functions do not support.)
+        if (!L.has_hamiltonian())
+          throw InputError(s.path + ": key 'integrator.form': form = \"hamiltonian\" with a written Lagrangian "
+                                    "needs system.hamiltonian = \"...\" (H in the coordinates and p_<name>)");
+        using H = WrittenHamiltonian<N>;
+        const HamiltonianStep<H, Map> step(H{s.written}, R, s.step, opt);
+        return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
+      } else {
+        using H = LegendreHamiltonian<System>;
+        const HamiltonianStep<H, Map> step(H(L), R, s.step, opt);
+        return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
+      }
+    }
+    if constexpr (is_written<System>::value) {
+      throw InputError(s.path + ": key 'integrator.form': a written Lagrangian runs the lagrangian and hamiltonian "
+                                "forms, got \"" + s.form + "\"");
+    } else {
+      const auto lift = tangent_lift(R);
+      using Step = SodeStep<System, std::decay_t<decltype(lift)>>;
+      const VelocityFormStep<Step> step(
+          Step(L, lift, s.step, s.form == "sode1" ? SodeForm::sode1 : SodeForm::sode2, opt));
       return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
     }
-    const auto lift = tangent_lift(R);
-    using Step = SodeStep<System, std::decay_t<decltype(lift)>>;
-    const VelocityFormStep<Step> step(Step(L, lift, s.step, s.form == "sode1" ? SodeForm::sode1 : SodeForm::sode2, opt));
-    return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
   };
   if (s.form == "newmark") {
-    const VelocityFormStep<NewmarkStep<System>> step(
-        NewmarkStep<System>(L, s.step, s.newmark_gamma, s.newmark_beta, opt));
-    return run_stepper<N>(s, step, "newmark", q, p, v0, energy_at, inv_name, invariant, o);
+    if constexpr (is_written<System>::value) {
+      throw InputError(s.path + ": key 'integrator.form': a written Lagrangian runs the lagrangian and hamiltonian "
+                                "forms, got \"newmark\"");
+    } else {
+      const VelocityFormStep<NewmarkStep<System>> step(
+          NewmarkStep<System>(L, s.step, s.newmark_gamma, s.newmark_beta, opt));
+      return run_stepper<N>(s, step, "newmark", q, p, v0, energy_at, inv_name, invariant, o);
+    }
   }
   if (s.map == "retraction-theta") return with_map(RetractionMap<EuclideanRetraction>({}, s.theta));
   if (s.map == "explicit-euler") return with_map(ThetaMap::explicit_euler());
@@ -303,6 +312,16 @@ int run_form(const Scene& s, const RunOptions& o) {
   if (s.system == "harmonic") return run_form_with_system(s, HarmonicOscillator(P.at("omega")), o);
   if (s.system == "pendulum") return run_form_with_system(s, Pendulum(P.at("m"), P.at("l"), P.at("g")), o);
   if (s.system == "kepler") return run_form_with_system(s, Kepler(P.at("mu")), o);
+  if (s.system == "lagrangian") {
+    switch (s.dim) {
+      case 1: return run_form_with_system(s, WrittenLagrangian<1>(s.written), o);
+      case 2: return run_form_with_system(s, WrittenLagrangian<2>(s.written), o);
+      case 3: return run_form_with_system(s, WrittenLagrangian<3>(s.written), o);
+      case 4: return run_form_with_system(s, WrittenLagrangian<4>(s.written), o);
+      case 5: return run_form_with_system(s, WrittenLagrangian<5>(s.written), o);
+      default: return run_form_with_system(s, WrittenLagrangian<6>(s.written), o);
+    }
+  }
   throw InputError(s.path + ": system \"" + s.system + "\" has no runner for form \"" + s.form + "\"");
 }
 

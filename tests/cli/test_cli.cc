@@ -3,6 +3,8 @@
 #define BOOST_TEST_MODULE cli
 #include <boost/test/unit_test.hpp>
 
+#include "tests/cli/cli_harness.h"
+
 #include <sys/wait.h>
 
 #include <cmath>
@@ -14,64 +16,7 @@
 
 namespace {
 
-struct Output {
-  int status;
-  std::string out, err;
-};
-
-std::string temp_dir() {
-  static std::string dir = [] {
-    char tmpl[] = "/tmp/dvm_cli_XXXXXX";
-    const char* d = mkdtemp(tmpl);
-    BOOST_REQUIRE(d);
-    return std::string(d);
-  }();
-  return dir;
-}
-
-std::string slurp(const std::string& path) {
-  std::ifstream f(path);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
-
-// Runs dvm with the arguments (each single-quoted for the shell).
-Output dvm(const std::vector<std::string>& args) {
-  std::string cmd = DVM_BINARY;
-  for (const auto& a : args) {
-    std::string q = "'";
-    for (char c : a) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
-    cmd += " " + q + "'";
-  }
-  const std::string err_path = temp_dir() + "/stderr.txt";
-  cmd += " 2>" + err_path;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  BOOST_REQUIRE(pipe);
-  std::string out;
-  char buf[4096];
-  std::size_t n;
-  while ((n = fread(buf, 1, sizeof buf, pipe)) > 0) out.append(buf, n);
-  const int st = pclose(pipe);
-  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out, slurp(err_path)};
-}
-
-std::string scene(const std::string& name) { return std::string(DVM_SCENES) + "/" + name; }
-
-std::string write_scene(const std::string& name, const std::string& text) {
-  const std::string path = temp_dir() + "/" + name;
-  std::ofstream(path) << text;
-  return path;
-}
-
-// The number after "key": in a JSON text (NaN if absent).
-double json_number(const std::string& json, const std::string& key) {
-  const auto pos = json.find("\"" + key + "\":");
-  if (pos == std::string::npos) return NAN;
-  return std::strtod(json.c_str() + pos + key.size() + 3, nullptr);
-}
-
-bool file_exists(const std::string& path) { return std::ifstream(path).good(); }
+using namespace cli_test;
 
 const char* kGood =
     "[system]\nbuiltin = \"harmonic\"\nparams = { omega = 2.0 }\n"
