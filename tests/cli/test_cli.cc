@@ -101,7 +101,6 @@ BOOST_AUTO_TEST_CASE(bad_input_exits_2_names_the_key_and_writes_nothing) {
       {"initial.p=[inf]", "finite"},
       {"integrator.step=0.0", "integrator.step"},
       {"integrator.step=-0.1", "positive"},
-      {"integrator.map=\"theta\"", ""},  // valid on its own: checked below with theta
       {"system.params.omega=-1.0", "omega"},
       {"system.params.mass=1.0", "unknown parameter"},
       {"integrator.stepz=1", "unknown key"},
