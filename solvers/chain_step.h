@@ -81,15 +81,7 @@ class ChainStep {
         s.message = "non-finite residual";
         return s;
       }
-      if (s.residual <= options_.residual_tolerance * s.scale) {
-        s.converged = true;
-        break;
-      }
-      if (dxn <= options_.stall_tolerance * (max_abs(dq) + max_abs(q0))) {
-        s.converged = s.residual <= options_.accept_tolerance * s.scale;
-        if (!s.converged) s.message = "Newton stalled above the residual tolerance";
-        break;
-      }
+      if (newton_verdict(s, dxn, max_abs(dq) + max_abs(q0), options_) != NewtonVerdict::iterate) break;
       // Solve (-J) delta = r with -J = (m/h) I + b Hess V(x), then dq += delta.
       chain_.hessian(x_, diag_, off_);
       if (!solve_tridiagonal(m / h_, b)) {

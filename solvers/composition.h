@@ -221,15 +221,7 @@ class ComposedLagrangianStep {
         s.message = "non-finite residual";
         return s;
       }
-      if (s.residual <= options_.residual_tolerance * s.scale) {
-        s.converged = true;
-        break;
-      }
-      if (prev_step <= options_.stall_tolerance * (max_abs(q0) + max_abs(dq))) {
-        s.converged = s.residual <= options_.accept_tolerance * s.scale;
-        if (!s.converged) s.message = "Newton stalled above the residual tolerance";
-        break;
-      }
+      if (newton_verdict(s, prev_step, max_abs(q0) + max_abs(dq), options_) != NewtonVerdict::iterate) break;
       if (it == options_.max_iterations) {
         s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
         return s;

@@ -57,6 +57,43 @@ struct StepSummary {
   std::string message;    // why a solve failed
 };
 
+// The stopping rule shared by every Newton loop of dvm, judged after an evaluation
+// that filled s.residual and s.scale; dxn is the size of the last update and x_size
+// the size it is compared with. `converged` also when the updates have stalled at a
+// residual below accept_tolerance; `failed` (with a message) when they stalled above.
+enum class NewtonVerdict { iterate, converged, failed };
+
+inline NewtonVerdict newton_verdict(StepSummary& s, double dxn, double x_size, const StepOptions& opt) {
+  const bool small = s.residual <= opt.residual_tolerance * s.scale;
+  const bool stalled = dxn <= opt.stall_tolerance * x_size;
+  if (!small && !stalled) return NewtonVerdict::iterate;
+  s.converged = small || s.residual <= opt.accept_tolerance * s.scale;
+  if (s.converged) return NewtonVerdict::converged;
+  s.message = "Newton stalled above the residual tolerance";
+  return NewtonVerdict::failed;
+}
+
+// dx with J dx = r; false if J is singular to working precision.
+template <int N>
+bool newton_update(const Mat<double, N, N>& J, const Vec<double, N>& r, Vec<double, N>& dx) {
+  if constexpr (N <= 4) {
+    bool invertible = false;
+    Mat<double, N, N> Jinv;
+    double det = 0.0;
+    J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
+    if (!invertible || !std::isfinite(det)) return false;
+    dx = Jinv * r;
+    return true;
+  } else {
+    try {
+      dx = solve_dense<double, N, N>(J, r);
+      return true;
+    } catch (const std::domain_error&) {
+      return false;
+    }
+  }
+}
+
 // Newton's method from x (updated in place). `scale_of(x, J)` gives the scale of
 // the residual terms at x; x0 is the size of the point x is an increment of.
 template <int N, class F, class Scale>
@@ -64,7 +101,7 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
   using D = ceres::Jet<double, N>;
   StepSummary s;
   Vec<D, N> xd, rd;
-  Vec<double, N> r;
+  Vec<double, N> r, dx;
   Mat<double, N, N> J;
   double dxn = INFINITY;
   for (int it = 0; it < opt.max_iterations; ++it) {
@@ -81,51 +118,20 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       s.message = "non-finite residual or Jacobian";
       return s;
     }
-    const bool small = s.residual <= opt.residual_tolerance * s.scale;
-    const bool stalled = dxn <= opt.stall_tolerance * (max_abs(x) + x0);
-    if (small || stalled) {
-      s.converged = small || s.residual <= opt.accept_tolerance * s.scale;
-      if (!s.converged) {
-        s.message = "Newton stalled above the residual tolerance";
-        return s;
-      }
+    const NewtonVerdict verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt);
+    if (verdict == NewtonVerdict::failed) return s;
+    if (verdict == NewtonVerdict::converged) {
       // Apply the Newton correction already paid for: it takes the residual from
       // the tolerance (or the stall level) down to round-off. Without it the
       // accepted residuals, all of one sign when the starting guess errs smoothly,
       // would add up over many steps and show as a drift of conserved quantities.
       // The reported residual is the one measured before this last correction.
-      if constexpr (N <= 4) {
-        bool invertible = false;
-        Mat<double, N, N> Jinv;
-        double det = 0.0;
-        J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
-        if (invertible && std::isfinite(det)) x -= Jinv * r;
-      } else {
-        try {
-          x -= solve_dense<double, N, N>(J, r);
-        } catch (const std::domain_error&) {
-        }
-      }
+      if (newton_update<N>(J, r, dx)) x -= dx;
       return s;
     }
-    Vec<double, N> dx;
-    if constexpr (N <= 4) {
-      bool invertible = false;
-      Mat<double, N, N> Jinv;
-      double det = 0.0;
-      J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
-      if (!invertible || !std::isfinite(det)) {
-        s.message = "singular step Jacobian";
-        return s;
-      }
-      dx = Jinv * r;
-    } else {
-      try {
-        dx = solve_dense<double, N, N>(J, r);
-      } catch (const std::domain_error&) {
-        s.message = "singular step Jacobian";
-        return s;
-      }
+    if (!newton_update<N>(J, r, dx)) {
+      s.message = "singular step Jacobian";
+      return s;
     }
     x -= dx;
     dxn = max_abs(dx);

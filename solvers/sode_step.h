@@ -65,6 +65,44 @@ Vec<T, S::dim> lagrangian_acceleration(const S& L, const Vec<T, S::dim>& q, cons
   return solve_dense<T, N, N>(W, rhs);
 }
 
+// The step equations of a (q, v) step as a functor of the increment dY, for the
+// solvers: step.residual(Y0, dY) = 0.
+template <class Step, int K>
+struct IncrementResidual {
+  const Step* step;
+  Vec<double, K> Y0;
+  template <class T>
+  bool operator()(const T* x, T* r) const {
+    Vec<T, K> dY;
+    for (int i = 0; i < K; ++i) dY[i] = x[i];
+    const Vec<T, K> F = step->residual(constants<T>(Y0), dY);
+    for (int i = 0; i < K; ++i) r[i] = F[i];
+    return true;
+  }
+};
+
+// Solves step.residual(Y0, dY) = 0 for dY = (dq, dv), which carry the guess in and the
+// increments out; the residual is judged against s0 + |J| |dY|.
+template <int N, class Step>
+StepSummary solve_increments(const Step& step, const Vec<double, 2 * N>& Y0, double s0, const StepOptions& options,
+                             Vec<double, N>& dq, Vec<double, N>& dv) {
+  IncrementResidual<Step, 2 * N> f{&step, Y0};
+  auto scale_of = [s0](const Vec<double, 2 * N>& x, const Mat<double, 2 * N, 2 * N>& J) {
+    return s0 + max_abs(J) * max_abs(x);
+  };
+  Vec<double, 2 * N> x = stack(dq, dv);
+  StepSummary s;
+  try {
+    s = solve_step_system<2 * N>(f, x, max_abs(Y0), options, scale_of);
+  } catch (const std::domain_error& e) {
+    s.converged = false;
+    s.message = e.what();
+  }
+  dq = x.template head<N>();
+  dv = x.template tail<N>();
+  return s;
+}
+
 enum class SodeForm { sode1, sode2 };
 inline const char* to_string(SodeForm f) { return f == SodeForm::sode1 ? "sode1" : "sode2"; }
 
@@ -99,36 +137,10 @@ class SodeStep {
     return t.v - (0.5 * h_) * (gamma(Y0) + gamma(Y1));
   }
 
-  struct Residual {
-    const SodeStep* step;
-    V2 Y0;
-    template <class T>
-    bool operator()(const T* x, T* r) const {
-      Vec<T, 2 * N> dY;
-      for (int i = 0; i < 2 * N; ++i) dY[i] = x[i];
-      const Vec<T, 2 * N> F = step->residual(constants<T>(Y0), dY);
-      for (int i = 0; i < 2 * N; ++i) r[i] = F[i];
-      return true;
-    }
-  };
-
   // One step in (q, v); (dq, dv) carry the guess in and the increments out.
   StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const {
     const V2 Y0 = stack(q0, v0);
-    Residual f{this, Y0};
-    const double s0 = h_ * max_abs(gamma(Y0));
-    auto scale_of = [s0](const V2& x, const Mat<double, 2 * N, 2 * N>& J) { return s0 + max_abs(J) * max_abs(x); };
-    V2 x = stack(dq, dv);
-    StepSummary s;
-    try {
-      s = solve_step_system<2 * N>(f, x, max_abs(Y0), options_, scale_of);
-    } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
-    }
-    dq = x.template head<N>();
-    dv = x.template tail<N>();
-    return s;
+    return solve_increments<N>(*this, Y0, h_ * max_abs(gamma(Y0)), options_, dq, dv);
   }
 
  private:
@@ -171,35 +183,10 @@ class NewmarkStep {
     return dY - stack(Wq, Wv);
   }
 
-  struct Residual {
-    const NewmarkStep* step;
-    V2 Y0;
-    template <class T>
-    bool operator()(const T* x, T* r) const {
-      Vec<T, 2 * N> dY;
-      for (int i = 0; i < 2 * N; ++i) dY[i] = x[i];
-      const Vec<T, 2 * N> F = step->residual(constants<T>(Y0), dY);
-      for (int i = 0; i < 2 * N; ++i) r[i] = F[i];
-      return true;
-    }
-  };
-
   StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const {
     const V2 Y0 = stack(q0, v0);
-    Residual f{this, Y0};
     const double s0 = h_ * std::fmax(max_abs(v0), max_abs(lagrangian_acceleration(L_, q0, v0)));
-    auto scale_of = [s0](const V2& x, const Mat<double, 2 * N, 2 * N>& J) { return s0 + max_abs(J) * max_abs(x); };
-    V2 x = stack(dq, dv);
-    StepSummary s;
-    try {
-      s = solve_step_system<2 * N>(f, x, max_abs(Y0), options_, scale_of);
-    } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
-    }
-    dq = x.template head<N>();
-    dv = x.template tail<N>();
-    return s;
+    return solve_increments<N>(*this, Y0, s0, options_, dq, dv);
   }
 
  private:
