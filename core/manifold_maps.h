@@ -58,12 +58,6 @@ inline void check_theta(double theta) {
   if (!(theta >= 0.0 && theta <= 1.0))
     throw std::invalid_argument("theta must lie in [0, 1], got " + std::to_string(theta));
 }
-template <class P>
-P scaled(const P& x, double s) {
-  P out = x;
-  for (int i = 0; i < out.size(); ++i) out(i) = s * x(i);
-  return out;
-}
 }  // namespace detail
 
 template <class Map>

@@ -151,11 +151,6 @@ struct Sphere {
     for (int i = 0; i < 3; ++i) v[i] = B(i, 0) * nu[0] + B(i, 1) * nu[1];
     return v;
   }
-  // The stored tangent vector of a curve through x with ambient derivative dx.
-  template <class T>
-  static Vec<T, 3> tangent_from_derivative(const Vec<T, 3>&, const Vec<T, 3>& dx) {
-    return dx;
-  }
   template <class T>
   static Vec<T, 2> tangent_coordinates(const Vec<double, 3>& x, const Vec<T, 3>& v) {
     const Mat<double, 3, 2> B = basis(x);
@@ -320,12 +315,6 @@ struct SO3 {
   static Vec<T, 3> tangent_coordinates(const Mat<double, 3, 3>&, const Vec<T, 3>& v) {
     return v;
   }
-  // Body angular velocity of a curve through R with ambient derivative dR: vee(R^T dR).
-  template <class T>
-  static Vec<T, 3> tangent_from_derivative(const Mat<T, 3, 3>& R, const Mat<T, 3, 3>& dR) {
-    const Mat<T, 3, 3> W = transpose_mul(R, dR);
-    return Vec<T, 3>(0.5 * (W(2, 1) - W(1, 2)), 0.5 * (W(0, 2) - W(2, 0)), 0.5 * (W(1, 0) - W(0, 1)));
-  }
   template <class T>
   static Mat<T, 3, 3> chart(const Mat<double, 3, 3>& c, const Vec<T, 3>& eta) {
     return mul(constants3<T>(c), exp(eta));
@@ -460,10 +449,6 @@ struct SpherePower {
     Vec<T, 2 * K> nu;
     for (int i = 0; i < K; ++i) put<T, 2 * K>(nu, i, Sphere::tangent_coordinates(block(x, i), block(v, i)));
     return nu;
-  }
-  template <class T>
-  static Vec<T, 3 * K> tangent_from_derivative(const Vec<T, 3 * K>&, const Vec<T, 3 * K>& dx) {
-    return dx;
   }
   template <class T>
   static Vec<T, 3 * K> chart(const Vec<double, 3 * K>& c, const Vec<T, 2 * K>& eta) {

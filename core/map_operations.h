@@ -42,7 +42,6 @@
 namespace dvm {
 
 constexpr int twice(int n) { return n == Eigen::Dynamic ? Eigen::Dynamic : 2 * n; }
-constexpr int half(int n) { return n == Eigen::Dynamic ? Eigen::Dynamic : n / 2; }
 
 // (a, b) stacked into one vector of twice the size.
 template <class T, int N>

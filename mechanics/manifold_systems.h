@@ -217,15 +217,6 @@ class ManifoldDiscreteLagrangian {
     for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
     return evaluate_relative(a, r).v;
   }
-  // The same from the stored points alone.
-  template <class T>
-  Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1) const {
-    return D1_local(q0, q1, M::relative(q0, q1));
-  }
-  Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1) const {
-    return D2_local(q0, q1, M::relative(q0, q1));
-  }
-
  private:
   System L_;
   Map R_;
