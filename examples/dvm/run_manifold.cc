@@ -3,10 +3,10 @@
 //   S^2    CSV  t, x, y, z, p0, p1, p2, energy, J3           (J3 = (x cross p)_3)
 //   SO(3)  CSV  t, qw, qx, qy, qz, pi0, pi1, pi2, energy, m0, m1, m2
 //               (unit quaternion of R, body momentum, spatial angular momentum R pi)
-// and the same JSON fields as on R^n (with `composition`: the map's steps composed by
-// any table of solvers/composition_methods.h), (q_final is the unit vector or the quaternion,
+// and the same JSON fields as on R^n (q_final is the unit vector or the quaternion,
 // p_final the momentum as stored), plus the largest distance from the manifold and the
-// error of the conserved momentum.
+// error of the conserved momentum. With `composition` the map's steps are composed by
+// any table of solvers/composition_methods.h.
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -171,7 +171,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
     std::printf("%s on %s with %s%s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), M::name,
-                R.name().c_str(), s.composition == "none" ? "" : (", composition " + s.composition).c_str(), s.step, static_cast<long long>(run.steps_done), t_final, wall);
+                R.name().c_str(), s.composition == "none" ? "" : (", composition " + s.composition).c_str(), s.step,
+                static_cast<long long>(run.steps_done), t_final, wall);
     std::printf("  energy %.15g -> %.15g, max |E - E0| = %.3e\n", E0, E, max_energy_error);
     std::printf("  %s: max error %.3e;  largest distance from %s %.1e\n", momentum_name, max_momentum_error, M::name,
                 max_defect);

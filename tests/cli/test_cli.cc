@@ -633,7 +633,7 @@ namespace {
 
 // q_final (all components) of a `dvm run --json`.
 std::vector<double> final_q(const std::string& path, const std::vector<std::string>& sets) {
-  std::vector<std::string> args = {"run", path, "--json"};
+  std::vector<std::string> args = {"run", path, "--json", "--csv", temp_dir() + "/final_q.csv"};
   for (const auto& x : sets) {
     args.push_back("--set");
     args.push_back(x);
@@ -714,7 +714,8 @@ BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
                         "integrator.composition=suzuki5"});
   BOOST_TEST(j.out.find("\"composition\": \"suzuki5\"") != std::string::npos, j.out);
   BOOST_TEST(j.out.find("\"form\": \"newmark\"") != std::string::npos, j.out);
-  const Output t = dvm({"run", pend, "--set", "integrator.form=hamiltonian", "--set", "integrator.composition=suzuki5"});
+  const Output t =
+      dvm({"run", pend, "--set", "integrator.form=hamiltonian", "--set", "integrator.composition=suzuki5"});
   BOOST_TEST(t.out.find("composition suzuki5") != std::string::npos, t.out);
 
   // S^2: the spherical pendulum, sphere-exp and its fixed-point form (which enters
@@ -727,8 +728,9 @@ BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
     BOOST_TEST_MESSAGE(map << ", triple-jump on S^2: order " << o);
     BOOST_TEST(std::fabs(o - 4.0) <= 0.3, map << ": " << o);
   }
-  const Output s2 = dvm({"run", sp, "--json", "--set", "integrator.composition=kahan-li6", "--set",
-                         "integrator.step=0.05", "--set", "integrator.t_end=20.0"});
+  const Output s2 = dvm({"run", sp, "--json", "--csv", temp_dir() + "/s2.csv", "--set",
+                         "integrator.composition=kahan-li6", "--set", "integrator.step=0.05", "--set",
+                         "integrator.t_end=20.0"});
   BOOST_TEST(s2.status == 0, s2.err);
   BOOST_TEST(s2.out.find("\"composition\": \"kahan-li6\"") != std::string::npos, s2.out);
   BOOST_TEST(json_number(s2.out, "max_abs_vertical_angular_momentum_error") <= 1e-13, s2.out);
