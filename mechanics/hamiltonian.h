@@ -59,24 +59,32 @@ void hamiltonian_vector_field(const H& ham, const Vec<T, H::dim>& q, const Vec<T
 
 // Reciprocal condition number (in the max norm) of the velocity Hessian at (q, v):
 // 0 for a singular Hessian, 1 for a multiple of the identity.
-template <class S>
-double velocity_hessian_rcond(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
-  constexpr int N = S::dim;
-  const Mat<double, N, N> W = velocity_hessian(L, q, v);
+// Winv is W^{-1} as computed by the caller (an exactly singular W gives an infinite
+// or NaN inverse, hence 0).
+template <int N>
+double velocity_hessian_rcond(const Mat<double, N, N>& W, const Mat<double, N, N>& Winv) {
   const double norm = W.cwiseAbs().rowwise().sum().maxCoeff();
   if (!(norm > 0.0) || !std::isfinite(norm)) return 0.0;
-  // An exactly singular W gives an infinite or NaN inverse, hence 0 below.
-  const Mat<double, N, N> Winv = W.partialPivLu().inverse();
   const double rc = 1.0 / (norm * Winv.cwiseAbs().rowwise().sum().maxCoeff());
   return std::isfinite(rc) ? rc : 0.0;
+}
+template <int N>
+double velocity_hessian_rcond(const Mat<double, N, N>& W) {
+  return velocity_hessian_rcond<N>(W, Mat<double, N, N>(W.partialPivLu().inverse()));
+}
+template <class S>
+double velocity_hessian_rcond(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
+  return velocity_hessian_rcond<S::dim>(velocity_hessian(L, q, v));
 }
 
 // Throws DegenerateLagrangianError, naming the point, when d2L/dv2 is singular (to
 // working precision, reciprocal condition below `rcond_floor`) at (q, v).
+// W is d2L/dv2 at (q, v), when the caller has it already.
 template <class S>
 void require_regular(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v,
+                     const Mat<double, S::dim, S::dim>& W, const Mat<double, S::dim, S::dim>& Winv,
                      double rcond_floor = 1e-12) {
-  const double rc = velocity_hessian_rcond(L, q, v);
+  const double rc = velocity_hessian_rcond<S::dim>(W, Winv);
   if (!(rc > rcond_floor)) {
     std::ostringstream msg;
     msg << L.name() << " is not regular at q = [" << q.transpose() << "], v = [" << v.transpose()
@@ -84,6 +92,12 @@ void require_regular(const S& L, const Vec<double, S::dim>& q, const Vec<double,
         << "), so the Legendre map cannot be inverted and there is no Hamiltonian there";
     throw DegenerateLagrangianError(msg.str());
   }
+}
+template <class S>
+void require_regular(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v,
+                     double rcond_floor = 1e-12) {
+  const Mat<double, S::dim, S::dim> W = velocity_hessian(L, q, v);
+  require_regular(L, q, v, W, Mat<double, S::dim, S::dim>(W.partialPivLu().inverse()), rcond_floor);
 }
 
 // The Legendre map FL(q, v) = (q, p) with the regularity check.
@@ -118,10 +132,24 @@ struct LegendreHamiltonian {
   T operator()(const Vec<T, dim>& q, const Vec<T, dim>& p) const {
     constexpr int N = dim;
     const Vec<double, N> q0 = values(q), p0 = values(p);
-    const Vec<double, N> v0 = legendre_inverse_checked(lagrangian, q0, p0);
+    // v0 = FL^{-1}(q0, p0), and the regularity check at (q0, v0), where H is
+    // evaluated, on the Hessian and inverse the Jet sweeps use anyway: one Hessian
+    // and one inverse per evaluation (legendre_inverse_checked forms three Hessians
+    // and two LU inverses). A Newton inverse that fails on a
+    // singular Hessian is reported as legendre_inverse_checked reports it, naming the
+    // point where it started.
+    Vec<double, N> v0;
+    try {
+      v0 = legendre_inverse(lagrangian, q0, p0);
+    } catch (const DegenerateLagrangianError&) {
+      require_regular(lagrangian, q0, Vec<double, N>(Vec<double, N>::Zero()));
+      throw;
+    }
+    const Mat<double, N, N> W = velocity_hessian(lagrangian, q0, v0);
+    const Mat<double, N, N> Winv = W.inverse();
+    require_regular(lagrangian, q0, v0, W, Winv);
     Vec<T, N> v = constants<T>(v0);
     if constexpr (is_jet_v<T>) {
-      const Mat<double, N, N> Winv = velocity_hessian(lagrangian, q0, v0).inverse();
       for (int sweep = 0; sweep <= jet_depth<T>::value; ++sweep) {
         Vec<T, N> a, b;
         lagrangian_gradient(lagrangian, q, v, a, b);

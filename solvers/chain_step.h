@@ -96,6 +96,11 @@ class ChainStep {
         s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
       return s;
     }
+    // As solve_newton does (solvers/newton.h): apply the correction of the accepted
+    // residual, which takes it from the tolerance down to round-off (the reported
+    // residual is the one measured before it).
+    chain_.hessian(x_, diag_, off_);
+    if (solve_tridiagonal(m / h_, b)) dq += r_;
     x_ = q0 + th * dq;
     chain_.gradient(x_, g_);
     dp = -h_ * g_;

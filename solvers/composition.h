@@ -81,11 +81,14 @@ class ComposedStep {
     CompensatedVector<N> Q(V::Zero()), P(V::Zero());  // increments since the start
     // Each substep starts from the previous substep's increment rescaled to its size
     // (the first from the caller's guess).
-    V prev = dq, d, e;
+    // Steps that take a guess of the momentum increment too (Hamiltonian steps) get
+    // the previous substep's, rescaled likewise (zero for the first).
+    V prev = dq, d, e = V::Zero(dq.size());
     double prev_weight = 1.0;
     for (std::size_t k = 0; k < substeps_.size(); ++k) {
       const double w = substeps_[k].weight;
       d = prev * (w / prev_weight);
+      e *= w / prev_weight;
       const V q = q0 + Q.sum, p = p0 + P.sum;
       const StepSummary s = substeps_[k].adjoint ? dual_[index_[k]].step(q, p, d, e) : plain_[index_[k]].step(q, p, d, e);
       total.iterations += s.iterations;
@@ -221,22 +224,30 @@ class ComposedLagrangianStep {
         s.message = "non-finite residual";
         return s;
       }
-      if (newton_verdict(s, prev_step, max_abs(q0) + max_abs(dq), options_) != NewtonVerdict::iterate) break;
-      if (it == options_.max_iterations) {
+      const NewtonVerdict verdict = newton_verdict(s, prev_step, max_abs(q0) + max_abs(dq), options_);
+      if (verdict == NewtonVerdict::failed) break;
+      if (verdict == NewtonVerdict::iterate && it == options_.max_iterations) {
         s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
         return s;
       }
       const Eigen::PartialPivLU<Eigen::MatrixXd> lu(J);
       const Eigen::VectorXd delta = lu.solve(F);  // change of the nodes q_1..q_S
-      if (!std::isfinite(delta.lpNorm<Eigen::Infinity>())) {
+      const bool finite = std::isfinite(delta.lpNorm<Eigen::Infinity>());
+      if (!finite && verdict == NewtonVerdict::iterate) {
         s.message = "singular composed Jacobian";
         return s;
       }
-      for (std::size_t k = 0; k < S; ++k) {
-        V dk = delta.segment<N>(static_cast<int>(k) * N);
-        if (k > 0) dk -= delta.segment<N>(static_cast<int>(k - 1) * N);
-        inc[k] -= dk;
+      // On convergence too, as solve_newton does (solvers/newton.h): the correction
+      // of the accepted residual takes it from the tolerance down to round-off (the
+      // reported residual is the one measured before it).
+      if (finite) {
+        for (std::size_t k = 0; k < S; ++k) {
+          V dk = delta.segment<N>(static_cast<int>(k) * N);
+          if (k > 0) dk -= delta.segment<N>(static_cast<int>(k - 1) * N);
+          inc[k] -= dk;
+        }
       }
+      if (verdict == NewtonVerdict::converged) break;
       prev_step = delta.lpNorm<Eigen::Infinity>();
     }
     if (!s.converged) return s;

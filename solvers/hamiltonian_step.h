@@ -54,7 +54,8 @@ class HamiltonianStep {
   HamiltonianStep(Ham H, Map R, double h, StepOptions options = {},
                   VectorFieldSample sample = VectorFieldSample::base_point)
       : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), sample_(sample) {
-    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    // negative sizes are the backward substeps of compositions (solvers/composition.h)
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
 
   double step_size() const { return h_; }
@@ -111,7 +112,7 @@ class HamiltonianStep {
     Residual f{this, q0, p0};
     V fq, fp;
     hamiltonian_vector_field(H_, q0, p0, fq, fp);
-    const double s0 = h_ * std::fmax(max_abs(fq), max_abs(fp));
+    const double s0 = std::fabs(h_) * std::fmax(max_abs(fq), max_abs(fp));
     auto scale_of = [s0](const V2& x, const M2& J) { return s0 + max_abs(J) * max_abs(x); };
     V2 x = stack(dq, dp);
     const double x0 = std::fmax(max_abs(q0), max_abs(p0));

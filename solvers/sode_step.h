@@ -21,13 +21,34 @@
 // Newmark (Newmark 1959; Hughes, The Finite Element Method, Sec. 9.1): with a_k = a(q_k, v_k)
 //   q1 = q0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1)
 //   v1 = v0 + h ((1 - gamma) a0 + gamma a1).
-// It is the first-option discretization through the explicit-Euler map on TQ,
-// R(Y, W) = (Y, Y + W) (so W = Y1 - Y0), with the vector field replaced by the Newmark
-// quadrature of Gamma along the step,
-//   W = h (v0 + h ((1/2 - beta) a0 + beta a1),  (1 - gamma) a0 + gamma a1);
-// NewmarkStep writes the residual that way. Linear stability on q'' = -w^2 q: for
-// gamma >= 1/2 the method is unconditionally stable when 2 beta >= gamma, and stable
-// only for w h < 1/sqrt(gamma/2 - beta) otherwise; for gamma < 1/2 it is unstable.
+// As an instance of the SODE machinery (a reconstruction: the paper's construction of
+// Sec. 4.1 was not available when this was written). The map is R^{TTQ}, the tangent
+// lift of the explicit-Euler map of Q, a map on TTQ:
+//   R^{TTQ}(q, v; dq, dv) = ((q, v), (q + dq, v + dv)),
+// which is the explicit-Euler map of TQ (tests/solvers/test_sode.cc checks the two
+// agree), so (X, W) = (R^{TTQ})^{-1}(Y0, Y1) = (Y0, Y1 - Y0). The vector of T_{Y0}TQ
+// that W is asked to equal is h times the Newmark quadrature of Gamma along the step,
+//   N^{gamma,beta}(Y0, Y1) = (v0 + h ((1/2 - beta) a0 + beta a1),  (1 - gamma) a0 + gamma a1),
+// an end-point ("first option") sampling like sode1's with the weights (gamma, beta):
+//   sode1:   W = h (Gamma(Y0) + Gamma(Y1)) / 2,      newmark:  W = h N^{gamma,beta}(Y0, Y1).
+// W = h N is the classical update above, term by term. For gamma = 1/2, beta = 1/4
+// the velocity row gives h (a0 + a1)/2 = v1 - v0, so the position row is
+// h (v0 + (v1 - v0)/2) = h (v0 + v1)/2: N = (Gamma(Y0) + Gamma(Y1))/2 and Newmark is
+// sode1 through R^{TTQ} (the trapezoidal rule; tested to round-off on the pendulum).
+// Why the weights have to sit in the sampling and cannot sit in the map alone: every
+// map on TQ that does not depend on h and satisfies Def. 2.2 with a linear inverse
+// (the theta maps of TQ and their tangent-lift forms) has W = Y1 - Y0, and its
+// sampled vector is h times a combination of Gamma(Y0) = (v0, a0), Gamma(Y1) =
+// (v1, a1) or Gamma(X). A single sample Gamma(X) cannot give the two accelerations a0
+// and a1 of a nonlinear a, and end-point samples give the position row
+// h (c0 v0 + c1 v1) = h v0 + c1 h^2 ((1 - gamma) a0 + gamma a1), i.e. only beta = gamma/2
+// (c1 = 1/2); the h^2 weights (1/2 - beta, beta) of the general member need the
+// quadrature above.
+// The adjoint method Phi*_h = (Phi_{-h})^{-1} is Newmark again, with
+// gamma* = 1 - gamma, beta* = 1/2 - gamma + beta (symmetric exactly for gamma = 1/2).
+// Linear stability on q'' = -w^2 q: for gamma >= 1/2 the method is unconditionally
+// stable when 2 beta >= gamma, and stable only for w h < 1/sqrt(gamma/2 - beta)
+// otherwise; for gamma < 1/2 it is unstable.
 //
 // Unknowns are the increments (dq, dv). Steps work in (q, v); VelocityFormStep adapts
 // them to the (q, p) interface of the integrate loop through the Legendre map.
@@ -103,8 +124,24 @@ StepSummary solve_increments(const Step& step, const Vec<double, 2 * N>& Y0, dou
   return s;
 }
 
-enum class SodeForm { sode1, sode2 };
-inline const char* to_string(SodeForm f) { return f == SodeForm::sode1 ? "sode1" : "sode2"; }
+enum class SodeForm { sode1, sode2, newmark };
+inline const char* to_string(SodeForm f) {
+  return f == SodeForm::sode1 ? "sode1" : f == SodeForm::sode2 ? "sode2" : "newmark";
+}
+
+// How a SODE step samples the vector field: the form, and Newmark's weights (used by
+// SodeForm::newmark only).
+struct SodeSampling {
+  SodeForm form = SodeForm::sode2;
+  double gamma = 0.5, beta = 0.25;
+  SodeSampling(SodeForm f) : form(f) {}  // implicit: a form is a sampling
+  static SodeSampling newmark(double gamma, double beta) {
+    SodeSampling s(SodeForm::newmark);
+    s.gamma = gamma;
+    s.beta = beta;
+    return s;
+  }
+};
 
 // Discretization of the SODE of L by a map MapTQ on TQ = R^{2n}.
 template <class System, class MapTQ>
@@ -114,14 +151,21 @@ class SodeStep {
   using V = Vec<double, N>;
   using V2 = Vec<double, 2 * N>;
 
-  SodeStep(System L, MapTQ R, double h, SodeForm form, StepOptions options = {})
-      : L_(std::move(L)), R_(std::move(R)), h_(h), form_(form), options_(options) {
-    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+  SodeStep(System L, MapTQ R, double h, SodeSampling sampling, StepOptions options = {})
+      : L_(std::move(L)), R_(std::move(R)), h_(h), sampling_(sampling), options_(options) {
+    // negative sizes are the backward substeps of compositions (solvers/composition.h)
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
   double step_size() const { return h_; }
   const System& lagrangian() const { return L_; }
-  SodeForm form() const { return form_; }
-  std::string name() const { return std::string(to_string(form_)) + "(" + R_.name() + ")"; }
+  SodeForm form() const { return sampling_.form; }
+  const SodeSampling& sampling() const { return sampling_; }
+  void set_step_size(double h) {
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
+    h_ = h;
+  }
+  void set_sampling(const SodeSampling& s) { sampling_ = s; }
+  std::string name() const { return std::string(to_string(sampling_.form)) + "(" + R_.name() + ")"; }
 
   template <class T>
   Vec<T, 2 * N> gamma(const Vec<T, 2 * N>& Y) const {
@@ -132,67 +176,78 @@ class SodeStep {
   template <class T>
   Vec<T, 2 * N> residual(const Vec<T, 2 * N>& Y0, const Vec<T, 2 * N>& dY) const {
     const TangentPoint<T, 2 * N> t = inverse_increment(R_, Y0, dY);
-    if (form_ == SodeForm::sode2) return t.v - h_ * gamma(t.x);
+    if (sampling_.form == SodeForm::sode2) return t.v - h_ * gamma(t.x);
     const Vec<T, 2 * N> Y1 = Y0 + dY;
-    return t.v - (0.5 * h_) * (gamma(Y0) + gamma(Y1));
+    if (sampling_.form == SodeForm::sode1) return t.v - (0.5 * h_) * (gamma(Y0) + gamma(Y1));
+    // Newmark's quadrature N^{gamma,beta}(Y0, Y1) of Gamma
+    const double g = sampling_.gamma, b = sampling_.beta;
+    const Vec<T, N> v0 = Y0.template tail<N>();
+    const Vec<T, N> a0 = lagrangian_acceleration(L_, Vec<T, N>(Y0.template head<N>()), v0);
+    const Vec<T, N> a1 = lagrangian_acceleration(L_, Vec<T, N>(Y1.template head<N>()), Vec<T, N>(Y1.template tail<N>()));
+    const Vec<T, N> Nq = v0 + h_ * ((0.5 - b) * a0 + b * a1), Nv = (1.0 - g) * a0 + g * a1;
+    return t.v - h_ * stack(Nq, Nv);
   }
 
   // One step in (q, v); (dq, dv) carry the guess in and the increments out.
   StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const {
     const V2 Y0 = stack(q0, v0);
-    return solve_increments<N>(*this, Y0, h_ * max_abs(gamma(Y0)), options_, dq, dv);
+    return solve_increments<N>(*this, Y0, std::fabs(h_) * max_abs(gamma(Y0)), options_, dq, dv);
   }
 
  private:
   System L_;
   MapTQ R_;
   double h_;
-  SodeForm form_;
+  SodeSampling sampling_;
   StepOptions options_;
 };
 
-// The Newmark family on the SODE of L.
+// The Newmark family on the SODE of L: the SODE step of the map R^{TTQ} (the
+// explicit-Euler map of TQ) with Newmark's sampling (see the top of this file).
 template <class System>
 class NewmarkStep {
  public:
   static constexpr int N = System::dim;
   using V = Vec<double, N>;
   using V2 = Vec<double, 2 * N>;
+  using Sode = SodeStep<System, ThetaMap>;
 
   NewmarkStep(System L, double h, double gamma, double beta, StepOptions options = {})
-      : L_(std::move(L)), h_(h), gamma_(gamma), beta_(beta), options_(options) {
+      : sode_(std::move(L), ThetaMap::explicit_euler(), h, SodeSampling::newmark(gamma, beta), options) {
     if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
     if (!(gamma >= 0.0 && gamma <= 1.0) || !(beta >= 0.0 && beta <= 0.5))
       throw std::invalid_argument("newmark: expected gamma in [0, 1] and beta in [0, 1/2]");
   }
-  double step_size() const { return h_; }
-  double gamma() const { return gamma_; }
-  double beta() const { return beta_; }
-  const System& lagrangian() const { return L_; }
+  double step_size() const { return sode_.step_size(); }
+  double gamma() const { return sode_.sampling().gamma; }
+  double beta() const { return sode_.sampling().beta; }
+  const System& lagrangian() const { return sode_.lagrangian(); }
+  const Sode& sode() const { return sode_; }
   std::string name() const { return "newmark"; }
 
-  // The explicit-Euler map on TQ gives W = Y1 - Y0 = dY; the residual is dY minus h
-  // times the Newmark quadrature of Gamma.
+  // The adjoint method (gamma, beta) -> (1 - gamma, 1/2 - gamma + beta). beta* may
+  // leave [0, 1/2]; it is the adjoint stage of a composition, not a user choice, and
+  // is not checked.
+  NewmarkStep adjoint() const {
+    NewmarkStep a = *this;
+    a.sode_.set_sampling(SodeSampling::newmark(1.0 - gamma(), 0.5 - gamma() + beta()));
+    return a;
+  }
+  // The same method with step h (negative for the backward substeps of compositions).
+  NewmarkStep with_step(double h) const {
+    NewmarkStep a = *this;
+    a.sode_.set_step_size(h);
+    return a;
+  }
+
   template <class T>
   Vec<T, 2 * N> residual(const Vec<T, 2 * N>& Y0, const Vec<T, 2 * N>& dY) const {
-    const Vec<T, N> q0 = Y0.template head<N>(), v0 = Y0.template tail<N>();
-    const Vec<T, N> q1 = q0 + dY.template head<N>(), v1 = v0 + dY.template tail<N>();
-    const Vec<T, N> a0 = lagrangian_acceleration(L_, q0, v0), a1 = lagrangian_acceleration(L_, q1, v1);
-    const Vec<T, N> Wq = h_ * (v0 + h_ * ((0.5 - beta_) * a0 + beta_ * a1));
-    const Vec<T, N> Wv = h_ * ((1.0 - gamma_) * a0 + gamma_ * a1);
-    return dY - stack(Wq, Wv);
+    return sode_.residual(Y0, dY);
   }
-
-  StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const {
-    const V2 Y0 = stack(q0, v0);
-    const double s0 = h_ * std::fmax(max_abs(v0), max_abs(lagrangian_acceleration(L_, q0, v0)));
-    return solve_increments<N>(*this, Y0, s0, options_, dq, dv);
-  }
+  StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const { return sode_.step_qv(q0, v0, dq, dv); }
 
  private:
-  System L_;
-  double h_, gamma_, beta_;
-  StepOptions options_;
+  Sode sode_;
 };
 
 // A (q, v) step seen through the Legendre map as a (q, p) step for integrate():

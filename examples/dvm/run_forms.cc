@@ -6,6 +6,9 @@
 //                          Hamiltonian of the system's Lagrangian (Legendre transform)
 //   form = "sode1"/"sode2" SodeStep of the tangent lift of the scene's map (Eq. 4.1/4.2)
 //   form = "newmark"       NewmarkStep(gamma, beta)
+//   composition = "..."    any of these composed (ComposedStep), the adjoint stages
+//                          from the adjoint map (theta -> 1 - theta) or, for Newmark,
+//                          the adjoint (gamma, beta) -> (1 - gamma, 1/2 - gamma + beta)
 //   system = "chain"       ChainStep (tridiagonal Newton), theta-family maps
 //   kind = "boundary-value" BoundaryValueProblem (one sparse Ceres problem)
 //
@@ -26,6 +29,7 @@
 #include "mechanics/systems.h"
 #include "solvers/boundary_value.h"
 #include "solvers/chain_step.h"
+#include "solvers/composition.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
 #include "solvers/sode_step.h"
@@ -132,8 +136,9 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
     if (run.failed) j.raw("failure", failure_json(run));
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
-    std::printf("%s with %s, %s form (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), method.c_str(),
-                s.form.c_str(), s.step, static_cast<long long>(run.steps_done), t_final, wall);
+    std::printf("%s with %s, %s form%s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(),
+                method.c_str(), s.form.c_str(),
+                s.composition == "none" ? "" : (", composition " + s.composition).c_str(), s.step, static_cast<long long>(run.steps_done), t_final, wall);
     std::printf("  energy %.15g -> %.15g, max |E - E0| = %.3e\n", E0, E, max_energy_error);
     if (!invariant_name.empty())
       std::printf("  %s %.15g, max error %.3e\n", invariant_name.c_str(), J0, max_J_error);
@@ -146,6 +151,14 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
     return 3;
   }
   return 0;
+}
+
+// The adjoint of a theta-family map is the same family at 1 - theta (Prop. 2.4:
+// R*(x, v) = (R^2_x(-v), R^1_x(-v))), so the adjoint stages of a composition reuse the
+// basic method's step type.
+ThetaMap same_type_adjoint(const ThetaMap& R) { return ThetaMap(1.0 - R.theta(), R.name() + "*"); }
+RetractionMap<EuclideanRetraction> same_type_adjoint(const RetractionMap<EuclideanRetraction>& R) {
+  return RetractionMap<EuclideanRetraction>({}, 1.0 - R.theta());
 }
 
 template <class S>
@@ -176,6 +189,19 @@ int run_form_with_system(const Scene& s, const System& L, const RunOptions& o) {
   if constexpr (std::is_same_v<System, Kepler>) inv_name = "angular_momentum";
   const StepOptions opt = step_options(s);
 
+  // The basic method's run, or its composition's (solvers/composition.h) when the
+  // scene names one: make(hk, adjoint) builds the step of size hk of the basic method
+  // or of its adjoint; `symmetric` says the basic method is its own adjoint.
+  auto run_method = [&](const auto& make, bool symmetric, const std::string& name) -> int {
+    if (s.composition == "none")
+      return run_stepper<N>(s, make(s.step, false), name, q, p, v0, energy_at, inv_name, invariant, o);
+    using Step = decltype(make(s.step, false));
+    const ComposedStep<Step> step(
+        s.step, substeps(find_composition(s.composition), symmetric), [&](double hk) { return make(hk, false); },
+        [&](double hk) { return make(hk, true); });
+    return run_stepper<N>(s, step, name, q, p, v0, energy_at, inv_name, invariant, o);
+  };
+
   auto with_map = [&](const auto& R) -> int {
     using Map = std::decay_t<decltype(R)>;
     if (s.form == "hamiltonian") {
@@ -186,23 +212,30 @@ int run_form_with_system(const Scene& s, const System& L, const RunOptions& o) {
           throw InputError(s.path + ": key 'integrator.form': form = \"hamiltonian\" with a written Lagrangian "
                                     "needs system.hamiltonian = \"...\" (H in the coordinates and p_<name>)");
         using H = WrittenHamiltonian<N>;
-        const HamiltonianStep<H, Map> step(H{s.written}, R, s.step, opt);
-        return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
+        auto make = [&](double hk, bool adj) {
+          return HamiltonianStep<H, Map>(H{s.written}, adj ? same_type_adjoint(R) : R, hk, opt);
+        };
+        return run_method(make, R.symmetric(), R.name());
       } else {
         using H = LegendreHamiltonian<System>;
-        const HamiltonianStep<H, Map> step(H(L), R, s.step, opt);
-        return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
+        auto make = [&](double hk, bool adj) {
+          return HamiltonianStep<H, Map>(H(L), adj ? same_type_adjoint(R) : R, hk, opt);
+        };
+        return run_method(make, R.symmetric(), R.name());
       }
     }
     if constexpr (is_written<System>::value) {
       throw InputError(s.path + ": key 'integrator.form': a written Lagrangian runs the lagrangian and hamiltonian "
                                 "forms, got \"" + s.form + "\"");
     } else {
-      const auto lift = tangent_lift(R);
-      using Step = SodeStep<System, std::decay_t<decltype(lift)>>;
-      const VelocityFormStep<Step> step(
-          Step(L, lift, s.step, s.form == "sode1" ? SodeForm::sode1 : SodeForm::sode2, opt));
-      return run_stepper<N>(s, step, R.name(), q, p, v0, energy_at, inv_name, invariant, o);
+      // the tangent lift of the adjoint map gives the adjoint SODE step (both
+      // samplings treat the two end points alike)
+      auto make = [&](double hk, bool adj) {
+        const auto lift = tangent_lift(adj ? same_type_adjoint(R) : R);
+        using Step = SodeStep<System, std::decay_t<decltype(lift)>>;
+        return VelocityFormStep<Step>(Step(L, lift, hk, s.form == "sode1" ? SodeForm::sode1 : SodeForm::sode2, opt));
+      };
+      return run_method(make, R.symmetric(), R.name());
     }
   };
   if (s.form == "newmark") {
@@ -210,9 +243,11 @@ int run_form_with_system(const Scene& s, const System& L, const RunOptions& o) {
       throw InputError(s.path + ": key 'integrator.form': a written Lagrangian runs the lagrangian and hamiltonian "
                                 "forms, got \"newmark\"");
     } else {
-      const VelocityFormStep<NewmarkStep<System>> step(
-          NewmarkStep<System>(L, s.step, s.newmark_gamma, s.newmark_beta, opt));
-      return run_stepper<N>(s, step, "newmark", q, p, v0, energy_at, inv_name, invariant, o);
+      const NewmarkStep<System> basic(L, s.step, s.newmark_gamma, s.newmark_beta, opt);
+      auto make = [&](double hk, bool adj) {
+        return VelocityFormStep<NewmarkStep<System>>((adj ? basic.adjoint() : basic).with_step(hk));
+      };
+      return run_method(make, s.newmark_gamma == 0.5, "newmark");
     }
   }
   if (s.map == "retraction-theta") return with_map(RetractionMap<EuclideanRetraction>({}, s.theta));

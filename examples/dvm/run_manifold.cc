@@ -5,7 +5,8 @@
 //               (unit quaternion of R, body momentum, spatial angular momentum R pi)
 // and the same JSON fields as on R^n (q_final is the unit vector or the quaternion,
 // p_final the momentum as stored), plus the largest distance from the manifold and the
-// error of the conserved momentum.
+// error of the conserved momentum. With `composition` the map's steps are composed by
+// any table of solvers/composition_methods.h.
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -14,6 +15,7 @@
 #include "examples/dvm/commands.h"
 #include "examples/dvm/json.h"
 #include "examples/dvm/report.h"
+#include "solvers/manifold_composition.h"
 #include "solvers/manifold_step.h"
 
 namespace dvm::cli {
@@ -98,7 +100,6 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   opt.max_iterations = s.max_iterations;
   opt.residual_tolerance = s.tolerance;
   opt.accept_tolerance = std::fmax(opt.accept_tolerance, s.tolerance);
-  const ManifoldStep<System, Map> stepper(L, R, s.step, opt);
 
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
   File csv;
@@ -119,15 +120,22 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
 
   double max_energy_error = 0.0, E = E0, max_defect = M::point_defect(q), max_momentum_error = 0.0;
   const auto start = std::chrono::steady_clock::now();
+  auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
+    E = energy_at(qk, pk);
+    max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0));
+    max_defect = std::fmax(max_defect, M::point_defect(qk));
+    const std::vector<double> J = momentum_map(L, qk, pk);
+    for (std::size_t i = 0; i < J.size(); ++i) max_momentum_error = std::fmax(max_momentum_error, std::fabs(J[i] - J0[i]));
+    if (csv && (k % s.every == 0 || k == s.steps)) write_row(t, qk, pk, E);
+  };
+  // The map's own step, or its steps composed (a non-symmetric map entering with its
+  // adjoint, theta -> 1 - theta; solvers/manifold_composition.h).
   const RunSummary run =
-      integrate_manifold(stepper, 0.0, q, p, v0, s.steps, [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
-        E = energy_at(qk, pk);
-        max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0));
-        max_defect = std::fmax(max_defect, M::point_defect(qk));
-        const std::vector<double> J = momentum_map(L, qk, pk);
-        for (std::size_t i = 0; i < J.size(); ++i) max_momentum_error = std::fmax(max_momentum_error, std::fabs(J[i] - J0[i]));
-        if (csv && (k % s.every == 0 || k == s.steps)) write_row(t, qk, pk, E);
-      });
+      s.composition == "none"
+          ? integrate_manifold(ManifoldStep<System, Map>(L, R, s.step, opt), 0.0, q, p, v0, s.steps, observer)
+          : integrate_manifold(ComposedManifoldStep<System, Map>(
+                                   L, R, s.step, substeps(find_composition(s.composition), R.symmetric()), opt),
+                               0.0, q, p, v0, s.steps, observer);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   if (csv && std::fflush(csv.get()) != 0) {
     std::cerr << "dvm: error writing '" << csv_path << "'\n";
@@ -142,6 +150,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .str("system", s.system)
         .str("manifold", M::name)
         .str("map", R.name())
+        .str("composition", s.composition)
         .str("solver", s.solver)
         .num("step", s.step)
         .num("steps", static_cast<double>(run.steps_done))
@@ -161,8 +170,9 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     if (run.failed) j.raw("failure", failure_json(run));
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
-    std::printf("%s on %s with %s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), M::name,
-                R.name().c_str(), s.step, static_cast<long long>(run.steps_done), t_final, wall);
+    std::printf("%s on %s with %s%s (h = %g): %lld steps to t = %.6g in %.3f s\n", s.system.c_str(), M::name,
+                R.name().c_str(), s.composition == "none" ? "" : (", composition " + s.composition).c_str(), s.step,
+                static_cast<long long>(run.steps_done), t_final, wall);
     std::printf("  energy %.15g -> %.15g, max |E - E0| = %.3e\n", E0, E, max_energy_error);
     std::printf("  %s: max error %.3e;  largest distance from %s %.1e\n", momentum_name, max_momentum_error, M::name,
                 max_defect);

@@ -683,11 +683,11 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
       } catch (const std::invalid_argument& e) {
         throw InputError(r.where(co, "integrator.composition") + ": got \"" + s.composition + "\"; " + e.what());
       }
-      // what the compositions are wired to so far: the position-momentum step on R^n
+      // compositions compose one-step maps: every initial-value form on R^n and the
+      // (lagrangian-form) steps on S^2, (S^2)^n and SO(3); not whole trajectories, and
+      // not the dynamic-size chain
       std::string why;
-      if (info.space != "R^n") why = "systems on " + info.space + " do not take compositions yet";
-      else if (s.form != "lagrangian") why = "compositions compose the lagrangian form's step, not form = \"" + s.form + "\"";
-      else if (s.problem != "initial-value") why = "a boundary-value problem takes no composition";
+      if (s.problem != "initial-value") why = "a boundary-value problem takes no composition";
       else if (s.system == "chain") why = "the chain (a dynamic-size system) takes no composition yet";
       if (!why.empty()) throw InputError(r.where(co, "integrator.composition") + ": " + why);
     }

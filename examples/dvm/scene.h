@@ -10,8 +10,8 @@
 //                 max_iterations = 25   tolerance = 2e-15   (optional: the solver's
 //                 iteration bound and relative residual tolerance)
 //                 composition = "none" | "stormer-verlet" | "triple-jump" | ... |
-//                 "triple-jump:<order>"   (optional: the map's step composed, see
-//                 `dvm methods`)
+//                 "triple-jump:<order>"   (optional: the basic method's step, of
+//                 any form, on any space, composed; see `dvm methods`)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
 //                 npy = "out.npy"                    (optional: NumPy float64 rows)
 // or, instead of builtin, a Lagrangian written in the scene (scene_written.h):
@@ -92,7 +92,7 @@ struct Scene {
   int max_iterations = 25;
   double tolerance = 2e-15;
   // "none" or a composition method (solvers/composition_methods.h), its stages the
-  // map's steps (issue 5)
+  // steps of the basic method (map and form; issue 5)
   std::string composition = "none";
   std::string csv;  // empty: no CSV
   std::int64_t every = 1;

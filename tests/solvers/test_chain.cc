@@ -155,3 +155,34 @@ BOOST_AUTO_TEST_CASE(large_chains_solve) {
   BOOST_TEST(run.max_step_iterations <= 5);
   BOOST_TEST(std::fabs(C.energy(q, p) - E0) <= 1e-3 * E0);
 }
+
+BOOST_AUTO_TEST_CASE(accepted_step_gets_the_last_newton_correction) {
+  // As solve_newton does, the chain's Newton loop applies the correction of the
+  // residual it accepted. With a loose tolerance (1e-4) and a zero guess the step is
+  // accepted after two iterations at a residual near 1e-5; the returned increment
+  // then satisfies the step equation p0 - (m/h) dq - h (1 - theta) grad V(q0 + theta dq) = 0
+  // to round-off (without the correction the residual left would be the accepted one).
+  const int n = 50;
+  const FPUChain C(n, 1.0, 1.0, 0.5, 2.0, true);
+  const double h = 0.05;
+  VectorXd q0(n), p0(n);
+  for (int i = 0; i < n; ++i) {
+    q0[i] = 0.3 * std::sin(0.7 * i + 0.2);
+    p0[i] = 0.5 * std::cos(1.3 * i);
+  }
+  StepOptions opt;
+  opt.residual_tolerance = 1e-4;
+  opt.accept_tolerance = 1e-4;
+  for (double th : {0.5, 0.3}) {
+    const ChainStep S(C, ThetaMap(th), h, opt);
+    VectorXd dq = VectorXd::Zero(n), dp(n), g(n);
+    const StepSummary s = S.step(q0, p0, dq, dp);
+    BOOST_TEST_REQUIRE(s.converged);
+    C.gradient(VectorXd(q0 + th * dq), g);
+    const double left = VectorXd(p0 - (C.m / h) * dq - h * (1.0 - th) * g).lpNorm<Eigen::Infinity>();
+    BOOST_TEST_MESSAGE("chain, theta " << th << ": accepted residual " << s.residual << ", left after the step "
+                                       << left);
+    BOOST_TEST(s.residual >= 1e-8 * s.scale);  // the accepted residual was not round-off
+    BOOST_TEST(left <= 1e-13 * s.scale);
+  }
+}

@@ -117,6 +117,10 @@ BOOST_AUTO_TEST_CASE(singular_lagrangians_are_rejected_with_a_clear_message) {
     }
     const LegendreHamiltonian<S> H(L);
     BOOST_CHECK_THROW(H(q, p), DegenerateLagrangianError);
+    // and through Jets, as the Hamiltonian step evaluates H (the check runs once per
+    // evaluation, on the Hessian the Jet sweeps use)
+    Vec<double, S::dim> fq, fp;
+    BOOST_CHECK_THROW(hamiltonian_vector_field(H, q, p, fq, fp), DegenerateLagrangianError);
     BOOST_CHECK_THROW(legendre_checked(L, q, p), DegenerateLagrangianError);
     (void)dim;
   };

@@ -252,3 +252,58 @@ BOOST_AUTO_TEST_CASE(velocity_form_adapter_runs_in_the_integrate_loop) {
   BOOST_TEST(!run.failed);
   BOOST_TEST(worst <= 1e-13);
 }
+
+BOOST_AUTO_TEST_CASE(newmark_one_half_one_quarter_is_sode1_through_the_ttq_map) {
+  // With gamma = 1/2, beta = 1/4 Newmark's quadrature of Gamma is the trapezoidal
+  // sampling of Eq. 4.1, so Newmark is sode1 through R^{TTQ}, the tangent lift of the
+  // explicit-Euler map (which is the explicit-Euler map of TQ): equal to round-off on
+  // the pendulum, through both forms of the map. Another member differs at O(h^3).
+  const Pendulum P(1.0, 2.0, 9.81);
+  const double h = 0.05;
+  const auto lift = tangent_lift(ThetaMap::explicit_euler());
+  const SodeStep<Pendulum, decltype(lift)> A(P, lift, h, SodeForm::sode1);
+  const SodeStep<Pendulum, ThetaMap> B(P, ThetaMap::explicit_euler(), h, SodeForm::sode1);
+  const NewmarkStep<Pendulum> C(P, h, 0.5, 0.25), D(P, h, 0.5, 0.3);
+  V1 qa(1.0), va(0.5), qb = qa, vb = va, qc = qa, vc = va, qd = qa, vd = va;
+  auto advance = [](const auto& S, V1& q, V1& v) {
+    V1 dq = S.step_size() * v, dv = V1::Zero();
+    BOOST_REQUIRE(S.step_qv(q, v, dq, dv).converged);
+    q += dq;
+    v += dv;
+  };
+  for (int k = 0; k < 50; ++k) {
+    advance(A, qa, va);
+    advance(B, qb, vb);
+    advance(C, qc, vc);
+    advance(D, qd, vd);
+  }
+  BOOST_TEST(std::fabs(qa[0] - qc[0]) <= 1e-13);
+  BOOST_TEST(std::fabs(va[0] - vc[0]) <= 1e-13);
+  BOOST_TEST(std::fabs(qb[0] - qc[0]) <= 1e-13);
+  BOOST_TEST(std::fabs(vb[0] - vc[0]) <= 1e-13);
+  BOOST_TEST(std::fabs(qd[0] - qc[0]) >= 1e-5);
+}
+
+BOOST_AUTO_TEST_CASE(newmark_adjoint_is_the_inverse_of_the_backward_step) {
+  // Phi*_h = (Phi_{-h})^{-1} with (gamma*, beta*) = (1 - gamma, 1/2 - gamma + beta):
+  // a step of the adjoint followed by a step of -h of the method returns to the start
+  // (Kepler, nonlinear, two degrees of freedom); gamma = 1/2 is its own adjoint.
+  const Kepler K(1.0);
+  for (const auto& [gamma, beta] :
+       std::vector<std::pair<double, double>>{{0.5, 0.25}, {0.6, 0.3025}, {0.7, 0.1}, {0.5, 0.0}, {1.0, 0.5}}) {
+    const NewmarkStep<Kepler> S(K, 0.05, gamma, beta);
+    const NewmarkStep<Kepler> A = S.adjoint(), B = S.with_step(-0.05);
+    const V2 q0(0.7, 0.1), v0(-0.2, 1.1);
+    V2 dq = 0.05 * v0, dv = V2::Zero();
+    BOOST_REQUIRE(A.step_qv(q0, v0, dq, dv).converged);
+    const V2 q1 = q0 + dq, v1 = v0 + dv;
+    V2 eq = -dq, ev = -dv;
+    BOOST_REQUIRE(B.step_qv(q1, v1, eq, ev).converged);
+    BOOST_TEST_CONTEXT("gamma " << gamma << " beta " << beta) {
+      BOOST_TEST(max_abs(V2(q1 + eq - q0)) <= 1e-15);
+      BOOST_TEST(max_abs(V2(v1 + ev - v0)) <= 1e-15);
+      BOOST_TEST(A.gamma() == 1.0 - gamma);
+      BOOST_TEST(std::fabs(A.beta() - (0.5 - gamma + beta)) <= 1e-16);
+    }
+  }
+}
