@@ -121,7 +121,10 @@ BOOST_AUTO_TEST_CASE(ratio_program_prints_the_ratios) {
       ++rows;
       const auto cells = split(line, '|');
       BOOST_REQUIRE(cells.size() >= 6);
-      BOOST_TEST(finite_number(cells[4].substr(1, cells[4].size() - 2)), line);
+      const std::string ratio = cells[4].substr(1, cells[4].size() - 2);
+      // an equal-error ratio is n/a when the tiny sweep does not reach the error
+      const bool equal_error = line.find("best dvm") != std::string::npos;
+      BOOST_TEST((finite_number(ratio) || (equal_error && ratio == "n/a")), line);
     }
   BOOST_TEST(rows == 6);
 }
