@@ -45,7 +45,8 @@ charts: deps
 	./$(BUILD)/examples/dvm_charts --out $(CHARTS)
 	./$(BUILD)/examples/bench_ratios --out $(CHARTS)
 	/usr/bin/gnuplot -e "dir='$(CHARTS)'" $(CHARTS)/plot.gp
-	sh $(CHARTS)/update_readme.sh README.md $(CHARTS)/table.md $(CHARTS)/ratios.md
+	sh $(CHARTS)/update_readme.sh README.md $(CHARTS)/ratios.md $(CHARTS)/table_sweeps.md \
+	  $(CHARTS)/table_long.md $(CHARTS)/table_stability.md
 
 clean:
 	rm -rf $(BUILD)

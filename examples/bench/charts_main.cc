@@ -18,8 +18,9 @@
 //
 // Output (in --out DIR): work_precision.csv, references.csv, energy_long.csv,
 // stability.csv, the gnuplot data files wp_<problem>.dat, energy_long.dat,
-// stability_threshold.dat, stability_pendulum.dat, and table.md (the numbers for the
-// README). usage: dvm_charts [--out DIR] [--tiny] [--only PROBLEM]
+// stability_threshold.dat, stability_pendulum.dat, and table_sweeps.md, table_long.md,
+// table_stability.md (the numbers for the README). --part regenerates one of the three
+// parts and its files only. usage: dvm_charts [--out DIR] [--tiny] [--part sweeps|long|stability]
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -65,23 +66,26 @@ void write_problem(const std::string& dir, const ProblemResult& r, std::ofstream
     if (!by_method.count(row.method)) order.push_back(row.method);
     by_method[row.method].push_back(&row);
   }
-  std::ofstream dat = open_out(dir + "/wp_" + r.problem + ".dat");
-  dat << "# " << r.problem << ": CPU seconds, global position error; one block per method\n";
-  bool first = true;
-  for (const std::string& name : order) {
-    const auto& rows = by_method[name];
-    if (!rows.front()->chart) continue;
-    std::ostringstream block;
-    int n = 0;
-    for (const Row* row : rows)
-      if (row->converged && row->error > 0 && row->cpu_seconds > 0) {
-        block << fmt(row->cpu_seconds) << ' ' << fmt(row->error) << '\n';
-        ++n;
-      }
-    if (n == 0) continue;
-    if (!first) dat << "\n\n";
-    first = false;
-    dat << '"' << name << "\" \"error\"\n" << block.str();
+  // dvm's methods in wp_<problem>.dat, the peers in wp_<problem>_peers.dat
+  for (const bool peers : {false, true}) {
+    std::ofstream dat = open_out(dir + "/wp_" + r.problem + (peers ? "_peers" : "") + ".dat");
+    dat << "# " << r.problem << ": CPU seconds, global position error; one block per method\n";
+    bool first = true;
+    for (const std::string& name : order) {
+      const auto& rows = by_method[name];
+      if (!rows.front()->chart || (rows.front()->family != "dvm") != peers) continue;
+      std::ostringstream block;
+      int n = 0;
+      for (const Row* row : rows)
+        if (row->converged && row->error > 0 && row->cpu_seconds > 0) {
+          block << fmt(row->cpu_seconds) << ' ' << fmt(row->error) << '\n';
+          ++n;
+        }
+      if (n == 0) continue;
+      if (!first) dat << "\n\n";
+      first = false;
+      dat << '"' << name << "\" \"error\"\n" << block.str();
+    }
   }
   md << "\n**" << r.problem << "** (reference: " << r.reference_note << ")\n\n";
   md << "| method | fitted order | CPU s at error 1e-6 | CPU s at error 1e-10 | max energy error at the finest step |\n";
@@ -256,7 +260,7 @@ void stability(const std::string& dir, bool tiny, std::ostringstream& md) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string dir = "examples/charts", only;
+  std::string dir = "examples/charts", part;
   SuiteConfig cfg;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -264,10 +268,12 @@ int main(int argc, char** argv) {
       dir = argv[++i];
     else if (a == "--tiny")
       cfg.tiny = true;
-    else if (a == "--only" && i + 1 < argc)
-      only = argv[++i];
+    else if (a == "--part" && i + 1 < argc && (std::string(argv[i + 1]) == "sweeps" ||
+                                                std::string(argv[i + 1]) == "long" ||
+                                                std::string(argv[i + 1]) == "stability"))
+      part = argv[++i];
     else {
-      std::fprintf(stderr, "usage: dvm_charts [--out DIR] [--tiny] [--only PROBLEM|long|stability]\n");
+      std::fprintf(stderr, "usage: dvm_charts [--out DIR] [--tiny] [--part sweeps|long|stability]\n");
       return 2;
     }
   }
@@ -275,36 +281,41 @@ int main(int argc, char** argv) {
     cfg.sweep.min_seconds = 0.0;
     cfg.sweep.max_run_seconds = 0.5;
   }
-  using Runner = ProblemResult (*)(const SuiteConfig&);
-  const std::vector<std::pair<std::string, Runner>> problems = {
-      {"harmonic", run_harmonic},         {"pendulum", run_pendulum}, {"kepler", run_kepler},
-      {"henon-heiles", run_henon_heiles}, {"fpu", run_fpu},           {"outer-solar-system", run_outer_solar_system}};
-  std::ostringstream md;
-  std::ofstream csv = open_out(dir + "/work_precision.csv");
-  std::ofstream refs = open_out(dir + "/references.csv");
-  csv << "problem,method,family,order,implicit,chart,h,steps,error,max_energy_error,cpu_seconds,converged\n";
-  refs << "problem,reference,agreement\n";
-  md << "Work precision: global position error (max norm) at the final time against CPU time; fitted order from "
-        "the errors between 1e-13 and 1e-2; CPU time at an error by log-log interpolation along the sweep.\n";
-  for (const auto& [name, run] : problems) {
-    if (!only.empty() && only != name) continue;
-    const double t0 = cpu_seconds();
-    const ProblemResult r = run(cfg);
-    refs << r.problem << ",\"" << r.reference_note << "\"," << fmt(r.reference_agreement) << '\n';
-    write_problem(dir, r, csv, md);
-    std::fprintf(stderr, "%s: %zu runs, %.1f s\n", name.c_str(), r.rows.size(), cpu_seconds() - t0);
+  if (part.empty() || part == "sweeps") {
+    using Runner = ProblemResult (*)(const SuiteConfig&);
+    const std::vector<std::pair<std::string, Runner>> problems = {
+        {"harmonic", run_harmonic},         {"pendulum", run_pendulum}, {"kepler", run_kepler},
+        {"henon-heiles", run_henon_heiles}, {"fpu", run_fpu},           {"outer-solar-system", run_outer_solar_system}};
+    std::ostringstream md;
+    std::ofstream csv = open_out(dir + "/work_precision.csv");
+    std::ofstream refs = open_out(dir + "/references.csv");
+    csv << "problem,method,family,order,implicit,chart,h,steps,error,max_energy_error,cpu_seconds,converged\n";
+    refs << "problem,reference,agreement\n";
+    md << "Work precision: global position error (max norm) at the final time against CPU time; fitted order "
+          "from the errors between 1e-13 and 1e-2; CPU time at an error by log-log interpolation along the "
+          "sweep.\n";
+    for (const auto& [name, run] : problems) {
+      const double t0 = cpu_seconds();
+      const ProblemResult r = run(cfg);
+      refs << r.problem << ",\"" << r.reference_note << "\"," << fmt(r.reference_agreement) << '\n';
+      write_problem(dir, r, csv, md);
+      std::fprintf(stderr, "%s: %zu runs, %.1f s\n", name.c_str(), r.rows.size(), cpu_seconds() - t0);
+    }
+    open_out(dir + "/table_sweeps.md") << md.str();
   }
-  if (only.empty() || only == "long") {
+  if (part.empty() || part == "long") {
     const double t0 = cpu_seconds();
+    std::ostringstream md;
     long_run(dir, cfg.tiny, md);
+    open_out(dir + "/table_long.md") << md.str();
     std::fprintf(stderr, "long run: %.1f s\n", cpu_seconds() - t0);
   }
-  if (only.empty() || only == "stability") {
+  if (part.empty() || part == "stability") {
     const double t0 = cpu_seconds();
+    std::ostringstream md;
     stability(dir, cfg.tiny, md);
+    open_out(dir + "/table_stability.md") << md.str();
     std::fprintf(stderr, "stability: %.1f s\n", cpu_seconds() - t0);
   }
-  std::ofstream table = open_out(dir + "/table.md");
-  table << md.str();
   return 0;
 }

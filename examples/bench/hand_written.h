@@ -80,7 +80,7 @@ std::int64_t hand_midpoint_pendulum(const Pendulum& P, double& q, double& p, dou
         ok = true;
         break;
       }
-      if (dx <= 1e-14 * (std::fabs(d) + std::fabs(q))) {
+      if (std::fabs(dx) <= 1e-14 * (std::fabs(d) + std::fabs(q))) {  // stalled
         ok = std::fabs(f) <= 1e-10 * scale;
         break;
       }

@@ -1,7 +1,7 @@
 #!/bin/sh
 # Replaces the lines between the markers <!-- charts:begin --> and <!-- charts:end -->
 # of a README with the given generated Markdown files (the numbers of `make charts`).
-# usage: update_readme.sh README.md table.md ratios.md
+# usage: update_readme.sh README.md ratios.md table_sweeps.md table_long.md table_stability.md
 set -eu
 readme=$1
 shift
@@ -10,9 +10,12 @@ gen=$(mktemp)
 {
   echo "Speed ratios (\`build/examples/bench_ratios\`, one run):"
   echo
-  cat "$2"
-  echo
   cat "$1"
+  shift
+  for f in "$@"; do
+    echo
+    cat "$f"
+  done
 } > "$gen"
 grep -q '^<!-- charts:begin -->$' "$readme" && grep -q '^<!-- charts:end -->$' "$readme" || {
   echo "update_readme.sh: markers not found in $readme" >&2
