@@ -36,6 +36,7 @@ test: build
 bench: build
 	./$(BUILD)/examples/bench_midpoint_step
 	./$(BUILD)/examples/bench_written_lagrangian
+	./$(BUILD)/examples/bench_ratios
 
 CHARTS := examples/charts
 charts: deps
