@@ -40,8 +40,10 @@
 #include "mechanics/lagrangian.h"
 #include "mechanics/systems_classic.h"
 #include "solvers/composition.h"
+#include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/sode_step.h"
 
 namespace dvm::bench {
 
@@ -157,6 +159,36 @@ RunFn<System> dvm_composition(ThetaMap R, const std::string& scheme) {
   };
 }
 
+// The Hamiltonian form (Eq. 5.1) of a theta map, with H the Legendre transform of L.
+template <class System>
+RunFn<System> dvm_hamiltonian(ThetaMap R) {
+  return [R](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
+    const HamiltonianStep<LegendreHamiltonian<System>, ThetaMap> S(LegendreHamiltonian<System>(P.sys), R, h);
+    return run_step(S, P, steps, track);
+  };
+}
+
+// The SODE forms (Sec. 4) with the tangent lift of a theta map.
+template <class System>
+RunFn<System> dvm_sode(ThetaMap R, SodeForm form) {
+  return [R, form](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
+    const auto lift = tangent_lift(R);
+    using Step = SodeStep<System, std::decay_t<decltype(lift)>>;
+    const VelocityFormStep<Step> S(Step(P.sys, lift, h, form));
+    return run_step(S, P, steps, track);
+  };
+}
+
+// Newmark's method (gamma, beta) in velocity form.
+template <class System>
+RunFn<System> dvm_newmark(double gamma, double beta) {
+  return [gamma, beta](const Problem<System>& P, double h, std::int64_t steps,
+                       const StateObserver<System::dim>* track) {
+    const VelocityFormStep<NewmarkStep<System>> S(NewmarkStep<System>(P.sys, h, gamma, beta));
+    return run_step(S, P, steps, track);
+  };
+}
+
 // The compositions measured with each basic map: every table of
 // solvers/composition_methods.h (orders 4 to 8) and the recursive triple jumps of
 // orders 6 and 8 (the chart draws a few; the CSV has all).
@@ -169,7 +201,8 @@ inline std::vector<std::string> suite_compositions() {
   return names;
 }
 
-// The dvm table for a system: the theta maps alone, the compositions of
+// The dvm table for a system: the theta maps alone (position-momentum form), on small
+// systems also the Hamiltonian, SODE and Newmark forms, the compositions of
 // explicit Euler (Stormer-Verlet basic method) and of the midpoint map. `heavy`
 // problems (large dim: every Newton iteration forms an N x N Jacobian by nested
 // Jets) get the compositions of explicit Euler and a few of the midpoint map.
@@ -185,6 +218,13 @@ std::vector<Method<System>> dvm_methods(bool heavy) {
   add("dvm theta-0.3", 1, true, false, dvm_map<System>(ThetaMap(0.3)));
   add("dvm stormer-verlet (EE composed)", 2, false, true,
       dvm_composition<System>(ThetaMap::explicit_euler(), "stormer-verlet"));
+  if constexpr (System::dim <= 2) {  // the other forms (paper Sec. 4 and 5.1), on the small systems
+    add("dvm hamiltonian midpoint", 2, true, true, dvm_hamiltonian<System>(ThetaMap::midpoint()));
+    add("dvm hamiltonian adjoint-euler", 1, false, false, dvm_hamiltonian<System>(ThetaMap::adjoint_euler()));
+    add("dvm sode1 midpoint (trapezoidal)", 2, true, false, dvm_sode<System>(ThetaMap::midpoint(), SodeForm::sode1));
+    add("dvm sode2 midpoint", 2, true, false, dvm_sode<System>(ThetaMap::midpoint(), SodeForm::sode2));
+    add("dvm newmark gamma=1/2 beta=1/4", 2, true, false, dvm_newmark<System>(0.5, 0.25));
+  }
   const std::vector<std::string> chart_ee = {"triple-jump", "mclachlan4", "kahan-li6", "kahan-li8"};
   const std::vector<std::string> chart_mp = {"triple-jump", "kahan-li8"};
   const std::vector<std::string> heavy_mp = {"triple-jump", "kahan-li6", "kahan-li8"};
