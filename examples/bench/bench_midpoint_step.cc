@@ -22,6 +22,7 @@
 #include <cstdlib>
 #include <string>
 
+#include "examples/bench/hand_written.h"
 #include "mechanics/systems.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
@@ -67,44 +68,14 @@ Result generic(const System& L, double h, std::int64_t steps, SolverKind solver)
   return {0, q[0], p[0], static_cast<double>(r.solver_iterations) / static_cast<double>(steps)};
 }
 
-// The implicit midpoint equations of the pendulum, by hand, with the generic loop's
-// starting guess, stopping rule and compensated sums.
+// The implicit midpoint equations of the pendulum, by hand (examples/bench/hand_written.h:
+// the generic loop's starting guess, stopping rule and compensated sums).
 Result hand_written(const Pendulum& P, double h, std::int64_t steps) {
-  const double M = P.m * P.l * P.l, k = P.m * P.g * P.l;
-  double q = 2.0, p = 0.0, cq = 0.0, cp = 0.0;
-  double d = 0.0, d1 = 0.0, d2 = 0.0;
-  std::int64_t iters = 0;
-  for (std::int64_t n = 0; n < steps; ++n) {
-    if (n >= 2)
-      d = 2 * d1 - d2;
-    else if (n == 1)
-      d = d1;
-    double dx = INFINITY;
-    for (int it = 0; it < 25; ++it) {
-      const double s = std::sin(q + 0.5 * d), c = std::cos(q + 0.5 * d);
-      const double f = M * d / h + 0.5 * h * k * s - p;
-      const double J = M / h + 0.25 * h * k * c;
-      ++iters;
-      const double scale = std::fabs(p) + std::fabs(J) * std::fabs(d);
-      if (std::fabs(f) <= 2e-15 * scale) {  // converged: apply the last correction, as dvm does
-        d -= f / J;
-        break;
-      }
-      if (dx <= 1e-14 * (std::fabs(d) + std::fabs(q))) break;
-      dx = f / J;
-      d -= dx;
-    }
-    const double dp = -h * k * std::sin(q + 0.5 * d);
-    // compensated sums, as in the generic loop
-    double y = d - cq, t = q + y;
-    cq = (t - q) - y;
-    q = t;
-    y = dp - cp;
-    t = p + y;
-    cp = (t - p) - y;
-    p = t;
-    d2 = d1;
-    d1 = d;
+  double q = 2.0, p = 0.0;
+  const std::int64_t iters = bench::hand_midpoint_pendulum(P, q, p, h, steps, [](double, double) {});
+  if (iters < 0) {
+    std::fprintf(stderr, "hand-written run failed at step %lld\n", static_cast<long long>(-1 - iters));
+    std::exit(3);
   }
   return {0, q, p, static_cast<double>(iters) / static_cast<double>(steps)};
 }
