@@ -10,13 +10,19 @@
 //     does not grow with the number of steps (DESIGN.md, "Speed");
 //   - computes t_k = t_0 + k h by multiplication, never by summation;
 //   - stops at the first step that fails and reports it, never passing a failed
-//     step on.
+//     step on. A step fails when its solve does not converge, when it would make q
+//     or p non-finite (inf or NaN), or when the step or the observer throws
+//     std::domain_error (a map or Legendre transform evaluated outside its domain,
+//     e.g. DegenerateLagrangianError); the failure records the step index k, the
+//     time t_k, the residual and a message saying which.
 // The observer is called as observer(k, t_k, q_k, p_k, summary_of_step_k) after
 // every completed step (k >= 1); it is a template parameter, so the loop has no
 // virtual call per step.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 
 #include "solvers/newton.h"
@@ -54,13 +60,30 @@ struct RunSummary {
     solver_iterations += s.iterations;
     if (s.iterations > max_step_iterations) max_step_iterations = s.iterations;
     if (s.converged) return true;
+    fail(s, k, t0, h);
+    if (!std::isfinite(failure.residual) && failure.iterations > 0)
+      failure.message = "the step equation is not finite (residual " + std::to_string(failure.residual) +
+                        "): the iterate left the domain of the Lagrangian or the map; " + failure.message;
+    return false;
+  }
+  // Records a failure of step k with the summary s (its message saying why).
+  void fail(const StepSummary& s, std::int64_t k, double t0, double h) {
     failed = true;
     failed_step = k;
     failed_time = t0 + static_cast<double>(k) * h;
     failure = s;
-    return false;
+    failure.converged = false;
   }
 };
+
+// A failure that is not a solve's: the message, and the residual where there is one.
+inline StepSummary step_fault(const std::string& message, double residual = NAN, int iterations = 0) {
+  StepSummary s;
+  s.message = message;
+  s.residual = residual;
+  s.iterations = iterations;
+  return s;
+}
 
 template <class S, class Observer>
 RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<double, S::N>& p,
@@ -76,14 +99,33 @@ RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<doub
       dq = 2.0 * dq_prev - dq_prev2;
     else if (k == 1)
       dq = dq_prev;
-    const StepSummary s = stepper.step(Q.sum, P.sum, dq, dp);
+    StepSummary s;
+    try {
+      s = stepper.step(Q.sum, P.sum, dq, dp);
+    } catch (const std::domain_error& e) {
+      run.fail(step_fault(e.what()), k, t0, h);
+      break;
+    }
     if (!run.record(s, k, t0, h)) break;
+    // (an expression: no temporary vector, no allocation for dynamic sizes)
+    if (!((Q.sum + dq).allFinite() && (P.sum + dp).allFinite())) {
+      run.fail(step_fault("the step gave a non-finite state (q or p is inf or NaN)", s.residual, s.iterations), k, t0,
+               h);
+      break;
+    }
     Q.add(dq);
     P.add(dp);
     dq_prev2 = dq_prev;
     dq_prev = dq;
     run.steps_done = k + 1;
-    observer(k + 1, t0 + static_cast<double>(k + 1) * h, Q.sum, P.sum, s);
+    try {
+      observer(k + 1, t0 + static_cast<double>(k + 1) * h, Q.sum, P.sum, s);
+    } catch (const std::domain_error& e) {
+      // the state of step k + 1 exists but cannot be evaluated (e.g. its Legendre
+      // transform is degenerate): the run stops there
+      run.fail(step_fault(std::string("at the state the step reached: ") + e.what()), k, t0, h);
+      break;
+    }
   }
   q = Q.sum;
   p = P.sum;

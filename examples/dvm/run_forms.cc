@@ -22,6 +22,7 @@
 #include <memory>
 
 #include "examples/dvm/json.h"
+#include "examples/dvm/output.h"
 #include "examples/dvm/report.h"
 #include "mechanics/chain.h"
 #include "mechanics/hamiltonian.h"
@@ -59,16 +60,15 @@ StepOptions step_options(const Scene& s) {
   return opt;
 }
 
-File open_csv(const std::string& path, int n) {
-  File csv;
-  if (path.empty()) return csv;
-  csv.reset(std::fopen(path.c_str(), "w"));
-  if (!csv) throw InputError("cannot open the CSV file '" + path + "' for writing");
+// Opens the run's CSV (output.h: a temporary renamed at the end) and writes its header.
+void open_csv(OutputFile& csv, const Scene& s, const RunOptions& o, int n) {
+  const std::string path = o.csv.empty() ? s.csv : o.csv;
+  if (path.empty()) return;
+  csv.open(path, output_source(s.path, o.csv, "--csv", "output.csv"), csv_bytes(output_rows(s.steps, s.every), 2 * n + 2));
   std::fputs("t", csv.get());
   for (int i = 0; i < n; ++i) std::fprintf(csv.get(), ",q%d", i);
   for (int i = 0; i < n; ++i) std::fprintf(csv.get(), ",p%d", i);
   std::fputs(",energy\n", csv.get());
-  return csv;
 }
 
 template <class V>
@@ -90,7 +90,8 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
   const double E0 = energy_at(q, p);
   if (!std::isfinite(E0)) throw InputError(s.path + ": the energy at the initial state is not finite");
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
-  File csv = open_csv(csv_path, static_cast<int>(q.size()));
+  OutputFile csv;
+  open_csv(csv, s, o, static_cast<int>(q.size()));
   if (csv) write_row(csv.get(), 0.0, q, p, E0);
   double max_energy_error = 0.0, E = E0;
   const double J0 = invariant(q, p);
@@ -105,10 +106,8 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
                                      if (csv && (k % s.every == 0 || k == s.steps)) write_row(csv.get(), t, qk, pk, E);
                                    });
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (csv && std::fflush(csv.get()) != 0) {
-    std::cerr << "dvm: error writing '" << csv_path << "'\n";
-    return 3;
-  }
+  std::string kept;
+  if (!finish_outputs(!run.failed, {&csv}, kept)) return 3;
   const double t_final = static_cast<double>(run.steps_done) * s.step;
   if (o.json) {
     Json::Object j;
@@ -144,10 +143,10 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
       std::printf("  %s %.15g, max error %.3e\n", invariant_name.c_str(), J0, max_J_error);
     std::printf("  solver iterations %lld (at most %d in a step)\n", static_cast<long long>(run.solver_iterations),
                 run.max_step_iterations);
-    if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
+    if (!run.failed && !csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
   }
   if (run.failed) {
-    print_failure(run, s.step);
+    print_failure(run, s.step, kept);
     return 3;
   }
   return 0;
@@ -277,13 +276,14 @@ int run_boundary_value_with(const Scene& s, const System& L, const RunOptions& o
   auto solve_and_report = [&](const auto& map) -> int {
     using Map = std::decay_t<decltype(map)>;
     const BoundaryValueProblem<System, Map> B(L, map, s.step);
+    const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
+    OutputFile csv;  // opened (and its room checked) before the solve
+    open_csv(csv, s, o, N);
     const auto start = std::chrono::steady_clock::now();
     BoundaryValueOptions bo;
     bo.max_iterations = std::max(s.max_iterations, 100);
     const auto res = B.solve(to_vec<N>(s.q), to_vec<N>(s.q_final), static_cast<int>(s.steps), bo);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
-    File csv = open_csv(csv_path, N);
     const auto K = static_cast<std::size_t>(s.steps);
     std::vector<double> E(K + 1);
     double emin = INFINITY, emax = -INFINITY;
@@ -294,10 +294,8 @@ int run_boundary_value_with(const Scene& s, const System& L, const RunOptions& o
       if (csv && (k % static_cast<std::size_t>(s.every) == 0 || k == K))
         write_row(csv.get(), static_cast<double>(k) * s.step, res.q[k], res.p[k], E[k]);
     }
-    if (csv && std::fflush(csv.get()) != 0) {
-      std::cerr << "dvm: error writing '" << csv_path << "'\n";
-      return 3;
-    }
+    std::string kept;
+    if (!finish_outputs(res.converged, {&csv}, kept)) return 3;
     if (o.json) {
       Json::Object j;
       j.str("status", res.converged ? "ok" : "failed")
@@ -328,10 +326,14 @@ int run_boundary_value_with(const Scene& s, const System& L, const RunOptions& o
       std::printf("  max DEL residual %.3e (scale %.3e), %d Ceres iterations\n", res.max_residual, res.scale,
                   res.iterations);
       std::printf("  p_initial %.15g, energy varies by %.3e along the solution\n", res.p.front()[0], emax - emin);
-      if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
+      if (res.converged && !csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
     }
     if (!res.converged) {
-      std::fprintf(stderr, "dvm: the boundary-value problem did not converge: %s\n", res.message.c_str());
+      std::fprintf(stderr,
+                   "dvm: the boundary-value problem did not converge after %d Ceres iterations: largest discrete "
+                   "Euler-Lagrange residual %.3e against scale %.3e (%s)%s%s\n",
+                   res.iterations, res.max_residual, res.scale, res.message.c_str(),
+                   kept.empty() ? "" : "; the nodes are in ", kept.c_str());
       return 3;
     }
     return 0;

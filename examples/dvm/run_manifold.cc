@@ -14,6 +14,7 @@
 
 #include "examples/dvm/commands.h"
 #include "examples/dvm/json.h"
+#include "examples/dvm/output.h"
 #include "examples/dvm/report.h"
 #include "solvers/manifold_composition.h"
 #include "solvers/manifold_step.h"
@@ -102,10 +103,11 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   opt.accept_tolerance = std::fmax(opt.accept_tolerance, s.tolerance);
 
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
-  File csv;
+  OutputFile csv;
   if (!csv_path.empty()) {
-    csv.reset(std::fopen(csv_path.c_str(), "w"));
-    if (!csv) throw InputError("cannot open the CSV file '" + csv_path + "' for writing");
+    const int columns = 2 + static_cast<int>(coordinates(q).size()) + C + static_cast<int>(J0.size());
+    csv.open(csv_path, output_source(s.path, o.csv, "--csv", "output.csv"),
+             csv_bytes(output_rows(s.steps, s.every), columns));
     std::fprintf(csv.get(), "%s%s\n", point_columns(L).c_str(), momentum_columns(L));
   }
   auto write_row = [&](double t, const Point& qk, const Covector& pk, double e) {
@@ -137,10 +139,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
                                    L, R, s.step, substeps(find_composition(s.composition), R.symmetric()), opt),
                                0.0, q, p, v0, s.steps, observer);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (csv && std::fflush(csv.get()) != 0) {
-    std::cerr << "dvm: error writing '" << csv_path << "'\n";
-    return 3;
-  }
+  std::string kept;
+  if (!finish_outputs(!run.failed, {&csv}, kept)) return 3;
   const double t_final = static_cast<double>(run.steps_done) * s.step;
   const char* momentum_name =
       std::is_same_v<System, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
@@ -178,10 +178,10 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
                 max_defect);
     std::printf("  solver iterations %lld (at most %d in a step)\n", static_cast<long long>(run.solver_iterations),
                 run.max_step_iterations);
-    if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
+    if (!run.failed && !csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
   }
   if (run.failed) {
-    print_failure(run, s.step);
+    print_failure(run, s.step, kept);
     return 3;
   }
   return 0;

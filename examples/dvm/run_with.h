@@ -26,6 +26,7 @@
 
 #include "examples/dvm/commands.h"
 #include "examples/dvm/json.h"
+#include "examples/dvm/output.h"
 #include "examples/dvm/report.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
@@ -131,28 +132,27 @@ bool exact_available(const S& L) {
 
 // ---- NumPy .npy writer (format version 1.0): a little-endian float64 2-D array.
 // The header holds the shape, unknown until the end: it is written with room to
-// spare and rewritten when the file is closed.
+// spare and rewritten before the file is finished (output.h: written under a
+// temporary name and renamed at the end).
 class NpyWriter {
  public:
-  bool open(const std::string& path, int cols) {
-    f_.reset(std::fopen(path.c_str(), "wb"));
-    if (!f_) return false;
+  void open(const std::string& path, const std::string& what, double rows, int cols) {
+    file_.open(path, what, npy_bytes(rows, cols));
     cols_ = cols;
     write_header();
-    return true;
   }
-  explicit operator bool() const { return static_cast<bool>(f_); }
+  explicit operator bool() const { return static_cast<bool>(file_); }
   void row(const double* x) {
-    std::fwrite(x, sizeof(double), static_cast<std::size_t>(cols_), f_.get());
+    std::fwrite(x, sizeof(double), static_cast<std::size_t>(cols_), file_.get());
     ++rows_;
   }
-  bool close() {
-    if (!f_) return true;
-    std::fseek(f_.get(), 0, SEEK_SET);
-    write_header();
-    const bool ok = std::fflush(f_.get()) == 0 && !std::ferror(f_.get());
-    f_.reset();
-    return ok;
+  // The header with the final row count; then the file is ready for finish_outputs.
+  OutputFile& file() {
+    if (file_) {
+      std::fseek(file_.get(), 0, SEEK_SET);
+      write_header();
+    }
+    return file_;
   }
 
  private:
@@ -168,10 +168,10 @@ class NpyWriter {
     h += '\n';
     const unsigned char pre[10] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0, static_cast<unsigned char>(len & 0xff),
                                    static_cast<unsigned char>(len >> 8)};
-    std::fwrite(pre, 1, 10, f_.get());
-    std::fwrite(h.data(), 1, h.size(), f_.get());
+    std::fwrite(pre, 1, 10, file_.get());
+    std::fwrite(h.data(), 1, h.size(), file_.get());
   }
-  File f_;
+  OutputFile file_;
   int cols_ = 0;
   long long rows_ = 0;
 };
@@ -335,6 +335,7 @@ int converge_with(const Scene& s, const System& L, const Map& R, const RunOption
   const StepOptions opt = step_options<System>(s);
   std::vector<double> hs, errs;
   std::vector<std::int64_t> iters;
+  std::string first_failure;
   for (auto n : list) {
     const double h = T / static_cast<double>(n);
     const PositionMomentumStep<System, Map> stepper(L, R, h, opt);
@@ -343,6 +344,14 @@ int converge_with(const Scene& s, const System& L, const Map& R, const RunOption
     hs.push_back(h);
     errs.push_back(run.failed ? NAN : std::fmax(max_abs(q - qr), max_abs(p - pr)));
     iters.push_back(run.solver_iterations);
+    if (run.failed && first_failure.empty()) {
+      std::ostringstream m;
+      m.precision(17);
+      m << "the run with " << n << " steps (h = " << h << ") failed at step " << run.failed_step
+        << " (t = " << run.failed_time << "): " << run.failure.message << " (residual " << run.failure.residual
+        << ")";
+      first_failure = m.str();
+    }
   }
   // orders between neighbours, and a least-squares fit above the round-off plateau
   std::vector<double> orders(hs.size(), NAN);
@@ -379,7 +388,7 @@ int converge_with(const Scene& s, const System& L, const Map& R, const RunOption
   }
   for (double e : errs)
     if (std::isnan(e)) {
-      std::fprintf(stderr, "dvm: a run of the convergence study did not converge\n");
+      std::fprintf(stderr, "dvm: a run of the convergence study did not converge: %s\n", first_failure.c_str());
       return 3;
     }
   return 0;
@@ -402,18 +411,17 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
 
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
   const std::string npy_path = o.npy.empty() ? s.npy : o.npy;
-  File csv;
+  const double rows = output_rows(s.steps, s.every);
+  OutputFile csv;
   if (!csv_path.empty()) {
-    csv.reset(std::fopen(csv_path.c_str(), "w"));
-    if (!csv) throw InputError("cannot open the CSV file '" + csv_path + "' for writing");
+    csv.open(csv_path, output_source(s.path, o.csv, "--csv", "output.csv"), csv_bytes(rows, 2 * N + 2));
     std::fputs("t", csv.get());
     for (int i = 0; i < N; ++i) std::fprintf(csv.get(), ",q%d", i);
     for (int i = 0; i < N; ++i) std::fprintf(csv.get(), ",p%d", i);
     std::fputs(",energy\n", csv.get());
   }
   NpyWriter npy;
-  if (!npy_path.empty() && !npy.open(npy_path, 2 * N + 2))
-    throw InputError("cannot open the NumPy file '" + npy_path + "' for writing");
+  if (!npy_path.empty()) npy.open(npy_path, output_source(s.path, o.npy, "--npy", "output.npy"), rows, 2 * N + 2);
   double row[2 * N + 2];
   auto write_row = [&](double t, const V& qk, const V& pk, double e) {
     if (csv) {
@@ -457,14 +465,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
                                                    substeps(find_composition(s.composition), R.symmetric()), opt),
                       0.0, q, p, v0, s.steps, observer);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  if (csv && std::fflush(csv.get()) != 0) {
-    std::cerr << "dvm: error writing '" << csv_path << "'\n";
-    return 3;
-  }
-  if (!npy.close()) {
-    std::cerr << "dvm: error writing '" << npy_path << "'\n";
-    return 3;
-  }
+  std::string kept;
+  if (!finish_outputs(!run.failed, {&csv, &npy.file()}, kept)) return 3;
   const double t_final = static_cast<double>(run.steps_done) * s.step;
   int angular = -1;  // a scalar angular momentum, reported with the historical JSON keys
   for (int i = 0; i < n_inv; ++i)
@@ -515,11 +517,11 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
                 static_cast<long long>(run.solver_iterations),
                 static_cast<double>(run.solver_iterations) / std::fmax(1.0, static_cast<double>(run.steps_done)),
                 run.max_step_iterations, wall, 1e6 * wall / std::fmax(1.0, static_cast<double>(run.steps_done)));
-    if (!csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
-    if (!npy_path.empty()) std::printf("  wrote %s\n", npy_path.c_str());
+    if (!run.failed && !csv_path.empty()) std::printf("  wrote %s\n", csv_path.c_str());
+    if (!run.failed && !npy_path.empty()) std::printf("  wrote %s\n", npy_path.c_str());
   }
   if (run.failed) {
-    print_failure(run, s.step);
+    print_failure(run, s.step, kept);
     return 3;
   }
   return 0;

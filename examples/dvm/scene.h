@@ -120,5 +120,10 @@ struct Scene {
 // Loads and validates a scene; overrides are "section.key=value" with value written
 // as in TOML. Throws InputError.
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
+// The same for a scene given as text; `path` names it in messages.
+Scene load_scene_text(const std::string& text, const std::string& path, const std::vector<std::string>& overrides);
+
+// The most steps a run takes: t_k = k h is formed from k as a double, exact to 2^53.
+constexpr std::int64_t kMaxSteps = std::int64_t(1) << 53;
 
 }  // namespace dvm::cli

@@ -1,0 +1,154 @@
+#include "examples/dvm/output.h"
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <system_error>
+
+#include "examples/dvm/scene.h"
+
+namespace dvm::cli {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// Bytes this process has promised to write, per filesystem (device id).
+std::map<unsigned long long, double>& reserved() {
+  static std::map<unsigned long long, double> r;
+  return r;
+}
+
+}  // namespace
+
+double output_rows(std::int64_t steps, std::int64_t every) {
+  return std::floor(static_cast<double>(steps) / static_cast<double>(every < 1 ? 1 : every)) + 2.0;
+}
+
+double csv_bytes(double rows, int columns) { return 64.0 * columns + rows * 25.0 * columns; }
+
+double npy_bytes(double rows, int columns) { return 128.0 + rows * 8.0 * columns; }
+
+std::string human_bytes(double bytes) {
+  const char* units[] = {"bytes", "kB", "MB", "GB", "TB", "PB", "EB"};
+  int u = 0;
+  while (bytes >= 1000.0 && u < 6) bytes /= 1000.0, ++u;
+  char buf[64];
+  std::snprintf(buf, sizeof buf, u == 0 ? "%.0f %s" : "%.1f %s", bytes, units[u]);
+  return buf;
+}
+
+void OutputFile::open(const std::string& path, const std::string& what, double bytes) {
+  discard();
+  const std::string where = what + " '" + path + "'";
+  const fs::path p(path);
+  if (p.filename().empty()) throw InputError(where + ": expected a file name, got a directory path");
+  const fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec))
+    throw InputError(where + ": the directory '" + dir.string() + "' does not exist; expected a path in an existing directory");
+  if (fs::is_directory(p, ec)) throw InputError(where + ": is a directory; expected a file name");
+  if (fs::exists(p, ec) && access(path.c_str(), W_OK) != 0)
+    throw InputError(where + ": the file exists and is not writable (" + std::strerror(errno) + ")");
+  if (access(dir.c_str(), W_OK | X_OK) != 0)
+    throw InputError(where + ": cannot create files in '" + dir.string() + "' (" + std::strerror(errno) + ")");
+
+  std::string tmpl = (dir / ("." + p.filename().string() + ".XXXXXX")).string();
+  const int fd = mkstemp(tmpl.data());
+  if (fd < 0)
+    throw InputError(where + ": cannot create a file in '" + dir.string() + "' (" + std::strerror(errno) + ")");
+  // mkstemp makes the file private (0600); give it the permissions a plain fopen would
+  const mode_t mask = umask(0);
+  umask(mask);
+  fchmod(fd, 0666 & ~mask);
+  f_ = fdopen(fd, "w+b");
+  if (!f_) {
+    ::close(fd);
+    std::remove(tmpl.c_str());
+    throw InputError(where + ": cannot open the temporary file '" + tmpl + "'");
+  }
+  path_ = path;
+  temp_ = tmpl;
+
+  // Room (checked once the path is known to be writable): this file plus the others this run writes to the same filesystem.
+  struct stat st {};
+  if (stat(dir.c_str(), &st) != 0)
+    throw InputError(where + ": cannot inspect '" + dir.string() + "' (" + std::strerror(errno) + ")");
+  device_ = static_cast<unsigned long long>(st.st_dev);
+  const fs::space_info space = fs::space(dir, ec);
+  const double total = reserved()[device_] + bytes;
+  if (!ec && total > static_cast<double>(space.available)) {
+    discard();
+    char exact[64];
+    std::snprintf(exact, sizeof exact, "%.0f", total);
+    throw InputError(where + ": the run would write up to " + human_bytes(total) + " (" + exact +
+                     " bytes) but the filesystem of '" +
+                     dir.string() + "' has " + human_bytes(static_cast<double>(space.available)) +
+                     " free; expected a run whose output fits (raise output.every, shorten the run, or "
+                     "write elsewhere)");
+  }
+  reserved()[device_] = total;
+  reserved_ = bytes;
+}
+
+std::string OutputFile::finish(bool complete) {
+  if (!f_) return "";
+  const bool write_error = std::fflush(f_) != 0 || std::ferror(f_) != 0;
+  const int write_errno = errno;
+  const bool close_error = std::fclose(f_) != 0;
+  f_ = nullptr;
+  if (write_error || close_error) {
+    const std::string msg = "error writing '" + path_ + "' (" + std::strerror(write_errno) + "); nothing was kept";
+    std::remove(temp_.c_str());
+    temp_.clear();
+    return msg;
+  }
+  const std::string target = complete ? path_ : path_ + ".partial";
+  if (std::rename(temp_.c_str(), target.c_str()) != 0) {
+    const std::string msg = "cannot rename '" + temp_ + "' to '" + target + "' (" + std::strerror(errno) + ")";
+    std::remove(temp_.c_str());
+    temp_.clear();
+    return msg;
+  }
+  temp_.clear();
+  return "";
+}
+
+void OutputFile::discard() {
+  if (f_) std::fclose(f_);
+  f_ = nullptr;
+  if (!temp_.empty()) std::remove(temp_.c_str());
+  temp_.clear();
+  if (reserved_ > 0.0) reserved()[device_] -= reserved_;
+  reserved_ = 0.0;
+}
+
+OutputFile::~OutputFile() { discard(); }
+
+bool finish_outputs(bool complete, std::initializer_list<OutputFile*> files, std::string& kept) {
+  bool ok = true;
+  for (OutputFile* f : files) {
+    if (!*f) continue;
+    const std::string err = f->finish(complete);
+    if (!err.empty()) {
+      std::fprintf(stderr, "dvm: %s\n", err.c_str());
+      ok = false;
+    } else if (!complete) {
+      kept += (kept.empty() ? "" : ", ") + f->path() + ".partial";
+    }
+  }
+  return ok;
+}
+
+std::string output_source(const std::string& scene_path, const std::string& option_value, const char* option,
+                          const char* key) {
+  return option_value.empty() ? scene_path + ": key '" + key + "'" : std::string(option);
+}
+
+}  // namespace dvm::cli

@@ -1,0 +1,72 @@
+// The output files of a run (CSV, NumPy .npy), written so that a file at the final
+// path is always a complete run.
+//
+//   - Before the run starts, each file's size is bounded from above (rows x columns
+//     x the widest number) and the sum over the run's files on one filesystem is
+//     compared with the space free there (std::filesystem::space). A run that would
+//     not fit is refused as bad input, with both numbers in the message. So is a
+//     path whose directory is missing or not writable, or that names a directory.
+//   - Rows go to a temporary file created in the final path's directory
+//     (".NAME.XXXXXX.tmp"). When the run is complete the file is flushed, closed and
+//     renamed onto the final path: rename(2) within one filesystem is atomic, so the
+//     final path holds either what it held before (or nothing) or the whole new file.
+//   - A run that stops on a numerical failure renames its rows to "PATH.partial"
+//     instead; the final path is left as it was. A write error (a full disk) removes
+//     the temporary. A run killed outright leaves only the hidden temporary.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+#include <initializer_list>
+#include <string>
+
+namespace dvm::cli {
+
+// The rows a run writes: the initial state, every `every`-th step and the last.
+double output_rows(std::int64_t steps, std::int64_t every);
+// Upper bounds of a file's size in bytes (a CSV number "%.17g" takes at most 24
+// characters plus its separator; the header is bounded generously).
+double csv_bytes(double rows, int columns);
+double npy_bytes(double rows, int columns);
+
+class OutputFile {
+ public:
+  OutputFile() = default;
+  OutputFile(const OutputFile&) = delete;
+  OutputFile& operator=(const OutputFile&) = delete;
+  ~OutputFile();  // not finished: the temporary is removed
+
+  // Checks the path and the free space for `bytes` more (beside this process's other
+  // open outputs on the same filesystem) and creates the temporary file. Throws
+  // InputError naming `what` (the option or scene key that gave the path).
+  void open(const std::string& path, const std::string& what, double bytes);
+  std::FILE* get() const { return f_; }
+  explicit operator bool() const { return f_ != nullptr; }
+  const std::string& path() const { return path_; }
+
+  // Flushes and closes the file and renames it onto the final path (complete) or
+  // onto path() + ".partial" (a failed run). Returns an empty string on success,
+  // else a message saying what went wrong (the temporary is then removed).
+  std::string finish(bool complete);
+
+ private:
+  void discard();
+  std::FILE* f_ = nullptr;
+  std::string path_, temp_;
+  double reserved_ = 0.0;
+  unsigned long long device_ = 0;
+};
+
+// Finishes each open file of a run (see OutputFile::finish), printing any error to
+// stderr; returns false if one failed. For a failed run `kept` lists the .partial
+// files written.
+bool finish_outputs(bool complete, std::initializer_list<OutputFile*> files, std::string& kept);
+
+// What gave an output path, for messages: the option (when given) or the scene key.
+std::string output_source(const std::string& scene_path, const std::string& option_value, const char* option,
+                          const char* key);
+
+// "12.3 GB": a byte count for messages.
+std::string human_bytes(double bytes);
+
+}  // namespace dvm::cli

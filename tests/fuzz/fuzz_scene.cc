@@ -1,0 +1,21 @@
+// libFuzzer target: TOML text -> validated scene (examples/dvm/scene.cc).
+//
+// Any input must end in a Scene or an InputError (bad input is expected and fine);
+// anything else - a crash, undefined behaviour, a leak, another exception - is a
+// finding. Run by `make fuzz`; seed corpus in tests/fuzz/corpus/scene.
+#include <cstddef>
+#include <cstdint>
+#include <string>
+
+#include "examples/dvm/scene.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string text(reinterpret_cast<const char*>(data), size);
+  try {
+    const dvm::cli::Scene s = dvm::cli::load_scene_text(text, "fuzz.toml", {});
+    // what the runners rely on after validation
+    if (s.step <= 0.0 || s.steps < 1 || s.every < 1) __builtin_trap();
+  } catch (const dvm::cli::InputError&) {
+  }
+  return 0;
+}
