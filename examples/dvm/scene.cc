@@ -594,9 +594,9 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
                                   "composition", "form", "gamma", "beta"});
   read_form(r, in, s);
-  if (info.space != "R^n" && s.form != "lagrangian")
-    throw InputError(path + ": key 'integrator.form': systems on " + info.space + " run the lagrangian form only, got \"" +
-                     s.form + "\"");
+  if (info.space != "R^n" && s.form != "lagrangian" && s.form != "hamiltonian")
+    throw InputError(path + ": key 'integrator.form': systems on " + info.space +
+                     " run the lagrangian and hamiltonian forms only, got \"" + s.form + "\"");
   const toml::node* m = in.get("map");
   if (!m && s.form != "newmark") throw InputError(path + ": missing key 'integrator.map'");
   if (m) {
