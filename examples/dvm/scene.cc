@@ -566,10 +566,10 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   if (info.name == "chain") s.dim = resolve_dimension(path, info, s.params);
   if (info.space != "R^n") {
     const auto kind = root["problem"]["kind"].value<std::string>();
-    if (kind && *kind == "boundary-value")
+    if (kind && *kind == "boundary-value" && info.name != "spherical-pendulum")
       throw InputError(r.where(root["problem"]["kind"].node(), "problem.kind") +
-                       ": boundary-value problems run on R^n systems only, not on " + info.space + " (" + info.name +
-                       ")");
+                       ": boundary-value problems run on R^n systems and the spherical pendulum only, not on " +
+                       info.space + " (" + info.name + ")");
   }
   read_problem(r, root, s, s.dim);
   const bool boundary_value = s.problem == "boundary-value";
@@ -588,6 +588,16 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
     read_rotation_initial(r, ini, path, s);
   else
     read_vector_initial(r, ini, path, info, s.dim * links, boundary_value, s);
+  if (boundary_value && info.space == "S^2") {
+    // both end points on the sphere, not projected onto it
+    for (const auto* end : {&s.q, &s.q_final}) {
+      const auto& x = *end;
+      const double defect = std::fabs(std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - 1.0);
+      if (!(defect <= 1e-12))
+        throw InputError(path + ": key '" + (end == &s.q ? "initial.q" : "problem.q_final") +
+                         "': not a unit vector (| |q| - 1 | = " + fmt(defect) + "); expected a point of S^2 to 1e-12");
+    }
+  }
 
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);
