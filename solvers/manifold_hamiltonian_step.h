@@ -22,8 +22,9 @@
 //
 // Every iterate is produced by the chart, so it lies on the manifold to round-off (a
 // chart result off by more than 1e-12 fails the step, as in solvers/manifold_step.h).
-// The local map has no closed-form inverse: HamiltonianStep inverts it by Newton's
-// method in doubles and differentiates the inverse by the implicit function theorem.
+// The local map is inverted through the manifold map's closed-form inverse
+// (ClosedFormChartMap), with the relative position of the two points formed in the
+// chart without cancellation; maps without one use Newton's method in the chart.
 #pragma once
 
 #include "mechanics/manifold_hamiltonian.h"
@@ -31,6 +32,81 @@
 #include "solvers/manifold_step.h"
 
 namespace dvm {
+
+// The relative position (Sphere::relative, SO3::relative) of chart(c, e0 + de) from
+// chart(c, e0), formed without cancellation when de is small:
+//   S^2 (central projection, chart(c, e) = (c + B e)/n(e), n = sqrt(1 + |e|^2)):
+//     d = c k + B (de/n1 + e0 k),   k = 1/n1 - 1/n0 = -(de.(2 e0 + de))/(n0 n1 (n0 + n1));
+//   SO(3): chart(c, e0)^T chart(c, e0 + de) = exp(e0)^T exp(e0 + de) (c cancels).
+template <class T>
+Vec<T, 3> chart_relative(const Sphere&, const Vec<double, 3>& c, const Vec<T, 2>& e0, const Vec<T, 2>& de) {
+  using std::sqrt;
+  const Vec<T, 2> e1(e0[0] + de[0], e0[1] + de[1]);
+  const T n0 = sqrt(1.0 + detail::dot(e0, e0)), n1 = sqrt(1.0 + detail::dot(e1, e1));
+  const T k = -(de[0] * (2.0 * e0[0] + de[0]) + de[1] * (2.0 * e0[1] + de[1])) / (n0 * n1 * (n0 + n1));
+  const Vec<T, 2> u(de[0] / n1 + e0[0] * k, de[1] / n1 + e0[1] * k);
+  const Vec<T, 3> Bu = Sphere::tangent(c, u);
+  return Vec<T, 3>(c[0] * k + Bu[0], c[1] * k + Bu[1], c[2] * k + Bu[2]);
+}
+template <class T>
+Mat<T, 3, 3> chart_relative(const SO3&, const Mat<double, 3, 3>&, const Vec<T, 3>& e0, const Vec<T, 3>& de) {
+  return SO3::transpose_mul(SO3::exp(e0), SO3::exp(Vec<T, 3>(e0 + de)));
+}
+
+// The map in the chart centred at c (as LocalRepresentation), inverted through the
+// manifold map's closed-form inverse when it has one: (x, v) = R_d^{-1}(q0, q1) with
+// the relative position from chart_relative, eta = chart^{-1}(x), and nu the chart
+// velocity with D(eta) nu = v, i.e. nu = (D^T D)^{-1} D^T v. Maps without a closed
+// form fall back to Newton's method on the local representation.
+template <class Map>
+class ClosedFormChartMap {
+ public:
+  using M = typename Map::Manifold;
+  static constexpr int n = M::dim;
+  static constexpr int S = M::template Tangent<double>::RowsAtCompileTime;
+  static constexpr bool provides_inverse = true;
+  using Point = typename M::template Point<double>;
+  ClosedFormChartMap(const Map* map, const Point& c) : local_(MapView<Map>{map}, c), map_(map), c_(c) {}
+  std::string name() const { return local_.name(); }
+  bool symmetric() const { return local_.symmetric(); }
+  int order() const { return local_.order(); }
+
+  template <class T, int N>
+  PointPair<T, N> operator()(const Vec<T, N>& eta, const Vec<T, N>& nu) const {
+    return local_(eta, nu);
+  }
+  template <class T, int N>
+  TangentPoint<T, N> inverse(const Vec<T, N>& e0, const Vec<T, N>& e1) const {
+    return inverse_increment(e0, Vec<T, N>(e1 - e0));
+  }
+  template <class T, int N>
+  TangentPoint<T, N> inverse_increment(const Vec<T, N>& e0, const Vec<T, N>& de) const {
+    static_assert(N == n, "a local representation lives in R^dim");
+    if (!map_->closed_form_inverse()) return dvm::inverse(local_, e0, Vec<T, N>(e0 + de));
+    const ManifoldTangent<M, T> t = map_->inverse_relative(M::chart(c_, e0), chart_relative(M{}, c_, e0, de));
+    const Vec<T, n> eta = M::chart_inverse(c_, t.x);
+    Mat<T, S, n> D;
+    chart_with_differential<M, T>(c_, eta, D);
+    Mat<T, n, n> G;
+    Vec<T, n> b;
+    for (int i = 0; i < n; ++i) {
+      T bi = constant<T>(0.0);
+      for (int k = 0; k < S; ++k) bi = bi + D(k, i) * t.v[k];
+      b[i] = bi;
+      for (int j = 0; j < n; ++j) {
+        T g = constant<T>(0.0);
+        for (int k = 0; k < S; ++k) g = g + D(k, i) * D(k, j);
+        G(i, j) = g;
+      }
+    }
+    return {eta, solve_dense<T, n, n>(G, b)};
+  }
+
+ private:
+  LocalRepresentation<MapView<Map>> local_;
+  const Map* map_;
+  Point c_;
+};
 
 template <class Ham, class Map>
 class ManifoldHamiltonianStep {
@@ -41,7 +117,7 @@ class ManifoldHamiltonianStep {
   using Covector = typename M::template Tangent<double>;
   using V = Vec<double, n>;
   using LocalH = decltype(chart_hamiltonian(std::declval<const Ham&>(), std::declval<const Point&>()));
-  using LocalMap = LocalRepresentation<MapView<Map>>;
+  using LocalMap = ClosedFormChartMap<Map>;
   using Local = HamiltonianStep<LocalH, LocalMap>;
   static_assert(std::is_same_v<typename Ham::Manifold, M>, "Hamiltonian and map live on different manifolds");
 
@@ -57,7 +133,7 @@ class ManifoldHamiltonianStep {
   // The R^dim Hamiltonian step in the chart centred at c (it refers to this object's
   // map, so it must not outlive it).
   Local local_step(const Point& c) const {
-    return Local(chart_hamiltonian(H_, c), LocalMap(MapView<Map>{&R_}, c), h_, options_, sample_);
+    return Local(chart_hamiltonian(H_, c), LocalMap(&R_, c), h_, options_, sample_);
   }
 
   // One step: xi holds the guess of the chart coordinates of q1 on entry and them on
