@@ -265,6 +265,22 @@ class LocalRepresentation {
   typename M::template Point<double> c_;
 };
 
+// A non-owning view of a manifold map with the interface LocalRepresentation needs,
+// so that a local representation can be re-centred every step without copying the
+// map (whose name is a std::string). The viewed map must outlive the view.
+template <class Map>
+struct MapView {
+  using Manifold = typename Map::Manifold;
+  const Map* map;
+  std::string name() const { return map->name(); }
+  bool symmetric() const { return map->symmetric(); }
+  int order() const { return map->order(); }
+  template <class X, class V>
+  auto operator()(const X& x, const V& v) const {
+    return (*map)(x, v);
+  }
+};
+
 // Newton's method in the chart centred at q0.
 template <class Map>
 ManifoldTangent<typename Map::Manifold, double> newton_manifold_inverse_values(

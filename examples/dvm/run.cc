@@ -10,9 +10,14 @@
 
 namespace dvm::cli {
 
+// [problem] kind = "boundary-value" on S^2 (run_manifold_bvp.cc; declared here rather
+// than in commands.h so that adding it recompiles no other runner).
+int run_manifold_boundary_value(const Scene& scene, const RunOptions& options);
+
 int run_scene(const Scene& s, const RunOptions& o) {
   try {
-    if (s.space != "R^n") return run_manifold_scene(s, o);
+    if (s.space != "R^n")
+      return s.problem == "boundary-value" ? run_manifold_boundary_value(s, o) : run_manifold_scene(s, o);
     // boundary-value problems, the dynamic-size chain, the other forms
     if (s.problem == "boundary-value") return run_boundary_value(s, o);
     if (s.system == "chain") return run_chain(s, o);

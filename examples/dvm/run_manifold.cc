@@ -1,5 +1,6 @@
 // `dvm run` for systems on S^2 and SO(3): the step is solved in local coordinates
-// (solvers/manifold_step.h). Output:
+// (solvers/manifold_step.h; form = "hamiltonian": solvers/manifold_hamiltonian_step.h,
+// with the same output). Output:
 //   S^2    CSV  t, x, y, z, p0, p1, p2, energy, J3           (J3 = (x cross p)_3)
 //   SO(3)  CSV  t, qw, qx, qy, qz, pi0, pi1, pi2, energy, m0, m1, m2
 //               (unit quaternion of R, body momentum, spatial angular momentum R pi)
@@ -17,6 +18,7 @@
 #include "examples/dvm/output.h"
 #include "examples/dvm/report.h"
 #include "solvers/manifold_composition.h"
+#include "solvers/manifold_hamiltonian_step.h"
 #include "solvers/manifold_step.h"
 
 namespace dvm::cli {
@@ -71,12 +73,16 @@ std::string point_columns(const SphericalPendulum&) { return "t,x,y,z,p0,p1,p2,e
 std::string point_columns(const RigidBody&) { return "t,qw,qx,qy,qz,pi0,pi1,pi2,energy"; }
 std::string point_columns(const HeavyTop&) { return "t,qw,qx,qy,qz,pi0,pi1,pi2,energy"; }
 
+template <class System, class Map, class Stepper>
+int run_stepper(const Scene& s, const System& L, const Map& R, const RunOptions& o, const Stepper& stepper,
+                typename Stepper::Point q, typename Stepper::Covector p, const typename Stepper::Covector& v0,
+                double E0, const std::vector<double>& J0);
+
 template <class System, class Map>
 int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o) {
   using M = typename Map::Manifold;
   using Point = typename M::template Point<double>;
   using Covector = typename M::template Tangent<double>;
-  constexpr int C = Covector::RowsAtCompileTime;
   Point q;
   if constexpr (std::is_same_v<M, SO3>)
     q = SO3::from_quaternion(Vec<double, 4>(s.q[0], s.q[1], s.q[2], s.q[3]));
@@ -90,9 +96,6 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     v0 = Eigen::Map<const Covector>(s.v.data());
     p = manifold_legendre(L, q, v0);
   }
-  auto energy_at = [&](const Point& qk, const Covector& pk) {
-    return manifold_energy(L, qk, manifold_legendre_inverse(L, qk, pk));
-  };
   const double E0 = manifold_energy(L, q, v0);
   const std::vector<double> J0 = momentum_map(L, q, p);
 
@@ -101,7 +104,38 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   opt.max_iterations = s.max_iterations;
   opt.residual_tolerance = s.tolerance;
   opt.accept_tolerance = std::fmax(opt.accept_tolerance, s.tolerance);
+  // form = "hamiltonian": Eq. 5.1 solved in a chart (solvers/manifold_hamiltonian_step.h)
+  // (written-out Hamiltonians of the S^2 and SO(3) systems; the chain has none yet)
+  if (s.form == "hamiltonian") {
+    if constexpr (std::is_same_v<M, Sphere> || std::is_same_v<M, SO3>)
+      return run_stepper(s, L, R, o,
+                         ManifoldHamiltonianStep<decltype(hamiltonian_of(L)), Map>(hamiltonian_of(L), R, s.step, opt),
+                         q, p, v0, E0, J0);
+    else
+      throw InputError(s.path + ": key 'integrator.form': " + s.system +
+                       " runs the lagrangian form only (form = \"hamiltonian\" is wired for S^2 and SO(3) systems)");
+  }
+  // the map's own step, or its steps composed (a non-symmetric map entering with its
+  // adjoint, theta -> 1 - theta; solvers/manifold_composition.h)
+  if (s.composition != "none")
+    return run_stepper(s, L, R, o,
+                       ComposedManifoldStep<System, Map>(
+                           L, R, s.step, substeps(find_composition(s.composition), R.symmetric()), opt),
+                       q, p, v0, E0, J0);
+  return run_stepper(s, L, R, o, ManifoldStep<System, Map>(L, R, s.step, opt), q, p, v0, E0, J0);
+}
 
+template <class System, class Map, class Stepper>
+int run_stepper(const Scene& s, const System& L, const Map& R, const RunOptions& o, const Stepper& stepper,
+                typename Stepper::Point q, typename Stepper::Covector p, const typename Stepper::Covector& v0,
+                double E0, const std::vector<double>& J0) {
+  using M = typename Map::Manifold;
+  using Point = typename M::template Point<double>;
+  using Covector = typename M::template Tangent<double>;
+  constexpr int C = Covector::RowsAtCompileTime;
+  auto energy_at = [&](const Point& qk, const Covector& pk) {
+    return manifold_energy(L, qk, manifold_legendre_inverse(L, qk, pk));
+  };
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
   OutputFile csv;
   if (!csv_path.empty()) {
@@ -130,14 +164,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     for (std::size_t i = 0; i < J.size(); ++i) max_momentum_error = std::fmax(max_momentum_error, std::fabs(J[i] - J0[i]));
     if (csv && (k % s.every == 0 || k == s.steps)) write_row(t, qk, pk, E);
   };
-  // The map's own step, or its steps composed (a non-symmetric map entering with its
-  // adjoint, theta -> 1 - theta; solvers/manifold_composition.h).
-  const RunSummary run =
-      s.composition == "none"
-          ? integrate_manifold(ManifoldStep<System, Map>(L, R, s.step, opt), 0.0, q, p, v0, s.steps, observer)
-          : integrate_manifold(ComposedManifoldStep<System, Map>(
-                                   L, R, s.step, substeps(find_composition(s.composition), R.symmetric()), opt),
-                               0.0, q, p, v0, s.steps, observer);
+  const RunSummary run = integrate_manifold(stepper, 0.0, q, p, v0, s.steps, observer);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   std::string kept;
   if (!finish_outputs(!run.failed, {&csv}, kept)) return 3;
@@ -150,6 +177,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .str("system", s.system)
         .str("manifold", M::name)
         .str("map", R.name())
+        .str("form", s.form)
         .str("composition", s.composition)
         .str("solver", s.solver)
         .num("step", s.step)

@@ -641,10 +641,10 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   if (info.name == "chain") s.dim = resolve_dimension(path, info, s.params);
   if (info.space != "R^n") {
     const auto kind = root["problem"]["kind"].value<std::string>();
-    if (kind && *kind == "boundary-value")
+    if (kind && *kind == "boundary-value" && info.name != "spherical-pendulum")
       throw InputError(r.where(root["problem"]["kind"].node(), "problem.kind") +
-                       ": boundary-value problems run on R^n systems only, not on " + info.space + " (" + info.name +
-                       ")");
+                       ": boundary-value problems run on R^n systems and the spherical pendulum only, not on " +
+                       info.space + " (" + info.name + ")");
   }
   read_problem(r, root, s, s.dim);
   const bool boundary_value = s.problem == "boundary-value";
@@ -663,15 +663,25 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     read_rotation_initial(r, ini, path, s);
   else
     read_vector_initial(r, ini, path, info, s.dim * links, boundary_value, s);
+  if (boundary_value && info.space == "S^2") {
+    // both end points on the sphere, not projected onto it
+    for (const auto* end : {&s.q, &s.q_final}) {
+      const auto& x = *end;
+      const double defect = std::fabs(std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - 1.0);
+      if (!(defect <= 1e-12))
+        throw InputError(path + ": key '" + (end == &s.q ? "initial.q" : "problem.q_final") +
+                         "': not a unit vector (| |q| - 1 | = " + fmt(defect) + "); expected a point of S^2 to 1e-12");
+    }
+  }
 
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
                                   "composition", "form", "gamma", "beta"});
   read_form(r, in, s);
-  if (info.space != "R^n" && s.form != "lagrangian")
-    throw InputError(path + ": key 'integrator.form': systems on " + info.space + " run the lagrangian form only, got \"" +
-                     s.form + "\"");
+  if (info.space != "R^n" && s.form != "lagrangian" && s.form != "hamiltonian")
+    throw InputError(path + ": key 'integrator.form': systems on " + info.space +
+                     " run the lagrangian and hamiltonian forms only, got \"" + s.form + "\"");
   const toml::node* m = in.get("map");
   if (!m && s.form != "newmark") throw InputError(path + ": missing key 'integrator.map'");
   if (m) {
@@ -777,6 +787,8 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
       std::string why;
       if (s.problem != "initial-value") why = "a boundary-value problem takes no composition";
       else if (s.system == "chain") why = "the chain (a dynamic-size system) takes no composition yet";
+      else if (info.space != "R^n" && s.form != "lagrangian")
+        why = "on " + info.space + " compositions compose the lagrangian form's step only, not form = \"" + s.form + "\"";
       if (!why.empty()) throw InputError(r.where(co, "integrator.composition") + ": " + why);
     }
   }
