@@ -29,6 +29,7 @@ test: build
 bench: build
 	./$(BUILD)/examples/bench_midpoint_step
 	./$(BUILD)/examples/bench_written_lagrangian
+	./$(BUILD)/examples/bench_galerkin_kepler
 
 clean:
 	rm -rf $(BUILD)

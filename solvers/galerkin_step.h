@@ -105,6 +105,17 @@ class GalerkinStep {
         WB_[i][j] = static_cast<double>(quad_.b[i] * dl);
       }
     }
+    for (int i = 0; i < m; ++i) {
+      bh_[i] = h_ * b_[i];
+      for (int j = 1; j <= s; ++j) {
+        Af_(j - 1, i) = A_[i][j];
+        Bf_(j - 1, i) = B_[i][j] / h_;
+      }
+      for (int j = 0; j < s; ++j) {
+        WAf_(i, j) = h_ * WA_[i][j];
+        WBf_(i, j) = WB_[i][j];
+      }
+    }
     // extrapolation of the previous polynomial to tau = 1 + d_j, relative to its end
     for (int j = 1; j <= s; ++j)
       for (int k = 1; k <= s; ++k) {
@@ -192,7 +203,10 @@ class GalerkinStep {
       double dxn = INFINITY;
       const double pscale = max_abs(p0);
       for (int it = 0; it < options_.max_iterations; ++it) {
-        residual<double>(q0, p0, X_, R_, force);
+        if constexpr (S > 0)
+          residual_fast(q0, p0, force);
+        else
+          residual<double>(q0, p0, X_, R_, force);
         sum.iterations = it + 1;
         sum.residual = R_.template lpNorm<Eigen::Infinity>();
         sum.scale = pscale + Jmax_ * X_.template lpNorm<Eigen::Infinity>() + options_.absolute_floor;
@@ -305,6 +319,28 @@ class GalerkinStep {
     for (int a = 0; a < N; ++a) v[a] = v[a] * inv_h;
   }
 
+  // residual<double> for a compile-time stage count, as small matrix products:
+  //   x = q0 + X A, v = X B / h (N x m), R = h G WA + P WB (N x s), force = h G b.
+  void residual_fast(const V& q0, const V& p0, V& force) const {
+    using NM = Eigen::Matrix<double, N, MMax>;
+    const Eigen::Map<const Eigen::Matrix<double, N, SMax>> X(X_.data());
+    NM xs, vs, G = NM::Zero(), P = NM::Zero();
+    xs.noalias() = X * Af_;
+    xs.colwise() += q0;
+    vs.noalias() = X * Bf_;
+    V g, p;
+    for (int i = 0; i < quad_.points; ++i) {
+      lagrangian_gradient(L_, V(xs.col(i)), V(vs.col(i)), g, p);
+      G.col(i) = g;
+      P.col(i) = p;
+    }
+    Eigen::Map<Eigen::Matrix<double, N, SMax>> R(R_.data());
+    R.noalias() = G * WAf_;
+    R.noalias() += P * WBf_;
+    R.col(0) += p0;
+    force.noalias() = G * bh_;
+  }
+
   // The Jacobian dR/dX at the current nodes X_, factored.
   void refresh(const V& q0) const {
     const int s = s_;
@@ -351,6 +387,13 @@ class GalerkinStep {
   std::array<double, MMax> b_{};
   std::array<std::array<double, SMax + 1>, MMax> A_{}, B_{}, WA_{}, WB_{};
   std::array<std::array<double, SMax + 1>, SMax + 1> E_{};
+  // the same tables as matrices for the fixed-size hot path (columns past the
+  // quadrature's points are zero)
+  Eigen::Matrix<double, SMax, MMax> Af_ = Eigen::Matrix<double, SMax, MMax>::Zero(),
+                                    Bf_ = Eigen::Matrix<double, SMax, MMax>::Zero();
+  Eigen::Matrix<double, MMax, SMax> WAf_ = Eigen::Matrix<double, MMax, SMax>::Zero(),
+                                    WBf_ = Eigen::Matrix<double, MMax, SMax>::Zero();
+  Eigen::Matrix<double, MMax, 1> bh_ = Eigen::Matrix<double, MMax, 1>::Zero();
   // workspace and the state carried from step to step
   mutable XV<double> X_, Xprev_, R_;
   mutable XV<double> delta_;
