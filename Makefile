@@ -68,6 +68,7 @@ bench: build
 	./$(BUILD)/examples/bench_midpoint_step
 	./$(BUILD)/examples/bench_written_lagrangian
 	./$(BUILD)/examples/bench_ratios
+	./$(BUILD)/examples/bench_galerkin_kepler
 
 CHARTS := examples/charts
 charts: deps

@@ -1,11 +1,14 @@
 // `dvm methods`: the composition methods, with their order, stages, symmetry and the
 // linear stability threshold of each, computed here from the trace of the one-step
-// matrix on q'' = -omega^2 q (solvers/stability.h).
+// matrix on q'' = -omega^2 q (solvers/stability.h); then the Galerkin discrete
+// Lagrangians ([integrator] method = "galerkin", solvers/galerkin_step.h) with their
+// orders.
 #include <cstdio>
 #include <iostream>
 
 #include "examples/dvm/commands.h"
 #include "examples/dvm/json.h"
+#include "mechanics/quadrature.h"
 #include "solvers/composition_methods.h"
 #include "solvers/stability.h"
 
@@ -28,6 +31,9 @@ std::vector<MethodRow> method_rows() {
                     std::isinf(composition_threshold(0.5, substeps(s, true)))});
   return rows;
 }
+
+constexpr const char* kGalerkinSource =
+    "Marsden & West, Acta Numerica 2001, Sec. 2.6; equals Gauss collocation (gauss) or Lobatto IIIA-IIIB (lobatto)";
 
 }  // namespace
 
@@ -57,8 +63,20 @@ int methods_command(bool json) {
           .num("stability_threshold_explicit_euler", r.threshold_verlet)
           .boolean("midpoint_unconditionally_stable", r.midpoint_unconditional)
           .str("citation", r.scheme.citation);
-      out += "  " + j.dump(4) + (i + 1 < rows.size() ? ",\n" : "\n");
+      out += "  " + j.dump(4) + ",\n";
     }
+    for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto})
+      for (int st = 1; st <= 6; ++st) {
+        Json::Object j;
+        j.str("name", "galerkin")
+            .str("quadrature", to_string(kind))
+            .num("stages", st)
+            .num("points", Quadrature(kind, st).points)
+            .num("order", 2 * st)
+            .boolean("symmetric", true)
+            .str("citation", kGalerkinSource);
+        out += "  " + j.dump(4) + (kind == QuadratureKind::lobatto && st == 6 ? "\n" : ",\n");
+      }
     std::cout << out << "]\n";
     return 0;
   }
@@ -76,6 +94,16 @@ int methods_command(bool json) {
       "the one-step matrix. midpoint: with map = \"midpoint\" every composition is stable for all\n"
       "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n",
       RecursiveTripleJump::max_order);
+  std::printf(
+      "\nGalerkin discrete Lagrangians: [integrator] method = \"galerkin\", stages = s, quadrature = q\n"
+      "(curves of degree s through the step's end points; R^n systems, lagrangian form)\n");
+  std::printf("%-10s %-6s %-6s %-5s %-9s %s\n", "quadrature", "stages", "points", "order", "symmetric", "source");
+  for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto})
+    for (int st = 1; st <= 6; ++st)
+      std::printf("%-10s %-6d %-6d %-5d %-9s %s\n", to_string(kind), st, Quadrature(kind, st).points, 2 * st, "yes",
+                  st == 1 ? (kind == QuadratureKind::gauss ? "s = 1: the midpoint discrete Lagrangian"
+                                                           : "s = 1: the trapezoidal discrete Lagrangian")
+                          : kGalerkinSource);
   return 0;
 }
 

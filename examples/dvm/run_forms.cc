@@ -114,6 +114,7 @@ int run_stepper(const Scene& s, const Stepper& stepper, const std::string& metho
     j.str("status", run.failed ? "failed" : "ok")
         .str("system", s.system)
         .str("map", method)
+        .str("method", s.method)
         .str("composition", s.composition)
         .str("solver", s.solver)
         .num("step", s.step)

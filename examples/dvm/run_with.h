@@ -32,6 +32,7 @@
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/composition.h"
+#include "solvers/galerkin_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 
@@ -276,6 +277,19 @@ void initial_state(const Scene& s, const System& L, Vec<double, System::dim>& q,
   }
 }
 
+// ---- the method a scene names: the map's own step (possibly composed) or Galerkin
+inline bool is_galerkin(const Scene& s) { return s.method == "galerkin"; }
+inline QuadratureKind quadrature_kind(const Scene& s) {
+  return s.quadrature == "lobatto" ? QuadratureKind::lobatto : QuadratureKind::gauss;
+}
+template <class Map>
+std::string method_label(const Scene& s, const Map& R) {
+  if (is_galerkin(s))
+    return "galerkin " + s.quadrature + " s=" + std::to_string(s.stages) + " (order " + std::to_string(2 * s.stages) +
+           ")";
+  return R.name();
+}
+
 // ---- `dvm converge`: the error at t_end against a reference, for several steps
 template <class System>
 void reference_solution(const System& L, double t_end, std::int64_t steps, Vec<double, System::dim>& q,
@@ -338,9 +352,12 @@ int converge_with(const Scene& s, const System& L, const Map& R, const RunOption
   std::string first_failure;
   for (auto n : list) {
     const double h = T / static_cast<double>(n);
-    const PositionMomentumStep<System, Map> stepper(L, R, h, opt);
     V q = q0, p = p0;
-    const RunSummary run = integrate(stepper, 0.0, q, p, v0, n, [](auto&&...) {});
+    const RunSummary run =
+        is_galerkin(s)
+            ? integrate(GalerkinStep<System>(L, quadrature_kind(s), s.stages, h, opt), 0.0, q, p, v0, n,
+                        [](auto&&...) {})
+            : integrate(PositionMomentumStep<System, Map>(L, R, h, opt), 0.0, q, p, v0, n, [](auto&&...) {});
     hs.push_back(h);
     errs.push_back(run.failed ? NAN : std::fmax(max_abs(q - qr), max_abs(p - pr)));
     iters.push_back(run.solver_iterations);
@@ -368,23 +385,26 @@ int converge_with(const Scene& s, const System& L, const Map& R, const RunOption
   const double fit = used >= 2 ? (used * sxy - sx * sy) / (used * sxx - sx * sx) : NAN;
   if (o.json) {
     Json::Object j;
-    j.str("system", L.name()).str("map", R.name()).num("t_end", T).str("reference", reference);
+    j.str("system", L.name()).str("map", is_galerkin(s) ? std::string("none") : R.name()).num("t_end", T).str("reference", reference);
+    if (is_galerkin(s)) j.str("method", "galerkin").num("stages", s.stages).str("quadrature", s.quadrature);
     std::string rows = "[\n";
     for (std::size_t i = 0; i < hs.size(); ++i) {
       Json::Object r;
       r.num("steps", static_cast<double>(list[i])).num("h", hs[i]).num("error", errs[i]).num("order", orders[i]);
       rows += "    " + r.dump(6) + (i + 1 < hs.size() ? ",\n" : "\n");
     }
-    j.raw("runs", rows + "  ]").num("fitted_order", fit).num("map_order", R.order());
+    j.raw("runs", rows + "  ]").num("fitted_order", fit).num("map_order", is_galerkin(s) ? 2 * s.stages : R.order());
     std::cout << j.dump() << "\n";
   } else {
-    std::printf("%s with %s to t = %g; reference: %s\n", L.name().c_str(), R.name().c_str(), T, reference.c_str());
+    std::printf("%s with %s to t = %g; reference: %s\n", L.name().c_str(), method_label(s, R).c_str(), T,
+                reference.c_str());
     std::printf("  %12s %14s %14s %8s %12s\n", "steps", "h", "error", "order", "iterations");
     for (std::size_t i = 0; i < hs.size(); ++i)
       std::printf("  %12lld %14.6e %14.6e %8.3f %12lld\n", static_cast<long long>(list[i]), hs[i], errs[i], orders[i],
                   static_cast<long long>(iters[i]));
-    std::printf("  fitted order %.3f (the map's order is %d; points below %.1e are left out as round-off)\n", fit,
-                R.order(), 1e-12 * std::fmax(1.0, scale));
+    std::printf("  fitted order %.3f (the %s order is %d; points below %.1e are left out as round-off)\n", fit,
+                is_galerkin(s) ? "method's" : "map's", is_galerkin(s) ? 2 * s.stages : R.order(),
+                1e-12 * std::fmax(1.0, scale));
   }
   for (double e : errs)
     if (std::isnan(e)) {
@@ -459,7 +479,10 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   // The map's own step, or its steps composed (resolved once, here).
   const StepOptions opt = step_options<System>(s);
   const RunSummary run =
-      s.composition == "none"
+      is_galerkin(s)
+          ? integrate(GalerkinStep<System>(L, quadrature_kind(s), s.stages, s.step, opt), 0.0, q, p, v0, s.steps,
+                      observer)
+      : s.composition == "none"
           ? integrate(PositionMomentumStep<System, Map>(L, R, s.step, opt), 0.0, q, p, v0, s.steps, observer)
           : integrate(CompositionStep<System, Map>(L, R, s.step,
                                                    substeps(find_composition(s.composition), R.symmetric()), opt),
@@ -476,7 +499,8 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     Json::Object j;
     j.str("status", run.failed ? "failed" : "ok")
         .str("system", L.name())
-        .str("map", R.name())
+        .str("map", is_galerkin(s) ? std::string("none") : R.name())
+        .str("method", s.method)
         .str("composition", s.composition)
         .str("solver", s.solver)
         .num("step", s.step)
@@ -492,6 +516,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
         .num("solver_iterations", static_cast<double>(run.solver_iterations))
         .num("max_step_iterations", run.max_step_iterations)
         .str("form", s.form);
+    if (is_galerkin(s)) j.num("stages", s.stages).str("quadrature", s.quadrature).num("order", 2 * s.stages);
     if (angular >= 0)
       j.num("angular_momentum_initial", I0[angular]).num("max_abs_angular_momentum_error", I_err[angular]);
     if (n_inv > 0) {
@@ -506,7 +531,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
     if (run.failed) j.raw("failure", failure_json(run));
     std::cout << j.dump() << "\n";
   } else if (!o.quiet) {
-    std::printf("%s with %s%s (h = %g): %lld steps to t = %.6g\n", L.name().c_str(), R.name().c_str(),
+    std::printf("%s with %s%s (h = %g): %lld steps to t = %.6g\n", L.name().c_str(), method_label(s, R).c_str(),
                 s.composition == "none" ? "" : (", composition " + s.composition).c_str(), s.step,
                 static_cast<long long>(run.steps_done), t_final);
     std::printf("  %-44s %22s %12s\n", "quantity", "initial", "max |change|");

@@ -465,6 +465,51 @@ void read_problem(const Reader& r, const toml::table& root, Scene& s, int dim) {
 }
 
 // [integrator] form, gamma, beta (issue 3).
+// [integrator] method, stages, quadrature (Galerkin discrete Lagrangians). Read after
+// the form and the problem, whose values it checks.
+void read_galerkin(const Reader& r, const toml::table& in, const SystemInfo& info, Scene& s) {
+  const toml::node* me = in.get("method");
+  if (me) {
+    s.method = r.string(*me, "integrator.method");
+    if (s.method != "map" && s.method != "galerkin")
+      throw InputError(r.where(me, "integrator.method") + ": got \"" + s.method +
+                       "\", expected \"map\" (the map's own step) or \"galerkin\" (Galerkin discrete Lagrangians)");
+  }
+  const bool galerkin = s.method == "galerkin";
+  for (const char* key : {"stages", "quadrature"}) {
+    const toml::node* n = in.get(key);
+    if (n && !galerkin)
+      throw InputError(r.where(n, std::string("integrator.") + key) + ": " + key +
+                       " applies only to method = \"galerkin\", not \"" + s.method + "\"");
+  }
+  if (!galerkin) return;
+  if (const toml::node* st = in.get("stages")) {
+    const std::int64_t k = r.integer(*st, "integrator.stages", 1);
+    if (k > 6)
+      throw InputError(r.where(st, "integrator.stages") + ": got " + Reader::describe(*st) +
+                       ", expected a whole number from 1 to 6");
+    s.stages = static_cast<int>(k);
+  }
+  if (const toml::node* qu = in.get("quadrature")) {
+    s.quadrature = r.string(*qu, "integrator.quadrature");
+    if (s.quadrature != "gauss" && s.quadrature != "lobatto")
+      throw InputError(r.where(qu, "integrator.quadrature") + ": got \"" + s.quadrature +
+                       "\", expected \"gauss\" (s points) or \"lobatto\" (s + 1 points)");
+  }
+  std::string why;
+  if (info.space != "R^n")
+    why = "Galerkin discrete Lagrangians run on R^n systems only; on " + info.space +
+          " the polynomial curve would need a chart or retraction for every node, which is not built yet";
+  else if (s.form != "lagrangian")
+    why = "method = \"galerkin\" is a discrete Lagrangian: it runs the lagrangian form only, not form = \"" + s.form +
+          "\"";
+  else if (s.problem != "initial-value")
+    why = "a boundary-value problem takes no method = \"galerkin\"";
+  else if (s.system == "chain")
+    why = "the chain (a dynamic-size system) takes no method = \"galerkin\"";
+  if (!why.empty()) throw InputError(r.where(me, "integrator.method") + ": " + why);
+}
+
 void read_form(const Reader& r, const toml::table& in, Scene& s) {
   if (const toml::node* f = in.get("form")) {
     s.form = r.string(*f, "integrator.form");
@@ -677,13 +722,14 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   // [integrator]
   const toml::table& in = r.section(root, "integrator", true);
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
-                                  "composition", "form", "gamma", "beta"});
+                                  "composition", "form", "gamma", "beta", "method", "stages", "quadrature"});
   read_form(r, in, s);
+  read_galerkin(r, in, info, s);
   if (info.space != "R^n" && s.form != "lagrangian" && s.form != "hamiltonian")
     throw InputError(path + ": key 'integrator.form': systems on " + info.space +
                      " run the lagrangian and hamiltonian forms only, got \"" + s.form + "\"");
   const toml::node* m = in.get("map");
-  if (!m && s.form != "newmark") throw InputError(path + ": missing key 'integrator.map'");
+  if (!m && s.form != "newmark" && s.method != "galerkin") throw InputError(path + ": missing key 'integrator.map'");
   if (m) {
     // newmark is its own discretization (gamma, beta) and uses no map; a map named in
     // the scene is still validated, so that --set integrator.form=newmark works on
@@ -790,6 +836,9 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
       else if (info.space != "R^n" && s.form != "lagrangian")
         why = "on " + info.space + " compositions compose the lagrangian form's step only, not form = \"" + s.form + "\"";
       if (!why.empty()) throw InputError(r.where(co, "integrator.composition") + ": " + why);
+      if (s.method == "galerkin")
+        throw InputError(r.where(co, "integrator.composition") + ": method = \"galerkin\" takes no composition (it "
+                                                                 "reaches high order itself: order 2 stages)");
     }
   }
 

@@ -12,6 +12,8 @@
 //                 composition = "none" | "stormer-verlet" | "triple-jump" | ... |
 //                 "triple-jump:<order>"   (optional: the basic method's step, of
 //                 any form, on any space, composed; see `dvm methods`)
+//                 method = "map" | "galerkin"   stages = 1..6   quadrature = "gauss" |
+//                 "lobatto"   (optional: Galerkin discrete Lagrangians, see below)
 //   [output]      csv = "out.csv"   every = 1        (both optional)
 //                 npy = "out.npy"                    (optional: NumPy float64 rows)
 // or, instead of builtin, a Lagrangian written in the scene (scene_written.h):
@@ -94,6 +96,15 @@ struct Scene {
   // "none" or a composition method (solvers/composition_methods.h), its stages the
   // steps of the basic method (map and form; issue 5)
   std::string composition = "none";
+  // Galerkin discrete Lagrangians (issue 9):
+  //   [integrator] method = "map" (default: the map's own step, possibly composed) |
+  //                "galerkin" (degree-`stages` curves, quadrature "gauss" of s points or
+  //                "lobatto" of s + 1; order 2 stages; R^n, lagrangian form only; no map
+  //                needed, a map named is validated and unused)
+  //                stages = 1..6 (default 2)   quadrature = "gauss" (default) | "lobatto"
+  std::string method = "map";
+  int stages = 2;
+  std::string quadrature = "gauss";
   std::string csv;  // empty: no CSV
   std::int64_t every = 1;
 

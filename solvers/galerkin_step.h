@@ -1,0 +1,443 @@
+// Galerkin discrete Lagrangians and their position-momentum step.
+//
+// The exact discrete Lagrangian L_d(q0, q1) = int_0^h L(q, qdot) dt along the true
+// motion is approximated by extremising a quadrature of the action over curves of
+// degree s with the right end points:
+//
+//   L_d(q0, q1) = ext_{q_1..q_{s-1}}  h sum_i b_i L(q(c_i h), qdot(c_i h)),
+//   q(tau h) = sum_{j=0}^{s} q_j l_j(tau),   q_0 = q0, q_s = q1,
+//
+// l_j the Lagrange basis of degree s on the control points d_j = j / s of [0, 1], and
+// (c_i, b_i) a quadrature rule (mechanics/quadrature.h). (Marsden and West, "Discrete
+// mechanics and variational integrators", Acta Numerica 2001, Sec. 2.2.6; the same idea
+// as the paper's composition with micro-nodes, Sec. 6, with the micro-nodes inside the
+// step.) With Gauss-Legendre quadrature of s points the one-step map is Gauss
+// collocation of order 2s (symplectic, symmetric); with Gauss-Lobatto of s + 1 points
+// it is the Lobatto IIIA-IIIB pair, also of order 2s (Marsden and West, Thm 2.6.1 and
+// Sec. 2.6.3; Hairer, Lubich, Wanner, Geometric Numerical Integration, VI.6.3).
+// For s = 1 with Gauss (midpoint) quadrature, L_d = h L((q0 + q1)/2, (q1 - q0)/h): the
+// midpoint discrete Lagrangian.
+//
+// The step. With the unknowns X_j = q_j - q0, j = 1..s (increments: no cancellation
+// in q1 - q0), the nodes at the quadrature points are
+//   x_i = q0 + sum_j l_j(c_i) X_j,   v_i = (1/h) sum_j l_j'(c_i) X_j
+// (sum_j l_j = 1 and sum_j l_j' = 0 remove q_0), and with g_i = dL/dq(x_i, v_i),
+// p_i = dL/dv(x_i, v_i),
+//   dL_d/dq_j = sum_i b_i (h l_j(c_i) g_i + l_j'(c_i) p_i).
+// Given (q0, p0), the s N equations
+//   R_0 = p0 + dL_d/dq_0 = 0,   R_j = dL_d/dq_j = 0 (j = 1..s-1)
+// determine X; then q1 = q0 + X_s and, because the dL_d/dq_j sum to h sum_i b_i g_i,
+//   p1 = dL_d/dq_s = p0 + h sum_i b_i g_i
+// at the solution: the momentum increment is the quadrature of the force, added
+// without cancellation.
+//
+// The solve is a simplified Newton iteration: the Jacobian (from the Hessian of L at
+// the quadrature points, by automatic differentiation through dL/dq, dL/dv) is
+// factored once and reused across iterations and steps while the iteration contracts
+// (ratio of successive corrections below `contraction`); it is refreshed when the
+// contraction is poor or the iteration stalls. The starting guess for a step that
+// continues the previous one is the previous step's polynomial extrapolated to the
+// new control points (error O(h^{s+1})). Stopping rule: newton_verdict, as every
+// Newton loop of dvm; iterations are bounded by StepOptions::max_iterations and a
+// step that does not converge is reported in its StepSummary.
+//
+// The step type fits `integrate` (N, step_size(), step(q, p, dq, dp)); it keeps the
+// previous step's polynomial and the factored Jacobian in mutable members, so one
+// object must not be shared between threads. Stage count S > 0 fixes all sizes at
+// compile time; S = 0 takes the stage count at run time (1..kGalerkinMaxStages) in
+// fixed-capacity storage (still no allocation per step).
+#pragma once
+
+#include <Eigen/LU>
+#include <array>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "mechanics/lagrangian.h"
+#include "mechanics/quadrature.h"
+#include "solvers/integrate.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+constexpr int kGalerkinMaxStages = 6;
+
+template <class System, int S = 0>
+class GalerkinStep {
+  static_assert(S >= 0 && S <= kGalerkinMaxStages, "Galerkin stages 1..6 (0: chosen at run time)");
+
+ public:
+  static constexpr int N = System::dim;
+  static constexpr int SMax = S > 0 ? S : kGalerkinMaxStages;
+  static constexpr int K = S > 0 ? S * N : Eigen::Dynamic;
+  static constexpr int KMax = SMax * N;
+  static constexpr int MMax = SMax + 1;  // quadrature points (Lobatto: s + 1)
+  using V = Vec<double, N>;
+  template <class T>
+  using XV = Eigen::Matrix<T, K, 1, 0, KMax, 1>;
+  using XM = Eigen::Matrix<double, K, K, 0, KMax, KMax>;
+
+  GalerkinStep(System L, QuadratureKind kind, int stages, double h, StepOptions options = {})
+      : L_(std::move(L)), quad_(kind, check_stages(stages)), s_(stages), h_(h), options_(options) {
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
+    const int s = s_, m = quad_.points;
+    std::array<long double, SMax + 1> d{};
+    for (int j = 0; j <= s; ++j) d[j] = static_cast<long double>(j) / s;
+    auto basis = [&](int j, long double t, long double& l, long double& dl) {
+      l = 1.0L;
+      dl = 0.0L;
+      for (int k = 0; k <= s; ++k) {
+        if (k == j) continue;
+        const long double f = (t - d[k]) / (d[j] - d[k]);
+        dl = dl * f + l / (d[j] - d[k]);
+        l *= f;
+      }
+    };
+    for (int i = 0; i < m; ++i) {
+      b_[i] = static_cast<double>(quad_.b[i]);
+      for (int j = 0; j <= s; ++j) {
+        long double l, dl;
+        basis(j, quad_.c[i], l, dl);
+        A_[i][j] = static_cast<double>(l);
+        B_[i][j] = static_cast<double>(dl);
+        WA_[i][j] = static_cast<double>(quad_.b[i] * l);
+        WB_[i][j] = static_cast<double>(quad_.b[i] * dl);
+      }
+    }
+    for (int i = 0; i < m; ++i) {
+      bh_[i] = h_ * b_[i];
+      for (int j = 1; j <= s; ++j) {
+        Af_(j - 1, i) = A_[i][j];
+        Bf_(j - 1, i) = B_[i][j] / h_;
+      }
+      for (int j = 0; j < s; ++j) {
+        WAf_(i, j) = h_ * WA_[i][j];
+        WBf_(i, j) = WB_[i][j];
+      }
+    }
+    // extrapolation of the previous polynomial to tau = 1 + d_j, relative to its end
+    for (int j = 1; j <= s; ++j)
+      for (int k = 1; k <= s; ++k) {
+        long double l, dl;
+        basis(k, 1.0L + d[j], l, dl);
+        E_[j][k] = static_cast<double>(l - (k == s ? 1.0L : 0.0L));
+      }
+    X_.setZero(s * N);
+    Xprev_.setZero(s * N);
+    R_.setZero(s * N);
+    delta_.setZero(s * N);
+    J_.setZero(s * N, s * N);
+    Jinv_.setZero(s * N, s * N);
+  }
+
+  double step_size() const { return h_; }
+  int stages() const { return s_; }
+  int order() const { return 2 * s_; }
+  const Quadrature& quadrature() const { return quad_; }
+  const System& lagrangian() const { return L_; }
+  // Jacobian evaluations and factorisations since construction.
+  long jacobian_updates() const { return jacobian_updates_; }
+  // Refresh the Jacobian when a correction is larger than `c` times the previous one.
+  void set_contraction(double c) { contraction_ = c; }
+  // Forget the previous step (its polynomial and the Jacobian).
+  void reset() const {
+    have_prev_ = false;
+    lu_valid_ = false;
+  }
+
+  // h sum_i b_i L(x_i, v_i) at the nodes q0 + X_j: the action whose stationary value
+  // is L_d.
+  template <class T>
+  T action(const Vec<T, N>& q0, const XV<T>& X) const {
+    T sum = constant<T>(0.0);
+    for (int i = 0; i < quad_.points; ++i) {
+      Vec<T, N> x, v;
+      node(i, q0, X, x, v);
+      sum += (h_ * b_[i]) * L_(x, v);
+    }
+    return sum;
+  }
+
+  // The step residual R(X) (s N values) and the force quadrature h sum_i b_i g_i,
+  // for any scalar.
+  template <class T>
+  void residual(const Vec<T, N>& q0, const Vec<T, N>& p0, const XV<T>& X, XV<T>& R, Vec<T, N>& force) const {
+    const int s = s_;
+    R.setConstant(s * N, constant<T>(0.0));
+    force.setConstant(constant<T>(0.0));
+    Vec<T, N> x, v, g, p;
+    for (int i = 0; i < quad_.points; ++i) {
+      node(i, q0, X, x, v);
+      lagrangian_gradient(L_, x, v, g, p);
+      for (int a = 0; a < N; ++a) g[a] = g[a] * h_;
+      for (int j = 0; j < s; ++j) R.template segment<N>(j * N) += WA_[i][j] * g + WB_[i][j] * p;
+      force += b_[i] * g;
+    }
+    R.template segment<N>(0) += p0;
+  }
+
+  // One step from (q0, p0); dq carries a guess of q1 - q0 on entry (used unless the
+  // step continues the previous one), q1 - q0 on return; dp receives p1 - p0.
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    const int s = s_;
+    StepSummary sum;
+    const bool continues = have_prev_ && max_abs(V(q0 - q_end_)) <= 1e-12 * (max_abs(q0) + max_abs(dq)) + 1e-300;
+    if (continues) {
+      for (int j = 1; j <= s; ++j) {
+        V a = V::Zero();
+        for (int k = 1; k <= s; ++k) a += E_[j][k] * Xprev_.template segment<N>((k - 1) * N);
+        X_.template segment<N>((j - 1) * N) = a;
+      }
+    } else {
+      for (int j = 1; j <= s; ++j) X_.template segment<N>((j - 1) * N) = (static_cast<double>(j) / s) * dq;
+    }
+    have_prev_ = false;
+    bool fresh = false;
+    try {
+      if (!lu_valid_) {
+        refresh(q0);
+        fresh = true;
+      }
+      V force;
+      double dxn = INFINITY;
+      const double pscale = max_abs(p0);
+      for (int it = 0; it < options_.max_iterations; ++it) {
+        if constexpr (S > 0)
+          residual_fast(q0, p0, force);
+        else
+          residual<double>(q0, p0, X_, R_, force);
+        sum.iterations = it + 1;
+        sum.residual = R_.template lpNorm<Eigen::Infinity>();
+        sum.scale = pscale + Jmax_ * X_.template lpNorm<Eigen::Infinity>() + options_.absolute_floor;
+        if (!std::isfinite(sum.residual)) {
+          sum.message = "non-finite residual";
+          return sum;
+        }
+        const double x_size = X_.template lpNorm<Eigen::Infinity>() + max_abs(q0);
+        const NewtonVerdict verdict = newton_verdict(sum, dxn, x_size, options_);
+        if (verdict == NewtonVerdict::converged) {
+          X_.noalias() -= Jinv_ * R_;  // the correction already paid for (see solve_newton)
+          dq = X_.template segment<N>((s - 1) * N);
+          dp = force;
+          if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
+            sum.converged = false;
+            sum.message = "non-finite step";
+            return sum;
+          }
+          Xprev_ = X_;
+          q_end_ = q0 + dq;
+          have_prev_ = true;
+          return sum;
+        }
+        if (verdict == NewtonVerdict::failed) {
+          if (fresh) return sum;
+          sum.message.clear();  // stalled on an old Jacobian: refresh and go on
+          refresh(q0);
+          fresh = true;
+          dxn = INFINITY;
+          continue;
+        }
+        delta_.noalias() = Jinv_ * R_;
+        X_ -= delta_;
+        const double n = delta_.template lpNorm<Eigen::Infinity>();
+        if (!std::isfinite(n)) {
+          sum.message = "singular Galerkin step Jacobian";
+          lu_valid_ = false;
+          return sum;
+        }
+        if (it >= 1 && n > contraction_ * dxn && !fresh) {
+          refresh(q0);
+          fresh = true;
+          dxn = INFINITY;
+          continue;
+        }
+        dxn = n;
+      }
+      sum.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+    } catch (const std::domain_error& e) {
+      sum.message = e.what();
+    }
+    lu_valid_ = false;
+    return sum;
+  }
+
+  // The Jacobian d(q1, p1)/d(q0, p0) of the one-step map at a converged step with
+  // nodes X (from the implicit function theorem, by automatic differentiation): for
+  // the symplecticity check.
+  Mat<double, 2 * N, 2 * N> map_jacobian(const V& q0, const V& p0) const {
+    static_assert(S > 0, "map_jacobian needs a compile-time stage count");
+    constexpr int KK = S * N;
+    using D = ceres::Jet<double, KK + 2 * N>;
+    const XV<double> X = Xprev_;
+    Vec<D, N> q0d, p0d, force;
+    for (int a = 0; a < N; ++a) {
+      q0d[a] = seed<double, KK + 2 * N>(q0[a], KK + a);
+      p0d[a] = seed<double, KK + 2 * N>(p0[a], KK + N + a);
+    }
+    XV<D> Xd, Rd;
+    for (int k = 0; k < KK; ++k) Xd[k] = seed<double, KK + 2 * N>(X[k], k);
+    residual<D>(q0d, p0d, Xd, Rd, force);
+    Mat<double, KK, KK> RX;
+    Mat<double, KK, 2 * N> Ry;
+    for (int k = 0; k < KK; ++k) {
+      RX.row(k) = Rd[k].v.template head<KK>().transpose();
+      Ry.row(k) = Rd[k].v.template tail<2 * N>().transpose();
+    }
+    const Mat<double, KK, 2 * N> dX = -RX.partialPivLu().solve(Ry);  // dX/d(q0, p0)
+    Mat<double, 2 * N, 2 * N> M = Mat<double, 2 * N, 2 * N>::Zero();
+    for (int a = 0; a < N; ++a) {
+      M(a, a) = 1.0;  // q1 = q0 + X_s
+      M.row(a) += dX.row((S - 1) * N + a);
+      M(N + a, N + a) = 1.0;  // p1 = p0 + force(q0, X)
+      const Eigen::Matrix<double, 1, KK> fX = force[a].v.template head<KK>().transpose();
+      M.row(N + a) += fX * dX;
+      M.row(N + a) += force[a].v.template tail<2 * N>().transpose();
+    }
+    return M;
+  }
+
+ private:
+  static int check_stages(int s) {
+    if (s < 1 || s > kGalerkinMaxStages || (S > 0 && s != S))
+      throw std::invalid_argument("galerkin stages must be 1.." + std::to_string(kGalerkinMaxStages) +
+                                  (S > 0 ? " and equal to the compiled " + std::to_string(S) : std::string()) +
+                                  ", got " + std::to_string(s));
+    return s;
+  }
+
+  template <class T>
+  void node(int i, const Vec<T, N>& q0, const XV<T>& X, Vec<T, N>& x, Vec<T, N>& v) const {
+    x = q0;
+    v.setConstant(constant<T>(0.0));
+    for (int j = 1; j <= s_; ++j) {
+      const auto Xj = X.template segment<N>((j - 1) * N);
+      x += A_[i][j] * Xj;
+      v += B_[i][j] * Xj;
+    }
+    const double inv_h = 1.0 / h_;
+    for (int a = 0; a < N; ++a) v[a] = v[a] * inv_h;
+  }
+
+  // residual<double> for a compile-time stage count, as small matrix products:
+  //   x = q0 + X A, v = X B / h (N x m), R = h G WA + P WB (N x s), force = h G b.
+  void residual_fast(const V& q0, const V& p0, V& force) const {
+    using NM = Eigen::Matrix<double, N, MMax>;
+    const Eigen::Map<const Eigen::Matrix<double, N, SMax>> X(X_.data());
+    NM xs, vs, G = NM::Zero(), P = NM::Zero();
+    xs.noalias() = X * Af_;
+    xs.colwise() += q0;
+    vs.noalias() = X * Bf_;
+    V g, p;
+    for (int i = 0; i < quad_.points; ++i) {
+      lagrangian_gradient(L_, V(xs.col(i)), V(vs.col(i)), g, p);
+      G.col(i) = g;
+      P.col(i) = p;
+    }
+    Eigen::Map<Eigen::Matrix<double, N, SMax>> R(R_.data());
+    R.noalias() = G * WAf_;
+    R.noalias() += P * WBf_;
+    R.col(0) += p0;
+    force.noalias() = G * bh_;
+  }
+
+  // The Jacobian dR/dX at the current nodes X_, factored.
+  void refresh(const V& q0) const {
+    const int s = s_;
+    using D = ceres::Jet<double, 2 * N>;
+    J_.setZero(s * N, s * N);
+    V x, v;
+    Vec<D, N> xd, vd, g, p;
+    Mat<double, N, N> Gq, Gv, Pq, Pv;
+    for (int i = 0; i < quad_.points; ++i) {
+      node(i, q0, X_, x, v);
+      for (int a = 0; a < N; ++a) {
+        xd[a] = seed<double, 2 * N>(x[a], a);
+        vd[a] = seed<double, 2 * N>(v[a], N + a);
+      }
+      lagrangian_gradient(L_, xd, vd, g, p);
+      for (int a = 0; a < N; ++a) {
+        Gq.row(a) = g[a].v.template head<N>().transpose();
+        Gv.row(a) = g[a].v.template tail<N>().transpose();
+        Pq.row(a) = p[a].v.template head<N>().transpose();
+        Pv.row(a) = p[a].v.template tail<N>().transpose();
+      }
+      for (int k = 1; k <= s; ++k) {
+        // d(h g_i)/dX_k and d(p_i)/dX_k
+        const Mat<double, N, N> dg = h_ * (A_[i][k] * Gq + (B_[i][k] / h_) * Gv);
+        const Mat<double, N, N> dp = A_[i][k] * Pq + (B_[i][k] / h_) * Pv;
+        for (int j = 0; j < s; ++j)
+          J_.template block<N, N>(j * N, (k - 1) * N) += WA_[i][j] * dg + WB_[i][j] * dp;
+      }
+    }
+    if (!std::isfinite(J_.template lpNorm<Eigen::Infinity>())) throw std::domain_error("non-finite Galerkin Jacobian");
+    Jmax_ = J_.cwiseAbs().maxCoeff();
+    const Eigen::PartialPivLU<XM> lu(J_);
+    if (!(lu.rcond() > 1e-13)) throw std::domain_error("singular Galerkin step Jacobian");
+    Jinv_ = lu.inverse();  // applied as a matrix-vector product in every iteration
+    lu_valid_ = true;
+    ++jacobian_updates_;
+  }
+
+  System L_;
+  Quadrature quad_;
+  int s_;
+  double h_;
+  StepOptions options_;
+  std::array<double, MMax> b_{};
+  std::array<std::array<double, SMax + 1>, MMax> A_{}, B_{}, WA_{}, WB_{};
+  std::array<std::array<double, SMax + 1>, SMax + 1> E_{};
+  // the same tables as matrices for the fixed-size hot path (columns past the
+  // quadrature's points are zero)
+  Eigen::Matrix<double, SMax, MMax> Af_ = Eigen::Matrix<double, SMax, MMax>::Zero(),
+                                    Bf_ = Eigen::Matrix<double, SMax, MMax>::Zero();
+  Eigen::Matrix<double, MMax, SMax> WAf_ = Eigen::Matrix<double, MMax, SMax>::Zero(),
+                                    WBf_ = Eigen::Matrix<double, MMax, SMax>::Zero();
+  Eigen::Matrix<double, MMax, 1> bh_ = Eigen::Matrix<double, MMax, 1>::Zero();
+  // workspace and the state carried from step to step
+  mutable XV<double> X_, Xprev_, R_;
+  mutable XV<double> delta_;
+  mutable XM J_, Jinv_;
+  double contraction_ = 0.25;
+  mutable double Jmax_ = 0.0;
+  mutable bool lu_valid_ = false, have_prev_ = false;
+  mutable V q_end_ = V::Zero();
+  mutable long jacobian_updates_ = 0;
+};
+
+// What a Galerkin run reports: the run summary and the solver's work.
+struct GalerkinRunStats {
+  RunSummary run;
+  long jacobian_updates = 0;
+};
+
+// Integrate `steps` steps of size h from (q, p) (updated in place) with the Galerkin
+// method of `stages` stages and the given quadrature: the entry point for benchmark
+// suites. Stage counts 1..6 dispatch to the fixed-size instantiations.
+template <class System, int S>
+GalerkinRunStats galerkin_run_fixed(const System& L, QuadratureKind kind, double h, std::int64_t steps,
+                                    Vec<double, System::dim>& q, Vec<double, System::dim>& p,
+                                    const StepOptions& opt) {
+  const GalerkinStep<System, S> step(L, kind, S, h, opt);
+  const Vec<double, System::dim> v0 = legendre_inverse(L, q, p);
+  GalerkinRunStats out;
+  out.run = integrate(step, 0.0, q, p, v0, steps, [](auto&&...) {});
+  out.jacobian_updates = step.jacobian_updates();
+  return out;
+}
+
+template <class System>
+GalerkinRunStats galerkin_run(const System& L, int stages, QuadratureKind kind, double h, std::int64_t steps,
+                              Vec<double, System::dim>& q, Vec<double, System::dim>& p, const StepOptions& opt = {}) {
+  switch (stages) {
+    case 1: return galerkin_run_fixed<System, 1>(L, kind, h, steps, q, p, opt);
+    case 2: return galerkin_run_fixed<System, 2>(L, kind, h, steps, q, p, opt);
+    case 3: return galerkin_run_fixed<System, 3>(L, kind, h, steps, q, p, opt);
+    case 4: return galerkin_run_fixed<System, 4>(L, kind, h, steps, q, p, opt);
+    case 5: return galerkin_run_fixed<System, 5>(L, kind, h, steps, q, p, opt);
+    case 6: return galerkin_run_fixed<System, 6>(L, kind, h, steps, q, p, opt);
+    default: throw std::invalid_argument("galerkin stages must be 1..6, got " + std::to_string(stages));
+  }
+}
+
+}  // namespace dvm
