@@ -762,6 +762,11 @@ BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
   const Output ch = dvm({"run", scene("chain.toml"), "--set", "integrator.composition=triple-jump"});
   BOOST_TEST(ch.status == 2);
   BOOST_TEST(ch.err.find("takes no composition") != std::string::npos, ch.err);
+  const Output hs = dvm({"run", scene("spherical-pendulum.toml"), "--set", "integrator.form=hamiltonian", "--set",
+                         "integrator.composition=triple-jump"});
+  BOOST_TEST(hs.status == 2);
+  BOOST_TEST(hs.err.find("compositions compose the lagrangian form's step only") != std::string::npos, hs.err);
+}
 
 BOOST_AUTO_TEST_CASE(hamiltonian_form_on_curved_spaces) {
   // form = "hamiltonian" on S^2 and SO(3): Eq. 5.1 solved in a chart. Same JSON keys
