@@ -285,7 +285,8 @@ int main(int argc, char** argv) {
     using Runner = ProblemResult (*)(const SuiteConfig&);
     const std::vector<std::pair<std::string, Runner>> problems = {
         {"harmonic", run_harmonic},         {"pendulum", run_pendulum}, {"kepler", run_kepler},
-        {"henon-heiles", run_henon_heiles}, {"fpu", run_fpu},           {"outer-solar-system", run_outer_solar_system}};
+        {"henon-heiles", run_henon_heiles}, {"fpu", run_fpu},           {"outer-solar-system", run_outer_solar_system},
+        {"rigid-body", run_rigid_body}};
     std::ostringstream md;
     std::ofstream csv = open_out(dir + "/work_precision.csv");
     std::ofstream refs = open_out(dir + "/references.csv");
