@@ -531,12 +531,13 @@ std::vector<Row> sweep(const Problem<System>& P, const std::vector<Method<System
 }
 
 // Slope of log(error) against log(h) by least squares over the points with
-// 1e-13 < error < 1e-2 (the asymptotic range, above round-off); NaN with < 3 points.
-inline double fitted_order(const std::vector<const Row*>& rows) {
+// floor < error < 1e-2 (the asymptotic range, above round-off and above the accuracy
+// of a computed reference); NaN with < 3 points.
+inline double fitted_order(const std::vector<const Row*>& rows, double floor = 1e-13) {
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   int n = 0;
   for (const Row* r : rows) {
-    if (!r->converged || !(r->error > 1e-13 && r->error < 1e-2)) continue;
+    if (!r->converged || !(r->error > floor && r->error < 1e-2)) continue;
     const double x = std::log(r->h), y = std::log(r->error);
     sx += x;
     sy += y;
