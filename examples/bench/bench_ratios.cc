@@ -151,7 +151,7 @@ int main(int argc, char** argv) {
 
   // 3. equal error on Kepler
   std::vector<std::int64_t> n;
-  for (int k = 0; k < (tiny ? 5 : 10); ++k) n.push_back((tiny ? 40 : 100) << k);
+  for (int k = 0; k < (tiny ? 5 : 12); ++k) n.push_back((tiny ? 40 : 25) << k);
   const Problem<Kepler> sweep_problem = kepler_problem(tiny ? 2.0 : 20.0, n);
   SweepOptions so;
   if (tiny) so.min_seconds = 0.0;

@@ -18,8 +18,8 @@
 // sweep is run once with an observer that records the energy error, then timed
 // separately without one, so the energy evaluation never enters the CPU time (the
 // timed run must reproduce the observed one bit for bit).
-// A new family (say a Galerkin integrator) is one more `add(...)` in `dvm_methods`
-// (or in a problem's own table) with a lambda that integrates the problem.
+// A new family is one more `add(...)` in `dvm_methods` (or in a problem's own table)
+// with a lambda that integrates the problem (the Galerkin methods are added so).
 #pragma once
 
 #include <boost/numeric/odeint.hpp>
@@ -40,6 +40,7 @@
 #include "mechanics/lagrangian.h"
 #include "mechanics/systems_classic.h"
 #include "solvers/composition.h"
+#include "solvers/galerkin_step.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
@@ -189,6 +190,16 @@ RunFn<System> dvm_newmark(double gamma, double beta) {
   };
 }
 
+// The Galerkin variational integrator of s stages (solvers/galerkin_step.h; with Gauss
+// quadrature the one-step map is Gauss collocation, order 2s), fixed-size in s.
+template <class System, int S>
+RunFn<System> dvm_galerkin(QuadratureKind kind) {
+  return [kind](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
+    const GalerkinStep<System, S> G(P.sys, kind, S, h);
+    return run_step(G, P, steps, track);
+  };
+}
+
 // The compositions measured with each basic map: every table of
 // solvers/composition_methods.h (orders 4 to 8) and the recursive triple jumps of
 // orders 6 and 8 (the chart draws a few; the CSV has all).
@@ -205,7 +216,9 @@ inline std::vector<std::string> suite_compositions() {
 // systems also the Hamiltonian, SODE and Newmark forms, the compositions of
 // explicit Euler (Stormer-Verlet basic method) and of the midpoint map. `heavy`
 // problems (large dim: every Newton iteration forms an N x N Jacobian by nested
-// Jets) get the compositions of explicit Euler and a few of the midpoint map.
+// Jets) get the compositions of explicit Euler and a few of the midpoint map. The
+// Galerkin methods (Gauss, s = 2, 4, 6: orders 4, 8, 12) are measured on the small
+// systems (dim <= 2) only: on the heavy ones each step solves an sN x sN system.
 template <class System>
 std::vector<Method<System>> dvm_methods(bool heavy) {
   std::vector<Method<System>> m;
@@ -224,6 +237,9 @@ std::vector<Method<System>> dvm_methods(bool heavy) {
     add("dvm sode1 midpoint (trapezoidal)", 2, true, false, dvm_sode<System>(ThetaMap::midpoint(), SodeForm::sode1));
     add("dvm sode2 midpoint", 2, true, false, dvm_sode<System>(ThetaMap::midpoint(), SodeForm::sode2));
     add("dvm newmark gamma=1/2 beta=1/4", 2, true, false, dvm_newmark<System>(0.5, 0.25));
+    add("dvm galerkin gauss s=2", 4, true, true, dvm_galerkin<System, 2>(QuadratureKind::gauss));
+    add("dvm galerkin gauss s=4", 8, true, true, dvm_galerkin<System, 4>(QuadratureKind::gauss));
+    add("dvm galerkin gauss s=6", 12, true, true, dvm_galerkin<System, 6>(QuadratureKind::gauss));
   }
   const std::vector<std::string> chart_ee = {"triple-jump", "mclachlan4", "kahan-li6", "kahan-li8"};
   const std::vector<std::string> chart_mp = {"triple-jump", "kahan-li8"};
@@ -515,12 +531,13 @@ std::vector<Row> sweep(const Problem<System>& P, const std::vector<Method<System
 }
 
 // Slope of log(error) against log(h) by least squares over the points with
-// 1e-13 < error < 1e-2 (the asymptotic range, above round-off); NaN with < 3 points.
-inline double fitted_order(const std::vector<const Row*>& rows) {
+// floor < error < 1e-2 (the asymptotic range, above round-off and above the accuracy
+// of a computed reference); NaN with < 3 points.
+inline double fitted_order(const std::vector<const Row*>& rows, double floor = 1e-13) {
   double sx = 0, sy = 0, sxx = 0, sxy = 0;
   int n = 0;
   for (const Row* r : rows) {
-    if (!r->converged || !(r->error > 1e-13 && r->error < 1e-2)) continue;
+    if (!r->converged || !(r->error > floor && r->error < 1e-2)) continue;
     const double x = std::log(r->h), y = std::log(r->error);
     sx += x;
     sy += y;
@@ -567,6 +584,7 @@ ProblemResult run_kepler(const SuiteConfig&);
 ProblemResult run_henon_heiles(const SuiteConfig&);
 ProblemResult run_fpu(const SuiteConfig&);
 ProblemResult run_outer_solar_system(const SuiteConfig&);
+ProblemResult run_rigid_body(const SuiteConfig&);  // on SO(3): dvm only (suite_rigid_body.cc)
 
 // Kepler, e = 0.6 (also used by the ratio program): the method table and the problem
 // with the exact reference filled in.

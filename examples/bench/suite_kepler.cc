@@ -35,7 +35,7 @@ Problem<Kepler> kepler_problem(double t_end, std::vector<std::int64_t> steps) {
 
 ProblemResult run_kepler(const SuiteConfig& c) {
   std::vector<std::int64_t> n;
-  for (int k = 0; k < (c.tiny ? 2 : 10); ++k) n.push_back((c.tiny ? 40 : 100) << k);
+  for (int k = 0; k < (c.tiny ? 2 : 12); ++k) n.push_back((c.tiny ? 40 : 25) << k);
   Problem<Kepler> P = kepler_problem(c.tiny ? 2.0 : 20.0, n);
   ProblemResult out;
   out.rows = sweep(P, kepler_methods(), c.sweep);

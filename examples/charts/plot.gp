@@ -2,17 +2,18 @@
 # usage: gnuplot -e "dir='examples/charts'" examples/charts/plot.gp
 # Work-precision charts: dvm's methods solid, peers (Odeint, hand-written) dashed.
 if (!exists("dir")) dir = "examples/charts"
-problems = "harmonic pendulum kepler henon-heiles fpu outer-solar-system"
+problems = "harmonic pendulum kepler henon-heiles fpu outer-solar-system rigid-body"
 
 set datafile missing "nan"
 set grid
 set key outside right top font ",9" noenhanced
 set termoption noenhanced
 
-# 12 distinguishable colours; line types 1-12 solid (dvm), 21-32 dashed (peers)
-array colours[12] = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", \
-                     "#e377c2", "#7f7f7f", "#bcbd22", "#17becf", "#000000", "#aa3377"]
-do for [k=1:12] {
+# 15 distinguishable colours; line types 1-15 solid (dvm), 21-35 dashed (peers)
+array colours[15] = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", \
+                     "#e377c2", "#7f7f7f", "#bcbd22", "#17becf", "#000000", "#aa3377", \
+                     "#66ccee", "#228833", "#ee6677"]
+do for [k=1:15] {
   set linetype k lc rgb colours[k] lw 1.5 pt k dt 1
   set linetype (20 + k) lc rgb colours[k] lw 1.5 pt (k + 1) dt 2
 }
@@ -36,8 +37,8 @@ do for [kind in "png svg"] {
       set format x "%.0e"; set format y "%.0e"
       set xlabel "CPU seconds"
       set ylabel "error"
-      plot for [i=0:nd-1] file index i using 1:2 with linespoints lt (i % 12 + 1) ps 0.8 title columnheader(1), \
-           for [i=0:np-1] peers index i using 1:2 with linespoints lt (20 + i % 12 + 1) ps 0.8 title columnheader(1)
+      plot for [i=0:nd-1] file index i using 1:2 with linespoints lt (i % 15 + 1) ps 0.8 title columnheader(1), \
+           for [i=0:np-1] peers index i using 1:2 with linespoints lt (20 + i % 15 + 1) ps 0.8 title columnheader(1)
       unset logscale
     }
   }
