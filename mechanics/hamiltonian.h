@@ -22,6 +22,8 @@
 #pragma once
 
 #include <Eigen/LU>
+#include <cmath>
+#include <stdexcept>
 #include <sstream>
 #include <string>
 
@@ -77,6 +79,17 @@ double velocity_hessian_rcond(const S& L, const Vec<double, S::dim>& q, const Ve
   return velocity_hessian_rcond<S::dim>(velocity_hessian(L, q, v));
 }
 
+// The scale of d2L/dv2 at (q, v): {|W|, 1/|W^{-1}|} in the max norm (W = d2L/dv2).
+// They bound the largest and the smallest singular value within a factor sqrt(dim), and
+// are |W| twice in one dimension; the second is 0 where W is singular.
+template <class S>
+Vec<double, 2> velocity_hessian_scale(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
+  const Mat<double, S::dim, S::dim> W = velocity_hessian(L, q, v);
+  if (!W.allFinite()) return Vec<double, 2>(NAN, NAN);
+  const double inv = Mat<double, S::dim, S::dim>(W.partialPivLu().inverse()).cwiseAbs().rowwise().sum().maxCoeff();
+  return Vec<double, 2>(W.cwiseAbs().rowwise().sum().maxCoeff(), std::isfinite(inv) ? 1.0 / inv : 0.0);
+}
+
 // Throws DegenerateLagrangianError, naming the point, when d2L/dv2 is singular (to
 // working precision, reciprocal condition below `rcond_floor`) at (q, v).
 // W is d2L/dv2 at (q, v), when the caller has it already.
@@ -98,6 +111,32 @@ void require_regular(const S& L, const Vec<double, S::dim>& q, const Vec<double,
                      double rcond_floor = 1e-12) {
   const Mat<double, S::dim, S::dim> W = velocity_hessian(L, q, v);
   require_regular(L, q, v, W, Mat<double, S::dim, S::dim>(W.partialPivLu().inverse()), rcond_floor);
+}
+
+// What the Legendre transform looks like at (q, p), for the message of a step that
+// did not converge: the scale of d2L/dv2 (velocity_hessian_scale) at v = FL^{-1}(q, p),
+// set against its value at a reference state (the run's initial one). A step near a
+// point where FL degenerates fails to converge (its Newton matrix contains d2L/dv2),
+// and the smallest scale having collapsed relative to the start says so.
+template <class S>
+std::string legendre_diagnosis(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& p,
+                               const Vec<double, S::dim>& guess, const Vec<double, 2>& scale_ref) {
+  Vec<double, S::dim> v;
+  try {
+    v = legendre_inverse(L, q, p, guess);
+  } catch (const std::domain_error& e) {
+    return std::string("at the last completed state the Legendre transform cannot be inverted: ") + e.what();
+  }
+  const Vec<double, 2> scale = velocity_hessian_scale(L, q, v);
+  if (!scale.allFinite()) return "at the last completed state the velocity Hessian d2L/dv2 is not finite";
+  std::ostringstream msg;
+  msg.precision(3);
+  msg << "at the last completed state the velocity Hessian W = d2L/dv2 has |W| = " << scale[0]
+      << " and 1/|W^-1| = " << scale[1] << " (" << scale_ref[0] << " and " << scale_ref[1]
+      << " at the initial state)";
+  if (!(scale[1] > 1e-2 * scale_ref[1]))  // collapsed by two orders of magnitude
+    msg << ": the Legendre transform is close to degenerate there, so the step equation is nearly singular";
+  return msg.str();
 }
 
 // The Legendre map FL(q, v) = (q, p) with the regularity check.

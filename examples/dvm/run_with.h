@@ -28,6 +28,7 @@
 #include "examples/dvm/json.h"
 #include "examples/dvm/output.h"
 #include "examples/dvm/report.h"
+#include "mechanics/hamiltonian.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
@@ -427,6 +428,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   auto energy_at = [&](const V& qk, const V& pk) { return monitored_energy(L, qk, legendre_inverse(L, qk, pk), pk); };
   const double E0 = monitored_energy(L, q, v0, p);
   if (!std::isfinite(E0)) throw InputError(s.path + ": the energy at the initial state is not finite");
+  const Vec<double, 2> sigma0 = velocity_hessian_scale(L, q, v0);  // for a failure's message
 
 
   const std::string csv_path = o.csv.empty() ? s.csv : o.csv;
@@ -478,7 +480,7 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
   };
   // The map's own step, or its steps composed (resolved once, here).
   const StepOptions opt = step_options<System>(s);
-  const RunSummary run =
+  RunSummary run =
       is_galerkin(s)
           ? integrate(GalerkinStep<System>(L, quadrature_kind(s), s.stages, s.step, opt), 0.0, q, p, v0, s.steps,
                       observer)
@@ -488,6 +490,9 @@ int run_with(const Scene& s, const System& L, const Map& R, const RunOptions& o)
                                                    substeps(find_composition(s.composition), R.symmetric()), opt),
                       0.0, q, p, v0, s.steps, observer);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  // a solve that did not converge: say what the Legendre transform looked like where it stopped
+  if (run.failed && run.failure.iterations > 0 && std::isfinite(run.failure.residual))
+    run.failure.message += "; " + legendre_diagnosis(L, q, p, v0, sigma0);
   std::string kept;
   if (!finish_outputs(!run.failed, {&csv, &npy.file()}, kept)) return 3;
   const double t_final = static_cast<double>(run.steps_done) * s.step;

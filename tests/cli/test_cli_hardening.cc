@@ -297,6 +297,16 @@ BOOST_AUTO_TEST_CASE(numerical_faults_stop_the_run_with_step_time_and_residual) 
   const double t_fail = json_number(g.out, "time");
   BOOST_TEST(t_fail <= 0.5 + 1e-9);
   BOOST_TEST(t_fail > 0.45);
+  // the message names the cause, on stderr and in the JSON failure: d2L/dv2 = x^2 has
+  // fallen from 1 to below 1e-2 of that (measured: 2e-17 at the last state, t = 0.5)
+  BOOST_TEST(g.err.find("close to degenerate") != std::string::npos, g.err);
+  BOOST_TEST(g.out.find("close to degenerate") != std::string::npos, g.out);
+  // and only then: a regular Lagrangian whose solve is cut short is not called degenerate
+  const Output r = dvm({"run", d, "--set", "system.lagrangian=\"x_dot^2/2 + cos(x)\"", "--set",
+                           "integrator.max_iterations=1"});
+  BOOST_TEST(r.status == 3, r.err);
+  BOOST_TEST(r.err.find("d2L/dv2") != std::string::npos, r.err);
+  BOOST_TEST(r.err.find("degenerate") == std::string::npos, r.err);
 }
 
 BOOST_AUTO_TEST_CASE(every_run_path_reports_a_failed_step_with_exit_3) {
