@@ -17,6 +17,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -307,6 +308,42 @@ BOOST_AUTO_TEST_CASE(numerical_faults_stop_the_run_with_step_time_and_residual) 
   BOOST_TEST(r.status == 3, r.err);
   BOOST_TEST(r.err.find("d2L/dv2") != std::string::npos, r.err);
   BOOST_TEST(r.err.find("degenerate") == std::string::npos, r.err);
+}
+
+BOOST_AUTO_TEST_CASE(a_boundary_value_problem_without_a_solution_exits_3) {
+  // The midpoint discretization of the harmonic oscillator (omega = 1) turns each
+  // step by the angle theta with tan(theta/2) = h/2, so every discrete solution is
+  // q_k = A cos(k theta) + B sin(k theta). With h = 2 tan(pi/(2K)) the K steps turn
+  // by exactly pi: every solution ends at q_K = -q_0 (a conjugate point), and the
+  // problem q_0 = 1, q_K = 0.5 has none. Ceres then stops at the least-squares point
+  // with a discrete Euler-Lagrange residual of order one, which must be reported as a
+  // numerical failure (exit 3), with the completed nodes in PATH.partial only; the
+  // consistent problem q_K = -1 (a one-parameter family) solves.
+  const int K = 10;
+  const double h = 2.0 * std::tan(std::acos(-1.0) / (2.0 * K));
+  std::ostringstream scene;
+  scene.precision(17);
+  scene << "[system]\nbuiltin = \"harmonic\"\nparams = { omega = 1.0 }\n[initial]\nq = [1.0]\n"
+        << "[problem]\nkind = \"boundary-value\"\nq_final = [0.5]\nsteps = " << K << "\n"
+        << "[integrator]\nmap = \"midpoint\"\nstep = " << h << "\n";
+  const std::string b = write_scene("conjugate.toml", scene.str());
+  const std::string csv = temp_dir() + "/conjugate.csv";
+  const Output f = dvm({"run", b, "--csv", csv});
+  BOOST_TEST_MESSAGE("| boundary-value problem at a conjugate point (no solution) | " << f.status << " | "
+                     << f.err.substr(0, f.err.find('\n')) << " |");
+  BOOST_TEST(f.status == 3, f.err);
+  BOOST_TEST(f.err.find("did not converge") != std::string::npos, f.err);
+  BOOST_TEST(f.err.find("residual") != std::string::npos, f.err);
+  BOOST_TEST(!file_exists(csv));
+  BOOST_TEST(file_exists(csv + ".partial"));
+  const Output j = dvm({"run", b, "--json"});
+  BOOST_TEST(j.status == 3, j.err);
+  BOOST_TEST(j.out.find("\"status\": \"failed\"") != std::string::npos, j.out);
+  BOOST_TEST(json_number(j.out, "max_del_residual") > 1e-3);
+
+  const Output ok = dvm({"run", b, "--csv", csv, "--set", "problem.q_final=[-1.0]"});
+  BOOST_TEST(ok.status == 0, ok.err);
+  BOOST_TEST(file_exists(csv));
 }
 
 BOOST_AUTO_TEST_CASE(every_run_path_reports_a_failed_step_with_exit_3) {
