@@ -215,6 +215,104 @@ BOOST_AUTO_TEST_CASE(energy_error_stays_bounded_over_a_million_steps) {
   BOOST_TEST(e2 <= 0.1 * e1);
 }
 
+namespace {
+
+// The largest starting-guess errors (guess used, plain extrapolation) over the steps
+// in (T/2, T] of the pendulum from q = 1.5 at rest, h = T / n.
+template <int S>
+std::pair<double, double> guess_errors(QuadratureKind kind, double T, int n) {
+  const Pendulum P(1.0, 1.0, 1.0);
+  const GalerkinStep<Pendulum, S> G(P, kind, S, T / n);
+  V1 q(1.5), p(0.0);
+  double guess = 0.0, extrapolation = 0.0;
+  const RunSummary r = integrate(G, 0.0, q, p, V1(0.0), n, [&](std::int64_t, double t, auto&&...) {
+    if (t <= 0.5 * T) return;
+    guess = std::fmax(guess, G.last_guess_error());
+    extrapolation = std::fmax(extrapolation, G.last_extrapolation_error());
+  });
+  BOOST_REQUIRE(!r.failed);
+  return {guess, extrapolation};
+}
+
+template <int S>
+void check_predictor_orders(QuadratureKind kind) {
+  // from h = 0.1 down by a factor 4; the errors stay far above round-off
+  std::vector<double> hs, guess, extrapolation;
+  for (int n : {20, 28, 40, 57, 80}) {
+    const auto [g, e] = guess_errors<S>(kind, 2.0, n);
+    hs.push_back(2.0 / n);
+    guess.push_back(g);
+    extrapolation.push_back(e);
+  }
+  const double pg = verification::fit_order(hs, guess, 1e-13), pe = verification::fit_order(hs, extrapolation, 1e-13);
+  BOOST_TEST_MESSAGE(to_string(kind) << " s=" << S << ": starting-guess errors " << guess.front() << " .. "
+                                     << guess.back() << " (order " << pg << "), plain extrapolation "
+                                     << extrapolation.front() << " .. " << extrapolation.back() << " (order " << pe
+                                     << ")");
+  BOOST_TEST_CONTEXT(to_string(kind) << " s=" << S) {
+    BOOST_TEST(std::fabs(pe - (S + 1)) <= 0.15);  // the extrapolated polynomial: stage order s
+    BOOST_TEST(std::fabs(pg - (S + 3)) <= 0.2);   // corrected by the extrapolated error sequence
+    BOOST_TEST(guess.back() <= 1e-2 * extrapolation.back());
+  }
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(starting_guess_has_order_s_plus_3) {
+  check_predictor_orders<1>(QuadratureKind::gauss);
+  check_predictor_orders<2>(QuadratureKind::gauss);
+  check_predictor_orders<3>(QuadratureKind::gauss);
+  check_predictor_orders<4>(QuadratureKind::gauss);
+  check_predictor_orders<2>(QuadratureKind::lobatto);
+  check_predictor_orders<3>(QuadratureKind::lobatto);
+}
+
+BOOST_AUTO_TEST_CASE(fixed_size_residual_agrees_with_the_generic_one) {
+  // GalerkinStep<System, S> evaluates the residual by fixed-size products with the
+  // number of quadrature points fixed at compile time (s Gauss, s + 1 Lobatto);
+  // GalerkinStep<System> (stages at run time) by the scalar-generic residual. Both
+  // solve the same equations to the same tolerance: the trajectories agree to
+  // round-off, and a wrong table or point count in either would separate them.
+  const Kepler K(1.0);
+  V2 q0, p0;
+  verification::kepler_initial(0.6, q0, p0);
+  for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto}) {
+    auto run = [&](const auto& G) {
+      V2 q = q0, p = p0;
+      const RunSummary r = integrate(G, 0.0, q, p, legendre_inverse(K, q0, p0), 400, [](auto&&...) {});
+      BOOST_REQUIRE(!r.failed);
+      return std::make_pair(q, p);
+    };
+    const auto [qf, pf] = run(GalerkinStep<Kepler, 3>(K, kind, 3, 0.05));
+    const auto [qg, pg] = run(GalerkinStep<Kepler>(K, kind, 3, 0.05));
+    const auto [q2, p2] = run(GalerkinStep<Kepler>(K, kind, 2, 0.05));  // a different method, for contrast
+    const double d = std::fmax(max_abs(V2(qf - qg)), max_abs(V2(pf - pg)));
+    const double d2 = std::fmax(max_abs(V2(qf - q2)), max_abs(V2(pf - p2)));
+    BOOST_TEST_MESSAGE(to_string(kind) << " s=3, 400 steps: fixed-size vs generic " << d << ", vs s=2 " << d2);
+    BOOST_TEST(d <= 1e-12);
+    BOOST_TEST(d2 >= 1e-8);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(iterations_per_step_stay_bounded_on_a_long_kepler_run) {
+  // Kepler e = 0.6, s = 6, h = 1/8 (the benchmark's step for an error near 1e-8), 80
+  // revolutions: every step converges in a bounded number of iterations (a
+  // predictor or Jacobian reuse gone wrong shows as many more, or as failures).
+  const Kepler K(1.0);
+  const V2 q0(0.4, 0.0), p0(0.0, 2.0);
+  V2 q = q0, p = p0;
+  const GalerkinRunStats r = galerkin_run(K, 6, QuadratureKind::gauss, 0.125, 4000, q, p);
+  BOOST_REQUIRE(!r.run.failed);
+  const double per_step = static_cast<double>(r.run.solver_iterations) / 4000.0;
+  BOOST_TEST_MESSAGE("Kepler e=0.6, s=6, h=1/8, 4000 steps: iterations per step " << per_step << ", most "
+                                                                                  << r.run.max_step_iterations
+                                                                                  << ", Jacobians "
+                                                                                  << r.jacobian_updates);
+  BOOST_TEST(per_step <= 5.0);
+  BOOST_TEST(r.run.max_step_iterations <= 8);
+  BOOST_TEST(r.jacobian_updates <= 10);
+}
+
 BOOST_AUTO_TEST_CASE(a_step_that_does_not_converge_is_reported_with_bounded_iterations) {
   const Kepler K(1.0);
   StepOptions opt;
