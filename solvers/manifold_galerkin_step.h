@@ -19,9 +19,9 @@
 //    (projective maps of the tangent planes on S^2, Baker-Campbell-Hausdorff on
 //    SO(3)), so the step depends on its centre, which moves with the state: the
 //    one-step map z -> psi_{c(z)}(z) is not symplectic and the momentum maps drift.
-//    Measured (tests/solvers/test_galerkin_manifold.cc): symplecticity defect
-//    O(h^{2s+1}) and momentum errors O(h^{2s}) at a fixed time; it is the type-1
-//    generating function F(c; q0, q1) with p0 = -d/dq0 at fixed c, which is not a
+//    Measured (tests/solvers/test_galerkin_manifold.cc): symplecticity defect about
+//    h^3 (s = 1), h^5.5 (s = 2); momentum errors about h^{2s} at a fixed time. Its
+//    generating function is F(c; q0, q1) differentiated with c = q0 held fixed, not a
 //    function of (q0, q1) alone.
 //
 // 2. ManifoldGalerkinStep (the variational integrator): the discrete Lagrangian
