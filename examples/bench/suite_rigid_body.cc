@@ -14,7 +14,9 @@
 // and theta = 1 (R0^T R1 = cay(w) for both, as cay(-w)^{-1} = cay(w)): the
 // fixed-first-point Cayley map is its own adjoint here, hence symmetric and of order 2
 // (nominal order 1 in the table), and its composition with its adjoint at h is the
-// map itself at h/2 (kept in the CSV, not drawn).
+// map itself at h/2 (kept in the CSV, not drawn). Also the Galerkin discrete
+// Lagrangians with Gauss quadrature, s = 2 and 4 (orders 4 and 8), as generating
+// functions in the chart centred at each point (solvers/manifold_galerkin_step.h).
 //
 // Reference: dvm's order-8 composition kahan-li8 of the so3-cayley midpoint map at a
 // small step, cross-checked by Boost.Odeint's Runge-Kutta-Fehlberg 7(8) at a fixed
@@ -24,6 +26,7 @@
 #include "examples/bench/suite.h"
 #include "mechanics/manifold_systems.h"
 #include "solvers/manifold_composition.h"
+#include "solvers/manifold_galerkin_step.h"
 #include "solvers/manifold_step.h"
 
 namespace dvm::bench {
@@ -77,6 +80,14 @@ RBRun composed(const SO3Map& map, const std::string& scheme) {
   };
 }
 
+template <int S>
+RBRun galerkin() {
+  return [](const RigidBody& L, const M3& R0, const V3& Pi0, double h, std::int64_t steps, const RBObserver* obs) {
+    const ManifoldGalerkinStep<RigidBody, S> G(L, QuadratureKind::gauss, h);
+    return run_rb(G, L, R0, Pi0, steps, obs);
+  };
+}
+
 double rb_energy(const RigidBody& L, const V3& Pi) { return 0.5 * Pi.cwiseQuotient(L.inertia).dot(Pi); }
 
 // RKF78 at a fixed step on (unit quaternion (a, b, c, d), Pi).
@@ -125,6 +136,8 @@ ProblemResult run_rigid_body(const SuiteConfig& c) {
       {"dvm kahan-li6 (so3-cayley midpoint)", 6, true, composed(cay, "kahan-li6")},
       {"dvm kahan-li8 (so3-cayley midpoint)", 8, true, composed(cay, "kahan-li8")},
       {"dvm mclachlan4 (so3-cayley fixed + adjoint)", 4, true, composed(cay0, "mclachlan4")},
+      {"dvm galerkin gauss s=2", 4, true, galerkin<2>()},
+      {"dvm galerkin gauss s=4", 8, true, galerkin<4>()},
   };
 
   ProblemResult out;

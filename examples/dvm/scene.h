@@ -99,8 +99,8 @@ struct Scene {
   // Galerkin discrete Lagrangians (issue 9):
   //   [integrator] method = "map" (default: the map's own step, possibly composed) |
   //                "galerkin" (degree-`stages` curves, quadrature "gauss" of s points or
-  //                "lobatto" of s + 1; order 2 stages; R^n, lagrangian form only; no map
-  //                needed, a map named is validated and unused)
+  //                "lobatto" of s + 1; order 2 stages; R^n, S^2, SO(3), lagrangian form
+  //                only; no map needed, a map named is validated and unused)
   //                stages = 1..6 (default 2)   quadrature = "gauss" (default) | "lobatto"
   std::string method = "map";
   int stages = 2;

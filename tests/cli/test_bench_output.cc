@@ -103,6 +103,12 @@ BOOST_AUTO_TEST_CASE(charts_program_writes_well_formed_csv) {
     for (const auto& r : wp) ok = ok || (r[0] == "kepler" && r[1] == g && r[11] == "1");
     BOOST_TEST(ok, g);
   }
+  // and on the rigid body (SO(3), generating functions in charts; issue 9)
+  for (const char* g : {"dvm galerkin gauss s=2", "dvm galerkin gauss s=4"}) {
+    bool ok = false;
+    for (const auto& r : wp) ok = ok || (r[0] == "rigid-body" && r[1] == g && r[11] == "1");
+    BOOST_TEST(ok, "rigid-body " << g);
+  }
   for (const auto& r : read_csv(dir + "/references.csv", "problem,reference,agreement")) BOOST_TEST(finite_number(r[2]));
   for (const auto& r : read_csv(dir + "/energy_long.csv", "method,t,max_energy_error_in_block")) {
     BOOST_TEST(finite_number(r[1]));

@@ -1,5 +1,6 @@
-// End-to-end tests of `[integrator] method = "galerkin"` (issue 9): the shipped scene
-// against Kepler's exact solution, built-in and written Lagrangians giving the same
+// End-to-end tests of `[integrator] method = "galerkin"` (issue 9): the shipped scenes
+// against Kepler's exact solution and, on S^2 and SO(3), against an order-8 composition
+// of a midpoint map at a small step (with the momentum maps conserved to round-off), built-in and written Lagrangians giving the same
 // run, `dvm converge` measuring order 2s, `dvm methods` listing the methods, and bad
 // values refused with exit status 2 and a message naming the key.
 #define BOOST_TEST_MODULE cli_galerkin
@@ -120,7 +121,13 @@ BOOST_AUTO_TEST_CASE(bad_galerkin_values_are_refused_with_status_2) {
       {{"integrator.quadrature=gauss"}, "kepler.toml", "applies only to method = \"galerkin\""},
       {{"integrator.form=hamiltonian", "integrator.map=midpoint"}, "kepler-galerkin.toml", "lagrangian form only"},
       {{"integrator.composition=triple-jump", "integrator.map=midpoint"}, "kepler-galerkin.toml", "no composition"},
-      {{"integrator.method=galerkin"}, "spherical-pendulum.toml", "R^n systems only"},
+      // on curved spaces: the chain, other forms, compositions (issue 9, S^2 and SO(3))
+      {{"integrator.method=galerkin"}, "spherical-chain.toml", "spherical chain takes no method = \"galerkin\""},
+      {{"integrator.form=hamiltonian"}, "spherical-pendulum-galerkin.toml", "lagrangian form only"},
+      {{"integrator.form=hamiltonian", "integrator.method=galerkin"}, "rigid-body.toml", "lagrangian form only"},
+      {{"integrator.composition=kahan-li8", "integrator.map=sphere-exp"}, "spherical-pendulum-galerkin.toml",
+       "no composition"},
+      {{"integrator.stages=7"}, "spherical-pendulum-galerkin.toml", "integrator.stages"},
   };
   for (const Case& c : cases) {
     std::vector<std::string> args = {"run", scene(c.scene)};
@@ -132,4 +139,81 @@ BOOST_AUTO_TEST_CASE(bad_galerkin_values_are_refused_with_status_2) {
       BOOST_TEST(o.out.empty());
     }
   }
+}
+
+// (q_final, p_final) of a JSON report, one vector.
+std::vector<double> final_state(const std::string& json) {
+  std::vector<double> x = json_array(json, "q_final");
+  const std::vector<double> p = json_array(json, "p_final");
+  x.insert(x.end(), p.begin(), p.end());
+  return x;
+}
+
+// A run of `scene` with the settings, JSON report; requires status 0.
+std::string run_json(const std::string& name, const std::vector<std::string>& sets) {
+  std::vector<std::string> args = {"run", scene(name), "--json", "--csv", temp_dir() + "/m.csv"};
+  for (const auto& s : sets) args.insert(args.end(), {"--set", s});
+  const Output o = cli_test::dvm(args);
+  BOOST_TEST_REQUIRE(o.status == 0, name << ": " << o.out << o.err);
+  return o.out;
+}
+
+BOOST_AUTO_TEST_CASE(galerkin_on_the_sphere_matches_an_order_8_composition) {
+  // the shipped scene (s = 4, order 8, h = 0.05) to t = 5 against kahan-li8 of the
+  // midpoint exp map at h = 0.005; J3 conserved to round-off, |x| = 1 to round-off
+  const std::string g = run_json("spherical-pendulum-galerkin.toml", {"integrator.t_end=5.0"});
+  BOOST_TEST(g.find("\"method\": \"galerkin\"") != std::string::npos);
+  BOOST_TEST(g.find("\"map\": \"none\"") != std::string::npos);
+  BOOST_TEST(json_number(g, "stages") == 4.0);
+  BOOST_TEST(json_number(g, "order") == 8.0);
+  BOOST_TEST(json_number(g, "max_point_defect") <= 1e-15);
+  BOOST_TEST(json_number(g, "max_abs_vertical_angular_momentum_error") <= 1e-13);
+  BOOST_TEST(json_number(g, "max_abs_energy_error") <= 1e-6);
+  const std::string r = run_json("spherical-pendulum.toml", {"integrator.t_end=5.0", "integrator.step=0.005",
+                                                             "integrator.composition=kahan-li8"});
+  const std::vector<double> a = final_state(g), b = final_state(r);
+  BOOST_REQUIRE(a.size() == 6u);
+  BOOST_REQUIRE(b.size() == 6u);
+  double d = 0.0;
+  for (int i = 0; i < 6; ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+  BOOST_TEST_MESSAGE("spherical pendulum, galerkin s = 4 h = 0.05 vs kahan-li8 h = 0.005 at t = 5: " << d);
+  BOOST_TEST(d <= 1e-7);
+  // the CSV has the columns of the other S^2 runs
+  std::ifstream csv(temp_dir() + "/m.csv");
+  std::string header;
+  std::getline(csv, header);
+  BOOST_TEST(header == "t,x,y,z,p0,p1,p2,energy,J3");
+}
+
+BOOST_AUTO_TEST_CASE(galerkin_on_so3_matches_an_order_8_composition) {
+  // heavy top, s = 3 Gauss and s = 2 Lobatto (order 6 and 4), against kahan-li8 of the
+  // midpoint exp map; the free rigid body's spatial angular momentum to round-off
+  const std::string r = run_json("heavy-top.toml", {"integrator.t_end=2.0", "integrator.step=0.002",
+                                                    "integrator.composition=kahan-li8"});
+  struct Case {
+    std::string stages, quadrature;
+    double tolerance;
+  };
+  for (const Case& c : {Case{"3", "gauss", 1e-8}, Case{"2", "lobatto", 1e-6}}) {
+    const std::string g =
+        run_json("heavy-top.toml", {"integrator.t_end=2.0", "integrator.step=0.01", "integrator.method=galerkin",
+                                    "integrator.stages=" + c.stages, "integrator.quadrature=" + c.quadrature});
+    BOOST_TEST_CONTEXT(c.quadrature << " s=" << c.stages) {
+      BOOST_TEST(g.find("\"quadrature\": \"" + c.quadrature + "\"") != std::string::npos);
+      BOOST_TEST(json_number(g, "max_point_defect") <= 1e-14);
+      BOOST_TEST(json_number(g, "max_abs_vertical_angular_momentum_error") <= 1e-13);
+      const std::vector<double> a = final_state(g), b = final_state(r);
+      BOOST_REQUIRE(a.size() == 7u);
+      BOOST_REQUIRE(b.size() == 7u);
+      double d = 0.0;
+      for (int i = 0; i < 7; ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+      BOOST_TEST_MESSAGE("heavy top, galerkin " << c.quadrature << " s = " << c.stages
+                                                << " h = 0.01 vs kahan-li8 h = 0.002 at t = 2: " << d);
+      BOOST_TEST(d <= c.tolerance);
+    }
+  }
+  const std::string b = run_json("rigid-body.toml", {"integrator.t_end=20.0", "integrator.step=0.05",
+                                                     "integrator.method=galerkin", "integrator.stages=2"});
+  BOOST_TEST(json_number(b, "max_abs_spatial_angular_momentum_error") <= 1e-13);
+  BOOST_TEST(json_number(b, "max_abs_energy_error") <= 1e-6);
 }

@@ -1,0 +1,476 @@
+// Galerkin discrete Lagrangians on S^2 and SO(3), solved in the chart centred at the
+// current point: two constructions, one of which is a variational integrator.
+//
+// Let phi_c(eta) = chart(c, eta) (core/manifolds.h: the central projection
+// (c + B eta)/|c + B eta| on S^2, c exp(eta) on SO(3)) and D_c(eta) its differential,
+// mapping chart velocities nu to stored tangent vectors. The Lagrangian pulled back by
+// the chart, L_c(eta, nu) = L(phi_c(eta), D_c(eta) nu), is a smooth Lagrangian on
+// T R^dim near eta = 0. F(c; q0, q1) denotes the Galerkin action (solvers/
+// galerkin_step.h: degree-s curves, Gauss or Lobatto quadrature) of L_c between the
+// coordinates of q0 and q1.
+//
+// 1. ChartGalerkinStep (a wrapper of the R^n step): from (q_k, p_k), take one Galerkin
+//    step of L_c with c = q_k from (0, pi_k), pi_k = D_c(0)^T p_k, and map back,
+//    q_{k+1} = phi_c(eta_1), p_{k+1} = D (D^T D)^{-1} pi_1 (D = D_c(eta_1)), as
+//    solvers/manifold_hamiltonian_step.h does. For a fixed centre this map is
+//    symplectic in the canonical coordinates (eta, pi) and has local error
+//    O(h^{2s+1}), so the order is 2s. But the Galerkin curves are polynomials in the
+//    chart's coordinates, and charts with different centres differ by nonlinear maps
+//    (projective maps of the tangent planes on S^2, Baker-Campbell-Hausdorff on
+//    SO(3)), so the step depends on its centre, which moves with the state: the
+//    one-step map z -> psi_{c(z)}(z) is not symplectic and the momentum maps drift.
+//    Measured (tests/solvers/test_galerkin_manifold.cc): symplecticity defect about
+//    h^3 (s = 1), h^5.5 (s = 2); momentum errors about h^{2s} at a fixed time. Its
+//    generating function is F(c; q0, q1) differentiated with c = q0 held fixed, not a
+//    function of (q0, q1) alone.
+//
+// 2. ManifoldGalerkinStep (the variational integrator): the discrete Lagrangian
+//       L_d(q0, q1) = F(q0; q0, q1),  p0 = -D1 L_d(q0, q1),  p1 = D2 L_d(q0, q1),
+//    the derivative in q0 moving the chart's centre with q0 (on Lie groups with the
+//    chart q0 exp(e), the construction behind the symplectic Runge-Kutta-Munthe-Kaas
+//    methods of Bogfjellmo and Marthinsen, "High order symplectic partitioned Lie
+//    group methods", Found. Comput. Math. 16, 2016, arXiv:1303.5654; here the same
+//    with the central-projection charts of S^2 too; the chart approach in
+//    general: Leok and Shingel, "General techniques for constructing variational
+//    integrators", Front. Math. China 7, 2012). L_d is a function of the two points,
+//    so the step is exactly symplectic (a type-1 generating function); if the chart
+//    family is equivariant under a symmetry of L (g phi_c(eta) = phi_{gc}(A eta), A
+//    linear: rotations on S^2, left multiplication on SO(3)), L_d is invariant (the
+//    Galerkin action is invariant under linear changes of the chart coordinates) and
+//    the momentum map is conserved exactly (discrete Noether). The local error is
+//    still O(h^{2s+1}): order 2s. Measured: symplecticity defect at the level of the
+//    finite-difference check, momentum maps to round-off.
+//
+// Every point is produced by the chart, so it lies on the manifold to round-off.
+// Both keep a factored Jacobian across steps (simplified Newton: refreshed when the
+// iteration contracts poorly), fixed sizes throughout, no allocation per step.
+#pragma once
+
+#include <array>
+#include <string>
+#include <utility>
+
+#include "mechanics/manifold_hamiltonian.h"
+#include "mechanics/manifold_systems.h"
+#include "solvers/galerkin_step.h"
+
+namespace dvm {
+
+// L_c(eta, nu) = L(chart(c, eta), D chart(c, eta) nu): a manifold Lagrangian written in
+// the chart centred at *centre, as an R^dim system. The centre is owned by the stepper
+// that re-bases it before each step.
+template <class System>
+struct ChartLagrangian {
+  using M = typename System::Manifold;
+  static constexpr int dim = M::dim;
+  using Point = typename M::template Point<double>;
+  System system;
+  const Point* centre;
+  std::string name() const { return system.name(); }
+  template <class T>
+  T operator()(const Vec<T, dim>& eta, const Vec<T, dim>& nu) const {
+    const auto xv = M::chart_and_tangent(*centre, eta, nu);
+    return system(xv.first, xv.second);
+  }
+};
+
+// The Galerkin method of S stages (1..6 at compile time; 0 at run time) on the
+// manifold of System, in the chart centred at the current point. Not copyable: the
+// chart Lagrangian inside the R^n step refers to this object's centre.
+template <class System, int S = 0>
+class ChartGalerkinStep {
+ public:
+  using M = typename System::Manifold;
+  static constexpr int n = M::dim;
+  using Point = typename M::template Point<double>;
+  using Covector = typename M::template Tangent<double>;
+  using V = Vec<double, n>;
+  using Local = GalerkinStep<ChartLagrangian<System>, S>;
+
+  ChartGalerkinStep(System L, QuadratureKind kind, int stages, double h, StepOptions options = {})
+      : centre_(M::sample_point()), local_(ChartLagrangian<System>{std::move(L), &centre_}, kind, stages, h, options) {
+    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+  }
+  ChartGalerkinStep(const ChartGalerkinStep&) = delete;
+  ChartGalerkinStep& operator=(const ChartGalerkinStep&) = delete;
+
+  double step_size() const { return local_.step_size(); }
+  int stages() const { return local_.stages(); }
+  int order() const { return local_.order(); }
+  const System& lagrangian() const { return local_.lagrangian().system; }
+  long jacobian_updates() const { return local_.jacobian_updates(); }
+  // The R^n step in the chart centred at the last step's starting point.
+  const Local& local_step() const { return local_; }
+
+  // One step: xi holds a guess of the chart coordinates of q1 on entry (the R^n step
+  // spreads it linearly over its control points) and them on return; dpi (optional)
+  // returns the change of the chart momentum pi_1 - pi_k.
+  StepSummary step(const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1, V* dpi = nullptr) const {
+    centre_ = q0;
+    const V pi0 = M::covector_to_local(q0, p0);
+    V dq = xi, dp = V::Zero();
+    StepSummary s = local_.step(V::Zero(), pi0, dq, dp);
+    if (!s.converged) return s;
+    xi = dq;
+    if (dpi) *dpi = dp;
+    const Point raw = M::chart(q0, xi);
+    const double defect = M::point_defect(raw);
+    if (!(defect <= 1e-12)) {
+      s.converged = false;
+      s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+      return s;
+    }
+    p1 = covector_from_chart_at<M>(q0, xi, V(pi0 + dp));
+    q1 = M::clean(raw);
+    if (!std::isfinite(max_abs(p1))) {
+      s.converged = false;
+      s.message = "non-finite momentum";
+    }
+    return s;
+  }
+
+  // d(eta_1, pi_1)/d(eta_0, pi_0) of the chart step just taken from (q0, p0) (centre
+  // held at q0), through the solve: symplectic exactly when M^T J M = J.
+  Mat<double, 2 * n, 2 * n> chart_jacobian(const Point& q0, const Covector& p0) const {
+    return local_.map_jacobian(V::Zero(), M::covector_to_local(q0, p0));
+  }
+
+ private:
+  mutable Point centre_;
+  Local local_;
+};
+
+
+namespace detail {
+
+// The chart centred at c(eps) = chart(q0, eps), as a function of eps (any scalar): the
+// data that the generating function of ManifoldGalerkinStep differentiates in eps.
+//   point_tangent(eta, nu)  the point with coordinates eta and the tangent vector with
+//                           chart velocity nu there
+//   end_coordinates(xs)     the coordinates of q1 = chart(q0, xs) in this chart
+template <class M, class T>
+struct MovingChart;
+
+// SO(3): c(eps) = q0 exp(eps), chart(c, eta) = c exp(eta), body velocity J_r(eta) nu;
+// q1 = q0 exp(xs) has coordinates log(exp(-eps) exp(xs)).
+template <class T>
+struct MovingChart<SO3, T> {
+  Mat<T, 3, 3> C, E;
+  MovingChart(const Mat<double, 3, 3>& q0, const Vec<T, 3>& eps)
+      : C(SO3::mul(SO3::constants3<T>(q0), SO3::exp(eps))), E(SO3::exp(eps)) {}
+  std::pair<Mat<T, 3, 3>, Vec<T, 3>> point_tangent(const Vec<T, 3>& eta, const Vec<T, 3>& nu) const {
+    return {SO3::mul(C, SO3::exp(eta)), SO3::right_jacobian_times(eta, nu)};
+  }
+  Vec<T, 3> end_coordinates(const Mat<double, 3, 3>&, const Vec<T, 3>& xs) const {
+    return SO3::log(SO3::transpose_mul(E, SO3::exp(xs)));
+  }
+};
+
+// S^2: c(eps) = chart(q0, eps) and the tangent basis B' = (I - c c^T) B(q0) of T_c S^2
+// (any basis serves: the Galerkin action is invariant under linear changes of the
+// chart coordinates), chart(c, eta) = (c + B' eta)/|c + B' eta|; q1 has coordinates
+// eta with B' eta = q1/(c.q1) - c.
+template <class T>
+struct MovingChart<Sphere, T> {
+  Vec<T, 3> c;
+  Mat<T, 3, 2> B;
+  MovingChart(const Vec<double, 3>& q0, const Vec<T, 2>& eps) : c(Sphere::chart(q0, eps)) {
+    const Mat<double, 3, 2> B0 = Sphere::basis(q0);
+    for (int j = 0; j < 2; ++j) {
+      const T cb = c[0] * B0(0, j) + c[1] * B0(1, j) + c[2] * B0(2, j);
+      for (int i = 0; i < 3; ++i) B(i, j) = B0(i, j) - cb * c[i];
+    }
+  }
+  std::pair<Vec<T, 3>, Vec<T, 3>> point_tangent(const Vec<T, 2>& eta, const Vec<T, 2>& nu) const {
+    using std::sqrt;
+    Vec<T, 3> y, w;
+    for (int i = 0; i < 3; ++i) {
+      y[i] = c[i] + B(i, 0) * eta[0] + B(i, 1) * eta[1];
+      w[i] = B(i, 0) * nu[0] + B(i, 1) * nu[1];
+    }
+    const T n2 = detail::dot(y, y);
+    const T n = sqrt(n2);
+    const T k = detail::dot(y, w) / (n2 * n);
+    Vec<T, 3> x, v;
+    for (int i = 0; i < 3; ++i) {
+      x[i] = y[i] / n;
+      v[i] = w[i] / n - k * y[i];
+    }
+    return {x, v};
+  }
+  Vec<T, 2> end_coordinates(const Vec<double, 3>& q0, const Vec<T, 2>& xs) const {
+    const Vec<T, 3> q1 = Sphere::chart(q0, xs);
+    const T d = detail::dot(c, q1);
+    Vec<T, 3> y;
+    for (int i = 0; i < 3; ++i) y[i] = q1[i] / d - c[i];
+    Mat<T, 2, 2> G;
+    Vec<T, 2> b;
+    for (int a = 0; a < 2; ++a) {
+      b[a] = B(0, a) * y[0] + B(1, a) * y[1] + B(2, a) * y[2];
+      for (int e = 0; e < 2; ++e) G(a, e) = B(0, a) * B(0, e) + B(1, a) * B(1, e) + B(2, a) * B(2, e);
+    }
+    const T det = G(0, 0) * G(1, 1) - G(0, 1) * G(1, 0);
+    return Vec<T, 2>((G(1, 1) * b[0] - G(0, 1) * b[1]) / det, (G(0, 0) * b[1] - G(1, 0) * b[0]) / det);
+  }
+};
+
+// Replace the double at the bottom of a (possibly nested) Jet.
+template <class T>
+void set_bottom_value(T& t, double v) {
+  if constexpr (is_jet_v<T>)
+    set_bottom_value(t.a, v);
+  else
+    t = v;
+}
+
+}  // namespace detail
+
+// The Galerkin discrete Lagrangian on S^2 or SO(3) as a generating function (the
+// second construction above). With F(c; q0, q1) the Galerkin action (degree-S
+// curves, the quadrature of `kind`) in the chart centred at c,
+//
+//   L_d(q0, q1) = F(q0; q0, q1),   p0 = -D1 L_d(q0, q1),   p1 = D2 L_d(q0, q1),
+//
+// the derivative in q0 moving the chart's centre with q0. L_d is a function of the
+// two points alone, so the step (q0, p0) -> (q1, p1) is exactly symplectic (a
+// type-1 generating function); if the chart family is equivariant under a symmetry of
+// L (g chart(c, eta) = chart(g c, A eta) with A linear: rotations on S^2, left
+// multiplication on SO(3)), L_d is invariant and the momentum map is conserved
+// exactly (discrete Noether). The local error is that of the Galerkin action,
+// O(h^{2S+1}), so the order is 2S.
+//
+// The step, in the chart centred at q0 with unknowns X_1..X_S (coordinates of the
+// control points; X_S those of q1): with A(eps, X) the quadrature of the action along
+// the curve whose control points are, in the chart centred at chart(q0, eps), 0,
+// X_1, .., X_{S-1} and the coordinates of chart(q0, X_S),
+//   p0 + dA/deps = 0,   dA/dX_j = 0 (j = 1..S-1)   at eps = 0,   p1 = dA/dX_S
+// (internal control points are stationary, so how they move with eps does not
+// matter). One Jet of dimension dim + S dim gives all of them; the Jacobian in X
+// (nested Jets) is factored and reused across iterations and steps while the
+// iteration contracts, as in solvers/galerkin_step.h.
+template <class System, int S>
+class ManifoldGalerkinStep {
+  static_assert(S >= 1 && S <= kGalerkinMaxStages, "Galerkin stages 1..6");
+
+ public:
+  using M = typename System::Manifold;
+  static constexpr int n = M::dim;
+  static constexpr int SN = S * n;
+  static constexpr int K = n + SN;
+  using Point = typename M::template Point<double>;
+  using Covector = typename M::template Tangent<double>;
+  using V = Vec<double, n>;
+  using XV = Vec<double, SN>;
+
+  ManifoldGalerkinStep(System L, QuadratureKind kind, double h, StepOptions options = {})
+      : L_(std::move(L)), quad_(kind, S), h_(h), options_(options) {
+    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    for (int i = 0; i < quad_.points; ++i) {
+      b_[i] = static_cast<double>(quad_.b[i]);
+      for (int j = 0; j <= S; ++j) {
+        // Lagrange basis on the control points d_k = k/S and its derivative at c_i
+        long double l = 1.0L, dl = 0.0L;
+        for (int k = 0; k <= S; ++k) {
+          if (k == j) continue;
+          const long double dj = static_cast<long double>(j) / S, dk = static_cast<long double>(k) / S;
+          const long double f = (quad_.c[i] - dk) / (dj - dk);
+          dl = dl * f + l / (dj - dk);
+          l *= f;
+        }
+        A_[i][j] = static_cast<double>(l);
+        B_[i][j] = static_cast<double>(dl);
+      }
+    }
+    // extrapolation of the previous step's curve to tau = 1 + j/S (control points of
+    // the next step, in the previous chart)
+    for (int j = 1; j <= S; ++j)
+      for (int k = 1; k <= S; ++k) {
+        long double l = 1.0L;
+        const long double t = 1.0L + static_cast<long double>(j) / S;
+        for (int m = 0; m <= S; ++m)
+          if (m != k) l *= (t - static_cast<long double>(m) / S) / (static_cast<long double>(k - m) / S);
+        E_[j][k] = static_cast<double>(l);
+      }
+  }
+
+  double step_size() const { return h_; }
+  int stages() const { return S; }
+  int order() const { return 2 * S; }
+  const System& lagrangian() const { return L_; }
+  long jacobian_updates() const { return jacobian_updates_; }
+
+  // The quadrature of the action, A(eps, X), for any scalar.
+  template <class T>
+  T action(const Point& q0, const Vec<T, n>& eps, const Vec<T, SN>& X) const {
+    const detail::MovingChart<M, T> chart(q0, eps);
+    std::array<Vec<T, n>, S + 1> Y;
+    for (int j = 1; j < S; ++j) Y[j] = X.template segment<n>((j - 1) * n);
+    const Vec<T, n> xs = X.template segment<n>((S - 1) * n);
+    Y[S] = chart.end_coordinates(q0, xs);
+    // at eps = 0 the end coordinates are xs: keep its value exactly (the formula's
+    // round-off is relative to |xs| ~ h); the derivatives come from the formula
+    for (int a = 0; a < n; ++a) detail::set_bottom_value(Y[S][a], value(xs[a]));
+    T sum = constant<T>(0.0);
+    for (int i = 0; i < quad_.points; ++i) {
+      Vec<T, n> eta, nu;
+      for (int a = 0; a < n; ++a) {
+        T e = constant<T>(0.0), v = constant<T>(0.0);
+        for (int j = 1; j <= S; ++j) {
+          e = e + A_[i][j] * Y[j][a];
+          v = v + (B_[i][j] / h_) * Y[j][a];
+        }
+        eta[a] = e;
+        nu[a] = v;
+      }
+      const auto xv = chart.point_tangent(eta, nu);
+      sum = sum + (h_ * b_[i]) * L_(xv.first, xv.second);
+    }
+    return sum;
+  }
+
+  // One step: xi holds a guess of the chart coordinates of q1 on entry (spread
+  // linearly over the control points) and them on return.
+  StepSummary step(const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
+    const V pi0 = M::covector_to_local(q0, p0);
+    // starting guess: the previous step's curve extrapolated (error O(h^{S+1})) and
+    // read in the chart centred at q0, when this step continues that one; otherwise
+    // xi spread linearly over the control points
+    if (have_prev_ && M::distance(q0, prev_end_) <= 1e-14) {
+      for (int j = 1; j <= S; ++j) {
+        V z = V::Zero();
+        for (int k = 1; k <= S; ++k) z += E_[j][k] * Xprev_.template segment<n>((k - 1) * n);
+        X_.template segment<n>((j - 1) * n) = M::chart_inverse(q0, M::chart(prev_centre_, z));
+      }
+    } else {
+      for (int j = 1; j <= S; ++j) X_.template segment<n>((j - 1) * n) = (static_cast<double>(j) / S) * xi;
+    }
+    have_prev_ = false;
+    StepSummary sum;
+    bool fresh = false;
+    try {
+      if (!lu_valid_) {
+        refresh(q0, pi0);
+        fresh = true;
+      }
+      const double pscale = max_abs(pi0);
+      double dxn = INFINITY;
+      V pi1;
+      for (int it = 0; it < options_.max_iterations; ++it) {
+        residual(q0, pi0, pi1);
+        sum.iterations = it + 1;
+        sum.residual = max_abs(R_);
+        sum.scale = pscale + Jmax_ * max_abs(X_) + options_.absolute_floor;
+        if (!std::isfinite(sum.residual)) {
+          sum.message = "non-finite residual";
+          break;
+        }
+        const NewtonVerdict verdict = newton_verdict(sum, dxn, max_abs(X_), options_);
+        if (verdict == NewtonVerdict::converged) {
+          X_.noalias() -= Jinv_ * R_;  // the correction already paid for
+          residual(q0, pi0, pi1);      // p1 at the corrected nodes
+          xi = X_.template segment<n>((S - 1) * n);
+          const Point raw = M::chart(q0, xi);
+          const double defect = M::point_defect(raw);
+          if (!(defect <= 1e-12)) {
+            sum.converged = false;
+            sum.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+            return sum;
+          }
+          p1 = covector_from_chart_at<M>(q0, xi, pi1);
+          q1 = M::clean(raw);
+          if (!std::isfinite(max_abs(p1))) {
+            sum.converged = false;
+            sum.message = "non-finite momentum";
+            return sum;
+          }
+          Xprev_ = X_;
+          prev_centre_ = q0;
+          prev_end_ = q1;
+          have_prev_ = true;
+          return sum;
+        }
+        if (verdict == NewtonVerdict::failed) {
+          if (fresh) break;
+          sum.message.clear();
+          refresh(q0, pi0);
+          fresh = true;
+          dxn = INFINITY;
+          continue;
+        }
+        delta_.noalias() = Jinv_ * R_;
+        X_ -= delta_;
+        const double d = max_abs(delta_);
+        if (!std::isfinite(d)) {
+          sum.message = "singular Galerkin step Jacobian";
+          break;
+        }
+        if (it >= 1 && d > contraction_ * dxn && !fresh) {
+          refresh(q0, pi0);
+          fresh = true;
+          dxn = INFINITY;
+          continue;
+        }
+        dxn = d;
+      }
+      if (sum.message.empty())
+        sum.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+    } catch (const std::domain_error& e) {
+      sum.message = e.what();
+    }
+    sum.converged = false;
+    lu_valid_ = false;
+    return sum;
+  }
+
+ private:
+  // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{S-1}) at eps = 0 and pi1 = dA/dX_S.
+  void residual(const Point& q0, const V& pi0, V& pi1) const {
+    using D = ceres::Jet<double, K>;
+    Vec<D, n> eps;
+    Vec<D, SN> X;
+    for (int a = 0; a < n; ++a) eps[a] = seed<double, K>(0.0, a);
+    for (int k = 0; k < SN; ++k) X[k] = seed<double, K>(X_[k], n + k);
+    const D A = action<D>(q0, eps, X);
+    R_ = A.v.template head<SN>();
+    R_.template head<n>() += pi0;
+    pi1 = A.v.template tail<n>();
+  }
+
+  // The Jacobian dR/dX at the current X_ (nested Jets), inverted.
+  void refresh(const Point& q0, const V&) const {
+    using I = ceres::Jet<double, SN>;
+    using DD = ceres::Jet<I, K>;
+    Vec<DD, n> eps;
+    Vec<DD, SN> X;
+    for (int a = 0; a < n; ++a) eps[a] = seed<I, K>(I(0.0), a);
+    for (int k = 0; k < SN; ++k) X[k] = seed<I, K>(seed<double, SN>(X_[k], k), n + k);
+    const DD A = action<DD>(q0, eps, X);
+    for (int r = 0; r < SN; ++r) J_.row(r) = A.v[r].v.transpose();
+    if (!std::isfinite(max_abs(J_))) throw std::domain_error("non-finite Galerkin Jacobian");
+    Jmax_ = max_abs(J_);
+    const Eigen::PartialPivLU<Mat<double, SN, SN>> lu(J_);
+    if (!(lu.rcond() > 1e-13)) throw std::domain_error("singular Galerkin step Jacobian");
+    Jinv_ = lu.inverse();
+    lu_valid_ = true;
+    ++jacobian_updates_;
+  }
+
+  System L_;
+  Quadrature quad_;
+  double h_;
+  StepOptions options_;
+  std::array<double, S + 2> b_{};
+  std::array<std::array<double, S + 1>, S + 2> A_{}, B_{};
+  std::array<std::array<double, S + 1>, S + 1> E_{};
+  mutable XV Xprev_ = XV::Zero();
+  mutable Point prev_centre_ = M::sample_point(), prev_end_ = M::sample_point();
+  mutable bool have_prev_ = false;
+  mutable XV X_ = XV::Zero(), R_ = XV::Zero(), delta_ = XV::Zero();
+  mutable Mat<double, SN, SN> J_ = Mat<double, SN, SN>::Zero(), Jinv_ = Mat<double, SN, SN>::Zero();
+  double contraction_ = 0.25;
+  mutable double Jmax_ = 0.0;
+  mutable bool lu_valid_ = false;
+  mutable long jacobian_updates_ = 0;
+};
+
+}  // namespace dvm
