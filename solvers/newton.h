@@ -15,12 +15,16 @@
 
 #include <ceres/jet.h>
 // TinySolver leaves a member uninitialised until its first Update(); GCC 12 warns
-// about it at the header's own lines.
+// about it at the header's own lines (clang has no such warning).
+#if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 #include <ceres/tiny_solver.h>
 #include <ceres/tiny_solver_autodiff_function.h>
+#if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
+#endif
 
 #include <cmath>
 #include <string>

@@ -3,8 +3,11 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <climits>
 #include <cmath>
+#include <csignal>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
@@ -23,6 +26,62 @@ namespace {
 std::map<unsigned long long, double>& reserved() {
   static std::map<unsigned long long, double> r;
   return r;
+}
+
+// The temporaries of this process's open outputs, for the handler of SIGINT, SIGTERM
+// and SIGHUP. The handler may only call async-signal-safe functions, so the paths live
+// in fixed static buffers (no allocation, no std::string); a slot's path is complete
+// before `used` is set and stays until after the file has been renamed or removed.
+struct TempSlot {
+  volatile std::sig_atomic_t used;
+  char path[PATH_MAX];
+};
+constexpr int kTempSlots = 16;
+TempSlot g_temp_slots[kTempSlots];
+
+extern "C" void remove_temporaries_and_reraise(int sig) {
+  for (TempSlot& t : g_temp_slots)
+    if (t.used) unlink(t.path);
+  // SA_RESETHAND restored the default action; the signal is blocked while this
+  // handler runs, so it is delivered (and ends the process) when the handler returns
+  raise(sig);
+}
+
+void install_signal_cleanup() {
+  static bool installed = false;
+  if (installed) return;
+  installed = true;
+  struct sigaction sa {};
+  sa.sa_handler = remove_temporaries_and_reraise;
+  sa.sa_flags = SA_RESETHAND;
+  sigemptyset(&sa.sa_mask);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&sa.sa_mask, sig);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
+    struct sigaction old {};
+    // a signal the caller chose to ignore (nohup, a background job) stays ignored
+    if (sigaction(sig, nullptr, &old) == 0 && old.sa_handler != SIG_IGN) sigaction(sig, &sa, nullptr);
+  }
+}
+
+// Returns the slot holding `path`, or -1 when all are taken or the path is too long
+// (that temporary is then not removed on a signal).
+int register_temporary(const std::string& path) {
+  if (path.size() >= PATH_MAX) return -1;
+  install_signal_cleanup();
+  for (int i = 0; i < kTempSlots; ++i) {
+    TempSlot& t = g_temp_slots[i];
+    if (t.used) continue;
+    std::memcpy(t.path, path.c_str(), path.size() + 1);
+    std::atomic_signal_fence(std::memory_order_seq_cst);  // the path is written before the flag
+    t.used = 1;
+    return i;
+  }
+  return -1;
+}
+
+void unregister_temporary(int& slot) {
+  if (slot >= 0) g_temp_slots[slot].used = 0;
+  slot = -1;
 }
 
 }  // namespace
@@ -63,6 +122,7 @@ void OutputFile::open(const std::string& path, const std::string& what, double b
   const int fd = mkstemp(tmpl.data());
   if (fd < 0)
     throw InputError(where + ": cannot create a file in '" + dir.string() + "' (" + std::strerror(errno) + ")");
+  slot_ = register_temporary(tmpl);
   // mkstemp makes the file private (0600); give it the permissions a plain fopen would
   const mode_t mask = umask(0);
   umask(mask);
@@ -71,6 +131,7 @@ void OutputFile::open(const std::string& path, const std::string& what, double b
   if (!f_) {
     ::close(fd);
     std::remove(tmpl.c_str());
+    unregister_temporary(slot_);
     throw InputError(where + ": cannot open the temporary file '" + tmpl + "'");
   }
   path_ = path;
@@ -106,6 +167,7 @@ std::string OutputFile::finish(bool complete) {
   if (write_error || close_error) {
     const std::string msg = "error writing '" + path_ + "' (" + std::strerror(write_errno) + "); nothing was kept";
     std::remove(temp_.c_str());
+    unregister_temporary(slot_);
     temp_.clear();
     return msg;
   }
@@ -113,9 +175,11 @@ std::string OutputFile::finish(bool complete) {
   if (std::rename(temp_.c_str(), target.c_str()) != 0) {
     const std::string msg = "cannot rename '" + temp_ + "' to '" + target + "' (" + std::strerror(errno) + ")";
     std::remove(temp_.c_str());
+    unregister_temporary(slot_);
     temp_.clear();
     return msg;
   }
+  unregister_temporary(slot_);
   temp_.clear();
   return "";
 }
@@ -124,6 +188,7 @@ void OutputFile::discard() {
   if (f_) std::fclose(f_);
   f_ = nullptr;
   if (!temp_.empty()) std::remove(temp_.c_str());
+  unregister_temporary(slot_);  // after the removal: a signal in between finds no file
   temp_.clear();
   if (reserved_ > 0.0) reserved()[device_] -= reserved_;
   reserved_ = 0.0;

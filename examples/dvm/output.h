@@ -12,7 +12,10 @@
 //     final path holds either what it held before (or nothing) or the whole new file.
 //   - A run that stops on a numerical failure renames its rows to "PATH.partial"
 //     instead; the final path is left as it was. A write error (a full disk) removes
-//     the temporary. A run killed outright leaves only the hidden temporary.
+//     the temporary. A run stopped by SIGINT, SIGTERM or SIGHUP removes its
+//     temporaries (the handler unlinks paths kept in static buffers, then re-raises
+//     the signal, so the process still ends by it). Only a run killed outright
+//     (SIGKILL, a crash) leaves a hidden temporary behind.
 #pragma once
 
 #include <cstdint>
@@ -55,6 +58,7 @@ class OutputFile {
   std::string path_, temp_;
   double reserved_ = 0.0;
   unsigned long long device_ = 0;
+  int slot_ = -1;  // where the signal handler finds temp_ (-1: not registered)
 };
 
 // Finishes each open file of a run (see OutputFile::finish), printing any error to

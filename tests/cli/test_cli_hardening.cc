@@ -11,10 +11,13 @@
 
 #include "tests/cli/cli_harness.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <cmath>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
@@ -380,4 +383,60 @@ BOOST_AUTO_TEST_CASE(every_run_path_reports_a_failed_step_with_exit_3) {
     }
     std::remove((csv + ".partial").c_str());
   }
+}
+
+BOOST_AUTO_TEST_CASE(a_run_stopped_by_sigint_or_sigterm_removes_its_temporary) {
+  // A long run (10^8 pendulum steps, every 10^6-th written) is stopped once its hidden
+  // temporary exists: the process still ends by the signal, and neither the final
+  // path nor a temporary is left.
+  const std::string dir = temp_dir();
+  for (int sig : {SIGTERM, SIGINT}) {
+    const std::string csv = dir + "/killed.csv";
+    const pid_t pid = fork();
+    BOOST_REQUIRE(pid >= 0);
+    if (pid == 0) {
+      const int null = ::open("/dev/null", O_WRONLY);
+      dup2(null, 1);
+      dup2(null, 2);
+      const std::string sc = scene("pendulum.toml");
+      execl(DVM_BINARY, DVM_BINARY, "run", sc.c_str(), "--quiet", "--csv", csv.c_str(), "--set",
+            "integrator.t_end=1e6", "--set", "output.every=1000000", static_cast<char*>(nullptr));
+      _exit(127);
+    }
+    auto hidden = [&] {
+      int n = 0;
+      for (const auto& e : std::filesystem::directory_iterator(dir))
+        if (e.path().filename().string().rfind(".killed.csv.", 0) == 0) ++n;
+      return n;
+    };
+    int status = 0;
+    bool exited = false;
+    for (int i = 0; i < 6000 && hidden() == 0 && !exited; ++i) {  // up to 60 s (a sanitized build starts slowly)
+      exited = waitpid(pid, &status, WNOHANG) == pid;
+      usleep(10000);
+    }
+    BOOST_REQUIRE_MESSAGE(!exited, "the run ended before it could be stopped");
+    BOOST_REQUIRE_EQUAL(hidden(), 1);
+    BOOST_REQUIRE(kill(pid, sig) == 0);
+    BOOST_REQUIRE(waitpid(pid, &status, 0) == pid);
+    BOOST_TEST_CONTEXT("signal " << sig) {
+      BOOST_TEST(WIFSIGNALED(status));
+      BOOST_TEST((WIFSIGNALED(status) ? WTERMSIG(status) : 0) == sig);
+      BOOST_TEST(hidden() == 0);
+      BOOST_TEST(!file_exists(csv));
+      BOOST_TEST(!file_exists(csv + ".partial"));
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(the_harness_removes_its_temporary_folder) {
+  std::string path;
+  {
+    const TempDir t;
+    path = t.path();
+    std::filesystem::create_directory(path + "/sub");
+    std::ofstream(path + "/sub/file.txt") << "x\n";
+    BOOST_TEST(std::filesystem::is_directory(path));
+  }
+  BOOST_TEST(!std::filesystem::exists(path));
 }
