@@ -53,6 +53,7 @@
 #include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/manifold_systems.h"
 #include "solvers/galerkin_step.h"
+#include "solvers/manifold_step.h"
 
 namespace dvm {
 
@@ -113,19 +114,7 @@ class ChartGalerkinStep {
     if (!s.converged) return s;
     xi = dq;
     if (dpi) *dpi = dp;
-    const Point raw = M::chart(q0, xi);
-    const double defect = M::point_defect(raw);
-    if (!(defect <= 1e-12)) {
-      s.converged = false;
-      s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
-      return s;
-    }
-    p1 = covector_from_chart_at<M>(q0, xi, V(pi0 + dp));
-    q1 = M::clean(raw);
-    if (!std::isfinite(max_abs(p1))) {
-      s.converged = false;
-      s.message = "non-finite momentum";
-    }
+    leave_chart<M>(q0, xi, V(pi0 + dp), s, q1, p1);
     return s;
   }
 
@@ -369,20 +358,8 @@ class ManifoldGalerkinStep {
           X_.noalias() -= Jinv_ * R_;  // the correction already paid for
           residual(q0, pi0, pi1);      // p1 at the corrected nodes
           xi = X_.template segment<n>((S - 1) * n);
-          const Point raw = M::chart(q0, xi);
-          const double defect = M::point_defect(raw);
-          if (!(defect <= 1e-12)) {
-            sum.converged = false;
-            sum.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
-            return sum;
-          }
-          p1 = covector_from_chart_at<M>(q0, xi, pi1);
-          q1 = M::clean(raw);
-          if (!std::isfinite(max_abs(p1))) {
-            sum.converged = false;
-            sum.message = "non-finite momentum";
-            return sum;
-          }
+          leave_chart<M>(q0, xi, pi1, sum, q1, p1);
+          if (!sum.converged) return sum;
           Xprev_ = X_;
           prev_centre_ = q0;
           prev_end_ = q1;

@@ -146,19 +146,7 @@ class ManifoldHamiltonianStep {
     if (!s.converged) return s;
     xi = dq;
     if (dp_out) *dp_out = dp;
-    const Point raw = M::chart(q0, xi);
-    const double defect = M::point_defect(raw);
-    if (!(defect <= 1e-12)) {
-      s.converged = false;
-      s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
-      return s;
-    }
-    p1 = covector_from_chart_at<M>(q0, xi, V(pi0 + dp));
-    q1 = M::clean(raw);
-    if (!std::isfinite(max_abs(p1))) {
-      s.converged = false;
-      s.message = "non-finite momentum";
-    }
+    leave_chart<M>(q0, xi, V(pi0 + dp), s, q1, p1);
     return s;
   }
 

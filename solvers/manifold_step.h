@@ -21,11 +21,34 @@
 
 #include <cstdint>
 
+#include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/manifold_systems.h"
 #include "solvers/integrate.h"
 #include "solvers/newton.h"
 
 namespace dvm {
+
+// The end of a step solved in the chart centred at q0: the point q1 = chart(q0, xi)
+// and the covector p1 with chart components pi1 there. The step s fails if the chart
+// left the manifold by more than round-off or if p1 is not finite.
+template <class M>
+void leave_chart(const typename M::template Point<double>& q0, const Vec<double, M::dim>& xi,
+                 const Vec<double, M::dim>& pi1, StepSummary& s, typename M::template Point<double>& q1,
+                 typename M::template Tangent<double>& p1) {
+  const typename M::template Point<double> raw = M::chart(q0, xi);
+  const double defect = M::point_defect(raw);
+  if (!(defect <= 1e-12)) {
+    s.converged = false;
+    s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+    return;
+  }
+  p1 = covector_from_chart_at<M>(q0, xi, pi1);
+  q1 = M::clean(raw);
+  if (!std::isfinite(max_abs(p1))) {
+    s.converged = false;
+    s.message = "non-finite momentum";
+  }
+}
 
 template <class System, class Map>
 class ManifoldStep {
