@@ -7,6 +7,7 @@
 #include <quadmath.h>
 
 #include <cmath>
+#include <limits>
 
 #include "mechanics/systems.h"
 #include "solvers/composition.h"
@@ -158,7 +159,11 @@ BOOST_AUTO_TEST_CASE(local_error_order_in_quadruple_precision) {
 BOOST_AUTO_TEST_CASE(recursive_triple_jump_matches_the_closed_forms) {
   const std::vector<double> a = find_composition("triple-jump:4").gamma, b = TripleJump4::gamma();
   BOOST_TEST(a.size() == b.size());
-  for (std::size_t i = 0; i < a.size(); ++i) BOOST_TEST(a[i] == b[i]);
+  // The recursion computes 2^(1/3) as pow(2, 1/3) with 1/3 rounded, the closed form as
+  // cbrt(2): the two agree to round-off, not bit for bit (clang's libm calls differ from
+  // GCC's folded constants by an ulp; found by the clang sanitizer build).
+  for (std::size_t i = 0; i < a.size(); ++i)
+    BOOST_TEST(std::fabs(a[i] - b[i]) <= 4 * std::numeric_limits<double>::epsilon() * std::fabs(b[i]));
   BOOST_TEST(find_composition("triple-jump:2").gamma == std::vector<double>{1.0});
   BOOST_TEST(find_composition("triple-jump:8").stages == 27);
   BOOST_CHECK_THROW(find_composition("triple-jump:5"), std::invalid_argument);
