@@ -12,6 +12,29 @@
 
 namespace dvm::verification {
 
+// True in a build with AddressSanitizer (`make sanitize`; g++ defines
+// __SANITIZE_ADDRESS__, clang answers __has_feature).
+#if defined(__SANITIZE_ADDRESS__)
+inline constexpr bool kAddressSanitizer = true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+inline constexpr bool kAddressSanitizer = true;
+#else
+inline constexpr bool kAddressSanitizer = false;
+#endif
+#else
+inline constexpr bool kAddressSanitizer = false;
+#endif
+
+// Step count of a long-horizon loop (bounded energy, drift of momentum maps, staying on
+// the manifold over 10^5 to 10^6 steps): n, and n / 10 under AddressSanitizer. ASan
+// checks every load and store of the nested Jets in a manifold step, which makes these
+// loops about 15 times slower than in the Release build; the sanitizer build is there
+// to find memory errors and undefined behaviour, which the same code path run a tenth
+// as long exercises, while the long-time properties are asserted by `make test` at
+// full length. The tolerances that depend on n are computed from the returned count.
+constexpr std::int64_t long_horizon(std::int64_t n) { return kAddressSanitizer ? n / 10 : n; }
+
 // (q, p) at time t_end = steps * h from (q0, p0), by the position-momentum method of
 // the map. Fails the calling test (returns NaN) if any step fails.
 template <class System, class Map>
