@@ -23,15 +23,18 @@ SAN_CXX   := clang++-14
 # clang-14 compiles our template-heavy test files in about two thirds of g++'s time with
 # half its memory; -gline-tables-only keeps file:line in the symbolized stack traces
 # without full debug information (which doubled compile time and memory).
+# -O2, not -O1: the suites run 2.5 to 3 times faster (test_product 311 -> 123 s,
+# test_composition_verification 347 -> 130 s) for a build that took 26 min at -j 2.
 # toml++'s internal debug assertions are off, as in the shipped NDEBUG build (see FUZZ_FLAGS)
-SAN_FLAGS := -O1 -gline-tables-only -fno-omit-frame-pointer -fsanitize=address,undefined \
+SAN_FLAGS := -O2 -gline-tables-only -fno-omit-frame-pointer -fsanitize=address,undefined \
              -fno-sanitize-recover=all -DTOML_ASSERT\(expr\)=static_assert\(true\)
 # detect_leaks: LeakSanitizer on (the default on x86_64 Linux, stated here); a finding stops the test
 SAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:strict_string_checks=1:detect_stack_use_after_return=1 \
              UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
              ASAN_SYMBOLIZER_PATH=/usr/bin/llvm-symbolizer-14
 
-FUZZ_PKGS    := clang-14 libclang-rt-14-dev
+# llvm-14 (only recommended by clang-14) holds llvm-symbolizer-14: file:line in the stack traces
+FUZZ_PKGS    := clang-14 libclang-rt-14-dev llvm-14
 FUZZ_BUILD   := build-fuzz
 FUZZ_CXX     := clang++-14
 FUZZ_SECONDS ?= 60
