@@ -23,8 +23,9 @@ SAN_CXX   := clang++-14
 # clang-14 compiles our template-heavy test files in about two thirds of g++'s time with
 # half its memory; -gline-tables-only keeps file:line in the symbolized stack traces
 # without full debug information (which doubled compile time and memory).
-# -O2, not -O1: the suites run 2.5 to 3 times faster (test_product 311 -> 123 s,
-# test_composition_verification 347 -> 130 s) for a build that took 26 min at -j 2.
+# -O2, not -O1: the heavy suites run 2.2 to 2.7 times faster (test_product 311 -> 123 s,
+# test_composition_verification 347 -> 130 s; the -O1 times were taken on a busier
+# machine) for a build that took 26 min at -j 2.
 # toml++'s internal debug assertions are off, as in the shipped NDEBUG build (see FUZZ_FLAGS)
 SAN_FLAGS := -O2 -gline-tables-only -fno-omit-frame-pointer -fsanitize=address,undefined \
              -fno-sanitize-recover=all -DTOML_ASSERT\(expr\)=static_assert\(true\)
