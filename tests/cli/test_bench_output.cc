@@ -12,24 +12,12 @@
 #include <string>
 #include <vector>
 
+#include "tests/cli/temp_files.h"
+
 namespace {
 
-std::string temp_dir() {
-  static std::string dir = [] {
-    char tmpl[] = "/tmp/dvm_bench_XXXXXX";
-    const char* d = mkdtemp(tmpl);
-    BOOST_REQUIRE(d);
-    return std::string(d);
-  }();
-  return dir;
-}
-
-std::string slurp(const std::string& path) {
-  std::ifstream f(path, std::ios::binary);
-  std::stringstream s;
-  s << f.rdbuf();
-  return s.str();
-}
+using cli_test::slurp;
+using cli_test::temp_dir;  // removed when the test exits
 
 std::vector<std::string> split(const std::string& line, char sep) {
   std::vector<std::string> out;
