@@ -154,16 +154,22 @@ class GalerkinStep {
   long jacobian_updates() const { return jacobian_updates_; }
   // Refresh the Jacobian when a correction is larger than `c` times the previous one.
   void set_contraction(double c) { contraction_ = c; }
-  // Diagnostics of the starting guess of the last converged step that continued its
-  // predecessor (NaN otherwise), in the max norm over the s N unknowns: the distance
-  // of the guess used, and of the plain extrapolation E X_prev, from the solution.
-  double last_guess_error() const { return last_guess_error_; }
-  double last_extrapolation_error() const { return last_extrapolation_error_; }
+  // Diagnostics of the starting guess of the last step, if it converged and continued
+  // its predecessor (NaN otherwise), in the max norm over the s N unknowns: the
+  // distance of the guess used, and of the plain extrapolation E X_prev, from the
+  // solution. Computed on request from the predictor's state (not in the step).
+  double last_guess_error() const {
+    return guess_measured_ ? (err1_ - corr_).template lpNorm<Eigen::Infinity>() : NAN;
+  }
+  double last_extrapolation_error() const {
+    return guess_measured_ ? err1_.template lpNorm<Eigen::Infinity>() : NAN;
+  }
   // Forget the previous step (its polynomial and the Jacobian).
   void reset() const {
     have_prev_ = false;
     lu_valid_ = false;
     errors_known_ = 0;
+    guess_measured_ = false;
   }
 
   // h sum_i b_i L(x_i, v_i) at the nodes q0 + X_j: the action whose stationary value
@@ -202,6 +208,7 @@ class GalerkinStep {
   StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
     const int s = s_;
     StepSummary sum;
+    guess_measured_ = false;
     const bool continues = have_prev_ && max_abs(V(q0 - q_end_)) <= 1e-12 * (max_abs(q0) + max_abs(dq)) + 1e-300;
     if (continues) {
       extrapolate();  // Xext_ = E Xprev_
@@ -258,10 +265,7 @@ class GalerkinStep {
             err2_ = err1_;
             err1_ = X_ - Xext_;
             if (errors_known_ < 2) ++errors_known_;
-            last_extrapolation_error_ = err1_.template lpNorm<Eigen::Infinity>();
-            last_guess_error_ = (err1_ - corr_).template lpNorm<Eigen::Infinity>();
-          } else {
-            last_extrapolation_error_ = last_guess_error_ = NAN;
+            guess_measured_ = true;
           }
           Xprev_ = X_;
           q_end_ = q0 + dq;
@@ -458,10 +462,12 @@ class GalerkinStep {
   mutable XV<double> X_, Xprev_, R_;
   mutable XV<double> delta_;
   // the predictor: the plain extrapolation of this step and the errors of the plain
-  // extrapolations of the last two steps (err1_ the latest); errors_known_ of them
+  // extrapolations of the last two steps (err1_ the latest); errors_known_ of them;
+  // guess_measured_: the last step converged continuing its predecessor, so err1_ and
+  // corr_ are its extrapolation error and its correction
   mutable XV<double> Xext_, err1_, err2_, corr_;
-  mutable double last_guess_error_ = NAN, last_extrapolation_error_ = NAN;
   mutable int errors_known_ = 0;
+  mutable bool guess_measured_ = false;
   mutable XM J_, Jinv_;
   double contraction_ = 0.25;
   mutable double Jmax_ = 0.0;
