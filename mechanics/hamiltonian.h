@@ -82,12 +82,16 @@ double velocity_hessian_rcond(const S& L, const Vec<double, S::dim>& q, const Ve
 // The scale of d2L/dv2 at (q, v): {|W|, 1/|W^{-1}|} in the max norm (W = d2L/dv2).
 // They bound the largest and the smallest singular value within a factor sqrt(dim), and
 // are |W| twice in one dimension; the second is 0 where W is singular.
+template <class Derived>
+Vec<double, 2> matrix_hessian_scale(const Eigen::MatrixBase<Derived>& W) {
+  if (!W.allFinite()) return Vec<double, 2>(NAN, NAN);
+  const Eigen::MatrixXd Wd = W;
+  const double inv = Eigen::MatrixXd(Wd.partialPivLu().inverse()).cwiseAbs().rowwise().sum().maxCoeff();
+  return Vec<double, 2>(Wd.cwiseAbs().rowwise().sum().maxCoeff(), std::isfinite(inv) ? 1.0 / inv : 0.0);
+}
 template <class S>
 Vec<double, 2> velocity_hessian_scale(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
-  const Mat<double, S::dim, S::dim> W = velocity_hessian(L, q, v);
-  if (!W.allFinite()) return Vec<double, 2>(NAN, NAN);
-  const double inv = Mat<double, S::dim, S::dim>(W.partialPivLu().inverse()).cwiseAbs().rowwise().sum().maxCoeff();
-  return Vec<double, 2>(W.cwiseAbs().rowwise().sum().maxCoeff(), std::isfinite(inv) ? 1.0 / inv : 0.0);
+  return matrix_hessian_scale(velocity_hessian(L, q, v));
 }
 
 // Throws DegenerateLagrangianError, naming the point, when d2L/dv2 is singular (to
@@ -118,16 +122,7 @@ void require_regular(const S& L, const Vec<double, S::dim>& q, const Vec<double,
 // set against its value at a reference state (the run's initial one). A step near a
 // point where FL degenerates fails to converge (its Newton matrix contains d2L/dv2),
 // and the smallest scale having collapsed relative to the start says so.
-template <class S>
-std::string legendre_diagnosis(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& p,
-                               const Vec<double, S::dim>& guess, const Vec<double, 2>& scale_ref) {
-  Vec<double, S::dim> v;
-  try {
-    v = legendre_inverse(L, q, p, guess);
-  } catch (const std::domain_error& e) {
-    return std::string("at the last completed state the Legendre transform cannot be inverted: ") + e.what();
-  }
-  const Vec<double, 2> scale = velocity_hessian_scale(L, q, v);
+inline std::string legendre_scale_diagnosis(const Vec<double, 2>& scale, const Vec<double, 2>& scale_ref) {
   if (!scale.allFinite()) return "at the last completed state the velocity Hessian d2L/dv2 is not finite";
   std::ostringstream msg;
   msg.precision(3);
@@ -138,6 +133,19 @@ std::string legendre_diagnosis(const S& L, const Vec<double, S::dim>& q, const V
     msg << ": the Legendre transform is close to degenerate there, so the step equation is nearly singular";
   return msg.str();
 }
+
+template <class S>
+std::string legendre_diagnosis(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& p,
+                               const Vec<double, S::dim>& guess, const Vec<double, 2>& scale_ref) {
+  Vec<double, S::dim> v;
+  try {
+    v = legendre_inverse(L, q, p, guess);
+  } catch (const std::domain_error& e) {
+    return std::string("at the last completed state the Legendre transform cannot be inverted: ") + e.what();
+  }
+  return legendre_scale_diagnosis(velocity_hessian_scale(L, q, v), scale_ref);
+}
+
 
 // The Legendre map FL(q, v) = (q, p) with the regularity check.
 template <class S>

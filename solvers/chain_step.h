@@ -45,7 +45,8 @@ class ChainStep {
 
   ChainStep(FPUChain chain, ThetaMap map, double h, StepOptions options = {})
       : chain_(std::move(chain)), map_(std::move(map)), h_(h), options_(options) {
-    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    // negative sizes are the backward substeps of compositions (solvers/composition.h)
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
     const int n = chain_.n;
     x_.resize(n);
     g_.resize(n);
@@ -76,7 +77,8 @@ class ChainStep {
       r_ = p0 - (m / h_) * dq - a * g_;
       s.iterations = it + 1;
       s.residual = max_abs(r_);
-      s.scale = pscale + (m / h_) * max_abs(dq) + a * chain_.gradient_scale(x_) + options_.absolute_floor;
+      s.scale = pscale + std::fabs(m / h_) * max_abs(dq) + std::fabs(a) * chain_.gradient_scale(x_) +
+                options_.absolute_floor;
       if (!std::isfinite(s.residual)) {
         s.message = "non-finite residual";
         return s;
@@ -110,9 +112,15 @@ class ChainStep {
 
  private:
   // Solves (d0 I + b T) y = r_ in place, T = tridiag(off_, diag_, off_). Returns false on a
-  // non-positive pivot.
+  // non-positive pivot. A backward substep (h < 0) has d0 < 0 and b <= 0: the system is
+  // solved as (-d0 I - b T) y = -r_, positive definite where V is convex.
   bool solve_tridiagonal(double d0, double b) const {
     const int n = chain_.n;
+    if (d0 < 0.0) {
+      d0 = -d0;
+      b = -b;
+      r_ = -r_;
+    }
     // forward elimination (Thomas): c_ = modified super-diagonal, d_ = modified rhs
     double piv = d0 + b * diag_[0];
     if (!(piv > 0.0)) return false;

@@ -78,7 +78,7 @@ class ComposedStep {
     total.iterations = 0;
     total.residual = 0.0;
     total.scale = 0.0;
-    CompensatedVector<N> Q(V::Zero()), P(V::Zero());  // increments since the start
+    CompensatedVector<N> Q(V::Zero(q0.size())), P(V::Zero(q0.size()));  // increments since the start
     // Each substep starts from the previous substep's increment rescaled to its size
     // (the first from the caller's guess).
     // Steps that take a guess of the momentum increment too (Hamiltonian steps) get

@@ -1,8 +1,12 @@
-// The integrate loop for one-step methods in (q, p) form.
+// The integrate loop for one-step methods in (q, p) form, on R^n and on manifolds.
 //
-// A step type S provides `static constexpr int N`, `double step_size() const` and
+// A step on R^n provides `static constexpr int N`, `double step_size() const` and
 //   StepSummary step(const V& q, const V& p, V& dq, V& dp) const
-// returning the increments; dq carries the starting guess on entry. The loop
+// returning the increments; dq carries the starting guess on entry. A step on a
+// manifold M (solvers/manifold_step.h) provides `M`, `n`, `Point`, `Covector`,
+// step_size() and
+//   StepSummary step(const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const
+// with xi the guess of q1's chart coordinates around q0. The loop
 //   - starts the first step from dq = h v with v from the inverse Legendre map
 //     (passed in by the caller), later steps from the linear extrapolation
 //     2 dq_{k-1} - dq_{k-2} of the previous increments (error O(h^3));
@@ -24,6 +28,8 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
+#include <utility>
 
 #include "solvers/newton.h"
 
@@ -85,41 +91,109 @@ inline StepSummary step_fault(const std::string& message, double residual = NAN,
   return s;
 }
 
+// How the loop holds the state of a stepper's space: steps on R^n return increments,
+// added with compensated sums; steps on a manifold return the new point and momentum
+// (each produced by a chart, so on the manifold to round-off). The starting guess of
+// a step continues the previous steps: on R^n the linear extrapolation
+// 2 dq_{k-1} - dq_{k-2} of the increments, on a manifold the chart coordinates of the
+// previous step's end seen from its start (M::next_guess).
+template <class S, class = void>
+struct is_point_stepper : std::false_type {};
+template <class S>
+struct is_point_stepper<S, std::void_t<typename S::Point, typename S::M>> : std::true_type {};
+
+template <class S, bool = is_point_stepper<S>::value>
+class LoopState;
+
+// R^n: (q, p) as compensated sums of the increments.
+template <class S>
+class LoopState<S, false> {
+ public:
+  static constexpr int N = S::N;
+  using Point = Vec<double, N>;
+  using Covector = Vec<double, N>;
+  LoopState(const Point& q, const Covector& p, const Covector& v0, double h)
+      : Q_(q), P_(p), dq_(h * v0), dq_prev_(dq_), dq_prev2_(dq_), dp_(Covector::Zero(q.rows())) {}
+  StepSummary step(const S& stepper, std::int64_t k) {
+    if (k >= 2)
+      dq_ = 2.0 * dq_prev_ - dq_prev2_;
+    else if (k == 1)
+      dq_ = dq_prev_;
+    return stepper.step(Q_.sum, P_.sum, dq_, dp_);
+  }
+  // (an expression: no temporary vector, no allocation for dynamic sizes)
+  bool finite() const { return (Q_.sum + dq_).allFinite() && (P_.sum + dp_).allFinite(); }
+  void commit() {
+    Q_.add(dq_);
+    P_.add(dp_);
+    dq_prev2_ = dq_prev_;
+    dq_prev_ = dq_;
+  }
+  const Point& q() const { return Q_.sum; }
+  const Covector& p() const { return P_.sum; }
+
+ private:
+  CompensatedVector<N> Q_, P_;
+  Point dq_, dq_prev_, dq_prev2_;
+  Covector dp_;
+};
+
+// A manifold M: the points themselves.
+template <class S>
+class LoopState<S, true> {
+ public:
+  using M = typename S::M;
+  using Point = typename S::Point;
+  using Covector = typename S::Covector;
+  LoopState(const Point& q, const Covector& p, const Covector& v0, double h)
+      : q_(q), q_prev_(q), q1_(q), p_(p), p1_(p), xi0_(h * M::tangent_coordinates(q, v0)) {}
+  StepSummary step(const S& stepper, std::int64_t k) {
+    Vec<double, S::n> xi = k == 0 ? xi0_ : Vec<double, S::n>(M::next_guess(q_prev_, q_));
+    return stepper.step(q_, p_, xi, q1_, p1_);
+  }
+  bool finite() const { return q1_.allFinite() && p1_.allFinite(); }
+  void commit() {
+    q_prev_ = q_;
+    q_ = q1_;
+    p_ = p1_;
+  }
+  const Point& q() const { return q_; }
+  const Covector& p() const { return p_; }
+
+ private:
+  Point q_, q_prev_, q1_;
+  Covector p_, p1_;
+  Vec<double, S::n> xi0_;
+};
+
+// The loop, for steps on R^n and on manifolds alike: q and p hold the initial state
+// on entry and the last completed state on return; v0 is the initial velocity (the
+// first step's guess).
 template <class S, class Observer>
-RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<double, S::N>& p,
-                     const Vec<double, S::N>& v0, std::int64_t steps, Observer&& observer) {
-  constexpr int N = S::N;
-  using V = Vec<double, N>;
+RunSummary integrate(const S& stepper, double t0, typename LoopState<S>::Point& q,
+                     typename LoopState<S>::Covector& p, const typename LoopState<S>::Covector& v0,
+                     std::int64_t steps, Observer&& observer) {
   const double h = stepper.step_size();
-  CompensatedVector<N> Q(q), P(p);
-  V dq = h * v0, dq_prev = dq, dq_prev2 = dq, dp = V::Zero(q.rows());
+  LoopState<S> state(q, p, v0, h);
   RunSummary run;
   for (std::int64_t k = 0; k < steps; ++k) {
-    if (k >= 2)
-      dq = 2.0 * dq_prev - dq_prev2;
-    else if (k == 1)
-      dq = dq_prev;
     StepSummary s;
     try {
-      s = stepper.step(Q.sum, P.sum, dq, dp);
+      s = state.step(stepper, k);
     } catch (const std::domain_error& e) {
       run.fail(step_fault(e.what()), k, t0, h);
       break;
     }
     if (!run.record(s, k, t0, h)) break;
-    // (an expression: no temporary vector, no allocation for dynamic sizes)
-    if (!((Q.sum + dq).allFinite() && (P.sum + dp).allFinite())) {
+    if (!state.finite()) {
       run.fail(step_fault("the step gave a non-finite state (q or p is inf or NaN)", s.residual, s.iterations), k, t0,
                h);
       break;
     }
-    Q.add(dq);
-    P.add(dp);
-    dq_prev2 = dq_prev;
-    dq_prev = dq;
+    state.commit();
     run.steps_done = k + 1;
     try {
-      observer(k + 1, t0 + static_cast<double>(k + 1) * h, Q.sum, P.sum, s);
+      observer(k + 1, t0 + static_cast<double>(k + 1) * h, state.q(), state.p(), s);
     } catch (const std::domain_error& e) {
       // the state of step k + 1 exists but cannot be evaluated (e.g. its Legendre
       // transform is degenerate): the run stops there
@@ -127,9 +201,16 @@ RunSummary integrate(const S& stepper, double t0, Vec<double, S::N>& q, Vec<doub
       break;
     }
   }
-  q = Q.sum;
-  p = P.sum;
+  q = state.q();
+  p = state.p();
   return run;
+}
+
+// The same loop under the name the manifold steps were first integrated with.
+template <class S, class Observer>
+RunSummary integrate_manifold(const S& stepper, double t0, typename S::Point& q, typename S::Covector& p,
+                              const typename S::Covector& v0, std::int64_t steps, Observer&& observer) {
+  return integrate(stepper, t0, q, p, v0, steps, std::forward<Observer>(observer));
 }
 
 }  // namespace dvm

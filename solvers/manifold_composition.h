@@ -7,6 +7,8 @@
 // of its stages (discrete Noether holds stage by stage).
 #pragma once
 
+#include <cmath>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -15,22 +17,29 @@
 
 namespace dvm {
 
-template <class System, class Map>
-class ComposedManifoldStep {
+// Any manifold step type `Stage` (the contract of integrate on a manifold: M, n, Point,
+// Covector, step_size(), step(q0, p0, xi, q1, p1)), composed: make_plain(hk) and
+// make_dual(hk) build the stage of size hk of the basic method and of its adjoint.
+// This is how the Hamiltonian step of a manifold map composes as the
+// position-momentum step does.
+template <class Stage>
+class ComposedPointStep {
  public:
-  using Stage = ManifoldStep<System, Map>;
   using M = typename Stage::M;
   static constexpr int n = Stage::n;
   using Point = typename Stage::Point;
   using Covector = typename Stage::Covector;
 
-  ComposedManifoldStep(const System& L, const Map& R, double h, const std::vector<Substep>& substeps,
-                       StepOptions options = {})
+  template <class MakePlain, class MakeDual>
+  ComposedPointStep(double h, const std::vector<Substep>& substeps, const MakePlain& make_plain,
+                    const MakeDual& make_dual)
       : h_(h) {
     if (substeps.empty()) throw std::invalid_argument("a composition needs at least one substep");
     for (const Substep& s : substeps) {
+      if (!(s.weight != 0.0) || !std::isfinite(s.weight))
+        throw std::invalid_argument("composition substeps must have nonzero finite weights");
       weights_.push_back(s.weight);
-      stages_.emplace_back(L, s.adjoint ? adjoint_map(R) : R, s.weight * h, options);
+      stages_.push_back(s.adjoint ? make_dual(s.weight * h) : make_plain(s.weight * h));
     }
   }
   double step_size() const { return h_; }
@@ -72,6 +81,19 @@ class ComposedManifoldStep {
   double h_;
   std::vector<double> weights_;
   std::vector<Stage> stages_;
+};
+
+// The position-momentum steps of a map on S^2, (S^2)^n or SO(3), composed; a map that
+// is not symmetric enters with its adjoint (theta -> 1 - theta).
+template <class System, class Map>
+class ComposedManifoldStep : public ComposedPointStep<ManifoldStep<System, Map>> {
+ public:
+  using Stage = ManifoldStep<System, Map>;
+  ComposedManifoldStep(const System& L, const Map& R, double h, const std::vector<Substep>& substeps,
+                       StepOptions options = {})
+      : ComposedPointStep<Stage>(
+            h, substeps, [&](double hk) { return Stage(L, R, hk, options); },
+            [&](double hk) { return Stage(L, adjoint_map(R), hk, options); }) {}
 };
 
 }  // namespace dvm

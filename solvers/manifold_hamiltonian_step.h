@@ -124,7 +124,8 @@ class ManifoldHamiltonianStep {
   ManifoldHamiltonianStep(Ham H, Map R, double h, StepOptions options = {},
                           VectorFieldSample sample = VectorFieldSample::base_point)
       : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), sample_(sample) {
-    if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    // negative sizes are the backward substeps of compositions (solvers/manifold_composition.h)
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
   double step_size() const { return h_; }
   const Ham& hamiltonian() const { return H_; }

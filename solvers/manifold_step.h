@@ -116,43 +116,4 @@ class ManifoldStep {
   StepOptions options_;
 };
 
-// The integrate loop on a manifold. The observer is called as
-// observer(k, t_k, q_k, p_k, summary) after every completed step.
-template <class S, class Observer>
-RunSummary integrate_manifold(const S& stepper, double t0, typename S::Point& q, typename S::Covector& p,
-                              const typename S::Covector& v0, std::int64_t steps, Observer&& observer) {
-  using M = typename S::M;
-  const double h = stepper.step_size();
-  typename S::Point q_prev = q, q1 = q;
-  typename S::Covector p1 = p;
-  RunSummary run;
-  for (std::int64_t k = 0; k < steps; ++k) {
-    Vec<double, S::n> xi = k == 0 ? Vec<double, S::n>(h * M::tangent_coordinates(q, v0)) : M::next_guess(q_prev, q);
-    StepSummary s;
-    try {
-      s = stepper.step(q, p, xi, q1, p1);
-    } catch (const std::domain_error& e) {
-      run.fail(step_fault(e.what()), k, t0, h);
-      break;
-    }
-    if (!run.record(s, k, t0, h)) break;
-    if (!(q1.allFinite() && p1.allFinite())) {
-      run.fail(step_fault("the step gave a non-finite state (q or p is inf or NaN)", s.residual, s.iterations), k, t0,
-               h);
-      break;
-    }
-    q_prev = q;
-    q = q1;
-    p = p1;
-    run.steps_done = k + 1;
-    try {
-      observer(k + 1, t0 + static_cast<double>(k + 1) * h, q, p, s);
-    } catch (const std::domain_error& e) {
-      run.fail(step_fault(std::string("at the state the step reached: ") + e.what()), k, t0, h);
-      break;
-    }
-  }
-  return run;
-}
-
 }  // namespace dvm

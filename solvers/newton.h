@@ -27,6 +27,7 @@
 #endif
 
 #include <cmath>
+#include <limits>
 #include <string>
 
 #include "core/dense_solve.h"
@@ -64,14 +65,18 @@ struct StepSummary {
 // The stopping rule shared by every Newton loop of dvm, judged after an evaluation
 // that filled s.residual and s.scale; dxn is the size of the last update and x_size
 // the size it is compared with. `converged` also when the updates have stalled at a
-// residual below accept_tolerance; `failed` (with a message) when they stalled above.
+// residual below accept_tolerance, or at the round-off floor of the residual's own
+// evaluation (`floor`: what an error of the unknown's size times machine epsilon
+// moves the residual by; the caller knows it, e.g. |J| eps (|x| + x0)); `failed`
+// (with a message) when they stalled above both.
 enum class NewtonVerdict { iterate, converged, failed };
 
-inline NewtonVerdict newton_verdict(StepSummary& s, double dxn, double x_size, const StepOptions& opt) {
+inline NewtonVerdict newton_verdict(StepSummary& s, double dxn, double x_size, const StepOptions& opt,
+                                    double floor = 0.0) {
   const bool small = s.residual <= opt.residual_tolerance * s.scale;
   const bool stalled = dxn <= opt.stall_tolerance * x_size;
   if (!small && !stalled) return NewtonVerdict::iterate;
-  s.converged = small || s.residual <= opt.accept_tolerance * s.scale;
+  s.converged = small || s.residual <= opt.accept_tolerance * s.scale || s.residual <= floor;
   if (s.converged) return NewtonVerdict::converged;
   s.message = "Newton stalled above the residual tolerance";
   return NewtonVerdict::failed;
@@ -122,7 +127,11 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       s.message = "non-finite residual or Jacobian";
       return s;
     }
-    const NewtonVerdict verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt);
+    // a residual formed from points of size |x| + x0 (a map inverted by Newton's
+    // method forms q1 = q0 + dq) cannot go below |J| eps (|x| + x0): 64 times that is
+    // round-off, whatever the scale of its terms
+    const double floor = 64.0 * std::numeric_limits<double>::epsilon() * max_abs(J) * (max_abs(x) + x0);
+    const NewtonVerdict verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt, floor);
     if (verdict == NewtonVerdict::failed) return s;
     if (verdict == NewtonVerdict::converged) {
       // Apply the Newton correction already paid for: it takes the residual from
