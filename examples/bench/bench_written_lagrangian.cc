@@ -5,7 +5,11 @@
 //                      inverse Legendre map (the path the engine takes by default);
 //   built-in, autodiff the same struct with its closed forms hidden (GenericOnly):
 //                      derivatives by nested Jets, exactly as for a written one;
-//   written            the Lagrangian parsed from text, derivatives by nested Jets.
+//   written            the Lagrangian parsed from text, derivatives by nested Jets
+//                      (WrittenLagrangian<N>, its size fixed at compile time);
+//   written, run-time  the same text through the run-time-sized kernel that `dvm run`
+//                      uses for every written system (WrittenDynamic: gradient by
+//                      reverse mode, Hessian by forward over reverse; DynamicThetaStep).
 //
 // Each runs the midpoint map's position-momentum step with Newton's method, the same
 // tolerances and start, and reports ns/step, the ratio to the built-in row, and the
@@ -22,6 +26,8 @@
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
+#include "mechanics/dynamic_system.h"
+#include "solvers/dynamic_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 
@@ -60,6 +66,32 @@ Result measure(const System& L, const Vec<double, System::dim>& q0, const Vec<do
   return best;
 }
 
+// The run-time-sized path of the same text.
+Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::VectorXd& q0,
+                       const Eigen::VectorXd& p0, double h, std::int64_t steps, int repeats) {
+  const WrittenDynamic L(text);
+  const DynamicThetaStep<WrittenDynamic> S(L, ThetaMap::midpoint(), h);
+  Result best;
+  for (int r = 0; r < repeats; ++r) {
+    Eigen::VectorXd q = q0, p = p0;
+    const Eigen::VectorXd v0 = legendre_inverse(L, q0, p0);
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [](auto&&...) {});
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                      static_cast<double>(steps);
+    if (run.failed) {
+      std::fprintf(stderr, "written, run-time sized: run failed at step %lld\n", static_cast<long long>(run.failed_step));
+      std::exit(3);
+    }
+    if (ns < best.ns_per_step) {
+      best.ns_per_step = ns;
+      best.state.assign(q.data(), q.data() + q.size());
+      best.state.insert(best.state.end(), p.data(), p.data() + p.size());
+    }
+  }
+  return best;
+}
+
 std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vector<std::pair<std::string, double>> params,
                                        const std::string& L) {
   auto s = std::make_shared<WrittenSystem>();
@@ -78,6 +110,7 @@ void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenS
   const Result a = measure(builtin, q0, p0, h, steps, repeats);
   const Result b = measure(GenericOnly<S>{builtin}, q0, p0, h, steps, repeats);
   const Result c = measure(WrittenLagrangian<N>(text), q0, p0, h, steps, repeats);
+  const Result d = measure_dynamic(text, q0, p0, h, steps, repeats);
   auto diff = [&](const Result& r) {
     double d = 0;
     for (std::size_t i = 0; i < r.state.size(); ++i) d = std::fmax(d, std::fabs(r.state[i] - a.state[i]));
@@ -91,6 +124,8 @@ void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenS
               diff(b));
   std::printf("  %-28s %10.1f %8.2f %14.3e\n", "written in the scene", c.ns_per_step, c.ns_per_step / a.ns_per_step,
               diff(c));
+  std::printf("  %-28s %10.1f %8.2f %14.3e\n", "written, run-time sized", d.ns_per_step, d.ns_per_step / a.ns_per_step,
+              diff(d));
   std::printf("  written / built-in autodiff = %.2f\n\n", c.ns_per_step / b.ns_per_step);
 }
 

@@ -1,0 +1,894 @@
+// Lagrangians and Hamiltonians of run-time size: systems on Q = R^n with n chosen at
+// run time, which provide their own derivatives in doubles.
+//
+// A Lagrangian L : TQ -> R enters the step equations only through its first and
+// second derivatives (solvers/dynamic_step.h, solvers/dynamic_galerkin_step.h):
+//
+//   gradient   L_q = dL/dq,  L_v = dL/dv                                  (n each)
+//   Hessian    L_qq = d2L/dq2,  L_qv(i, j) = d2L/dq_i dv_j,  L_vv = d2L/dv2   (n x n)
+//
+// (L_vq = L_qv^T, so these three blocks are the whole symmetric 2n x 2n Hessian). From
+// them (Abraham-Marsden, Foundations of Mechanics, Sec. 3.6; paper Sec. 5.1):
+//
+//   Legendre map       p = FL(q, v) = L_v(q, v)
+//   energy             E_L(q, v) = <L_v(q, v), v> - L(q, v)
+//   inverse Legendre   v = FL^{-1}(q, p): a closed form, or Newton's method on
+//                      L_v(q, v) - p = 0 with the matrix L_vv (regularity: L_vv invertible)
+//   Hamiltonian        H(q, p) = <p, v> - L(q, v),  v = FL^{-1}(q, p), with
+//                      H_q = -L_q(q, v),  H_p = v,
+//                      and, differentiating L_v(q, v(q, p)) = p (implicit functions),
+//                      dv/dp = L_vv^{-1},  dv/dq = -L_vv^{-1} L_vq, hence
+//                      H_pp = L_vv^{-1},  H_qp = -L_qv L_vv^{-1},
+//                      H_qq = -L_qq + L_qv L_vv^{-1} L_qv^T:
+//                      second derivatives of L suffice, no third ones.
+//
+// The concept. A run-time-sized system (Lagrangian in (q, v) or Hamiltonian in (q, p):
+// the shape is the same, with the second block named v or p) is a type providing
+//
+//   int dim() const;                                   // n
+//   std::string name() const;
+//   double value(const DynIn& q, const DynIn& v) const;
+//   void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const;
+//   void hessian(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv,
+//                DynMatOut Lqq, DynMatOut Lqv, DynMatOut Lvv) const;   // gradient too
+// and optionally (detected by has_dynamic_velocity) the closed-form inverse Legendre map
+//   void velocity(const DynIn& q, const DynIn& p, DynOut v) const;
+//
+// DynIn, DynOut, DynMatOut are Eigen::Ref of VectorXd / MatrixXd: a vector, a segment of
+// one or a column of a matrix binds without a copy. Outputs must already have their sizes
+// (n, n x n); an implementation then allocates nothing. Some implementations keep
+// mutable workspace, so one object must not be used from two threads at once (copies
+// are independent).
+//
+// Why. A fixed-size system (mechanics/lagrangian.h) is differentiated by nested
+// ceres::Jet of its size, so every size is a separate compiled instantiation of every
+// step. Here the size is data: a step type is compiled once per system type.
+//
+// Implementations:
+//   FixedAsDynamic<S>    any fixed-size Lagrangian of mechanics/: its closed-form
+//                        gradient (or one Jet level) for L_q, L_v, and one Jet level of
+//                        size 2 dim through the closed-form gradient (nested Jets when it
+//                        has none) for the Hessian; its closed-form velocity if it has one.
+//   NBodyDynamic         the N-body Lagrangian of NBody<B> (systems_classic.h) for any
+//                        number of bodies: closed-form gradient, Hessian (one 3 x 3 block
+//                        per pair) and velocity; total momentum and angular momentum.
+//   WrittenDynamic       a WrittenSystem (written_lagrangian.h) of any dimension: the value
+//                        by its tape in doubles, the gradient by reverse mode
+//                        (Expression::gradient), the Hessian by forward over reverse: the
+//                        reverse gradient evaluated in ceres::Jet<double, K>, seeded in K
+//                        of the 2n input directions per pass, ceil(2n/K) passes
+//                        (K = 2, 4 or 8: the smallest >= 2n, else 8). A tape longer than
+//                        Expression::kMaxTape (reverse mode refuses it) is differentiated
+//                        forward: the gradient in chunks of 8 directions, the Hessian by
+//                        Jet<Jet<double, 8>, 8> over pairs of chunks (about (2n/8)^2 / 2
+//                        passes).
+//                        Measured (g++ -O2, one core of an AMD EPYC, one full Hessian, the
+//                        same chunk width K both ways, best of three runs):
+//                                                     forward/reverse  forward/forward
+//                          pendulum, n = 1, K = 2          100 ns          132 ns
+//                          Kepler, n = 2, K = 4            209 ns          528 ns
+//                          double pendulum, n = 2, K = 4   373 ns          783 ns
+//                          FPU, n = 6, K = 8              1635 ns        13736 ns
+//                        (K = 6 would give 1537 ns for n = 6, K = 4 2106 ns.) Forward over
+//                        reverse wins at every size measured, so it is the default when the
+//                        tape allows it (WrittenDerivatives::automatic).
+//   WrittenDynamicHamiltonian  the Hamiltonian H(q, p) written in a scene, the same way
+//                        (its text is parsed a second time with p as the second block, so
+//                        that reverse mode, which differentiates blocks 0 and 1, applies).
+//   LegendreDynamicHamiltonian<Sys>  H of any run-time-sized Lagrangian by the Legendre
+//                        transform above; regularity (reciprocal condition of L_vv, as
+//                        mechanics/hamiltonian.h) is checked wherever L_vv^{-1} is formed,
+//                        and a degenerate L throws DegenerateLagrangianError.
+#pragma once
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <memory>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <vector>
+
+#include "core/map_operations.h"
+#include "core/scalar.h"
+#include "mechanics/lagrangian.h"
+#include "mechanics/systems.h"
+#include "mechanics/written_lagrangian.h"
+
+namespace dvm {
+
+using DynIn = Eigen::Ref<const Eigen::VectorXd>;
+using DynOut = Eigen::Ref<Eigen::VectorXd>;
+using DynMatOut = Eigen::Ref<Eigen::MatrixXd>;
+
+// Whether S is a run-time-sized system (the concept above).
+template <class S, class = void>
+struct is_dynamic_system : std::false_type {};
+template <class S>
+struct is_dynamic_system<
+    S, std::void_t<decltype(int(std::declval<const S&>().dim())),
+                   decltype(std::declval<const S&>().hessian(
+                       std::declval<const DynIn&>(), std::declval<const DynIn&>(), std::declval<DynOut>(),
+                       std::declval<DynOut>(), std::declval<DynMatOut>(), std::declval<DynMatOut>(),
+                       std::declval<DynMatOut>()))>> : std::true_type {};
+template <class S>
+inline constexpr bool is_dynamic_system_v = is_dynamic_system<S>::value;
+
+// Whether a run-time-sized Lagrangian has a closed-form inverse Legendre map.
+template <class S, class = void>
+struct has_dynamic_velocity : std::false_type {};
+template <class S>
+struct has_dynamic_velocity<S, std::void_t<decltype(std::declval<const S&>().velocity(
+                                   std::declval<const DynIn&>(), std::declval<const DynIn&>(),
+                                   std::declval<DynOut>()))>> : std::true_type {};
+
+namespace dynamic_detail {
+
+// max |x_i| over a vector or matrix of doubles, NaN if any entry is NaN (as max_abs of
+// core/scalar.h, in one plain loop over the storage).
+template <class Derived>
+double inf_norm(const Eigen::PlainObjectBase<Derived>& x) {
+  const double* d = x.data();
+  double m = 0.0;
+  bool nan = false;
+  for (Eigen::Index i = 0; i < x.size(); ++i) {
+    const double a = std::fabs(d[i]);
+    nan = nan || std::isnan(a);
+    m = a > m ? a : m;
+  }
+  return nan ? NAN : m;
+}
+
+}  // namespace dynamic_detail
+
+// LU factorisation with partial pivoting, P A = L U, of a square matrix of run-time
+// size, in storage sized once: factor() and solve() allocate nothing. Singular to
+// working precision means a pivot not above 1e-14 max|A| (the rule of solve_dense,
+// core/dense_solve.h) or not finite. Unblocked, column oriented: meant for the dense
+// step matrices of a few to a few hundred unknowns.
+class DenseLU {
+ public:
+  DenseLU() = default;
+  explicit DenseLU(int n) { resize(n); }
+  void resize(int n) {
+    lu_.resize(n, n);
+    piv_.resize(static_cast<std::size_t>(n));
+  }
+  int size() const { return static_cast<int>(lu_.rows()); }
+
+  // Factors A (size() x size()); false if A is singular to working precision.
+  bool factor(const Eigen::Ref<const Eigen::MatrixXd>& A) {
+    if (A.rows() != size()) resize(static_cast<int>(A.rows()));  // allocates only here
+    const int n = size();
+    if (A.outerStride() == A.rows())
+      std::copy(A.data(), A.data() + A.size(), lu_.data());
+    else
+      lu_ = A;
+    const double tiny = 1e-14 * dynamic_detail::inf_norm(lu_);  // NaN if A holds a NaN
+    if (!std::isfinite(tiny)) return false;
+    for (int k = 0; k < n; ++k) {
+      int p = k;
+      double best = std::fabs(lu_(k, k));
+      for (int i = k + 1; i < n; ++i) {
+        const double a = std::fabs(lu_(i, k));
+        if (a > best) {
+          best = a;
+          p = i;
+        }
+      }
+      piv_[static_cast<std::size_t>(k)] = p;
+      if (!(best > tiny) || !std::isfinite(best)) return false;
+      if (p != k) lu_.row(k).swap(lu_.row(p));
+      const double inv = 1.0 / lu_(k, k);
+      for (int i = k + 1; i < n; ++i) lu_(i, k) *= inv;
+      for (int j = k + 1; j < n; ++j) {
+        const double u = lu_(k, j);
+        if (u == 0.0) continue;
+        double* col = lu_.col(j).data();
+        const double* l = lu_.col(k).data();
+        for (int i = k + 1; i < n; ++i) col[i] -= l[i] * u;
+      }
+    }
+    return true;
+  }
+
+  // x = A^{-1} b after a successful factor(); x may be b itself.
+  void solve(const DynIn& b, DynOut x) const {
+    const int n = size();
+    if (x.data() != b.data()) x = b;
+    for (int k = 0; k < n; ++k) {
+      const int p = piv_[static_cast<std::size_t>(k)];
+      if (p != k) std::swap(x[k], x[p]);
+    }
+    for (int k = 0; k < n; ++k) {
+      const double xk = x[k];
+      if (xk == 0.0) continue;
+      const double* l = lu_.col(k).data();
+      for (int i = k + 1; i < n; ++i) x[i] -= l[i] * xk;
+    }
+    for (int k = n - 1; k >= 0; --k) {
+      x[k] /= lu_(k, k);
+      const double xk = x[k];
+      const double* u = lu_.col(k).data();
+      for (int i = 0; i < k; ++i) x[i] -= u[i] * xk;
+    }
+  }
+
+  // A^{-1} into `out` (size() x size()).
+  void inverse(DynMatOut out) const {
+    out.setIdentity();
+    for (int j = 0; j < size(); ++j) solve(out.col(j), out.col(j));
+  }
+
+ private:
+  Eigen::MatrixXd lu_;
+  std::vector<int> piv_;
+};
+
+namespace dynamic_detail {
+
+// 1 / (|W|_inf |W^{-1}|_inf), as velocity_hessian_rcond (mechanics/hamiltonian.h), in
+// loops (no temporaries).
+inline double rcond_inf(const Eigen::MatrixXd& W, const Eigen::MatrixXd& Winv) {
+  auto norm = [](const Eigen::MatrixXd& A) {
+    double m = 0.0;
+    for (Eigen::Index i = 0; i < A.rows(); ++i) {
+      double s = 0.0;
+      for (Eigen::Index j = 0; j < A.cols(); ++j) s += std::fabs(A(i, j));
+      if (std::isnan(s)) return s;
+      if (s > m) m = s;
+    }
+    return m;
+  };
+  const double a = norm(W);
+  if (!(a > 0.0) || !std::isfinite(a)) return 0.0;
+  const double rc = 1.0 / (a * norm(Winv));
+  return std::isfinite(rc) ? rc : 0.0;
+}
+
+template <class Sys>
+[[noreturn]] void throw_not_regular(const Sys& L, const DynIn& q, const DynIn& v, double rc) {
+  std::ostringstream msg;
+  msg << L.name() << " is not regular at q = [" << q.transpose() << "], v = [" << v.transpose()
+      << "]: the velocity Hessian d2L/dv2 is singular (reciprocal condition " << rc
+      << "), so the Legendre map cannot be inverted and there is no Hamiltonian there";
+  throw DegenerateLagrangianError(msg.str());
+}
+
+// Workspace of the Newton inverse of the Legendre map, sized once. `current`: the
+// derivative blocks held are those at the v returned (Newton stopped on the residual
+// of an evaluation at that v), so a caller that needs them there can reuse them.
+struct LegendreWork {
+  Eigen::VectorXd Lq, Lv, r;
+  Eigen::MatrixXd Lqq, Lqv, Lvv;
+  DenseLU lu;
+  bool current = false;
+  explicit LegendreWork(int n = 0) { resize(n); }
+  void resize(int n) {
+    Lq.resize(n);
+    Lv.resize(n);
+    r.resize(n);
+    Lqq.resize(n, n);
+    Lqv.resize(n, n);
+    Lvv.resize(n, n);
+    lu.resize(n);
+  }
+};
+
+// v with L_v(q, v) = p: the closed form, or Newton's method from the v given (the rule
+// of legendre_inverse in mechanics/lagrangian.h). Throws DegenerateLagrangianError.
+template <class Sys>
+void legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, LegendreWork& w) {
+  w.current = false;
+  if constexpr (has_dynamic_velocity<Sys>::value) {
+    L.velocity(q, p, v);
+  } else {
+    const double scale = std::fmax(1e-300, max_abs(p));
+    for (int it = 0; it < 50; ++it) {
+      L.hessian(q, v, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
+      w.r = w.Lv - p;
+      if (max_abs(w.r) <= 1e-14 * scale) {
+        w.current = true;
+        return;
+      }
+      if (!w.lu.factor(w.Lvv))
+        throw DegenerateLagrangianError(L.name() + ": the velocity Hessian d2L/dv2 is singular; "
+                                                   "the Legendre transform cannot be inverted");
+      w.lu.solve(w.r, w.r);
+      v -= w.r;
+      if (max_abs(w.r) <= 4e-16 * std::fmax(1.0, max_abs(v))) return;
+    }
+    throw DegenerateLagrangianError(L.name() + ": Newton's method for the inverse Legendre map did not converge");
+  }
+}
+
+}  // namespace dynamic_detail
+
+// p = L_v(q, v).
+template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
+Eigen::VectorXd legendre(const Sys& L, const DynIn& q, const DynIn& v) {
+  Eigen::VectorXd a(L.dim()), b(L.dim());
+  L.gradient(q, v, a, b);
+  return b;
+}
+
+// E_L(q, v) = <L_v, v> - L.
+template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
+double energy(const Sys& L, const DynIn& q, const DynIn& v) {
+  Eigen::VectorXd a(L.dim()), b(L.dim());
+  L.gradient(q, v, a, b);
+  return b.dot(v) - L.value(q, v);
+}
+
+// v with L_v(q, v) = p: the closed form, or Newton's method from `guess` (zero if not
+// given). Throws DegenerateLagrangianError where L_vv is singular.
+template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
+Eigen::VectorXd legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, const DynIn& guess) {
+  dynamic_detail::LegendreWork w(L.dim());
+  Eigen::VectorXd v = guess;
+  dynamic_detail::legendre_inverse(L, q, p, v, w);
+  return v;
+}
+template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
+Eigen::VectorXd legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p) {
+  return legendre_inverse(L, q, p, Eigen::VectorXd::Zero(L.dim()));
+}
+
+// Throws DegenerateLagrangianError, naming the point, when L_vv(q, v) is singular to
+// working precision (reciprocal condition not above rcond_floor), as require_regular
+// of mechanics/hamiltonian.h.
+template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
+void require_regular(const Sys& L, const DynIn& q, const DynIn& v, double rcond_floor = 1e-12) {
+  const int n = L.dim();
+  dynamic_detail::LegendreWork w(n);
+  L.hessian(q, v, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
+  double rc = 0.0;
+  if (w.lu.factor(w.Lvv)) {
+    Eigen::MatrixXd Winv(n, n);
+    w.lu.inverse(Winv);
+    rc = dynamic_detail::rcond_inf(w.Lvv, Winv);
+  }
+  if (!(rc > rcond_floor)) dynamic_detail::throw_not_regular(L, q, v, rc);
+}
+
+// The inverse Legendre map with the regularity check at the start (v = 0) and at the
+// solution, as legendre_inverse_checked of mechanics/hamiltonian.h.
+template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
+Eigen::VectorXd legendre_inverse_checked(const Sys& L, const DynIn& q, const DynIn& p) {
+  const Eigen::VectorXd zero = Eigen::VectorXd::Zero(L.dim());
+  require_regular(L, q, zero);
+  const Eigen::VectorXd v = legendre_inverse(L, q, p, zero);
+  require_regular(L, q, v);
+  return v;
+}
+
+// ---------------------------------------------------------------------------------
+// A fixed-size Lagrangian of mechanics/ seen as a run-time-sized one.
+
+template <class S>
+class FixedAsDynamic {
+ public:
+  static constexpr int N = S::dim;
+  using V = Vec<double, N>;
+
+  explicit FixedAsDynamic(S system) : system_(std::move(system)) {}
+  int dim() const { return N; }
+  std::string name() const { return system_.name(); }
+  const S& system() const { return system_; }
+
+  // (Inputs and outputs are contiguous: they are read and written as fixed-size maps.)
+  double value(const DynIn& q, const DynIn& v) const { return system_(in(q), in(v)); }
+
+  void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
+    V a, b;
+    lagrangian_gradient(system_, in(q), in(v), a, b);
+    Eigen::Map<V>(Lq.data()) = a;
+    Eigen::Map<V>(Lv.data()) = b;
+  }
+
+  // One Jet level of size 2N through the gradient (nested Jets if it is not closed form).
+  void hessian(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv, DynMatOut Lqq, DynMatOut Lqv,
+               DynMatOut Lvv) const {
+    using D = ceres::Jet<double, 2 * N>;
+    Vec<D, N> qd, vd, a, b;
+    const double* qp = q.data();
+    const double* vp = v.data();
+    for (int i = 0; i < N; ++i) {
+      qd[i] = seed<double, 2 * N>(qp[i], i);
+      vd[i] = seed<double, 2 * N>(vp[i], N + i);
+    }
+    lagrangian_gradient(system_, qd, vd, a, b);
+    for (int i = 0; i < N; ++i) {
+      Lq[i] = a[i].a;
+      Lv[i] = b[i].a;
+      for (int j = 0; j < N; ++j) {
+        Lqq(i, j) = a[i].v[j];
+        Lqv(i, j) = a[i].v[N + j];
+        Lvv(i, j) = b[i].v[N + j];
+      }
+    }
+  }
+
+  template <class T = S, std::enable_if_t<has_velocity<T>::value, int> = 0>
+  void velocity(const DynIn& q, const DynIn& p, DynOut v) const {
+    Eigen::Map<V>(v.data()) = system_.velocity(in(q), in(p));
+  }
+
+ private:
+  static V in(const DynIn& x) {
+    eigen_assert(x.size() == N);
+    return Eigen::Map<const V>(x.data());
+  }
+  S system_;
+};
+
+// ---------------------------------------------------------------------------------
+// The N-body Lagrangian of any number of bodies B in R^3 (systems_classic.h, NBody<B>):
+//
+//   L = sum_i m_i |v_i|^2/2 + sum_{i<j} k_ij / r_ij,   k_ij = G m_i m_j,
+//   r_ij = |d|, d = q_i - q_j.
+//
+// With f = k_ij / r_ij^3: L_{q_i} gets -f d and L_{q_j} gets +f d from the pair; its
+// Hessian block is B_ij = f (3 d d^T / r_ij^2 - I), added to (i, i) and (j, j) and
+// subtracted from (i, j) and (j, i). L_qv = 0, L_vv = diag(m_i I_3), v_i = p_i / m_i.
+class NBodyDynamic {
+ public:
+  double G = 1.0;
+  std::vector<double> mass;
+
+  NBodyDynamic(double G_, std::vector<double> masses) : G(G_), mass(std::move(masses)) {
+    if (mass.empty()) throw std::invalid_argument("nbody: at least one body is needed");
+    if (!std::isfinite(G) || G < 0) throw std::invalid_argument("nbody: parameter G must be finite and >= 0");
+    for (double m : mass) detail::require_positive("nbody", "mass", m);
+  }
+  std::string name() const { return "nbody"; }
+  int bodies() const { return static_cast<int>(mass.size()); }
+  int dim() const { return 3 * bodies(); }
+  double m(int i) const { return mass[static_cast<std::size_t>(i)]; }
+
+  double value(const DynIn& q, const DynIn& v) const {
+    const int B = bodies();
+    double kin = 0.0, pot = 0.0;
+    for (int i = 0; i < B; ++i)
+      kin += m(i) * (v[3 * i] * v[3 * i] + v[3 * i + 1] * v[3 * i + 1] + v[3 * i + 2] * v[3 * i + 2]);
+    for (int i = 0; i < B; ++i)
+      for (int j = i + 1; j < B; ++j) {
+        const double dx = q[3 * i] - q[3 * j], dy = q[3 * i + 1] - q[3 * j + 1], dz = q[3 * i + 2] - q[3 * j + 2];
+        pot += (G * m(i) * m(j)) / std::sqrt(dx * dx + dy * dy + dz * dz);
+      }
+    return 0.5 * kin + pot;
+  }
+
+  void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
+    const int B = bodies();
+    Lq.setZero();
+    for (int i = 0; i < B; ++i)
+      for (int a = 0; a < 3; ++a) Lv[3 * i + a] = m(i) * v[3 * i + a];
+    for (int i = 0; i < B; ++i)
+      for (int j = i + 1; j < B; ++j) {
+        double d[3];
+        for (int a = 0; a < 3; ++a) d[a] = q[3 * i + a] - q[3 * j + a];
+        const double r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        const double f = (G * m(i) * m(j)) / (r2 * std::sqrt(r2));
+        for (int a = 0; a < 3; ++a) {
+          const double fa = f * d[a];
+          Lq[3 * i + a] -= fa;
+          Lq[3 * j + a] += fa;
+        }
+      }
+  }
+
+  void hessian(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv, DynMatOut Lqq, DynMatOut Lqv,
+               DynMatOut Lvv) const {
+    const int B = bodies();
+    Lq.setZero();
+    Lqq.setZero();
+    Lqv.setZero();
+    Lvv.setZero();
+    for (int i = 0; i < B; ++i)
+      for (int a = 0; a < 3; ++a) {
+        Lv[3 * i + a] = m(i) * v[3 * i + a];
+        Lvv(3 * i + a, 3 * i + a) = m(i);
+      }
+    for (int i = 0; i < B; ++i)
+      for (int j = i + 1; j < B; ++j) {
+        double d[3];
+        for (int a = 0; a < 3; ++a) d[a] = q[3 * i + a] - q[3 * j + a];
+        const double r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        const double f = (G * m(i) * m(j)) / (r2 * std::sqrt(r2));
+        const double g = 3.0 * f / r2;
+        for (int a = 0; a < 3; ++a) {
+          const double fa = f * d[a];
+          Lq[3 * i + a] -= fa;
+          Lq[3 * j + a] += fa;
+          for (int b = 0; b < 3; ++b) {
+            const double Bab = g * d[a] * d[b] - (a == b ? f : 0.0);
+            Lqq(3 * i + a, 3 * i + b) += Bab;
+            Lqq(3 * j + a, 3 * j + b) += Bab;
+            Lqq(3 * i + a, 3 * j + b) -= Bab;
+            Lqq(3 * j + a, 3 * i + b) -= Bab;
+          }
+        }
+      }
+  }
+
+  void velocity(const DynIn&, const DynIn& p, DynOut v) const {
+    for (int i = 0; i < bodies(); ++i)
+      for (int a = 0; a < 3; ++a) v[3 * i + a] = p[3 * i + a] / m(i);
+  }
+
+  // Total momentum (3) and total angular momentum (3), as NBody<B>::momenta.
+  static std::array<double, 6> momenta(const DynIn& q, const DynIn& p) {
+    std::array<double, 6> out{};
+    for (Eigen::Index i = 0; i + 2 < q.size(); i += 3) {
+      const double* x = q.data() + i;
+      const double* y = p.data() + i;
+      out[0] += y[0];
+      out[1] += y[1];
+      out[2] += y[2];
+      out[3] += x[1] * y[2] - x[2] * y[1];
+      out[4] += x[2] * y[0] - x[0] * y[2];
+      out[5] += x[0] * y[1] - x[1] * y[0];
+    }
+    return out;
+  }
+};
+
+// ---------------------------------------------------------------------------------
+// Written expressions (mechanics/expression.h) differentiated in doubles for any n.
+
+// How a written tape is differentiated: automatic = reverse mode where the tape allows
+// it (Expression::kMaxTape), forward otherwise; the other two force one way (a tape too
+// long for reverse mode is refused with std::invalid_argument).
+enum class WrittenDerivatives { automatic, forward_over_reverse, forward_over_forward };
+
+namespace dynamic_detail {
+
+// Value, gradient and Hessian of a tape in two blocks of n variables (block 0 = a,
+// block 1 = b), with workspace sized at construction.
+class TapeDerivatives {
+ public:
+  static constexpr int kForwardChunk = 8;
+
+  TapeDerivatives(std::shared_ptr<const Expression> e, int n, WrittenDerivatives mode) : e_(std::move(e)), n_(n) {
+    const bool fits = static_cast<int>(e_->tape().size()) <= Expression::kMaxTape;
+    if (mode == WrittenDerivatives::forward_over_reverse && !fits)
+      throw std::invalid_argument("the expression's tape has " + std::to_string(e_->tape().size()) +
+                                  " instructions; reverse mode takes at most " +
+                                  std::to_string(Expression::kMaxTape));
+    reverse_ = fits && mode != WrittenDerivatives::forward_over_forward;
+    const std::size_t m = static_cast<std::size_t>(2 * n);
+    if (reverse_) {
+      chunk_ = 2 * n <= 2 ? 2 : (2 * n <= 4 ? 4 : 8);
+      if (chunk_ == 2) j2_.resize(2 * m);
+      if (chunk_ == 4) j4_.resize(2 * m);
+      if (chunk_ == 8) j8_.resize(2 * m);
+    } else {
+      chunk_ = kForwardChunk;
+      j8_.resize(2 * m);
+      jj_.resize(m);
+    }
+  }
+
+  bool reverse() const { return reverse_; }
+  int chunk() const { return chunk_; }
+  const Expression& expression() const { return *e_; }
+
+  double value(const double* a, const double* b) const { return (*e_)(a, b); }
+
+  void gradient(const double* a, const double* b, DynOut ga, DynOut gb) const {
+    if (reverse_) {
+      ga.setZero();
+      gb.setZero();
+      e_->gradient(a, b, ga.data(), gb.data());
+      return;
+    }
+    using J = ceres::Jet<double, kForwardChunk>;
+    const int m = 2 * n_;
+    J* in = j8_.data();
+    for (int d0 = 0; d0 < m; d0 += kForwardChunk) {
+      load(in, a, b);
+      for (int k = 0; k < kForwardChunk && d0 + k < m; ++k) in[d0 + k].v[k] = 1.0;
+      const J y = (*e_)(in, in + n_);
+      for (int k = 0; k < kForwardChunk && d0 + k < m; ++k) {
+        const int d = d0 + k;
+        if (d < n_)
+          ga[d] = y.v[k];
+        else
+          gb[d - n_] = y.v[k];
+      }
+    }
+  }
+
+  void hessian(const double* a, const double* b, DynOut ga, DynOut gb, DynMatOut Haa, DynMatOut Hab,
+               DynMatOut Hbb) const {
+    if (!reverse_) return forward_over_forward(a, b, ga, gb, Haa, Hab, Hbb);
+    switch (chunk_) {
+      case 2: return forward_over_reverse<2>(j2_.data(), a, b, ga, gb, Haa, Hab, Hbb);
+      case 4: return forward_over_reverse<4>(j4_.data(), a, b, ga, gb, Haa, Hab, Hbb);
+      default: return forward_over_reverse<8>(j8_.data(), a, b, ga, gb, Haa, Hab, Hbb);
+    }
+  }
+
+ private:
+  template <class J>
+  void load(J* in, const double* a, const double* b) const {
+    for (int i = 0; i < n_; ++i) {
+      in[i] = J(a[i]);
+      in[n_ + i] = J(b[i]);
+    }
+  }
+
+  // The reverse gradient in Jets seeded in directions d0..d0+K-1 of the 2n inputs
+  // gives columns d0..d0+K-1 of the Hessian: ceil(2n/K) passes.
+  template <int K>
+  void forward_over_reverse(ceres::Jet<double, K>* w, const double* a, const double* b, DynOut ga, DynOut gb,
+                            DynMatOut Haa, DynMatOut Hab, DynMatOut Hbb) const {
+    using J = ceres::Jet<double, K>;
+    const int n = n_, m = 2 * n;
+    J* in = w;
+    J* out = w + m;
+    for (int d0 = 0; d0 < m; d0 += K) {
+      load(in, a, b);
+      for (int i = 0; i < m; ++i) out[i] = J(0.0);
+      for (int k = 0; k < K && d0 + k < m; ++k) in[d0 + k].v[k] = 1.0;
+      e_->gradient(in, in + n, out, out + n);
+      if (d0 == 0)
+        for (int i = 0; i < n; ++i) {
+          ga[i] = out[i].a;
+          gb[i] = out[n + i].a;
+        }
+      for (int k = 0; k < K && d0 + k < m; ++k) {
+        const int d = d0 + k;
+        if (d < n) {
+          for (int i = 0; i < n; ++i) Haa(i, d) = out[i].v[k];
+        } else {
+          for (int i = 0; i < n; ++i) {
+            Hab(i, d - n) = out[i].v[k];
+            Hbb(i, d - n) = out[n + i].v[k];
+          }
+        }
+      }
+    }
+  }
+
+  // Jet<Jet<double, 8>, 8>: the inner level seeded in chunk c1, the outer in chunk
+  // c2 >= c1, gives the Hessian block (c1, c2); diagonal chunks give the gradient.
+  void forward_over_forward(const double* a, const double* b, DynOut ga, DynOut gb, DynMatOut Haa, DynMatOut Hab,
+                            DynMatOut Hbb) const {
+    constexpr int K = kForwardChunk;
+    using J = ceres::Jet<double, K>;
+    using JJ = ceres::Jet<J, K>;
+    const int n = n_, m = 2 * n;
+    JJ* in = jj_.data();
+    auto store = [&](int r, int c, double h) {
+      if (r > c) std::swap(r, c);
+      if (c < n) {
+        Haa(r, c) = h;
+        Haa(c, r) = h;
+      } else if (r >= n) {
+        Hbb(r - n, c - n) = h;
+        Hbb(c - n, r - n) = h;
+      } else {
+        Hab(r, c - n) = h;
+      }
+    };
+    for (int c1 = 0; c1 < m; c1 += K)
+      for (int c2 = c1; c2 < m; c2 += K) {
+        for (int i = 0; i < m; ++i) {
+          J x(i < n ? a[i] : b[i - n]);
+          if (i >= c1 && i < c1 + K) x.v[i - c1] = 1.0;
+          in[i] = JJ(x);
+          if (i >= c2 && i < c2 + K) in[i].v[i - c2] = J(1.0);
+        }
+        const JJ y = (*e_)(in, in + n);
+        if (c1 == c2)
+          for (int k = 0; k < K && c1 + k < m; ++k) {
+            const int d = c1 + k;
+            if (d < n)
+              ga[d] = y.a.v[k];
+            else
+              gb[d - n] = y.a.v[k];
+          }
+        for (int k2 = 0; k2 < K && c2 + k2 < m; ++k2)
+          for (int k1 = 0; k1 < K && c1 + k1 < m; ++k1) store(c1 + k1, c2 + k2, y.v[k2].v[k1]);
+      }
+  }
+
+  std::shared_ptr<const Expression> e_;
+  int n_;
+  bool reverse_ = true;
+  int chunk_ = 8;
+  mutable std::vector<ceres::Jet<double, 2>> j2_;
+  mutable std::vector<ceres::Jet<double, 4>> j4_;
+  mutable std::vector<ceres::Jet<double, 8>> j8_;
+  mutable std::vector<ceres::Jet<ceres::Jet<double, kForwardChunk>, kForwardChunk>> jj_;
+};
+
+inline const WrittenSystem& checked_written(const std::shared_ptr<const WrittenSystem>& s) {
+  if (!s || s->dim() < 1) throw std::invalid_argument("a written system needs at least one coordinate");
+  if (s->lagrangian.empty()) throw std::invalid_argument(s->name + ": the written system has no Lagrangian");
+  return *s;
+}
+
+}  // namespace dynamic_detail
+
+// A written Lagrangian (written_lagrangian.h) of any dimension.
+class WrittenDynamic {
+ public:
+  explicit WrittenDynamic(std::shared_ptr<const WrittenSystem> s,
+                          WrittenDerivatives mode = WrittenDerivatives::automatic)
+      : system_(std::move(s)),
+        tape_(std::shared_ptr<const Expression>(system_, &dynamic_detail::checked_written(system_).lagrangian),
+              dynamic_detail::checked_written(system_).dim(), mode),
+        Lq_(system_->dim()),
+        Lv_(system_->dim()) {}
+
+  int dim() const { return system_->dim(); }
+  std::string name() const { return system_->name; }
+  const std::shared_ptr<const WrittenSystem>& system() const { return system_; }
+  // Whether derivatives go through reverse mode (else the tape is differentiated forward).
+  bool reverse_mode() const { return tape_.reverse(); }
+
+  double value(const DynIn& q, const DynIn& v) const { return tape_.value(q.data(), v.data()); }
+  void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
+    tape_.gradient(q.data(), v.data(), Lq, Lv);
+  }
+  void hessian(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv, DynMatOut Lqq, DynMatOut Lqv,
+               DynMatOut Lvv) const {
+    tape_.hessian(q.data(), v.data(), Lq, Lv, Lqq, Lqv, Lvv);
+  }
+
+  // The monitored energy: the written one if given, else E_L = <L_v, v> - L.
+  double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
+    if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
+    gradient(q, v, Lq_, Lv_);
+    return Lv_.dot(v) - value(q, v);
+  }
+  bool has_hamiltonian() const { return !system_->hamiltonian.empty(); }
+  double hamiltonian(const DynIn& q, const DynIn& p) const {
+    return system_->hamiltonian(q.data(), static_cast<const double*>(nullptr), p.data());
+  }
+  // A coordinate that L does not depend on is cyclic: its momentum is conserved.
+  bool cyclic(int i) const { return !system_->lagrangian.uses(0, i); }
+
+ private:
+  std::shared_ptr<const WrittenSystem> system_;
+  dynamic_detail::TapeDerivatives tape_;
+  mutable Eigen::VectorXd Lq_, Lv_;
+};
+
+// The Hamiltonian H(q, p) written in a scene (system.hamiltonian), for the Hamiltonian
+// form (Eq. 5.1) of any dimension. Block 1 of the concept is p.
+class WrittenDynamicHamiltonian {
+ public:
+  explicit WrittenDynamicHamiltonian(std::shared_ptr<const WrittenSystem> s,
+                                     WrittenDerivatives mode = WrittenDerivatives::automatic)
+      : system_(std::move(s)), tape_(reparse(system_), system_->dim(), mode) {}
+
+  int dim() const { return system_->dim(); }
+  std::string name() const { return system_->name.empty() ? "hamiltonian" : system_->name; }
+  bool reverse_mode() const { return tape_.reverse(); }
+
+  double value(const DynIn& q, const DynIn& p) const { return tape_.value(q.data(), p.data()); }
+  void gradient(const DynIn& q, const DynIn& p, DynOut Hq, DynOut Hp) const {
+    tape_.gradient(q.data(), p.data(), Hq, Hp);
+  }
+  void hessian(const DynIn& q, const DynIn& p, DynOut Hq, DynOut Hp, DynMatOut Hqq, DynMatOut Hqp,
+               DynMatOut Hpp) const {
+    tape_.hessian(q.data(), p.data(), Hq, Hp, Hqq, Hqp, Hpp);
+  }
+
+ private:
+  // The scene's H parses with q as block 0 and p as block 2; reverse mode differentiates
+  // blocks 0 and 1, so the same text is parsed again with p as block 1 (the same
+  // names, constants and folding: the same tape up to the block index).
+  static std::shared_ptr<const Expression> reparse(const std::shared_ptr<const WrittenSystem>& s) {
+    if (!s || s->dim() < 1) throw std::invalid_argument("a written system needs at least one coordinate");
+    if (s->hamiltonian.empty())
+      throw std::invalid_argument(s->name + ": the Hamiltonian form needs a written Hamiltonian H(q, p)");
+    ExpressionSymbols sym;
+    for (int i = 0; i < s->dim(); ++i) {
+      const std::string& c = s->coordinates[static_cast<std::size_t>(i)];
+      sym.variables.push_back({c, 0, i});
+      sym.variables.push_back({"p_" + c, 1, i});
+    }
+    sym.constants = s->params;
+    return std::make_shared<const Expression>(Expression::parse(s->hamiltonian.text(), sym));
+  }
+
+  std::shared_ptr<const WrittenSystem> system_;
+  dynamic_detail::TapeDerivatives tape_;
+};
+
+// ---------------------------------------------------------------------------------
+// The Hamiltonian of a regular run-time-sized Lagrangian, by the Legendre transform.
+//
+// v = FL^{-1}(q, p) is the closed form, or Newton's method from v = 0 (as
+// LegendreHamiltonian of mechanics/hamiltonian.h, so that both give the same v); the
+// derivatives of L at the last Newton iterate are reused when it is v itself (Newton
+// stops on the residual there: one evaluation of L's Hessian saved per call).
+// value() and gradient() need only v; hessian() forms L_vv^{-1}, checks the reciprocal
+// condition of L_vv (above 1e-12, as require_regular) and throws
+// DegenerateLagrangianError where it fails.
+template <class Sys>
+class LegendreDynamicHamiltonian {
+ public:
+  explicit LegendreDynamicHamiltonian(Sys L) : L_(std::move(L)) {
+    const int n = L_.dim();
+    v_.resize(n);
+    Lq_.resize(n);
+    Lv_.resize(n);
+    Winv_.resize(n, n);
+    T_.resize(n, n);
+    lu_.resize(n);
+    work_.resize(n);
+  }
+
+  int dim() const { return L_.dim(); }
+  std::string name() const { return L_.name(); }
+  const Sys& lagrangian() const { return L_; }
+
+  // v = FL^{-1}(q, p). A Newton inverse that fails on a singular L_vv is reported
+  // naming the point where it started (v = 0) when L is singular there.
+  void velocity(const DynIn& q, const DynIn& p, DynOut v) const {
+    v.setZero();
+    try {
+      dynamic_detail::legendre_inverse(L_, q, p, v, work_);
+    } catch (const DegenerateLagrangianError&) {
+      require_regular(L_, q, Eigen::VectorXd::Zero(L_.dim()));
+      throw;
+    }
+  }
+
+  double value(const DynIn& q, const DynIn& p) const {
+    velocity(q, p, v_);
+    return p.dot(v_) - L_.value(q, v_);
+  }
+
+  // H_q = -L_q(q, v), H_p = v.
+  void gradient(const DynIn& q, const DynIn& p, DynOut Hq, DynOut Hp) const {
+    velocity(q, p, v_);
+    if (work_.current)  // Newton's last evaluation was at v
+      Hq = -work_.Lq;
+    else {
+      L_.gradient(q, v_, Lq_, Lv_);
+      Hq = -Lq_;
+    }
+    Hp = v_;
+  }
+
+  // H_pp = W^{-1}, H_qp = -L_qv W^{-1}, H_qq = -L_qq + L_qv W^{-1} L_qv^T, W = L_vv.
+  void hessian(const DynIn& q, const DynIn& p, DynOut Hq, DynOut Hp, DynMatOut Hqq, DynMatOut Hqp,
+               DynMatOut Hpp) const {
+    velocity(q, p, v_);
+    if (!work_.current) L_.hessian(q, v_, work_.Lq, work_.Lv, work_.Lqq, work_.Lqv, work_.Lvv);
+    const Eigen::MatrixXd &Lqq = work_.Lqq, &Lqv = work_.Lqv, &Lvv = work_.Lvv;
+    double rc = 0.0;
+    if (lu_.factor(Lvv)) {
+      lu_.inverse(Winv_);
+      rc = dynamic_detail::rcond_inf(Lvv, Winv_);
+    }
+    if (!(rc > 1e-12)) dynamic_detail::throw_not_regular(L_, q, v_, rc);
+    Hq = -work_.Lq;
+    Hp = v_;
+    Hpp = Winv_;
+    T_.noalias() = Lqv * Winv_;
+    Hqp = -T_;
+    Hqq.noalias() = T_ * Lqv.transpose();
+    Hqq -= Lqq;
+  }
+
+ private:
+  Sys L_;
+  mutable Eigen::VectorXd v_, Lq_, Lv_;
+  mutable Eigen::MatrixXd Winv_, T_;
+  mutable DenseLU lu_;
+  mutable dynamic_detail::LegendreWork work_;
+};
+
+}  // namespace dvm

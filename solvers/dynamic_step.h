@@ -1,0 +1,311 @@
+// Steps of the theta discretization maps for run-time-sized systems
+// (mechanics/dynamic_system.h): the step equations assembled from the derivative
+// blocks the system provides, solved by Newton's method in storage sized once.
+//
+// The theta map R_d(x, v) = (x - theta v, x + (1 - theta) v), theta in [0, 1]
+// (explicit Euler 0, midpoint 1/2, adjoint Euler 1; core/discretization_map.h).
+//
+// 1. Position-momentum step (discrete Legendre form; solvers/position_momentum_step.h).
+//    The discrete Lagrangian L_d(q0, q1) = h L(x, v) at R_d^{-1}(q0, q1) / h, i.e.
+//    x = q0 + theta dq, v = dq / h with dq = q1 - q0 (paper Sec. 5.3), has
+//      D1 L_d = h (1 - theta) L_q(x, v) - L_v(x, v),   (D1 + D2) L_d = h L_q(x, v).
+//    Given (q0, p0), the increment dq solves
+//      F(dq) = p0 + h (1 - theta) L_q(x, v) - L_v(x, v) = 0,
+//    then dp = p1 - p0 = h L_q(x, v) (the common shift of q0 and q1 leaves v unchanged:
+//    no cancellation). With dx/ddq = theta I and dv/ddq = I / h, the Jacobian is
+//      dF/ddq = h theta (1 - theta) L_qq + (1 - theta) L_qv - theta L_qv^T - L_vv / h,
+//    built from one call of the system's hessian() per Newton iteration.
+//
+// 2. Hamiltonian step (paper Sec. 5.1, Eq. 5.1; solvers/hamiltonian_step.h). The
+//    inverse of the cotangent lift of the theta map sends (q0, p0; q1, p1) to the base
+//    point x = (1 - theta) q0 + theta q1 = q0 + theta dq,
+//          p = theta p0 + (1 - theta) p1 = p0 + (1 - theta) dp,
+//    and the tangent vector (dq, dp); Eq. 5.1 asks it to be h X_H(x, p):
+//      F(dq, dp) = (dq - h H_p(x, p),  dp + h H_q(x, p)) = 0,
+//    with the Jacobian (H_pq = H_qp^T)
+//      [ I - h theta H_pq      -h (1 - theta) H_pp   ]
+//      [ h theta H_qq           I + h (1 - theta) H_qp ].
+//    The map is symplectic for any H (the lift is a symplectomorphism, Prop. 5.1 of the
+//    paper); with theta = 1/2 it is the implicit midpoint rule.
+//
+// Adjoints. The theta map's adjoint is the (1 - theta) map (Prop. 2.4), and the method
+// of the adjoint map is the adjoint method, so adjoint() of either step is the same
+// type with 1 - theta: ComposedStep<DynamicThetaStep<Sys>> composes one type.
+//
+// Solving: Newton's method with the stopping rule newton_verdict (solvers/newton.h), the
+// correction of the accepted residual applied as solve_newton does, and the scale
+// conventions of the fixed-size steps: |p0| + |J| |dq| for the position-momentum step
+// (stall measured against |dq| + |q0|), |h| max(|H_p|, |H_q|)(q0, p0) + |J| |(dq, dp)|
+// for the Hamiltonian step (against |(dq, dp)| + max(|q0|, |p0|)). The linear solves use
+// DenseLU (a pivot not above 1e-14 max|J| is singular, as solve_dense; the fixed-size
+// Newton of dimension <= 4 refuses only an exactly singular matrix). Non-convergence,
+// singular Jacobians, non-finite values and std::domain_error from the system (e.g. a
+// degenerate Legendre transform) are reported in the StepSummary, never thrown. Only
+// Newton's method is offered: StepOptions::solver = tiny is refused at construction.
+//
+// Workspace is allocated at construction for the system's dimension; a step allocates
+// nothing (checked with Eigen's EIGEN_RUNTIME_NO_MALLOC and a count of operator new in
+// tests/solvers/test_dynamic.cc). One object must not be used from two threads at once.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "core/discretization_map.h"
+#include "mechanics/dynamic_system.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+namespace dynamic_detail {
+
+inline void require_newton(const StepOptions& options) {
+  if (options.solver != SolverKind::newton)
+    throw std::invalid_argument("run-time-sized steps solve by Newton's method only (solver = \"newton\")");
+}
+inline void require_step(double h) {
+  // negative sizes are the backward substeps of compositions (solvers/composition.h)
+  if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
+}
+// A summary for a state whose size is not the system's.
+inline bool sizes_match(int n, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0, const Eigen::VectorXd& dq,
+                        StepSummary& s) {
+  if (q0.size() == n && p0.size() == n && dq.size() == n) return true;
+  s.message = "the state has " + std::to_string(q0.size()) + " coordinates (p " + std::to_string(p0.size()) +
+              ", dq " + std::to_string(dq.size()) + "); the system has " + std::to_string(n);
+  return false;
+}
+
+}  // namespace dynamic_detail
+
+// The position-momentum step of the theta map for a run-time-sized Lagrangian Sys.
+template <class Sys>
+class DynamicThetaStep {
+  static_assert(is_dynamic_system_v<Sys>, "DynamicThetaStep needs a run-time-sized system (dynamic_system.h)");
+
+ public:
+  static constexpr int N = Eigen::Dynamic;
+  using V = Eigen::VectorXd;
+
+  DynamicThetaStep(Sys L, ThetaMap R, double h, StepOptions options = {})
+      : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options) {
+    dynamic_detail::require_step(h);
+    dynamic_detail::require_newton(options);
+    const int n = L_.dim();
+    x_.resize(n);
+    v_.resize(n);
+    Lq_.resize(n);
+    Lv_.resize(n);
+    r_.resize(n);
+    Lqq_.resize(n, n);
+    Lqv_.resize(n, n);
+    Lvv_.resize(n, n);
+    J_.resize(n, n);
+    lu_.resize(n);
+  }
+
+  double step_size() const { return h_; }
+  const Sys& lagrangian() const { return L_; }
+  const ThetaMap& map() const { return R_; }
+  const StepOptions& options() const { return options_; }
+  int dim() const { return L_.dim(); }
+
+  // The step of the adjoint map (1 - theta), of the same size.
+  DynamicThetaStep adjoint() const { return DynamicThetaStep(L_, R_.adjoint(), h_, options_); }
+
+  // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
+  // dp receives p1 - p0.
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    StepSummary s;
+    const int n = L_.dim();
+    if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
+    if (dp.size() != n) dp.resize(n);
+    const double th = R_.theta(), inv_h = 1.0 / h_;
+    const double a = h_ * th * (1.0 - th), b = 1.0 - th;
+    const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
+    try {
+      double dxn = INFINITY;
+      bool done = false;
+      for (int it = 0; it < options_.max_iterations && !done; ++it) {
+        at(q0, dq);
+        L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
+        // F = p0 + D1 L_d, written as PositionMomentumStep evaluates it
+        for (int i = 0; i < n; ++i) r_[i] = p0[i] + ((h_ * Lq_[i]) * b - Lv_[i]);
+        for (int j = 0; j < n; ++j)
+          for (int i = 0; i < n; ++i) J_(i, j) = a * Lqq_(i, j) + b * Lqv_(i, j) - th * Lqv_(j, i) - inv_h * Lvv_(i, j);
+        s.iterations = it + 1;
+        s.residual = dynamic_detail::inf_norm(r_);
+        const double Jmax = dynamic_detail::inf_norm(J_);
+        s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + options_.absolute_floor;
+        if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+          s.message = "non-finite residual or Jacobian";
+          return s;
+        }
+        const NewtonVerdict verdict = newton_verdict(s, dxn, dynamic_detail::inf_norm(dq) + q0size, options_);
+        if (verdict == NewtonVerdict::failed) return s;
+        if (!lu_.factor(J_)) {
+          if (verdict == NewtonVerdict::converged) break;  // nothing more to apply
+          s.message = "singular step Jacobian";
+          return s;
+        }
+        lu_.solve(r_, r_);  // r_ is now the Newton correction
+        dq -= r_;
+        dxn = dynamic_detail::inf_norm(r_);
+        // on convergence the correction already paid for is applied (see solve_newton)
+        done = verdict == NewtonVerdict::converged;
+      }
+      if (!s.converged) {
+        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+        return s;
+      }
+      at(q0, dq);
+      L_.gradient(x_, v_, Lq_, Lv_);
+      for (int i = 0; i < n; ++i) dp[i] = h_ * Lq_[i];
+      if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+        s.converged = false;
+        s.message = "non-finite momentum";
+      }
+    } catch (const std::domain_error& e) {
+      s.converged = false;
+      s.message = e.what();
+    }
+    return s;
+  }
+
+ private:
+  // x = q0 + theta dq, v = dq / h (as ThetaMap::inverse_increment and DiscreteLagrangian)
+  void at(const V& q0, const V& dq) const {
+    const double th = R_.theta(), inv_h = 1.0 / h_;
+    for (Eigen::Index i = 0; i < q0.size(); ++i) {
+      x_[i] = q0[i] + th * dq[i];
+      v_[i] = dq[i] * inv_h;
+    }
+  }
+
+  Sys L_;
+  ThetaMap R_;
+  double h_;
+  StepOptions options_;
+  mutable V x_, v_, Lq_, Lv_, r_;
+  mutable Eigen::MatrixXd Lqq_, Lqv_, Lvv_, J_;
+  mutable DenseLU lu_;
+};
+
+// The Hamiltonian step (Eq. 5.1) of the theta map for a run-time-sized Hamiltonian Ham
+// (WrittenDynamicHamiltonian, LegendreDynamicHamiltonian<Sys>, or any type of the
+// concept with (q, p) as its blocks).
+template <class Ham>
+class DynamicHamiltonianThetaStep {
+  static_assert(is_dynamic_system_v<Ham>,
+                "DynamicHamiltonianThetaStep needs a run-time-sized Hamiltonian (dynamic_system.h)");
+
+ public:
+  static constexpr int N = Eigen::Dynamic;
+  using V = Eigen::VectorXd;
+
+  DynamicHamiltonianThetaStep(Ham H, ThetaMap R, double h, StepOptions options = {})
+      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options) {
+    dynamic_detail::require_step(h);
+    dynamic_detail::require_newton(options);
+    const int n = H_.dim();
+    x_.resize(n);
+    p_.resize(n);
+    Hq_.resize(n);
+    Hp_.resize(n);
+    y_.resize(2 * n);
+    r_.resize(2 * n);
+    Hqq_.resize(n, n);
+    Hqp_.resize(n, n);
+    Hpp_.resize(n, n);
+    J_.resize(2 * n, 2 * n);
+    lu_.resize(2 * n);
+  }
+
+  double step_size() const { return h_; }
+  const Ham& hamiltonian() const { return H_; }
+  const ThetaMap& map() const { return R_; }
+  const StepOptions& options() const { return options_; }
+  int dim() const { return H_.dim(); }
+
+  // The step of the adjoint map (1 - theta), of the same size.
+  DynamicHamiltonianThetaStep adjoint() const {
+    return DynamicHamiltonianThetaStep(H_, R_.adjoint(), h_, options_);
+  }
+
+  // One step from (q0, p0); (dq, dp) hold the starting guess on entry and the
+  // increments on return.
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    StepSummary s;
+    const int n = H_.dim();
+    if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
+    if (dp.size() != n) dp.setZero(n);
+    const double th = R_.theta(), b = 1.0 - th;
+    y_.head(n) = dq;
+    y_.tail(n) = dp;
+    try {
+      H_.gradient(q0, p0, Hq_, Hp_);
+      const double s0 = std::fabs(h_) * std::fmax(dynamic_detail::inf_norm(Hp_), dynamic_detail::inf_norm(Hq_));
+      const double x0 = std::fmax(dynamic_detail::inf_norm(q0), dynamic_detail::inf_norm(p0));
+      double dxn = INFINITY;
+      bool done = false;
+      for (int it = 0; it < options_.max_iterations && !done; ++it) {
+        for (int i = 0; i < n; ++i) {
+          x_[i] = q0[i] + th * y_[i];
+          p_[i] = p0[i] + b * y_[n + i];
+        }
+        H_.hessian(x_, p_, Hq_, Hp_, Hqq_, Hqp_, Hpp_);
+        for (int i = 0; i < n; ++i) {
+          r_[i] = y_[i] - h_ * Hp_[i];
+          r_[n + i] = y_[n + i] + h_ * Hq_[i];
+        }
+        const double ht = h_ * th, hb = h_ * b;
+        for (int j = 0; j < n; ++j)
+          for (int i = 0; i < n; ++i) {
+            J_(i, j) = (i == j ? 1.0 : 0.0) - ht * Hqp_(j, i);
+            J_(i, n + j) = -hb * Hpp_(i, j);
+            J_(n + i, j) = ht * Hqq_(i, j);
+            J_(n + i, n + j) = (i == j ? 1.0 : 0.0) + hb * Hqp_(i, j);
+          }
+        s.iterations = it + 1;
+        s.residual = dynamic_detail::inf_norm(r_);
+        const double Jmax = dynamic_detail::inf_norm(J_);
+        s.scale = s0 + Jmax * dynamic_detail::inf_norm(y_) + options_.absolute_floor;
+        if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+          s.message = "non-finite residual or Jacobian";
+          break;
+        }
+        const NewtonVerdict verdict = newton_verdict(s, dxn, dynamic_detail::inf_norm(y_) + x0, options_);
+        if (verdict == NewtonVerdict::failed) break;
+        if (!lu_.factor(J_)) {
+          if (verdict != NewtonVerdict::converged) s.message = "singular step Jacobian";
+          break;
+        }
+        lu_.solve(r_, r_);
+        y_ -= r_;
+        dxn = dynamic_detail::inf_norm(r_);
+        done = verdict == NewtonVerdict::converged;
+      }
+      if (!s.converged && s.message.empty())
+        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+    } catch (const std::domain_error& e) {
+      s.converged = false;
+      s.message = e.what();
+    }
+    dq = y_.head(n);
+    dp = y_.tail(n);
+    return s;
+  }
+
+ private:
+  Ham H_;
+  ThetaMap R_;
+  double h_;
+  StepOptions options_;
+  mutable V x_, p_, Hq_, Hp_, y_, r_;
+  mutable Eigen::MatrixXd Hqq_, Hqp_, Hpp_, J_;
+  mutable DenseLU lu_;
+};
+
+}  // namespace dvm

@@ -1,0 +1,895 @@
+// Run-time-sized systems and steps (mechanics/dynamic_system.h, solvers/dynamic_step.h,
+// solvers/dynamic_galerkin_step.h): derivatives of every dynamic system against the
+// fixed-size systems and nested Jets; each step against its fixed-size counterpart;
+// adjoints and composition; written chains of 10 and 50 coordinates and 10 bodies
+// (momentum conserved to round-off, bounded energy error); measured orders; a degenerate
+// Lagrangian reported as a failure; steps that allocate nothing.
+//
+// The allocation check: Eigen's EIGEN_RUNTIME_NO_MALLOC makes every Eigen heap
+// allocation call eigen_assert, which is redefined here so that it is active in release
+// builds too and counts the "heap allocation is forbidden" failures (any other failed
+// Eigen assertion aborts, as in a debug build); the replaceable operator new counts the
+// other heap allocations (std::vector, std::string).
+#define EIGEN_RUNTIME_NO_MALLOC
+#include <atomic>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <new>
+
+namespace dvm_test {
+inline std::atomic<long> eigen_mallocs{0};
+inline std::atomic<long> operator_news{0};
+inline void eigen_assert_failed(const char* what, const char* file, int line) {
+  if (std::strstr(what, "heap allocation is forbidden")) {
+    ++eigen_mallocs;
+    return;
+  }
+  std::fprintf(stderr, "Eigen assertion failed: %s (%s:%d)\n", what, file, line);
+  std::abort();
+}
+}  // namespace dvm_test
+#define eigen_assert(x) ((x) ? static_cast<void>(0) : ::dvm_test::eigen_assert_failed(#x, __FILE__, __LINE__))
+
+// (GCC flags free() of memory from operator new, not knowing that operator new is
+// the malloc below)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void* operator new(std::size_t n) {
+  ++dvm_test::operator_news;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void* operator new(std::size_t n, std::align_val_t a) {
+  ++dvm_test::operator_news;
+  const std::size_t al = static_cast<std::size_t>(a);
+  if (void* p = std::aligned_alloc(al, (n + al - 1) / al * al + (n ? 0 : al))) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+void operator delete(void* p, std::align_val_t) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::free(p); }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+#define BOOST_TEST_MODULE dynamic
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/hamiltonian.h"
+#include "mechanics/systems.h"
+#include "mechanics/systems_classic.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/composition.h"
+#include "solvers/dynamic_galerkin_step.h"
+#include "solvers/dynamic_step.h"
+#include "solvers/galerkin_step.h"
+#include "solvers/hamiltonian_step.h"
+#include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
+#include "tests/verification/common.h"
+
+using namespace dvm;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+static_assert(is_dynamic_system_v<NBodyDynamic> && is_dynamic_system_v<WrittenDynamic> &&
+              is_dynamic_system_v<WrittenDynamicHamiltonian> && is_dynamic_system_v<FixedAsDynamic<Kepler>> &&
+              is_dynamic_system_v<LegendreDynamicHamiltonian<WrittenDynamic>>);
+static_assert(!is_dynamic_system_v<Kepler> && !is_dynamic_system_v<NBody<3>>);
+static_assert(has_dynamic_velocity<NBodyDynamic>::value && has_dynamic_velocity<FixedAsDynamic<Kepler>>::value);
+static_assert(!has_dynamic_velocity<WrittenDynamic>::value &&
+              !has_dynamic_velocity<FixedAsDynamic<GenericOnly<Kepler>>>::value);
+static_assert(DynamicThetaStep<NBodyDynamic>::N == Eigen::Dynamic &&
+              DynamicGalerkinStep<WrittenDynamic>::N == Eigen::Dynamic);
+
+namespace {
+
+std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vector<std::pair<std::string, double>> params,
+                                       const std::string& L, const std::string& H = "") {
+  auto s = std::make_shared<WrittenSystem>();
+  s->name = "written";
+  s->coordinates = std::move(coords);
+  s->params = std::move(params);
+  s->check_names();
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  if (!H.empty()) s->hamiltonian = Expression::parse(H, s->symbols(WrittenSystem::Kind::hamiltonian));
+  return s;
+}
+
+// DoublePendulum(1.3, 0.7, 1.1, 0.9, 9.81) as text.
+const DoublePendulum kPendulum2(1.3, 0.7, 1.1, 0.9, 9.81);
+std::shared_ptr<WrittenSystem> written_double_pendulum() {
+  return written({"a", "b"}, {{"m1", 1.3}, {"m2", 0.7}, {"l1", 1.1}, {"l2", 0.9}, {"g", 9.81}},
+                 "(m1 + m2)/2*l1^2*a_dot^2 + m2/2*l2^2*b_dot^2 + m2*l1*l2*a_dot*b_dot*cos(a - b)"
+                 " + (m1 + m2)*g*l1*cos(a) + m2*g*l2*cos(b)");
+}
+// Kepler(1.5) as text, with its Hamiltonian.
+const Kepler kKepler(1.5);
+std::shared_ptr<WrittenSystem> written_kepler() {
+  return written({"x", "y"}, {{"mu", 1.5}}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)",
+                 "(p_x^2 + p_y^2)/2 - mu/sqrt(x^2 + y^2)");
+}
+// FermiPastaUlam(7) as text: 6 coordinates, 12 derivative directions (two chunks of 8).
+std::shared_ptr<WrittenSystem> written_fpu() {
+  return written({"a", "b", "c", "d", "e", "f"}, {{"w", 7.0}},
+                 "(a_dot^2 + b_dot^2 + c_dot^2 + d_dot^2 + e_dot^2 + f_dot^2)/2"
+                 " - 0.25*w^2*((b - a)^2 + (d - c)^2 + (f - e)^2) - (a^4 + (c - b)^4 + (e - d)^4 + f^4)");
+}
+
+// A chain of n unit masses with free ends, L = sum v_i^2/2 - sum_i V(x_{i+1} - x_i),
+// V(r) = k r^2/2 + beta r^4/4: translation invariant, so sum p_i is conserved.
+std::shared_ptr<WrittenSystem> written_chain(int n) {
+  std::vector<std::string> c;
+  for (int i = 0; i < n; ++i) c.push_back("x" + std::to_string(i));
+  std::string kin, pot;
+  for (int i = 0; i < n; ++i) kin += (i ? " + " : "") + c[i] + "_dot^2";
+  for (int i = 0; i + 1 < n; ++i) {
+    const std::string r = "(" + c[i + 1] + " - " + c[i] + ")";
+    pot += (i ? " + " : "") + std::string("k/2*") + r + "^2 + beta/4*" + r + "^4";
+  }
+  return written(c, {{"k", 1.0}, {"beta", 0.5}}, "(" + kin + ")/2 - (" + pot + ")");
+}
+
+VectorXd random_vector(int n, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  VectorXd x(n);
+  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
+  return x;
+}
+
+double rel_diff(const MatrixXd& a, const MatrixXd& b) {
+  return (a - b).cwiseAbs().maxCoeff() / std::fmax(1e-300, b.cwiseAbs().maxCoeff());
+}
+
+struct Derivatives {
+  double value = 0;
+  VectorXd Lq, Lv;
+  MatrixXd Lqq, Lqv, Lvv;
+};
+template <class Sys>
+Derivatives derivatives(const Sys& L, const VectorXd& q, const VectorXd& v) {
+  const int n = L.dim();
+  Derivatives d;
+  d.value = L.value(q, v);
+  d.Lq.resize(n);
+  d.Lv.resize(n);
+  d.Lqq.resize(n, n);
+  d.Lqv.resize(n, n);
+  d.Lvv.resize(n, n);
+  L.hessian(q, v, d.Lq, d.Lv, d.Lqq, d.Lqv, d.Lvv);
+  VectorXd gq(n), gv(n);
+  L.gradient(q, v, gq, gv);  // the gradient alone equals the Hessian call's
+  BOOST_TEST(rel_diff(gq, d.Lq) <= 1e-15);
+  BOOST_TEST(rel_diff(gv, d.Lv) <= 1e-15);
+  return d;
+}
+
+// Relative agreement of all derivative blocks.
+void check_same(const Derivatives& a, const Derivatives& b, double tol) {
+  BOOST_TEST(std::fabs(a.value - b.value) <= tol * std::fabs(b.value));
+  BOOST_TEST(rel_diff(a.Lq, b.Lq) <= tol);
+  BOOST_TEST(rel_diff(a.Lv, b.Lv) <= tol);
+  const double scale = std::fmax(b.Lqq.cwiseAbs().maxCoeff(), std::fmax(b.Lqv.cwiseAbs().maxCoeff(), b.Lvv.cwiseAbs().maxCoeff()));
+  BOOST_TEST((a.Lqq - b.Lqq).cwiseAbs().maxCoeff() <= tol * scale);
+  BOOST_TEST((a.Lqv - b.Lqv).cwiseAbs().maxCoeff() <= tol * scale);
+  BOOST_TEST((a.Lvv - b.Lvv).cwiseAbs().maxCoeff() <= tol * scale);
+}
+
+// The value, gradient and Hessian of a fixed-size function f(q, v) (a Lagrangian or a
+// Hamiltonian) by nested Jets: the reference the dynamic derivatives are checked against.
+template <class F>
+Derivatives nested_jets(const F& f, const VectorXd& q, const VectorXd& v) {
+  constexpr int N = F::dim;
+  using D = ceres::Jet<double, 2 * N>;
+  using DD = ceres::Jet<D, 2 * N>;
+  Vec<DD, N> qd, vd;
+  for (int i = 0; i < N; ++i) {
+    qd[i] = DD(D(q[i], i));
+    qd[i].v[i] = D(1.0);
+    vd[i] = DD(D(v[i], N + i));
+    vd[i].v[N + i] = D(1.0);
+  }
+  const DD y = f(qd, vd);
+  Derivatives d;
+  d.value = y.a.a;
+  d.Lq = y.a.v.template head<N>();
+  d.Lv = y.a.v.template tail<N>();
+  d.Lqq.resize(N, N);
+  d.Lqv.resize(N, N);
+  d.Lvv.resize(N, N);
+  for (int i = 0; i < N; ++i)
+    for (int j = 0; j < N; ++j) {
+      d.Lqq(i, j) = y.v[j].v[i];
+      d.Lqv(i, j) = y.v[N + j].v[i];
+      d.Lvv(i, j) = y.v[N + j].v[N + i];
+    }
+  return d;
+}
+
+// Runs a step type with `integrate` and records the state after every step.
+template <class Step, class VecT>
+std::vector<VectorXd> trajectory(const Step& S, const VecT& q0, const VecT& p0, const VecT& v0, int steps,
+                                 RunSummary* summary = nullptr) {
+  std::vector<VectorXd> out;
+  VecT q = q0, p = p0;
+  const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const auto& qk, const auto& pk, const StepSummary&) {
+    VectorXd y(2 * qk.size());
+    y << qk, pk;
+    out.push_back(y);
+  });
+  if (summary) *summary = run;
+  BOOST_TEST(!run.failed, run.failure.message);
+  return out;
+}
+
+// The largest difference between two trajectories, relative to the largest state
+// (logged: the measured values behind the tolerance of the comparisons below).
+double trajectory_difference(const std::vector<VectorXd>& a, const std::vector<VectorXd>& b) {
+  BOOST_REQUIRE(a.size() == b.size());
+  double d = 0.0, s = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    d = std::fmax(d, (a[k] - b[k]).cwiseAbs().maxCoeff());
+    s = std::fmax(s, b[k].cwiseAbs().maxCoeff());
+  }
+  BOOST_TEST_MESSAGE("  trajectory difference " << d / s);
+  return d / s;
+}
+
+template <int N>
+Vec<double, N> fixed(const VectorXd& x) {
+  return Vec<double, N>(x);
+}
+
+// Three bodies, well separated, G != 1.
+NBody<3> nbody3() { return NBody<3>(1.2, {1.0, 0.3, 0.01}); }
+void nbody3_state(VectorXd& q, VectorXd& p) {
+  q.resize(9);
+  p.resize(9);
+  q << 0.0, 0.0, 0.1, 1.0, 0.1, 0.0, -0.3, 1.5, 0.2;
+  p << 0.0, -0.05, 0.01, 0.0, 0.35, 0.02, -0.008, 0.0, 0.001;
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------
+// Derivatives.
+
+BOOST_AUTO_TEST_CASE(nbody_dynamic_equals_nbody_with_three_bodies) {
+  const NBody<3> F = nbody3();
+  const NBodyDynamic D(1.2, {1.0, 0.3, 0.01});
+  BOOST_TEST(D.dim() == 9);
+  VectorXd q, p;
+  nbody3_state(q, p);
+  const VectorXd v = random_vector(9, 0.7, 5);
+  // the same formulas as NBody<3>: equal to round-off
+  const Derivatives d = derivatives(D, q, v);
+  check_same(d, derivatives(FixedAsDynamic<NBody<3>>(F), q, v), 1e-14);
+  // the Hessian against nested Jets through L itself (no closed form used)
+  check_same(d, nested_jets(GenericOnly<NBody<3>>{F}, q, v), 1e-13);
+  VectorXd vel(9);
+  D.velocity(q, p, vel);
+  BOOST_TEST(rel_diff(vel, VectorXd(F.velocity(fixed<9>(q), fixed<9>(p)))) <= 1e-16);
+  const auto a = NBodyDynamic::momenta(q, p);
+  const auto b = NBody<3>::momenta(fixed<9>(q), fixed<9>(p));
+  for (int i = 0; i < 6; ++i) BOOST_TEST(a[static_cast<std::size_t>(i)] == b[static_cast<std::size_t>(i)]);
+  BOOST_CHECK_THROW(NBodyDynamic(1.0, {}), std::invalid_argument);
+  BOOST_CHECK_THROW(NBodyDynamic(1.0, {1.0, -1.0}), std::invalid_argument);
+}
+
+BOOST_AUTO_TEST_CASE(written_dynamic_equals_the_builtin_systems_both_ways) {
+  // forward over reverse (the default) and forward over forward, each against the
+  // built-in system's closed-form gradient with one Jet level and against nested Jets
+  auto check = [](const auto& builtin, const std::shared_ptr<WrittenSystem>& text, unsigned seed) {
+    using S = std::decay_t<decltype(builtin)>;
+    const WrittenDynamic R(text), F(text, WrittenDerivatives::forward_over_forward);
+    BOOST_TEST(R.reverse_mode());
+    BOOST_TEST(!F.reverse_mode());
+    for (int k = 0; k < 3; ++k) {
+      const VectorXd q = random_vector(S::dim, 0.8, seed + k), v = random_vector(S::dim, 1.2, seed + 10 + k);
+      BOOST_TEST_CONTEXT(builtin.name() << " point " << k) {
+        const Derivatives ref = nested_jets(GenericOnly<S>{builtin}, q, v);
+        const Derivatives r = derivatives(R, q, v), f = derivatives(F, q, v);
+        check_same(r, ref, 1e-13);
+        check_same(f, ref, 1e-13);
+        check_same(r, derivatives(FixedAsDynamic<S>(builtin), q, v), 1e-13);
+      }
+    }
+  };
+  check(kPendulum2, written_double_pendulum(), 11);  // 4 directions: one pass of K = 4
+  check(kKepler, written_kepler(), 21);
+  check(FermiPastaUlam(7.0), written_fpu(), 31);  // 12 directions: two passes of K = 8
+  // a tape longer than reverse mode takes: forward automatically, reverse refused
+  const auto chain = written_chain(50);
+  BOOST_TEST(chain->lagrangian.tape().size() > static_cast<std::size_t>(Expression::kMaxTape));
+  BOOST_TEST(!WrittenDynamic(chain).reverse_mode());
+  BOOST_CHECK_THROW(WrittenDynamic(chain, WrittenDerivatives::forward_over_reverse), std::invalid_argument);
+}
+
+BOOST_AUTO_TEST_CASE(long_tapes_are_differentiated_forward_correctly) {
+  // the 50-coordinate chain (forward over forward, 13 chunks of 8 directions) against
+  // its 12-coordinate sibling differentiated in reverse mode, at a state where the
+  // coordinates from 10 on are equal and at rest (the springs past the 12th carry no
+  // load, so the first 12 rows agree)
+  const WrittenDynamic L50(written_chain(50)), L12(written_chain(12));
+  BOOST_TEST(!L50.reverse_mode());
+  BOOST_TEST(L12.reverse_mode());
+  VectorXd q = VectorXd::Zero(50), v = VectorXd::Zero(50);
+  q.head(10) = random_vector(10, 0.5, 3);
+  v.head(10) = random_vector(10, 0.5, 4);
+  q.tail(40).setConstant(0.25);
+  const Derivatives a = derivatives(L50, q, v);
+  const Derivatives b = derivatives(L12, VectorXd(q.head(12)), VectorXd(v.head(12)));
+  BOOST_TEST(std::fabs(a.value - b.value) <= 1e-14 * std::fabs(b.value));
+  BOOST_TEST(rel_diff(a.Lq.head(12), b.Lq) <= 1e-14);
+  // rows 0..10 (row 11 of the long chain also holds the unloaded spring's stiffness)
+  BOOST_TEST(rel_diff(a.Lqq.topLeftCorner(11, 12), b.Lqq.topRows(11)) <= 1e-14);
+  BOOST_TEST(a.Lq.tail(38).cwiseAbs().maxCoeff() == 0.0);
+  BOOST_TEST(rel_diff(a.Lvv, MatrixXd::Identity(50, 50)) == 0.0);
+  BOOST_TEST(a.Lqv.cwiseAbs().maxCoeff() == 0.0);
+  // a tridiagonal Lqq: the chain couples neighbours only
+  for (int i = 0; i < 50; ++i)
+    for (int j = 0; j < 50; ++j)
+      if (std::abs(i - j) > 1) BOOST_TEST(a.Lqq(i, j) == 0.0);
+}
+
+BOOST_AUTO_TEST_CASE(legendre_maps_of_dynamic_systems) {
+  const WrittenDynamic L(written_double_pendulum());
+  const FixedAsDynamic<DoublePendulum> B(kPendulum2);
+  const VectorXd q = random_vector(2, 0.9, 1), v = random_vector(2, 1.5, 2);
+  const VectorXd p = legendre(L, q, v);
+  BOOST_TEST(rel_diff(p, VectorXd(dvm::legendre(kPendulum2, fixed<2>(q), fixed<2>(v)))) <= 1e-15);
+  BOOST_TEST(std::fabs(energy(L, q, v) - energy(kPendulum2, fixed<2>(q), fixed<2>(v))) <= 1e-14);
+  // Newton (written) and the closed form (built-in) invert it
+  BOOST_TEST(rel_diff(legendre_inverse(L, q, p), v) <= 1e-14);
+  BOOST_TEST(rel_diff(legendre_inverse(B, q, p), v) <= 1e-14);
+  BOOST_TEST(rel_diff(legendre_inverse_checked(L, q, p), v) <= 1e-14);
+  BOOST_TEST(std::fabs(L.energy_at(q, v, p) - energy(kPendulum2, fixed<2>(q), fixed<2>(v))) <= 1e-14);
+  const NBodyDynamic Nb(1.0, {1.0, 2.0});
+  const VectorXd qn = random_vector(6, 1.0, 3), pn = random_vector(6, 1.0, 4);
+  BOOST_TEST(rel_diff(legendre(Nb, qn, legendre_inverse(Nb, qn, pn)), pn) <= 1e-16);
+}
+
+BOOST_AUTO_TEST_CASE(hamiltonians_equal_the_fixed_size_hamiltonians) {
+  auto hd = [](const auto& H, const VectorXd& q, const VectorXd& p) { return derivatives(H, q, p); };
+  // H of a Lagrangian by the Legendre transform (implicit differentiation, no third
+  // derivatives) against LegendreHamiltonian differentiated by nested Jets: built-in
+  // (closed-form velocity) and written (Newton) double pendulum
+  const LegendreHamiltonian<DoublePendulum> Hf(kPendulum2);
+  const LegendreDynamicHamiltonian<FixedAsDynamic<DoublePendulum>> Hb{FixedAsDynamic<DoublePendulum>(kPendulum2)};
+  const LegendreDynamicHamiltonian<WrittenDynamic> Hw{WrittenDynamic(written_double_pendulum())};
+  for (int k = 0; k < 3; ++k) {
+    const VectorXd q = random_vector(2, 1.0, 40 + k), p = random_vector(2, 2.0, 50 + k);
+    BOOST_TEST_CONTEXT("double pendulum point " << k) {
+      const Derivatives ref = nested_jets(Hf, q, p);
+      check_same(hd(Hb, q, p), ref, 1e-13);
+      check_same(hd(Hw, q, p), ref, 1e-13);
+    }
+  }
+  // the written H(q, p) against WrittenHamiltonian<2> by nested Jets and against the
+  // Legendre transform of the written L
+  const auto text = written_kepler();
+  const WrittenHamiltonian<2> Kf{text};
+  const WrittenDynamicHamiltonian Kw(text), Kff(text, WrittenDerivatives::forward_over_forward);
+  const LegendreDynamicHamiltonian<WrittenDynamic> Kl{WrittenDynamic(text)};
+  for (int k = 0; k < 3; ++k) {
+    const VectorXd q = random_vector(2, 1.0, 60 + k), p = random_vector(2, 1.0, 70 + k);
+    BOOST_TEST_CONTEXT("Kepler point " << k) {
+      const Derivatives ref = nested_jets(Kf, q, p);
+      check_same(hd(Kw, q, p), ref, 1e-13);
+      check_same(hd(Kff, q, p), ref, 1e-13);
+      check_same(hd(Kl, q, p), ref, 1e-13);
+    }
+  }
+  BOOST_CHECK_THROW(WrittenDynamicHamiltonian{written_double_pendulum()}, std::invalid_argument);
+}
+
+// ---------------------------------------------------------------------------------
+// Steps against their fixed-size counterparts.
+//
+// Tolerance. Both paths solve the same equations with the same stopping rule and apply
+// the correction of the accepted residual, so each step differs only by the round-off of
+// evaluating residual and Jacobian in another order: a few units of 1e-16 relative, added
+// up over 100 steps and carried along by the flow. Measured (logged below): at most
+// 6e-16 relative to the largest state for the theta steps (position-momentum and
+// Hamiltonian), 1.4e-14 for the Galerkin steps, whose simplified Newton stops one
+// contraction (ratio up to 0.25) after the tolerance 2e-15, so the result keeps a part of
+// the old Jacobian's last bits. Tolerances 1e-14 and 1e-13 leave a margin of 10, while a
+// wrong sign or factor anywhere gives differences of 1e-4 or more.
+
+BOOST_AUTO_TEST_CASE(theta_step_equals_the_position_momentum_step) {
+  const double tol = 1e-14;
+  for (double theta : {0.0, 0.3, 0.5, 1.0}) {
+    const ThetaMap R(theta);
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      {  // Kepler, e = 0.6: the fixed system wrapped
+        Vec<double, 2> q0, p0;
+        verification::kepler_initial(0.6, q0, p0);
+        const Vec<double, 2> v0 = legendre_inverse(kKepler, q0, p0);
+        const double h = 0.01;
+        const auto a = trajectory(PositionMomentumStep<Kepler, ThetaMap>(kKepler, R, h), q0, p0, v0, 100);
+        const auto b = trajectory(DynamicThetaStep<FixedAsDynamic<Kepler>>(FixedAsDynamic<Kepler>(kKepler), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+      }
+      {  // NBody<3> against NBodyDynamic with three bodies
+        VectorXd q, p;
+        nbody3_state(q, p);
+        const NBody<3> F = nbody3();
+        const Vec<double, 9> v0 = F.velocity(fixed<9>(q), fixed<9>(p));
+        const double h = 0.02;
+        const auto a = trajectory(PositionMomentumStep<NBody<3>, ThetaMap>(F, R, h), fixed<9>(q), fixed<9>(p), v0, 100);
+        const auto b = trajectory(DynamicThetaStep<NBodyDynamic>(NBodyDynamic(1.2, {1.0, 0.3, 0.01}), R, h), q, p,
+                                  VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+      }
+      {  // the written double pendulum: WrittenLagrangian<2> and the built-in system
+        const auto text = written_double_pendulum();
+        const Vec<double, 2> q0(0.5, 0.3), p0(0.2, -0.1);
+        const Vec<double, 2> v0 = legendre_inverse(kPendulum2, q0, p0);
+        const double h = 0.01;
+        const auto a = trajectory(PositionMomentumStep<WrittenLagrangian<2>, ThetaMap>(WrittenLagrangian<2>(text), R, h),
+                                  q0, p0, v0, 100);
+        const auto c = trajectory(PositionMomentumStep<DoublePendulum, ThetaMap>(kPendulum2, R, h), q0, p0, v0, 100);
+        const auto b = trajectory(DynamicThetaStep<WrittenDynamic>(WrittenDynamic(text), R, h), VectorXd(q0),
+                                  VectorXd(p0), VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+        BOOST_TEST(trajectory_difference(b, c) <= tol);
+      }
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(hamiltonian_theta_step_equals_the_hamiltonian_step) {
+  const double tol = 1e-14;
+  for (double theta : {0.0, 0.3, 0.5, 1.0}) {
+    const ThetaMap R(theta);
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      Vec<double, 2> q0, p0;
+      verification::kepler_initial(0.6, q0, p0);
+      const Vec<double, 2> v0 = legendre_inverse(kKepler, q0, p0);
+      const double h = 0.01;
+      {  // H of Kepler's L by the Legendre transform
+        using HF = LegendreHamiltonian<Kepler>;
+        using HD = LegendreDynamicHamiltonian<FixedAsDynamic<Kepler>>;
+        const auto a = trajectory(HamiltonianStep<HF, ThetaMap>(HF(kKepler), R, h), q0, p0, v0, 100);
+        const auto b = trajectory(DynamicHamiltonianThetaStep<HD>(HD(FixedAsDynamic<Kepler>(kKepler)), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+      }
+      {  // the written H(q, p) of Kepler, and the Legendre transform of the written L
+        const auto text = written_kepler();
+        const auto a =
+            trajectory(HamiltonianStep<WrittenHamiltonian<2>, ThetaMap>(WrittenHamiltonian<2>{text}, R, h), q0, p0, v0, 100);
+        const auto b = trajectory(DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian>(WrittenDynamicHamiltonian(text), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        const auto c = trajectory(DynamicHamiltonianThetaStep<LegendreDynamicHamiltonian<WrittenDynamic>>(
+                                      LegendreDynamicHamiltonian<WrittenDynamic>(WrittenDynamic(text)), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+        BOOST_TEST(trajectory_difference(c, a) <= tol);
+      }
+      {  // the written double pendulum's H by the Legendre transform (Newton inverse;
+         // the fixed-size path cannot differentiate it: it would need a third Jet level)
+        using HF = LegendreHamiltonian<DoublePendulum>;
+        const Vec<double, 2> qa(0.5, 0.3), pa(0.2, -0.1);
+        const Vec<double, 2> va = legendre_inverse(kPendulum2, qa, pa);
+        const auto a = trajectory(HamiltonianStep<HF, ThetaMap>(HF(kPendulum2), R, h), qa, pa, va, 100);
+        const auto b = trajectory(DynamicHamiltonianThetaStep<LegendreDynamicHamiltonian<WrittenDynamic>>(
+                                      LegendreDynamicHamiltonian<WrittenDynamic>(WrittenDynamic(written_double_pendulum())), R, h),
+                                  VectorXd(qa), VectorXd(pa), VectorXd(va), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+      }
+    }
+  }
+}
+
+namespace {
+
+template <int S>
+void check_galerkin(QuadratureKind kind) {
+  const double tol = 1e-13;
+  Vec<double, 2> q0, p0;
+  verification::kepler_initial(0.6, q0, p0);
+  const Vec<double, 2> v0 = legendre_inverse(kKepler, q0, p0);
+  const double h = 0.05;
+  BOOST_TEST_CONTEXT(to_string(kind) << " s = " << S) {
+    const GalerkinStep<Kepler, S> F(kKepler, kind, S, h);
+    const DynamicGalerkinStep<FixedAsDynamic<Kepler>> D(FixedAsDynamic<Kepler>(kKepler), kind, S, h);
+    BOOST_TEST(D.order() == 2 * S);
+    const auto a = trajectory(F, q0, p0, v0, 100);
+    const auto b = trajectory(D, VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+    BOOST_TEST(trajectory_difference(b, a) <= tol);
+    // the same simplified Newton: the Jacobian is refreshed as often
+    BOOST_TEST(D.jacobian_updates() == F.jacobian_updates());
+    BOOST_TEST(std::fabs(D.last_guess_error() - F.last_guess_error()) <= 1e-3 * F.last_guess_error() + 1e-16);
+  }
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(galerkin_step_equals_the_fixed_size_galerkin_step) {
+  for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto}) {
+    check_galerkin<1>(kind);
+    check_galerkin<2>(kind);
+    check_galerkin<3>(kind);
+    check_galerkin<4>(kind);
+    check_galerkin<5>(kind);
+    check_galerkin<6>(kind);
+  }
+  // written double pendulum (forward over reverse Hessians) and three bodies
+  const double tol = 1e-13;
+  {
+    const auto text = written_double_pendulum();
+    const Vec<double, 2> q0(0.5, 0.3), p0(0.2, -0.1);
+    const Vec<double, 2> v0 = legendre_inverse(kPendulum2, q0, p0);
+    const GalerkinStep<WrittenLagrangian<2>, 3> F(WrittenLagrangian<2>(text), QuadratureKind::gauss, 3, 0.02);
+    const DynamicGalerkinStep<WrittenDynamic> D(WrittenDynamic(text), QuadratureKind::gauss, 3, 0.02);
+    BOOST_TEST(trajectory_difference(trajectory(D, VectorXd(q0), VectorXd(p0), VectorXd(v0), 100),
+                                     trajectory(F, q0, p0, v0, 100)) <= tol);
+  }
+  {
+    VectorXd q, p;
+    nbody3_state(q, p);
+    const NBody<3> B = nbody3();
+    const Vec<double, 9> v0 = B.velocity(fixed<9>(q), fixed<9>(p));
+    const GalerkinStep<NBody<3>, 2> F(B, QuadratureKind::lobatto, 2, 0.05);
+    const DynamicGalerkinStep<NBodyDynamic> D(NBodyDynamic(1.2, {1.0, 0.3, 0.01}), QuadratureKind::lobatto, 2, 0.05);
+    BOOST_TEST(trajectory_difference(trajectory(D, q, p, VectorXd(v0), 100),
+                                     trajectory(F, fixed<9>(q), fixed<9>(p), v0, 100)) <= tol);
+  }
+  BOOST_CHECK_THROW(DynamicGalerkinStep<NBodyDynamic>(NBodyDynamic(1.0, {1.0}), QuadratureKind::gauss, 7, 0.1),
+                    std::invalid_argument);
+}
+
+// ---------------------------------------------------------------------------------
+// Adjoints and composition.
+
+BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
+  // Phi^*_h = (Phi_{-h})^{-1}: the (1 - theta) step of size -h takes Phi_h(y) back to y
+  const FixedAsDynamic<Kepler> L(kKepler);
+  Vec<double, 2> qf, pf;
+  verification::kepler_initial(0.5, qf, pf);
+  const VectorXd q0 = qf, p0 = pf;
+  const double h = 0.05;
+  for (double theta : {0.0, 0.3, 0.5}) {
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      const DynamicThetaStep<FixedAsDynamic<Kepler>> S(L, ThetaMap(theta), h);
+      const auto back = DynamicThetaStep<FixedAsDynamic<Kepler>>(L, ThetaMap(theta), -h).adjoint();
+      BOOST_TEST(back.map().theta() == 1.0 - theta);
+      VectorXd dq = h * p0, dp = VectorXd::Zero(2);
+      BOOST_TEST(S.step(q0, p0, dq, dp).converged);
+      const VectorXd q1 = q0 + dq, p1 = p0 + dp;
+      VectorXd eq = -dq, ep = VectorXd::Zero(2);
+      BOOST_TEST(back.step(q1, p1, eq, ep).converged);
+      BOOST_TEST((q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
+      BOOST_TEST((p1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
+
+      using HD = LegendreDynamicHamiltonian<FixedAsDynamic<Kepler>>;
+      const DynamicHamiltonianThetaStep<HD> T(HD(L), ThetaMap(theta), h);
+      const auto tback = DynamicHamiltonianThetaStep<HD>(HD(L), ThetaMap(theta), -h).adjoint();
+      dq = h * p0;
+      dp.setZero();
+      BOOST_TEST(T.step(q0, p0, dq, dp).converged);
+      const VectorXd Q1 = q0 + dq, P1 = p0 + dp;
+      eq = -dq;
+      ep = -dp;
+      BOOST_TEST(tback.step(Q1, P1, eq, ep).converged);
+      BOOST_TEST((Q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
+      BOOST_TEST((P1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(composed_dynamic_steps_equal_the_fixed_size_compositions) {
+  // ComposedStep (solvers/composition.h) with N = Eigen::Dynamic: the dynamic theta step
+  // and its adjoint (the same type) against CompositionStep<Kepler, ThetaMap>, and the
+  // dynamic Hamiltonian step against ComposedStep of HamiltonianStep; a non-symmetric map
+  // (theta = 0.3: adjoint halves) and the symmetric midpoint, with the 4th-order triple
+  // jump. (The substeps solve to the same tolerance as single steps, so the tolerance is
+  // that of the Galerkin comparison: measured up to 1.1e-14.)
+  const double h = 0.05;
+  Vec<double, 2> q0, p0;
+  verification::kepler_initial(0.5, q0, p0);
+  const FixedAsDynamic<Kepler> L(kKepler);
+  for (double theta : {0.3, 0.5}) {
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      const ThetaMap R(theta);
+      const std::vector<Substep> sub = substeps(find_composition("triple-jump:4"), R.symmetric());
+      using Step = DynamicThetaStep<FixedAsDynamic<Kepler>>;
+      const ComposedStep<Step> D(
+          h, sub, [&](double hk) { return Step(L, R, hk); }, [&](double hk) { return Step(L, R, hk).adjoint(); });
+      static_assert(ComposedStep<Step>::N == Eigen::Dynamic);
+      const auto a = trajectory(CompositionStep<Kepler, ThetaMap>(kKepler, R, h, sub), q0, p0, p0, 100);
+      const auto b = trajectory(D, VectorXd(q0), VectorXd(p0), VectorXd(p0), 100);
+      BOOST_TEST(trajectory_difference(b, a) <= 1e-13);
+
+      using HD = LegendreDynamicHamiltonian<FixedAsDynamic<Kepler>>;
+      using HS = DynamicHamiltonianThetaStep<HD>;
+      using HF = HamiltonianStep<LegendreHamiltonian<Kepler>, ThetaMap>;
+      const ComposedStep<HS> DH(
+          h, sub, [&](double hk) { return HS(HD(L), R, hk); }, [&](double hk) { return HS(HD(L), R, hk).adjoint(); });
+      const ComposedStep<HF> FH(
+          h, sub, [&](double hk) { return HF(LegendreHamiltonian<Kepler>(kKepler), R, hk); },
+          [&](double hk) { return HF(LegendreHamiltonian<Kepler>(kKepler), R.adjoint(), hk); });
+      BOOST_TEST(trajectory_difference(trajectory(DH, VectorXd(q0), VectorXd(p0), VectorXd(p0), 100),
+                                       trajectory(FH, q0, p0, p0, 100)) <= 1e-13);
+    }
+  }
+}
+
+// ---------------------------------------------------------------------------------
+// Large systems: written chains and ten bodies.
+
+namespace {
+
+double compensated_sum(const VectorXd& x) {
+  double s = 0.0, c = 0.0;
+  for (Eigen::Index i = 0; i < x.size(); ++i) {
+    const double y = x[i] - c, t = s + y;
+    c = (t - s) - y;
+    s = t;
+  }
+  return s;
+}
+
+// A free written chain of n unit masses: sum p conserved to round-off, the energy error
+// below energy_tol E0 and, with `no_drift`, no worse over the second half of the run than
+// over the first (within a factor 2: the error oscillates).
+template <class Step>
+void check_chain(const Step& S, const WrittenDynamic& L, int n, int steps, double energy_tol, bool no_drift) {
+  const VectorXd q0 = random_vector(n, 0.3, 100 + n);
+  const VectorXd p0 = random_vector(n, 0.4, 200 + n).array() + 0.1;  // moving as a whole
+  auto E = [&](const VectorXd& q, const VectorXd& p) { return energy(L, q, p); };  // v = p
+  const double E0 = E(q0, p0), P0 = compensated_sum(p0);
+  double dP = 0.0, dE1 = 0.0, dE2 = 0.0;
+  VectorXd q = q0, p = p0;
+  const RunSummary run = integrate(S, 0.0, q, p, p0, steps, [&](std::int64_t k, double, const VectorXd& qk, const VectorXd& pk, const StepSummary&) {
+    dP = std::fmax(dP, std::fabs(compensated_sum(pk) - P0));
+    const double e = std::fabs(E(qk, pk) - E0);
+    (2 * k <= steps ? dE1 : dE2) = std::fmax(2 * k <= steps ? dE1 : dE2, e);
+  });
+  BOOST_TEST(!run.failed, run.failure.message);
+  BOOST_TEST_MESSAGE("chain n = " << n << ": |dP| = " << dP << ", |dE| = " << dE1 << " then " << dE2 << " (E0 = " << E0
+                                  << ")");
+  BOOST_TEST(dP <= 1e-13 * p0.cwiseAbs().sum());
+  BOOST_TEST(std::fmax(dE1, dE2) <= energy_tol * E0);
+  if (no_drift) BOOST_TEST(dE2 <= 2.0 * dE1);
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(written_chains_of_10_and_50_coordinates) {
+  const double h = 0.05;
+  {
+    const WrittenDynamic L(written_chain(10));
+    BOOST_TEST(L.reverse_mode());
+    check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 10, 2000, 1e-3, true);
+    check_chain(DynamicGalerkinStep<WrittenDynamic>(L, QuadratureKind::gauss, 2, h), L, 10, 1000, 1e-6, false);
+  }
+  {
+    const WrittenDynamic L(written_chain(50));
+    BOOST_TEST(!L.reverse_mode());  // forward over forward: the tape is too long for reverse mode
+    check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 50, 200, 1e-3, true);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(ten_bodies_conserve_momentum_and_angular_momentum) {
+  // a central mass and nine light bodies (masses 1e-4 i) on slightly eccentric orbits of
+  // radii 1.5^(i-1), inclined by 0.05 i: a planetary system without close encounters
+  std::vector<double> m = {1.0};
+  VectorXd q = VectorXd::Zero(30), p = VectorXd::Zero(30);
+  for (int i = 1; i < 10; ++i) {
+    m.push_back(1e-4 * i);
+    const double r = std::pow(1.5, i - 1), a = 0.7 * i, inc = 0.05 * i;
+    const double v = 1.02 * std::sqrt(1.0 / r);
+    q.segment<3>(3 * i) << r * std::cos(a), r * std::sin(a) * std::cos(inc), r * std::sin(a) * std::sin(inc);
+    p.segment<3>(3 * i) << -v * std::sin(a), v * std::cos(a) * std::cos(inc), v * std::cos(a) * std::sin(inc);
+    p.segment<3>(3 * i) *= m.back();
+  }
+  const NBodyDynamic B(1.0, m);
+  const auto J0 = NBodyDynamic::momenta(q, p);
+  auto E = [&](const VectorXd& x, const VectorXd& y) { return energy(B, x, legendre_inverse(B, x, y)); };
+  const double E0 = E(q, p);
+  double dJ = 0.0, dE = 0.0, scale = 0.0;
+  for (double j : J0) scale = std::fmax(scale, std::fabs(j));
+  const DynamicThetaStep<NBodyDynamic> S(B, ThetaMap::midpoint(), 0.01);
+  VectorXd v0(30);
+  B.velocity(q, p, v0);
+  const RunSummary run = integrate(S, 0.0, q, p, v0, 3000, [&](std::int64_t, double, const VectorXd& x, const VectorXd& y, const StepSummary&) {
+    const auto J = NBodyDynamic::momenta(x, y);
+    for (int i = 0; i < 6; ++i) dJ = std::fmax(dJ, std::fabs(J[static_cast<std::size_t>(i)] - J0[static_cast<std::size_t>(i)]));
+    dE = std::fmax(dE, std::fabs(E(x, y) - E0));
+  });
+  BOOST_TEST(!run.failed, run.failure.message);
+  BOOST_TEST_MESSAGE("ten bodies: |dJ| = " << dJ << " (scale " << scale << "), |dE| = " << dE << " (E0 = " << E0 << ")");
+  BOOST_TEST(dJ <= 1e-13 * scale);
+  BOOST_TEST(dE <= 1e-5 * std::fabs(E0));
+}
+
+// ---------------------------------------------------------------------------------
+// Orders, by a log-log fit at t = 1 against Kepler's exact solution (written Kepler).
+
+BOOST_AUTO_TEST_CASE(measured_orders_of_the_dynamic_steps) {
+  const auto text = written_kepler();
+  Vec<double, 2> qf, pf;
+  verification::kepler_initial(0.5, qf, pf);
+  Vec<double, 2> qe, pe;
+  kKepler.exact(1.0, qf, pf, qe, pe);
+  auto error_of = [&](const auto& S, double h) {
+    VectorXd q = qf, p = pf;
+    const int steps = static_cast<int>(std::lround(1.0 / h));
+    const RunSummary run = integrate(S, 0.0, q, p, VectorXd(pf), steps, [](auto&&...) {});
+    BOOST_TEST(!run.failed, run.failure.message);
+    return std::fmax((q - VectorXd(qe)).cwiseAbs().maxCoeff(), (p - VectorXd(pe)).cwiseAbs().maxCoeff());
+  };
+  std::vector<double> hs, e_mid, e_ham, e_gauss, e_lobatto;
+  for (int k = 0; k < 5; ++k) {
+    const double h = 0.1 / std::pow(2.0, k);
+    hs.push_back(h);
+    e_mid.push_back(error_of(DynamicThetaStep<WrittenDynamic>(WrittenDynamic(text), ThetaMap::midpoint(), h), h));
+    e_ham.push_back(error_of(
+        DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian>(WrittenDynamicHamiltonian(text), ThetaMap::midpoint(), h), h));
+    e_gauss.push_back(error_of(DynamicGalerkinStep<WrittenDynamic>(WrittenDynamic(text), QuadratureKind::gauss, 2, h), h));
+    e_lobatto.push_back(
+        error_of(DynamicGalerkinStep<WrittenDynamic>(WrittenDynamic(text), QuadratureKind::lobatto, 2, h), h));
+  }
+  const double o_mid = verification::fit_order(hs, e_mid), o_ham = verification::fit_order(hs, e_ham);
+  const double o_gauss = verification::fit_order(hs, e_gauss), o_lob = verification::fit_order(hs, e_lobatto);
+  BOOST_TEST_MESSAGE("orders: theta = 1/2 " << o_mid << ", Hamiltonian midpoint " << o_ham << ", Gauss s = 2 " << o_gauss
+                                            << ", Lobatto s = 2 " << o_lob);
+  BOOST_TEST(std::fabs(o_mid - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_ham - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_gauss - 4.0) <= 0.2);
+  BOOST_TEST(std::fabs(o_lob - 4.0) <= 0.2);
+}
+
+// ---------------------------------------------------------------------------------
+// Failures.
+
+BOOST_AUTO_TEST_CASE(a_degenerate_written_lagrangian_is_reported_not_crashed) {
+  // L does not depend on v: L_vv = 0, the Legendre map has no inverse
+  const WrittenDynamic L(written({"x", "y"}, {}, "-(x^2 + y^2)/2 + cos(x)*y"));
+  const VectorXd q = random_vector(2, 0.5, 1), p = random_vector(2, 0.5, 2), v = VectorXd::Zero(2);
+  BOOST_CHECK_THROW(legendre_inverse(L, q, p), DegenerateLagrangianError);
+  BOOST_CHECK_THROW(legendre_inverse_checked(L, q, p), DegenerateLagrangianError);
+  BOOST_CHECK_THROW(require_regular(L, q, v), DegenerateLagrangianError);
+  // the Hamiltonian form: the Legendre transform fails inside the step, reported
+  {
+    const DynamicHamiltonianThetaStep<LegendreDynamicHamiltonian<WrittenDynamic>> S(
+        LegendreDynamicHamiltonian<WrittenDynamic>(L), ThetaMap::midpoint(), 0.1);
+    VectorXd dq = VectorXd::Zero(2), dp = VectorXd::Zero(2);
+    StepSummary s;
+    BOOST_CHECK_NO_THROW(s = S.step(q, p, dq, dp));
+    BOOST_TEST(!s.converged);
+    BOOST_TEST(s.message.find("not regular") != std::string::npos, s.message);
+    VectorXd qq = q, pp = p;
+    RunSummary run;
+    BOOST_CHECK_NO_THROW(run = integrate(S, 0.0, qq, pp, v, 10, [](auto&&...) {}));
+    BOOST_TEST(run.failed);
+    BOOST_TEST(run.failed_step == 0);
+  }
+  // the Lagrangian form with theta = 0 or 1: the step Jacobian (1 - theta) L_qv -
+  // theta L_qv^T - L_vv / h + h theta (1 - theta) L_qq vanishes
+  for (double theta : {0.0, 1.0}) {
+    const DynamicThetaStep<WrittenDynamic> S(L, ThetaMap(theta), 0.1);
+    VectorXd dq = VectorXd::Zero(2), dp = VectorXd::Zero(2);
+    StepSummary s;
+    BOOST_CHECK_NO_THROW(s = S.step(q, p, dq, dp));
+    BOOST_TEST(!s.converged);
+    BOOST_TEST(s.message == "singular step Jacobian");
+    VectorXd qq = q, pp = p;
+    RunSummary run;
+    BOOST_CHECK_NO_THROW(run = integrate(S, 0.0, qq, pp, v, 10, [](auto&&...) {}));
+    BOOST_TEST(run.failed);
+  }
+  // (For 0 < theta < 1 the step equation p0 + h (1 - theta) L_q(x) = 0 of such an L is
+  // solvable where L_qq is invertible: only the Legendre map, checked at the initial
+  // state, detects the degeneracy there.)
+}
+
+BOOST_AUTO_TEST_CASE(bad_input_is_refused_at_construction_and_bad_states_reported) {
+  StepOptions tiny;
+  tiny.solver = SolverKind::tiny;
+  const NBodyDynamic B(1.0, {1.0, 1.0});
+  BOOST_CHECK_THROW(DynamicThetaStep<NBodyDynamic>(B, ThetaMap::midpoint(), 0.1, tiny), std::invalid_argument);
+  BOOST_CHECK_THROW(DynamicThetaStep<NBodyDynamic>(B, ThetaMap::midpoint(), 0.0), std::invalid_argument);
+  BOOST_CHECK_THROW(DynamicGalerkinStep<NBodyDynamic>(B, QuadratureKind::gauss, 2, 0.1, tiny), std::invalid_argument);
+  const DynamicThetaStep<NBodyDynamic> S(B, ThetaMap::midpoint(), 0.1);
+  VectorXd q = VectorXd::Zero(5), p = VectorXd::Zero(5), dq = q, dp = q;
+  const StepSummary s = S.step(q, p, dq, dp);
+  BOOST_TEST(!s.converged);
+  BOOST_TEST(s.message.find("the system has 6") != std::string::npos, s.message);
+  // two bodies at the same point: a non-finite residual, reported
+  q = VectorXd::Zero(6);
+  p = VectorXd::Zero(6);
+  dq = q;
+  dp = q;
+  const StepSummary t = S.step(q, p, dq, dp);
+  BOOST_TEST(!t.converged);
+  BOOST_TEST(!t.message.empty());
+}
+
+// ---------------------------------------------------------------------------------
+// No allocation in a step.
+
+namespace {
+
+// Heap allocations (Eigen's and operator new's) in `steps` steps, after one warm-up step.
+template <class S, class = void>
+struct has_reset : std::false_type {};
+template <class S>
+struct has_reset<S, std::void_t<decltype(std::declval<const S&>().reset())>> : std::true_type {};
+
+template <class Step>
+long allocations_in_steps(const Step& S, const VectorXd& q0, const VectorXd& p0, const VectorXd& guess, int steps,
+                          bool reset_each = false) {
+  VectorXd q = q0, p = p0, dq = guess, dp = VectorXd::Zero(q0.size());
+  BOOST_TEST(S.step(q, p, dq, dp).converged);
+  q += dq;
+  p += dp;
+  const long e0 = dvm_test::eigen_mallocs, n0 = dvm_test::operator_news;
+  Eigen::internal::set_is_malloc_allowed(false);
+  bool ok = true;
+  for (int k = 0; k < steps; ++k) {
+    if constexpr (has_reset<Step>::value)
+      if (reset_each) S.reset();  // a refresh of the Jacobian in every step
+    ok = ok && S.step(q, p, dq, dp).converged;
+    q += dq;
+    p += dp;
+  }
+  Eigen::internal::set_is_malloc_allowed(true);
+  BOOST_TEST(ok);
+  return (dvm_test::eigen_mallocs - e0) + (dvm_test::operator_news - n0);
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
+  // the check itself works
+  {
+    const long e0 = dvm_test::eigen_mallocs;
+    Eigen::internal::set_is_malloc_allowed(false);
+    VectorXd x(1000);
+    Eigen::internal::set_is_malloc_allowed(true);
+    BOOST_TEST(dvm_test::eigen_mallocs - e0 == 1);
+    BOOST_TEST(x.size() == 1000);
+  }
+  const double h = 0.01;
+  VectorXd q, p;
+  nbody3_state(q, p);
+  const NBodyDynamic B(1.2, {1.0, 0.3, 0.01});
+  const VectorXd g3 = h * legendre_inverse(B, q, p);
+  BOOST_TEST(allocations_in_steps(DynamicThetaStep<NBodyDynamic>(B, ThetaMap::midpoint(), h), q, p, g3, 5) == 0);
+  BOOST_TEST(allocations_in_steps(DynamicGalerkinStep<NBodyDynamic>(B, QuadratureKind::gauss, 3, h), q, p, g3, 5, true) == 0);
+
+  const auto text = written_kepler();
+  Vec<double, 2> qf, pf;
+  verification::kepler_initial(0.5, qf, pf);
+  const VectorXd qk = qf, pk = pf, gk = h * pk;
+  BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic>(WrittenDynamic(text), ThetaMap(0.3), h), qk, pk, gk, 5) == 0);
+  BOOST_TEST(allocations_in_steps(DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian>(WrittenDynamicHamiltonian(text),
+                                                                                        ThetaMap::midpoint(), h),
+                                  qk, pk, gk, 5) == 0);
+  // Newton's inverse of the Legendre map inside every evaluation of H
+  BOOST_TEST(allocations_in_steps(DynamicHamiltonianThetaStep<LegendreDynamicHamiltonian<WrittenDynamic>>(
+                                      LegendreDynamicHamiltonian<WrittenDynamic>(WrittenDynamic(text)), ThetaMap::midpoint(), h),
+                                  qk, pk, gk, 5) == 0);
+  BOOST_TEST(allocations_in_steps(DynamicGalerkinStep<WrittenDynamic>(WrittenDynamic(text), QuadratureKind::lobatto, 4, h),
+                                  qk, pk, gk, 5, true) == 0);
+  // large: the 50-coordinate chain (forward over forward), a 100 x 100 Galerkin Jacobian
+  const WrittenDynamic C(written_chain(50));
+  const VectorXd qc = random_vector(50, 0.3, 1), pc = random_vector(50, 0.3, 2);
+  BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic>(C, ThetaMap::midpoint(), 0.05), qc, pc, VectorXd(0.05 * pc), 2) == 0);
+  BOOST_TEST(allocations_in_steps(DynamicGalerkinStep<WrittenDynamic>(C, QuadratureKind::gauss, 2, 0.05), qc, pc,
+                                  VectorXd(0.05 * pc), 2, true) == 0);
+}
