@@ -6,10 +6,10 @@
 #               and the numbers of the README's charts section
 #   make sanitize  build the whole test suite with AddressSanitizer and
 #               UndefinedBehaviorSanitizer (in build-sanitize/) and run it
-#   make fuzz   build the libFuzzer targets with clang (in build-fuzz/) and run each
-#               for FUZZ_SECONDS (default 60) from the seed corpus in tests/fuzz/corpus;
-#               fails on a crash, leak or undefined behaviour (the input is kept in
-#               build-fuzz/ as crash-*, leak-* or timeout-*)
+#   make fuzz   build the libFuzzer targets with clang in the sanitizer build and run
+#               each for FUZZ_SECONDS (default 60) from the seed corpus in
+#               tests/fuzz/corpus; fails on a crash, leak or undefined behaviour (the
+#               input is kept in build-sanitize/ as crash-*, leak-* or timeout-*)
 PKGS  := cmake g++ make libeigen3-dev libceres-dev libboost-test-dev libboost-dev libtomlplusplus-dev
 BUILD := build
 SUDO  := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
@@ -26,7 +26,10 @@ SAN_CXX   := clang++-14
 # -O2, not -O1: the heavy suites run 2.2 to 2.7 times faster (test_product 311 -> 123 s,
 # test_composition_verification 347 -> 130 s; the -O1 times were taken on a busier
 # machine) for a build that took 26 min at -j 2.
-# toml++'s internal debug assertions are off, as in the shipped NDEBUG build (see FUZZ_FLAGS)
+# toml++'s internal debug assertions are off, as in the shipped (NDEBUG, g++) build, where
+# they are no-ops: the sanitizers and fuzzers check what ships. (Without NDEBUG this also
+# keeps TOML_ASSERT_ASSUME from becoming clang's __builtin_assume.) Several of them fail
+# on malformed text ("q=[}"); the code after them was found memory-safe by the fuzzers.
 SAN_FLAGS := -O2 -gline-tables-only -fno-omit-frame-pointer -fsanitize=address,undefined \
              -fno-sanitize-recover=all -DTOML_ASSERT\(expr\)=static_assert\(true\)
 # detect_leaks: LeakSanitizer on (the default on x86_64 Linux, stated here); a finding stops the test
@@ -36,18 +39,7 @@ SAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:strict_string_checks=1
 
 # llvm-14 (only recommended by clang-14) holds llvm-symbolizer-14: file:line in the stack traces
 FUZZ_PKGS    := clang-14 libclang-rt-14-dev llvm-14
-FUZZ_BUILD   := build-fuzz
-FUZZ_CXX     := clang++-14
 FUZZ_SECONDS ?= 60
-FUZZ_FLAGS   := -std=c++17 -O1 -g -fno-omit-frame-pointer -fsanitize=fuzzer,address,undefined \
-                -fno-sanitize-recover=all -Wall -Wextra -I. -I/usr/include/eigen3 \
-                "-DTOML_ASSERT(expr)=static_assert(true)"
-# toml++'s internal debug assertions are off, as in the shipped (NDEBUG, g++) build,
-# where they are no-ops: the fuzzers check what ships. (Without NDEBUG this also keeps
-# TOML_ASSERT_ASSUME from becoming clang's __builtin_assume.) Several of them fail on
-# malformed text ("q=[}"); the code after them was found memory-safe by these targets.
-FUZZ_SCENE_SRC := tests/fuzz/fuzz_scene.cc examples/dvm/scene.cc examples/dvm/scene_written.cc
-FUZZ_EXPR_SRC  := tests/fuzz/fuzz_expression.cc
 
 .PHONY: deps build run test bench charts clean sanitize fuzz fuzz-deps
 
@@ -90,41 +82,34 @@ charts: deps
 	sh $(CHARTS)/update_readme.sh README.md $(CHARTS)/ratios.md $(CHARTS)/table_sweeps.md \
 	  $(CHARTS)/table_long.md $(CHARTS)/table_stability.md
 
-# The benchmark programs no test runs are left out (DVM_BUILD_BENCH=OFF).
-sanitize: fuzz-deps
-	cmake -S . -B $(SAN_BUILD) -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_CXX_COMPILER=$(SAN_CXX) $(LAUNCHER) \
-	  -DDVM_BUILD_BENCH=OFF -DCMAKE_CXX_FLAGS="$(SAN_FLAGS)" \
+# The benchmark programs no test runs are left out (DVM_BUILD_BENCH=OFF). The fuzz
+# targets are built in the same tree (DVM_FUZZ=ON), so that `make fuzz` after
+# `make sanitize` compiles only them.
+SAN_CONFIGURE = cmake -S . -B $(SAN_BUILD) -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_CXX_COMPILER=$(SAN_CXX) $(LAUNCHER) \
+	  -DDVM_BUILD_BENCH=OFF -DDVM_FUZZ=ON -DCMAKE_CXX_FLAGS="$(SAN_FLAGS)" \
 	  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined"
+sanitize: fuzz-deps
+	$(SAN_CONFIGURE)
 	cmake --build $(SAN_BUILD) -j $(JOBS)
 	cd $(SAN_BUILD) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS)
 
 fuzz-deps: deps
-	@missing=$$(for p in $(FUZZ_PKGS); do dpkg-query -W -f='$${Status}\n' $$p 2>/dev/null | grep -q "install ok installed" || echo $$p; done); \
-	if [ -n "$$missing" ]; then \
-	  echo "installing: $$missing"; \
-	  $(SUDO) apt-get update && DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y --no-install-recommends $$missing; \
-	fi
+	$(call install_missing,$(FUZZ_PKGS))
 
-$(FUZZ_BUILD)/fuzz_scene: $(FUZZ_SCENE_SRC) examples/dvm/scene.h examples/dvm/scene_written.h mechanics/expression.h mechanics/written_lagrangian.h solvers/composition_methods.h
-	@mkdir -p $(FUZZ_BUILD)
-	$(FUZZ_CXX) $(FUZZ_FLAGS) $(FUZZ_SCENE_SRC) -o $@
-
-$(FUZZ_BUILD)/fuzz_expression: $(FUZZ_EXPR_SRC) mechanics/expression.h
-	@mkdir -p $(FUZZ_BUILD)
-	$(FUZZ_CXX) $(FUZZ_FLAGS) $(FUZZ_EXPR_SRC) -o $@
-
-# Each target runs from a scratch copy of its corpus (new inputs land in build-fuzz/,
-# the committed seeds stay as they are); libFuzzer exits non-zero on a finding.
+# Each target runs from a scratch copy of its corpus (new inputs land in
+# build-sanitize/, the committed seeds stay as they are); libFuzzer exits non-zero on
+# a finding (the input is kept in build-sanitize/ as crash-*, leak-* or timeout-*).
 fuzz: fuzz-deps
-	$(MAKE) $(FUZZ_BUILD)/fuzz_scene $(FUZZ_BUILD)/fuzz_expression
+	$(SAN_CONFIGURE)
+	cmake --build $(SAN_BUILD) -j $(JOBS) --target fuzz_scene fuzz_expression
 	@for t in scene expression; do \
-	  mkdir -p $(FUZZ_BUILD)/corpus-$$t && \
+	  mkdir -p $(SAN_BUILD)/corpus-$$t && \
 	  echo "fuzzing $$t for $(FUZZ_SECONDS) s" && \
 	  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  ./$(FUZZ_BUILD)/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -max_len=4096 \
-	    -print_final_stats=1 -artifact_prefix=$(FUZZ_BUILD)/$$t- \
-	    $(FUZZ_BUILD)/corpus-$$t tests/fuzz/corpus/$$t || exit 1; \
+	  ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -max_len=4096 \
+	    -print_final_stats=1 -artifact_prefix=$(SAN_BUILD)/$$t- \
+	    $(SAN_BUILD)/corpus-$$t tests/fuzz/corpus/$$t || exit 1; \
 	done
 
 clean:
-	rm -rf $(BUILD) $(SAN_BUILD) $(FUZZ_BUILD)
+	rm -rf $(BUILD) $(SAN_BUILD)

@@ -1,10 +1,11 @@
-// `dvm check-map`: the identity checks of core/map_checks.h on a named map.
+// `dvm check-map`: the identity checks of core/map_checks.h on a map of the registry.
 #include <iostream>
 
 #include "core/manifold_checks.h"
 #include "core/map_checks.h"
 #include "examples/dvm/commands.h"
-#include "examples/dvm/json.h"
+#include "solvers/runtime/json.h"
+#include "solvers/runtime/registry.h"
 
 namespace dvm::cli {
 
@@ -34,43 +35,56 @@ int report_manifold(const Map& map, double tolerance) {
   return print_report(r, Map::Manifold::name, map.theta(), tolerance, ok);
 }
 
-template <int N, class M>
-int report(const M& map, double theta, double tolerance) {
-  const MapCheckReport r = check_map<N>(map);
-  const bool ok = report_passes(r, tolerance);
-  return print_report(r, "R^n", theta, tolerance, ok);
+template <int N>
+int report_rn(const MapEntry& e, double theta, double tolerance) {
+  auto report = [&](const auto& map) {
+    const MapCheckReport r = check_map<N>(map);
+    return print_report(r, "R^n", theta, tolerance, report_passes(r, tolerance));
+  };
+  switch (e.family) {
+    case MapFamily::theta: return report(ThetaMap(theta, e.name));
+    case MapFamily::retraction_theta: return report(RetractionMap<EuclideanRetraction>({}, theta));
+    case MapFamily::sphere:
+    case MapFamily::rotation: break;
+  }
+  throw InputError("check-map: map \"" + e.name + "\" does not live on R^n");
 }
 
-template <int N>
-int dispatch(const std::string& name, double theta, double tolerance) {
-  if (name == "explicit-euler") return report<N>(ThetaMap::explicit_euler(), 0.0, tolerance);
-  if (name == "adjoint-euler") return report<N>(ThetaMap::adjoint_euler(), 1.0, tolerance);
-  if (name == "midpoint") return report<N>(ThetaMap::midpoint(), 0.5, tolerance);
-  if (name == "theta") return report<N>(ThetaMap(theta), theta, tolerance);
-  return report<N>(RetractionMap<EuclideanRetraction>({}, theta), theta, tolerance);
+RetractionKind kind_of(const MapEntry& e) {
+  switch (e.retraction) {
+    case MapRetraction::exp: return RetractionKind::exp;
+    case MapRetraction::projection: return RetractionKind::projection;
+    case MapRetraction::cayley: return RetractionKind::cayley;
+    case MapRetraction::none: break;
+  }
+  throw InputError("check-map: map \"" + e.name + "\" is not built from a retraction of S^2 or SO(3)");
 }
 
 }  // namespace
 
 int check_map_command(const std::string& name, double theta, int dim, double tolerance) {
-  const MapInfo& info = find_map(name, "check-map");
-  if (info.space != "R^n") {
-    const bool exp = name.find("exp") != std::string::npos, fixed = name.find("fixed") != std::string::npos;
-    const double th = fixed ? 0.0 : 0.5;
-    if (info.space == "S^2")
-      return report_manifold(SphereMap(exp ? RetractionKind::exp : RetractionKind::projection, th, name), tolerance);
-    return report_manifold(SO3Map(exp ? RetractionKind::exp : RetractionKind::cayley, th, name), tolerance);
-  }
+  const MapEntry& e = find_map_entry(name, "check-map");
+  if (theta < 0.0) theta = e.theta;  // not given: the map's own
   if (!(theta >= 0.0 && theta <= 1.0))
     throw InputError("check-map: --theta " + std::to_string(theta) + " is outside [0, 1]");
-  switch (dim) {
-    case 1: return dispatch<1>(name, theta, tolerance);
-    case 2: return dispatch<2>(name, theta, tolerance);
-    case 3: return dispatch<3>(name, theta, tolerance);
-    case 4: return dispatch<4>(name, theta, tolerance);
-    default:
-      throw InputError("check-map: --dim " + std::to_string(dim) + " is not supported; expected 1, 2, 3 or 4");
+  if (!e.takes_theta && theta != e.theta)
+    throw InputError("check-map: --theta applies only to the maps that take a theta (theta, retraction-theta), not \"" +
+                     e.name + "\"");
+  if (e.space != Space::euclidean) {
+    if (dim > 0)
+      throw InputError("check-map: --dim applies only to maps on R^n; \"" + e.name + "\" lives on " +
+                       to_string(e.space));
+    if (e.family == MapFamily::sphere) return report_manifold(SphereMap(kind_of(e), theta, e.name), tolerance);
+    return report_manifold(SO3Map(kind_of(e), theta, e.name), tolerance);
   }
+  switch (dim > 0 ? dim : 2) {
+    case 1: return report_rn<1>(e, theta, tolerance);
+    case 2: return report_rn<2>(e, theta, tolerance);
+    case 3: return report_rn<3>(e, theta, tolerance);
+    case 4: return report_rn<4>(e, theta, tolerance);
+    default: break;
+  }
+  throw InputError("check-map: --dim " + std::to_string(dim) + " is not supported; expected 1, 2, 3 or 4");
 }
 
 }  // namespace dvm::cli

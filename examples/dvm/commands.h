@@ -12,32 +12,23 @@ namespace dvm::cli {
 
 struct RunOptions {
   std::string csv;  // overrides [output] csv
+  std::string npy;  // overrides [output] npy
   bool json = false;
   bool quiet = false;
-  // Added with issue 6:
-  std::string npy;                       // overrides [output] npy
   bool converge = false;                 // `dvm converge`: a convergence study instead of a run
   std::vector<std::int64_t> steps_list;  // converge: the step counts (empty: the default)
   double t_end = 0.0;                    // converge: the time span (0: the scene's)
 };
 
+// `dvm run` and `dvm converge` on a loaded scene (run.cc). Throws InputError.
 int run_scene(const Scene& scene, const RunOptions& options);
-// Systems on S^2 and SO(3) (run_manifold.cc).
-int run_manifold_scene(const Scene& scene, const RunOptions& options);
-
-// The runners of the systems added with issue 6 (run_classic.cc, run_nbody.cc,
-// run_written.cc), called by run_scene.
-int run_classic(const Scene& scene, const RunOptions& options);
-int run_nbody(const Scene& scene, const RunOptions& options);
-int run_written(const Scene& scene, const RunOptions& options);
-int run_written_high(const Scene& scene, const RunOptions& options);
 
 // Prints the identity residuals of a map as JSON; returns 0 if every identity holds
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.
 int check_map_command(const std::string& name, double theta, int dim, double tolerance);
 
-// Lists the composition methods (order, stages, symmetry, stability threshold) as a
-// table or JSON; returns 0.
+// Lists the composition methods (order, stages, symmetry, stability threshold) and the
+// Galerkin methods as a table or JSON; returns 0.
 int methods_command(bool json);
 
 }  // namespace dvm::cli

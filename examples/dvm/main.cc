@@ -9,10 +9,14 @@
 #include <vector>
 
 #include "examples/dvm/commands.h"
-#include "examples/dvm/json.h"
 #include "examples/dvm/scene.h"
+#include "solvers/runtime/converge.h"
+#include "solvers/runtime/json.h"
+#include "solvers/runtime/registry.h"
+#include "solvers/runtime/run.h"
 
 using namespace dvm::cli;
+using dvm::Json;
 
 namespace {
 
@@ -51,10 +55,7 @@ const char* kRunHelp =
     "              stderr only when stderr is a terminal\n"
     "\n"
     "Scene keys:\n"
-    "  [system]      builtin = NAME  (see 'dvm systems': harmonic, pendulum, kepler,\n"
-    "                  double-pendulum, henon-heiles, fpu, duffing, charged-particle,\n"
-    "                  nbody with masses = [m1, m2, ...], chain; on S^2 spherical-pendulum,\n"
-    "                  spherical-chain; on SO(3) rigid-body, heavy-top)\n"
+    "  [system]      builtin = NAME  (see 'dvm systems'; @SYSTEMS@)\n"
     "                params = { ... }   (the system's parameters; defaults otherwise)\n"
     "                or a Lagrangian written in the scene:\n"
     "                coordinates = [\"x\", \"y\"]   velocities are x_dot, y_dot\n"
@@ -65,19 +66,15 @@ const char* kRunHelp =
     "                name = \"...\"  (optional)\n"
     "                Expressions: + - * / ^ (or **), parentheses, numbers, pi, and\n"
     "                sin cos tan asin acos atan exp log sqrt cbrt abs sinh cosh tanh\n"
-    "                atan2(y, x) pow(x, y). Up to 6 coordinates.\n"
+    "                atan2(y, x) pow(x, y). Any number of coordinates.\n"
     "  [initial]     q = [...]   and   p = [...] or v = [...]   (S^2: q a unit vector, v tangent)\n"
     "                SO(3): rotation = [w, x, y, z] or R = [[...], [...], [...]],\n"
     "                       and omega = [...] (body angular velocity) or pi = [...]\n"
-    "  [integrator]  map = \"midpoint\" | \"explicit-euler\" | \"adjoint-euler\" | \"theta\"\n"
-    "                    | \"retraction-theta\"                                (on R^n)\n"
-    "                    | \"sphere-exp\" | \"sphere-projection\" and their \"-fixed\" forms (S^2)\n"
-    "                    | \"so3-exp\" | \"so3-cayley\" and their \"-fixed\" forms     (SO(3))\n"
+    "  [integrator]  map = NAME  (see 'dvm maps'; @MAPS@)\n"
     "                theta = 0.5  (map theta only)   step = 0.01   steps = N  or  t_end = T\n"
     "                solver = \"newton\" (default) | \"tiny\" (ceres::TinySolver)\n"
     "                max_iterations = 25   tolerance = 2e-15  (relative residual)\n"
-    "                composition = \"none\" (default) | \"stormer-verlet\" | \"triple-jump\"\n"
-    "                    | \"suzuki5\" | \"mclachlan4\" | \"yoshida6a\" ... | \"kahan-li8\"\n"
+    "                composition = \"none\" (default) | NAME  (see 'dvm methods'; @COMPOSITIONS@)\n"
     "                    | \"triple-jump:<even order>\"   (the basic method's step\n"
     "                    composed, in every form and on S^2/SO(3) too; one that is not\n"
     "                    symmetric enters as Phi_{h/2} o Phi*_{h/2}; see 'dvm methods')\n"
@@ -174,8 +171,55 @@ const char* kConvergeHelp =
     "example:\n"
     "  dvm converge examples/scenes/duffing.toml --steps-list 100,200,400,800 --t-end 10\n";
 
+// The run help with the registries' names filled in, and what each system runs.
+std::string run_help() {
+  std::string h = kRunHelp;
+  auto fill = [&](const std::string& tag, const std::string& text) {
+    const auto at = h.find(tag);
+    if (at != std::string::npos) h.replace(at, tag.size(), text);
+  };
+  std::string systems, maps, compositions;
+  for (const auto& e : dvm::system_registry()) systems += (systems.empty() ? "" : ", ") + e.name;
+  for (const auto& m : dvm::map_registry()) maps += (maps.empty() ? "" : ", ") + m.name;
+  for (const auto& c : dvm::composition_schemes()) compositions += (compositions.empty() ? "" : ", ") + c.name;
+  auto wrap = [](const std::string& list) {
+    std::string out, line;
+    std::size_t start = 0;
+    while (start < list.size()) {
+      auto end = list.find(", ", start);
+      const std::string word = list.substr(start, end == std::string::npos ? std::string::npos : end - start + 1);
+      if (line.size() + word.size() > 60) {
+        out += line + "\n                  ";
+        line.clear();
+      }
+      line += word + (end == std::string::npos ? "" : " ");
+      start = end == std::string::npos ? list.size() : end + 2;
+    }
+    return out + line;
+  };
+  fill("@SYSTEMS@", wrap(systems));
+  fill("@MAPS@", wrap(maps));
+  fill("@COMPOSITIONS@", wrap(compositions));
+  h += "\nWhat each system runs (any other combination is refused with exit 2):\n";
+  char line[256];
+  std::snprintf(line, sizeof line, "  %-18s %-6s %-38s %-5s %-8s %s\n", "system", "space", "forms", "comp.", "galerkin",
+                "boundary-value");
+  h += line;
+  auto row = [&](const dvm::SystemEntry& e) {
+    std::string forms;
+    for (dvm::Form f : e.caps.forms) forms += (forms.empty() ? "" : ",") + std::string(dvm::to_string(f));
+    std::snprintf(line, sizeof line, "  %-18s %-6s %-38s %-5s %-8s %s\n", e.name.c_str(), dvm::to_string(e.space),
+                  forms.c_str(), e.caps.composition ? "yes" : "no", e.caps.galerkin ? "yes" : "no",
+                  e.caps.boundary_value ? "yes" : "no");
+    h += line;
+  };
+  for (const auto& e : dvm::system_registry()) row(e);
+  row(dvm::written_system_entry());
+  return h;
+}
+
 [[noreturn]] void usage_error(const std::string& msg, const char* help) {
-  std::cerr << "dvm: " << msg << "\n\n" << help;
+  std::cerr << "dvm: " << msg << "\n\n" << (help == kRunHelp ? run_help() : std::string(help));
   std::exit(2);
 }
 
@@ -200,7 +244,7 @@ int cmd_run(const std::vector<std::string>& args) {
       return args[++i];
     };
     if (is_help(a)) {
-      std::cout << kRunHelp;
+      std::cout << run_help();
       return 0;
     } else if (a == "--set") {
       sets.push_back(value("--set"));
@@ -240,26 +284,29 @@ int cmd_maps(const std::vector<std::string>& args) {
       usage_error("unknown argument " + a, kMapsHelp);
     }
   }
+  const auto& maps = dvm::map_registry();
   if (json) {
     std::string out = "[\n";
-    for (std::size_t i = 0; i < maps().size(); ++i) {
-      const MapInfo& m = maps()[i];
+    for (std::size_t i = 0; i < maps.size(); ++i) {
+      const dvm::MapEntry& m = maps[i];
       Json::Object j;
       j.str("name", m.name)
           .str("formula", m.formula)
-          .boolean("symmetric", m.symmetric)
-          .num("order", m.order)
+          .boolean("symmetric", m.symmetric(m.theta) && !m.takes_theta)
+          .num("order", m.takes_theta ? 1 : m.order(m.theta))
           .boolean("closed_form_inverse", m.closed_inverse)
-          .str("space", m.space)
-          .str("note", m.note);
-      out += "  " + j.dump(4) + (i + 1 < maps().size() ? ",\n" : "\n");
+          .str("space", dvm::to_string(m.space))
+          .str("note", m.note)
+          .boolean("takes_theta", m.takes_theta);
+      out += "  " + j.dump(4) + (i + 1 < maps.size() ? ",\n" : "\n");
     }
     std::cout << out << "]\n";
   } else {
     std::printf("%-24s %-6s %-9s %-5s %-8s %s\n", "name", "space", "symmetric", "order", "inverse", "formula");
-    for (const auto& m : maps())
-      std::printf("%-24s %-6s %-9s %-5d %-8s %s   (%s)\n", m.name.c_str(), m.space.c_str(), m.symmetric ? "yes" : "no",
-                  m.order, m.closed_inverse ? "closed" : "Newton", m.formula.c_str(), m.note.c_str());
+    for (const auto& m : maps)
+      std::printf("%-24s %-6s %-9s %-5d %-8s %s   (%s)\n", m.name.c_str(), dvm::to_string(m.space),
+                  m.symmetric(m.theta) && !m.takes_theta ? "yes" : "no", m.takes_theta ? 1 : m.order(m.theta),
+                  m.closed_inverse ? "closed" : "Newton", m.formula.c_str(), m.note.c_str());
   }
   return 0;
 }
@@ -276,22 +323,32 @@ int cmd_systems(const std::vector<std::string>& args) {
       usage_error("unknown argument " + a, kSystemsHelp);
     }
   }
+  const auto& systems = dvm::system_registry();
   if (json) {
     std::string out = "[\n";
-    for (std::size_t i = 0; i < systems().size(); ++i) {
-      const SystemInfo& sy = systems()[i];
+    for (std::size_t i = 0; i < systems.size(); ++i) {
+      const dvm::SystemEntry& sy = systems[i];
       Json::Object j;
-      j.str("name", sy.name).num("dim", sy.dim).str("lagrangian", sy.lagrangian);
+      j.str("name", sy.name).num("dim", sy.dim).str("lagrangian", sy.lagrangian).str("space", dvm::to_string(sy.space));
       Json::Object ps;
       for (const auto& p : sy.params) ps.num(p.name, p.default_value);
       j.raw("params", ps.dump(6));
-      out += "  " + j.dump(4) + (i + 1 < systems().size() ? ",\n" : "\n");
+      std::string forms = "[";
+      for (std::size_t k = 0; k < sy.caps.forms.size(); ++k)
+        forms += (k ? ", " : "") + Json::string(dvm::to_string(sy.caps.forms[k]));
+      j.raw("forms", forms + "]")
+          .boolean("retraction_maps", sy.caps.retraction_maps)
+          .boolean("composition", sy.caps.composition)
+          .boolean("galerkin", sy.caps.galerkin)
+          .boolean("boundary_value", sy.caps.boundary_value);
+      out += "  " + j.dump(4) + (i + 1 < systems.size() ? ",\n" : "\n");
     }
     std::cout << out << "]\n";
   } else {
-    for (const auto& sy : systems()) {
-      std::printf("%-17s %s coordinates\n  %s\n", sy.name.c_str(),
-                  sy.dim > 0 ? std::to_string(sy.dim).c_str() : "3 x bodies", sy.lagrangian.c_str());
+    for (const auto& sy : systems) {
+      std::printf("%-17s %s coordinates on %s\n  %s\n", sy.name.c_str(),
+                  sy.dim > 0 ? std::to_string(sy.dim).c_str() : sy.dim_note.c_str(), dvm::to_string(sy.space),
+                  sy.lagrangian.c_str());
       for (const auto& p : sy.params)
         std::printf("  %-8s = %-10g %s\n", p.name.c_str(), p.default_value, p.meaning.c_str());
     }
@@ -362,8 +419,8 @@ int cmd_converge(const std::vector<std::string>& args) {
 
 int cmd_check_map(const std::vector<std::string>& args) {
   std::string name;
-  double theta = 0.5, tol = 1e-12;
-  int dim = 2;
+  double theta = -1.0, tol = 1e-12;  // theta < 0, dim 0: not given
+  int dim = 0;
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
     auto value = [&](const char* opt) -> std::string {

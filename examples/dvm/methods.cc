@@ -7,9 +7,8 @@
 #include <iostream>
 
 #include "examples/dvm/commands.h"
-#include "examples/dvm/json.h"
-#include "mechanics/quadrature.h"
-#include "solvers/composition_methods.h"
+#include "solvers/runtime/json.h"
+#include "solvers/runtime/registry.h"
 #include "solvers/stability.h"
 
 namespace dvm::cli {
@@ -31,9 +30,6 @@ std::vector<MethodRow> method_rows() {
                     std::isinf(composition_threshold(0.5, substeps(s, true)))});
   return rows;
 }
-
-constexpr const char* kGalerkinSource =
-    "Marsden & West, Acta Numerica 2001, Sec. 2.6; equals Gauss collocation (gauss) or Lobatto IIIA-IIIB (lobatto)";
 
 }  // namespace
 
@@ -65,18 +61,19 @@ int methods_command(bool json) {
           .str("citation", r.scheme.citation);
       out += "  " + j.dump(4) + ",\n";
     }
-    for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto})
-      for (int st = 1; st <= 6; ++st) {
-        Json::Object j;
-        j.str("name", "galerkin")
-            .str("quadrature", to_string(kind))
-            .num("stages", st)
-            .num("points", Quadrature(kind, st).points)
-            .num("order", 2 * st)
-            .boolean("symmetric", true)
-            .str("citation", kGalerkinSource);
-        out += "  " + j.dump(4) + (kind == QuadratureKind::lobatto && st == 6 ? "\n" : ",\n");
-      }
+    const auto& galerkin = galerkin_registry();
+    for (std::size_t i = 0; i < galerkin.size(); ++i) {
+      const GalerkinEntry& g = galerkin[i];
+      Json::Object j;
+      j.str("name", "galerkin")
+          .str("quadrature", to_string(g.quadrature))
+          .num("stages", g.stages)
+          .num("points", g.points)
+          .num("order", g.order)
+          .boolean("symmetric", true)
+          .str("citation", g.citation);
+      out += "  " + j.dump(4) + (i + 1 < galerkin.size() ? ",\n" : "\n");
+    }
     std::cout << out << "]\n";
     return 0;
   }
@@ -98,12 +95,9 @@ int methods_command(bool json) {
       "\nGalerkin discrete Lagrangians: [integrator] method = \"galerkin\", stages = s, quadrature = q\n"
       "(curves of degree s through the step's end points; R^n systems, lagrangian form)\n");
   std::printf("%-10s %-6s %-6s %-5s %-9s %s\n", "quadrature", "stages", "points", "order", "symmetric", "source");
-  for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto})
-    for (int st = 1; st <= 6; ++st)
-      std::printf("%-10s %-6d %-6d %-5d %-9s %s\n", to_string(kind), st, Quadrature(kind, st).points, 2 * st, "yes",
-                  st == 1 ? (kind == QuadratureKind::gauss ? "s = 1: the midpoint discrete Lagrangian"
-                                                           : "s = 1: the trapezoidal discrete Lagrangian")
-                          : kGalerkinSource);
+  for (const GalerkinEntry& g : galerkin_registry())
+    std::printf("%-10s %-6d %-6d %-5d %-9s %s\n", to_string(g.quadrature), g.stages, g.points, g.order, "yes",
+                (g.note.empty() ? g.citation : g.note).c_str());
   return 0;
 }
 

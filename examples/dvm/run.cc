@@ -1,39 +1,40 @@
-// `dvm run`: integrate a scene. The system and map named in the scene are resolved
-// once, here, into one instantiation of the templated run of run_with.h; the loop
-// itself has no runtime dispatch. Other systems and forms have their own translation
-// units: run_manifold.cc (S^2, SO(3)), run_forms.cc (Hamiltonian, SODE and Newmark
-// forms, the chain, boundary-value problems), run_classic.cc, run_nbody.cc and
-// run_written.cc (the classic systems and Lagrangians written in the scene).
+// `dvm run` and `dvm converge`: the scene's problem and method handed to the runtime
+// layer (solvers/runtime): one Run built by make_run, its rows written by one
+// Recorder, its summary printed by print_report; or a convergence study of the same.
 #include "examples/dvm/commands.h"
-#include "examples/dvm/run_forms.h"
-#include "examples/dvm/run_with.h"
+#include "solvers/runtime/converge.h"
+#include "solvers/runtime/run.h"
 
 namespace dvm::cli {
 
-// [problem] kind = "boundary-value" on S^2 (run_manifold_bvp.cc; declared here rather
-// than in commands.h so that adding it recompiles no other runner).
-int run_manifold_boundary_value(const Scene& scene, const RunOptions& options);
+namespace {
+
+std::string output_source(const Scene& s, const std::string& option_value, const char* option, const char* key) {
+  return option_value.empty() ? s.path + ": key '" + key + "'" : std::string(option);
+}
+
+}  // namespace
 
 int run_scene(const Scene& s, const RunOptions& o) {
-  try {
-    if (s.space != "R^n")
-      return s.problem == "boundary-value" ? run_manifold_boundary_value(s, o) : run_manifold_scene(s, o);
-    // boundary-value problems, the dynamic-size chain, the other forms
-    if (s.problem == "boundary-value") return run_boundary_value(s, o);
-    if (s.system == "chain") return run_chain(s, o);
-    if (s.form != "lagrangian") return run_form(s, o);
-    const auto& P = s.params;
-    if (s.system == "harmonic") return run_system(s, HarmonicOscillator(P.at("omega")), o);
-    if (s.system == "pendulum") return run_system(s, Pendulum(P.at("m"), P.at("l"), P.at("g")), o);
-    if (s.system == "kepler") return run_system(s, Kepler(P.at("mu")), o);
-    if (s.system == "lagrangian") return run_written(s, o);
-    if (s.system == "nbody") return run_nbody(s, o);
-    return run_classic(s, o);
-  } catch (const std::invalid_argument& e) {
-    throw InputError(s.path + ": " + e.what());
-  } catch (const DegenerateLagrangianError& e) {
-    throw InputError(s.path + ": " + e.what());
+  if (o.converge) {
+    ConvergeOptions co;
+    co.steps_list = o.steps_list;
+    co.t_end = o.t_end;
+    const ConvergeReport r = converge(s.problem, s.method, co);
+    return print_converge(r, o.json);
   }
+  const auto run = make_run(s.problem, s.method);
+  OutputSpec out;
+  out.csv = o.csv.empty() ? s.csv : o.csv;
+  out.npy = o.npy.empty() ? s.npy : o.npy;
+  out.csv_source = output_source(s, o.csv, "--csv", "output.csv");
+  out.npy_source = output_source(s, o.npy, "--npy", "output.npy");
+  out.every = s.every;
+  out.progress = !o.quiet && !o.json;
+  Recorder recorder(out);
+  const RunReport r = run->execute(&recorder);
+  print_report(r, o.json, o.quiet);
+  return r.failed || r.output_error ? 3 : 0;
 }
 
 }  // namespace dvm::cli

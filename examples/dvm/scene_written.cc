@@ -81,7 +81,7 @@ std::string string_location(const std::string& path, const toml::node& n, std::s
   return here();
 }
 
-void read_written_system(const std::string& path, const toml::table& sys, Scene& s) {
+void read_written_system(const std::string& path, const toml::table& sys, Problem& pr) {
   auto w = std::make_shared<WrittenSystem>();
   if (sys.get("builtin"))
     throw InputError(key_where(path, *sys.get("builtin"), "system.builtin") +
@@ -107,9 +107,6 @@ void read_written_system(const std::string& path, const toml::table& sys, Scene&
                        ": expected a name (a string)");
     w->coordinates.push_back(*v);
   }
-  if (static_cast<int>(w->coordinates.size()) > kMaxWrittenDim)
-    throw InputError(key_where(path, *c, "system.coordinates") + ": got " + std::to_string(w->coordinates.size()) +
-                     " coordinates, at most " + std::to_string(kMaxWrittenDim) + " are supported");
   if (const toml::node* params = sys.get("params")) {
     if (!params->is_table()) throw InputError(key_where(path, *params, "system.params") + ": expected a table of numbers");
     for (const auto& [k, v] : *params->as_table()) {
@@ -118,7 +115,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Scene&
       if (!(v.is_number()) || !x || !std::isfinite(*x))
         throw InputError(key_where(path, v, "system.params." + name) + ": expected a finite number");
       w->params.emplace_back(name, *x);
-      s.params[name] = *x;
+      pr.params[name] = *x;
     }
   }
   try {
@@ -144,11 +141,11 @@ void read_written_system(const std::string& path, const toml::table& sys, Scene&
   parse("energy", WrittenSystem::Kind::energy, w->energy, false);
   parse("hamiltonian", WrittenSystem::Kind::hamiltonian, w->hamiltonian, false);
   const toml::node* L = sys.get("lagrangian");
-  s.written_where = key_where(path, *L, "system.lagrangian");
-  if (const toml::node* H = sys.get("hamiltonian")) s.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
-  s.system = "lagrangian";
-  s.dim = w->dim();
-  s.written = std::move(w);
+  pr.written_where = key_where(path, *L, "system.lagrangian");
+  if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
+  pr.system = &written_system_entry();
+  pr.dim = w->dim();
+  pr.written = std::move(w);
 }
 
 }  // namespace dvm::cli

@@ -21,8 +21,9 @@
 
 namespace dvm::cli {
 
-// Fills s.system, s.params, s.written and s.dim from `sys`. Throws InputError.
-void read_written_system(const std::string& path, const toml::table& sys, Scene& s);
+// Fills the problem's system, params, written system and dimension from `sys`.
+// Throws InputError.
+void read_written_system(const std::string& path, const toml::table& sys, Problem& pr);
 
 // "file:line:column" of the character at `offset` of the string value `n` (or a
 // description of the --set override when the value did not come from the file).

@@ -63,4 +63,29 @@ inline double json_number(const std::string& json, const std::string& key, std::
 
 inline bool file_exists(const std::string& path) { return std::ifstream(path).good(); }
 
+// The numbers of the array after "key": (empty if absent).
+inline std::vector<double> json_array(const std::string& json, const std::string& key) {
+  std::vector<double> out;
+  const std::size_t at = json.find("\"" + key + "\": [");
+  if (at == std::string::npos) return out;
+  const char* c = json.c_str() + json.find('[', at) + 1;
+  char* end = nullptr;
+  for (;;) {
+    const double x = std::strtod(c, &end);
+    if (end == c) break;
+    out.push_back(x);
+    c = end;
+    while (*c == ',' || *c == ' ' || *c == '\n') ++c;
+  }
+  return out;
+}
+
+// The string after "key": (without escapes; "" if absent), searching from `from`.
+inline std::string json_string(const std::string& json, const std::string& key, std::size_t from = 0) {
+  const auto pos = json.find("\"" + key + "\": \"", from);
+  if (pos == std::string::npos) return "";
+  const auto start = pos + key.size() + 5;
+  return json.substr(start, json.find('"', start) - start);
+}
+
 }  // namespace cli_test

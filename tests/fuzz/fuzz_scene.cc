@@ -1,4 +1,5 @@
-// libFuzzer target: TOML text -> validated scene (examples/dvm/scene.cc).
+// libFuzzer target: TOML text -> validated scene (examples/dvm/scene.cc): a problem and a
+// method of the runtime layer, validated by dvm::validate.
 //
 // Any input must end in a Scene or an InputError (bad input is expected and fine);
 // anything else - a crash, undefined behaviour, a leak, another exception - is a
@@ -14,7 +15,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   try {
     const dvm::cli::Scene s = dvm::cli::load_scene_text(text, "fuzz.toml", {});
     // what the runners rely on after validation
-    if (s.step <= 0.0 || s.steps < 1 || s.every < 1) __builtin_trap();
+    if (s.problem.step <= 0.0 || s.problem.steps < 1 || s.every < 1 || !s.problem.system) __builtin_trap();
   } catch (const dvm::cli::InputError&) {
   }
   return 0;

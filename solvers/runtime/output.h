@@ -23,7 +23,7 @@
 #include <initializer_list>
 #include <string>
 
-namespace dvm::cli {
+namespace dvm {
 
 // The rows a run writes: the initial state, every `every`-th step and the last.
 double output_rows(std::int64_t steps, std::int64_t every);
@@ -73,4 +73,4 @@ std::string output_source(const std::string& scene_path, const std::string& opti
 // "12.3 GB": a byte count for messages.
 std::string human_bytes(double bytes);
 
-}  // namespace dvm::cli
+}  // namespace dvm

@@ -1,4 +1,4 @@
-#include "examples/dvm/output.h"
+#include "solvers/runtime/output.h"
 
 #include <sys/stat.h>
 #include <unistd.h>
@@ -14,9 +14,9 @@
 #include <map>
 #include <system_error>
 
-#include "examples/dvm/scene.h"
+#include "solvers/runtime/errors.h"
 
-namespace dvm::cli {
+namespace dvm {
 
 namespace fs = std::filesystem;
 
@@ -216,4 +216,4 @@ std::string output_source(const std::string& scene_path, const std::string& opti
   return option_value.empty() ? scene_path + ": key '" + key + "'" : std::string(option);
 }
 
-}  // namespace dvm::cli
+}  // namespace dvm

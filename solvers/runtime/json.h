@@ -7,7 +7,7 @@
 #include <string>
 #include <vector>
 
-namespace dvm::cli {
+namespace dvm {
 
 class Json {
  public:
@@ -69,4 +69,4 @@ class Json {
   };
 };
 
-}  // namespace dvm::cli
+}  // namespace dvm

@@ -1,0 +1,263 @@
+#include "solvers/runtime/converge.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <iostream>
+#include <limits>
+#include <set>
+#include <sstream>
+
+#include "solvers/runtime/json.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/runtime/run.h"
+
+namespace dvm {
+
+namespace {
+
+struct State {
+  std::vector<double> q, p;
+};
+
+double distance(const State& a, const State& b) {
+  double d = 0.0;
+  for (std::size_t i = 0; i < a.q.size() && i < b.q.size(); ++i) d = std::fmax(d, std::fabs(a.q[i] - b.q[i]));
+  for (std::size_t i = 0; i < a.p.size() && i < b.p.size(); ++i) d = std::fmax(d, std::fabs(a.p[i] - b.p[i]));
+  return d;
+}
+
+double size_of(const State& a) {
+  double s = 0.0;
+  for (double x : a.q) s = std::fmax(s, std::fabs(x));
+  for (double x : a.p) s = std::fmax(s, std::fabs(x));
+  return s;
+}
+
+Problem with_grid(const Problem& pr, double T, std::int64_t n) {
+  Problem out = pr;
+  out.step = T / static_cast<double>(n);
+  out.steps = n;
+  return out;
+}
+
+// Runs the problem with n steps to T; false (with the message) if the run failed.
+bool final_state(const Problem& pr, const Method& me, double T, std::int64_t n, State& out, std::int64_t& iterations,
+                 std::string& failure) {
+  const auto run = make_run(with_grid(pr, T, n), me);
+  const RunReport r = run->execute(nullptr);
+  iterations = r.solver_iterations;
+  if (r.failed) {
+    std::ostringstream m;
+    m.precision(17);
+    m << "the run with " << n << " steps (h = " << T / static_cast<double>(n) << ") failed at step "
+      << r.loop.failed_step << " (t = " << r.loop.failed_time << "): " << r.loop.failure.message << " (residual "
+      << r.loop.failure.residual << ")";
+    failure = m.str();
+    return false;
+  }
+  out.q = r.q_embedded;
+  out.p = r.p_final;
+  return true;
+}
+
+// The reference method of a problem: Galerkin Gauss s = 6 where the system runs it,
+// else kahan-li8 of the space's midpoint map.
+Method reference_method(const Problem& pr, const Method& me, int& order, std::string& name) {
+  Method ref;
+  ref.solver = SolverKind::newton;
+  ref.max_iterations = std::max(me.max_iterations, 25);
+  ref.tolerance = 2e-15;
+  if (pr.system->caps.galerkin) {
+    ref.galerkin = true;
+    ref.stages = 6;
+    ref.quadrature = QuadratureKind::gauss;
+    order = 12;
+    name = "galerkin gauss s=6 (order 12)";
+    return ref;
+  }
+  const char* map = pr.system->space == Space::sphere ? "sphere-exp" : pr.system->space == Space::rotation ? "so3-exp" : "midpoint";
+  ref.map = &find_map_entry(map, "converge");
+  ref.theta = ref.map->theta;
+  ref.composition = "kahan-li8";
+  order = 8;
+  name = std::string(map) + ", composition kahan-li8 (order 8)";
+  return ref;
+}
+
+}  // namespace
+
+ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptions& o) {
+  if (pr.boundary_value)
+    throw InputError("problem.kind: dvm converge measures initial-value runs; a boundary-value problem has no step "
+                     "size to refine");
+  validate(pr, me);
+  const double T = o.t_end > 0.0 ? o.t_end : static_cast<double>(pr.steps) * pr.step;
+  std::vector<std::int64_t> list = o.steps_list;
+  if (list.empty()) {
+    const std::int64_t n0 = std::max<std::int64_t>(1, static_cast<std::int64_t>(std::llround(T / pr.step)));
+    list = {n0, 2 * n0, 4 * n0, 8 * n0};
+  }
+  if (list.size() < 2) throw InputError("--steps-list: a convergence study needs at least two step counts");
+  std::set<std::int64_t> seen;
+  for (std::int64_t n : list) {
+    if (n < 1) throw InputError("--steps-list: step counts must be at least 1");
+    if (!seen.insert(n).second)
+      throw InputError("--steps-list: the step count " + std::to_string(n) +
+                       " appears twice; an order needs different step sizes");
+  }
+
+  ConvergeReport rep;
+  rep.system = pr.written ? pr.written->name : pr.system->name;
+  rep.map = me.map_label();
+  rep.method_label = me.label();
+  rep.form = to_string(me.form);
+  rep.composition = me.composition;
+  rep.galerkin = me.galerkin;
+  rep.stages = me.galerkin ? me.stages : 0;
+  rep.quadrature = me.galerkin ? to_string(me.quadrature) : "";
+  rep.map_order = me.galerkin ? 2 * me.stages : (me.form == Form::newmark ? (me.newmark_gamma == 0.5 ? 2 : 1)
+                                                                           : (me.map ? me.map->order(me.theta) : 0));
+  rep.method_order = me.order();
+  rep.t_end = T;
+
+  // the runs of the study
+  std::vector<State> finals(list.size());
+  std::vector<bool> ok(list.size(), false);
+  for (std::size_t i = 0; i < list.size(); ++i) {
+    ConvergeRow row;
+    row.steps = list[i];
+    row.h = T / static_cast<double>(list[i]);
+    std::string failure;
+    ok[i] = final_state(pr, me, T, list[i], finals[i], row.iterations, failure);
+    if (!ok[i] && rep.failure.empty()) rep.failure = failure;
+    rep.rows.push_back(row);
+  }
+
+  // the reference
+  State ref;
+  std::vector<double> exact_q, exact_p;
+  const auto run0 = make_run(with_grid(pr, T, list.front()), me);
+  if (run0->exact(T, exact_q, exact_p)) {
+    ref.q = exact_q;
+    ref.p = exact_p;
+    rep.reference = "exact solution";
+    rep.reference_accuracy = 1e-15 * std::fmax(1.0, size_of(ref));
+  } else {
+    int order = 0;
+    std::string name;
+    const Method rm = reference_method(pr, me, order, name);
+    std::int64_t n = *std::max_element(list.begin(), list.end());
+    State r1, r2;
+    std::int64_t it = 0;
+    std::string failure;
+    if (!final_state(pr, rm, T, n, r1, it, failure))
+      throw InputError("converge: the reference run (" + name + ") failed: " + failure);
+    double d = INFINITY;
+    for (int level = 0; level < 5; ++level) {
+      n *= 2;
+      if (!final_state(pr, rm, T, n, r2, it, failure))
+        throw InputError("converge: the reference run (" + name + ") failed: " + failure);
+      d = distance(r1, r2);
+      double smallest = INFINITY;
+      for (std::size_t i = 0; i < finals.size(); ++i)
+        if (ok[i]) smallest = std::fmin(smallest, distance(finals[i], r2));
+      // round-off of a run of n steps: about eps sqrt(n) times the solution's size
+      const double floor = 64.0 * std::numeric_limits<double>::epsilon() * std::sqrt(static_cast<double>(n)) *
+                           std::fmax(1.0, size_of(r2));
+      if (d <= std::fmax(1e-2 * smallest, floor)) break;
+      r1 = r2;
+    }
+    ref = r2;
+    rep.reference = name + " with " + std::to_string(n) + " steps";
+    rep.reference_accuracy = d;
+  }
+  rep.scale = size_of(ref);
+
+  // errors, orders, the fit
+  for (std::size_t i = 0; i < rep.rows.size(); ++i) {
+    ConvergeRow& row = rep.rows[i];
+    row.error = ok[i] ? distance(finals[i], ref) : NAN;
+    if (!ok[i])
+      row.excluded = "failed";
+    else if (!(row.error > 10.0 * rep.reference_accuracy))
+      row.excluded = "reference";
+    else if (!(row.error < 0.1 * std::fmax(1e-300, rep.scale)))
+      row.excluded = "pre-asymptotic";
+    row.order = i == 0 ? NAN : std::log(rep.rows[i - 1].error / row.error) / std::log(rep.rows[i - 1].h / row.h);
+  }
+  double sx = 0, sy = 0, sxx = 0, sxy = 0;
+  int used = 0;
+  for (const ConvergeRow& row : rep.rows) {
+    if (!row.excluded.empty()) continue;
+    const double x = std::log(row.h), y = std::log(row.error);
+    sx += x, sy += y, sxx += x * x, sxy += x * y;
+    ++used;
+  }
+  rep.fitted_points = used;
+  rep.fitted_order = used >= 2 ? (used * sxy - sx * sy) / (used * sxx - sx * sx) : NAN;
+  int at_reference = 0, pre = 0;
+  for (const ConvergeRow& row : rep.rows) {
+    at_reference += row.excluded == "reference";
+    pre += row.excluded == "pre-asymptotic";
+  }
+  std::ostringstream note;
+  note.precision(3);
+  if (used < 2) {
+    note << "not determined: " << used << " of " << rep.rows.size() << " runs have an error above 10 times the "
+         << "reference's accuracy (" << rep.reference_accuracy << ") and below a tenth of the solution's size ("
+         << rep.scale << ")";
+    if (pre > 0) note << "; errors of the size of the solution mean the runs are not in the asymptotic range (a "
+                         "chaotic horizon or steps too large: shorten --t-end or refine --steps-list)";
+    if (at_reference > 0) note << "; errors at the reference's accuracy cannot show an order (coarser steps, or a "
+                                  "shorter horizon where the reference is better)";
+  } else if (at_reference + pre > 0) {
+    note << "left out of the fit: " << at_reference << " run(s) within 10 times the reference's accuracy, " << pre
+         << " run(s) with an error above a tenth of the solution's size";
+  }
+  rep.fit_note = note.str();
+  return rep;
+}
+
+int print_converge(const ConvergeReport& r, bool json) {
+  if (json) {
+    Json::Object j;
+    j.str("system", r.system).str("map", r.map).str("form", r.form).str("composition", r.composition);
+    if (r.galerkin) j.str("method", "galerkin").num("stages", r.stages).str("quadrature", r.quadrature);
+    j.num("t_end", r.t_end).str("reference", r.reference).num("reference_accuracy", r.reference_accuracy);
+    std::string rows = "[\n";
+    for (std::size_t i = 0; i < r.rows.size(); ++i) {
+      const ConvergeRow& c = r.rows[i];
+      Json::Object o;
+      o.num("steps", static_cast<double>(c.steps)).num("h", c.h).num("error", c.error).num("order", c.order);
+      o.num("iterations", static_cast<double>(c.iterations)).boolean("fitted", c.excluded.empty());
+      if (!c.excluded.empty()) o.str("excluded", c.excluded);
+      rows += "    " + o.dump(6) + (i + 1 < r.rows.size() ? ",\n" : "\n");
+    }
+    j.raw("runs", rows + "  ]").num("fitted_order", r.fitted_order).num("map_order", r.map_order);
+    j.num("method_order", r.method_order);
+    if (!r.fit_note.empty()) j.str("fit_note", r.fit_note);
+    if (!r.failure.empty()) j.str("failure", r.failure);
+    std::cout << j.dump() << "\n";
+  } else {
+    std::printf("%s with %s to t = %g; reference: %s (accuracy %.1e)\n", r.system.c_str(), r.method_label.c_str(),
+                r.t_end, r.reference.c_str(), r.reference_accuracy);
+    std::printf("  %12s %14s %14s %8s %12s\n", "steps", "h", "error", "order", "iterations");
+    for (const ConvergeRow& c : r.rows)
+      std::printf("  %12lld %14.6e %14.6e %8.3f %12lld%s%s\n", static_cast<long long>(c.steps), c.h, c.error, c.order,
+                  static_cast<long long>(c.iterations), c.excluded.empty() ? "" : "   not fitted: ",
+                  c.excluded.c_str());
+    if (std::isnan(r.fitted_order))
+      std::printf("  fitted order %s\n", r.fit_note.c_str());
+    else
+      std::printf("  fitted order %.3f over %d runs (the method's order is %d)%s%s\n", r.fitted_order,
+                  r.fitted_points, r.method_order, r.fit_note.empty() ? "" : "; ", r.fit_note.c_str());
+  }
+  if (!r.failure.empty()) {
+    std::fprintf(stderr, "dvm: a run of the convergence study did not converge: %s\n", r.failure.c_str());
+    return 3;
+  }
+  return 0;
+}
+
+}  // namespace dvm

@@ -1,0 +1,70 @@
+// A convergence study of any initial-value run: the same problem integrated to a time
+// T with several step counts N (h = T/N), the error of each at T against a reference,
+// the observed order between neighbouring runs and a least-squares fitted order.
+//
+// Error: max(|q - q_ref|, |p - p_ref|) in the max norm over the stored coordinates in
+// their embedding (R^n: q; S^2: the unit vector(s); SO(3): the nine entries of R) and
+// the stored momenta.
+//
+// Reference: the exact solution where the system has one (its accuracy: round-off of
+// the closed form), else a run of a higher-order method of the same problem (Galerkin
+// Gauss s = 6, order 12, where the system runs Galerkin; else the kahan-li8 composition
+// of the space's midpoint map, order 8) refined by doubling its step count until two
+// successive reference runs agree to 1/100 of the smallest error measured (or to
+// round-off, or the refinement limit). The difference of the last two reference runs
+// is reported as the reference's accuracy: an upper estimate of the error of the finer
+// one.
+//
+// Fit: log(error) against log(h) by least squares over the runs whose error is above
+// 10 times the reference's accuracy and below a tenth of the solution's size (the
+// others are marked in the table: at the reference's floor, or not yet in the
+// asymptotic range). With fewer than two such runs the fitted order is not determined
+// and the report says why; it is never printed as a result.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solvers/runtime/problem.h"
+
+namespace dvm {
+
+struct ConvergeOptions {
+  std::vector<std::int64_t> steps_list;  // empty: the problem's count times 1, 2, 4, 8
+  double t_end = 0.0;                    // 0: the problem's steps x step
+};
+
+struct ConvergeRow {
+  std::int64_t steps = 0;
+  double h = 0.0, error = 0.0, order = 0.0;  // order: against the previous row
+  std::int64_t iterations = 0;
+  // "" when the row enters the fit; else why not ("reference", "pre-asymptotic", "failed")
+  std::string excluded;
+};
+
+struct ConvergeReport {
+  std::string system, map, method_label, form, composition;
+  bool galerkin = false;
+  int stages = 0;
+  std::string quadrature;
+  int map_order = 0, method_order = 0;
+  double t_end = 0.0;
+  std::string reference;
+  double reference_accuracy = 0.0;
+  double scale = 0.0;  // the size of the solution at T
+  std::vector<ConvergeRow> rows;
+  double fitted_order = 0.0;  // NaN when not determined
+  int fitted_points = 0;
+  std::string fit_note;       // why the fit is not determined, or what was left out
+  std::string failure;        // the first run that failed (empty: none)
+};
+
+// Throws InputError for a boundary-value problem, fewer than two step counts, equal
+// step counts, or anything make_run refuses.
+ConvergeReport converge(const Problem& problem, const Method& method, const ConvergeOptions& options);
+
+// The table (or JSON) on stdout; returns the exit status (3 when a run failed).
+int print_converge(const ConvergeReport& report, bool json);
+
+}  // namespace dvm

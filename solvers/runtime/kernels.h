@@ -1,0 +1,218 @@
+// The kernels behind make_run: templates instantiated once per system type in the
+// kernels_*.cc translation units, never in a caller.
+//
+// A kernel is StepperRun<View, Stepper>: a system view (what is monitored, written
+// and reported for a system: energy, invariants, columns, stored coordinates) and a
+// step type of solvers/ (any form, any space). execute() is one call of integrate()
+// (solvers/integrate.h: one loop for R^n and manifolds) with an observer that is a
+// template parameter, so the loop has no runtime dispatch. The factory functions
+// (make_rn_run, make_manifold_run, ...) read the method once and pick the step type:
+//
+//   form / method     R^n (fixed size)                    S^2, (S^2)^n, SO(3)
+//   lagrangian        PositionMomentumStep<S, Map>        ManifoldStep<S, Map>
+//   hamiltonian       HamiltonianStep<LegendreH<S>, Map>  ManifoldHamiltonianStep<H, Map>
+//   sode1 / sode2     SodeStep<S, tangent lift of Map>    (refused)
+//   newmark           NewmarkStep<S>                      (refused)
+//   galerkin          GalerkinStep<S>                     ManifoldGalerkinStep<S, s>
+//   composition       ComposedStep<Step> of any of these, adjoint stages from the
+//                     adjoint map (theta -> 1 - theta, Prop. 2.4) or Newmark's adjoint
+//   boundary value    BoundaryValueProblem<S, Map>        SphereBoundaryValueProblem
+//
+// Maps are resolved from their registry entry into a value of the space's map type(s):
+// on R^n std::variant<ThetaMap, RetractionMap<EuclideanRetraction>>, visited once.
+#pragma once
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <type_traits>
+#include <utility>
+#include <variant>
+#include <vector>
+
+#include <Eigen/SVD>
+
+#include "mechanics/hamiltonian.h"
+#include "mechanics/lagrangian.h"
+#include "solvers/composition.h"
+#include "solvers/integrate.h"
+#include "solvers/runtime/run.h"
+
+namespace dvm::kernels {
+
+// ---- maps from registry entries ------------------------------------------------------
+using RnMap = std::variant<ThetaMap, RetractionMap<EuclideanRetraction>>;
+
+inline RnMap rn_map(const Method& m) {
+  const MapEntry& e = *m.map;
+  switch (e.family) {
+    case MapFamily::theta:
+      return ThetaMap(m.theta, e.name);
+    case MapFamily::retraction_theta:
+      return RetractionMap<EuclideanRetraction>({}, m.theta);
+    case MapFamily::sphere:
+    case MapFamily::rotation:
+      break;
+  }
+  throw InputError("integrator.map: map \"" + e.name + "\" does not live on R^n");
+}
+
+// The adjoint of a theta-family map is the same family at 1 - theta (Prop. 2.4), so the
+// adjoint stages of a composition reuse the basic method's step type.
+inline ThetaMap same_type_adjoint(const ThetaMap& R) { return R.adjoint(); }
+inline RetractionMap<EuclideanRetraction> same_type_adjoint(const RetractionMap<EuclideanRetraction>& R) {
+  return RetractionMap<EuclideanRetraction>({}, 1.0 - R.theta());
+}
+
+// ---- the loop around any stepper -----------------------------------------------------
+// A system view V provides
+//   using Point, Covector;                    the stepper's state types
+//   std::vector<std::string> columns() const; the CSV columns
+//   int row_size() const;
+//   void fill_row(double* row, double t, const Point&, const Covector&, double E) const;
+//   double energy(const Point&, const Covector&) const;
+//   int invariant_count() const; void invariants(const Point&, const Covector&, double*) const;
+//   std::vector<InvariantReport> invariant_reports(const double* initial) const;
+//   void finish_report(RunReport&, const Point&, const Covector&) const;  stored forms
+//   double point_defect(const Point&) const;  (< 0: not a manifold)
+constexpr int kMaxInvariantValues = 8;
+
+template <class View, class Stepper>
+class StepperRun final : public Run {
+ public:
+  using Point = typename View::Point;
+  using Covector = typename View::Covector;
+
+  StepperRun(View view, Stepper stepper, Point q0, Covector p0, Covector v0, RunReport base, std::int64_t steps)
+      : view_(std::move(view)),
+        stepper_(std::move(stepper)),
+        q0_(std::move(q0)),
+        p0_(std::move(p0)),
+        v0_(std::move(v0)),
+        base_(std::move(base)),
+        steps_(steps) {
+    E0_ = view_.energy(q0_, p0_);
+  }
+
+  double initial_energy() const override { return E0_; }
+  bool exact(double t, std::vector<double>& q, std::vector<double>& p) const override {
+    return view_.exact(t, q0_, p0_, q, p);
+  }
+
+  RunReport execute(Recorder* rec) override {
+    RunReport r = base_;
+    const double h = stepper_.step_size();
+    std::vector<double> row(static_cast<std::size_t>(view_.row_size()));
+    if (rec) {
+      rec->open(view_.columns(), output_rows(steps_, rec->every()));
+      view_.fill_row(row.data(), 0.0, q0_, p0_, E0_);
+      rec->row(row.data());
+    }
+    const int n_inv = view_.invariant_count();
+    double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
+    view_.invariants(q0_, p0_, I0);
+    double max_energy_error = 0.0, E = E0_, defect = view_.point_defect(q0_);
+    Point q = q0_;
+    Covector p = p0_;
+    const auto start = std::chrono::steady_clock::now();
+    auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
+      E = view_.energy(qk, pk);
+      max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0_));
+      if (n_inv > 0) {
+        view_.invariants(qk, pk, Ik);
+        for (int i = 0; i < n_inv; ++i) Ierr[i] = std::fmax(Ierr[i], std::fabs(Ik[i] - I0[i]));
+      }
+      if (defect >= 0.0) defect = std::fmax(defect, view_.point_defect(qk));
+      if (rec) {
+        if (rec->wants(k, steps_)) {
+          view_.fill_row(row.data(), t, qk, pk, E);
+          rec->row(row.data());
+        }
+        rec->progress(k, steps_, h);
+      }
+    };
+    r.loop = integrate(stepper_, 0.0, q, p, v0_, steps_, observer);
+    r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    r.failed = r.loop.failed;
+    r.steps = r.loop.steps_done;
+    r.t_final = static_cast<double>(r.loop.steps_done) * h;
+    r.energy_initial = E0_;
+    r.energy_final = E;
+    r.max_abs_energy_error = max_energy_error;
+    r.solver_iterations = r.loop.solver_iterations;
+    r.max_step_iterations = r.loop.max_step_iterations;
+    r.max_point_defect = defect;
+    r.invariants = view_.invariant_reports(I0);
+    {
+      int k = 0;
+      for (InvariantReport& inv : r.invariants)
+        for (std::size_t c = 0; c < inv.initial.size(); ++c, ++k) inv.max_abs_error = std::fmax(inv.max_abs_error, Ierr[k]);
+    }
+    view_.finish_report(r, q, p);
+    if (r.failed && r.loop.failure.iterations > 0 && std::isfinite(r.loop.failure.residual))
+      view_.diagnose(r.loop.failure.message, q, p);
+    if (rec) {
+      if (!rec->finish(!r.failed, r.kept)) r.output_error = true;
+      if (!r.failed && !r.output_error) {
+        if (!rec->spec().csv.empty()) r.written.push_back(rec->spec().csv);
+        if (!rec->spec().npy.empty()) r.written.push_back(rec->spec().npy);
+      }
+    }
+    return r;
+  }
+
+ private:
+  View view_;
+  Stepper stepper_;
+  Point q0_;
+  Covector p0_, v0_;
+  RunReport base_;
+  std::int64_t steps_;
+  double E0_ = 0.0;
+};
+
+template <class View, class Stepper>
+std::unique_ptr<Run> stepper_run(const View& view, Stepper stepper, const typename View::Point& q0,
+                                 const typename View::Covector& p0, const typename View::Covector& v0,
+                                 const RunReport& base, std::int64_t steps) {
+  return std::make_unique<StepperRun<View, Stepper>>(view, std::move(stepper), q0, p0, v0, base, steps);
+}
+
+// The basic method's run, or its composition's when the method names one:
+// make(hk, adjoint) builds the step of size hk of the basic method or of its adjoint.
+template <class View, class Make>
+std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h, bool symmetric, const Make& make,
+                                    const typename View::Point& q0, const typename View::Covector& p0,
+                                    const typename View::Covector& v0, const RunReport& base, std::int64_t steps) {
+  if (me.composition == "none") return stepper_run(view, make(h, false), q0, p0, v0, base, steps);
+  using Step = decltype(make(h, false));
+  ComposedStep<Step> step(
+      h, substeps(find_composition(me.composition), symmetric), [&](double hk) { return make(hk, false); },
+      [&](double hk) { return make(hk, true); });
+  return stepper_run(view, std::move(step), q0, p0, v0, base, steps);
+}
+
+// The fields every report shares, from the problem and the method.
+RunReport base_report(const Problem& pr, const Method& me, const std::string& system_name);
+
+// "the Lagrangian is degenerate at the initial state" when the velocity Hessian is
+// singular there; `where` names the system's text or the scene.
+template <int N>
+void require_regular_hessian(const Mat<double, N, N>& H, const std::string& where) {
+  const Eigen::MatrixXd Hd = H;  // dynamic size: the fixed 1x1 SVD trips GCC's uninitialised warnings
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Hd);
+  const auto sv = svd.singularValues();
+  const double smax = sv.maxCoeff(), smin = sv.minCoeff();
+  if (!(smin > 1e-12 * smax) || !std::isfinite(smax)) {
+    std::ostringstream m;
+    m << where << ": the Lagrangian is degenerate at the initial state: the velocity Hessian d2L/dv2 is "
+      << "singular there (singular values from " << smax << " down to " << smin
+      << "), so the Legendre transform cannot be inverted and the discrete equations do not define a step";
+    throw InputError(m.str());
+  }
+}
+
+}  // namespace dvm::kernels

@@ -1,0 +1,211 @@
+// Kernels for systems whose size is known only at run time (mechanics/dynamic_system.h):
+// N bodies with any number of bodies, Lagrangians written in a scene with any number
+// of coordinates. One instantiation per system type, none per size:
+//
+//   form / method   step (solvers/dynamic_step.h, solvers/dynamic_galerkin_step.h)
+//   lagrangian      DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
+//                   with the flat retraction R_x(v) = x + v is the theta map itself,
+//                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
+//                   in closed form)
+//   hamiltonian     DynamicHamiltonianThetaStep of the scene's written H, or of H from
+//                   L by the Legendre transform
+//   galerkin        DynamicGalerkinStep<Sys>
+//   composition     ComposedStep of either step, the adjoint stages at 1 - theta
+// Included only by the kernels_*.cc translation units.
+#pragma once
+
+#include <cmath>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/hamiltonian.h"
+#include "solvers/dynamic_galerkin_step.h"
+#include "solvers/dynamic_step.h"
+#include "solvers/runtime/kernels.h"
+
+namespace dvm::kernels {
+
+// What a run-time-sized system monitors besides the energy.
+inline std::vector<InvariantReport> dynamic_invariant_names(const NBodyDynamic&) {
+  std::vector<InvariantReport> out;
+  for (const char* n : {"momentum x", "momentum y", "momentum z", "angular momentum x", "angular momentum y",
+                        "angular momentum z"}) {
+    InvariantReport r;
+    r.name = n;
+    r.initial = {0.0};
+    out.push_back(r);
+  }
+  return out;
+}
+inline void dynamic_invariant_values(const NBodyDynamic&, const Eigen::VectorXd& q, const Eigen::VectorXd& p,
+                                     double* out) {
+  const auto m = NBodyDynamic::momenta(q, p);
+  for (int i = 0; i < 6; ++i) out[i] = m[static_cast<std::size_t>(i)];
+}
+// A coordinate that L does not depend on is cyclic: its momentum is conserved.
+inline std::vector<InvariantReport> dynamic_invariant_names(const WrittenDynamic& L) {
+  std::vector<InvariantReport> out;
+  for (int i = 0; i < L.dim() && static_cast<int>(out.size()) < kMaxInvariantValues; ++i)
+    if (L.cyclic(i)) {
+      InvariantReport r;
+      r.name = "p_" + L.system()->coordinates[static_cast<std::size_t>(i)] + " (cyclic)";
+      r.initial = {0.0};
+      out.push_back(r);
+    }
+  return out;
+}
+inline void dynamic_invariant_values(const WrittenDynamic& L, const Eigen::VectorXd&, const Eigen::VectorXd& p,
+                                     double* out) {
+  int k = 0;
+  for (int i = 0; i < L.dim() && k < kMaxInvariantValues; ++i)
+    if (L.cyclic(i)) out[k++] = p[i];
+}
+inline double dynamic_energy(const NBodyDynamic& L, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
+                             const Eigen::VectorXd&) {
+  return energy(L, q, v);
+}
+inline double dynamic_energy(const WrittenDynamic& L, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
+                             const Eigen::VectorXd& p) {
+  return L.energy_at(q, v, p);
+}
+
+template <class Sys>
+struct DynamicView {
+  using Point = Eigen::VectorXd;
+  using Covector = Eigen::VectorXd;
+  Sys L;
+  std::vector<std::string> names;  // coordinate names of the columns (empty: q0.., p0..)
+  Vec<double, 2> sigma0 = Vec<double, 2>::Zero();  // the scale of d2L/dv2 at the initial state
+  int n() const { return L.dim(); }
+
+  // d2L/dv2 at (q, v)
+  Eigen::MatrixXd velocity_hessian(const Point& q, const Point& v) const {
+    const int m = n();
+    Eigen::VectorXd Lq(m), Lv(m);
+    Eigen::MatrixXd Lqq(m, m), Lqv(m, m), Lvv(m, m);
+    L.hessian(q, v, Lq, Lv, Lqq, Lqv, Lvv);
+    return Lvv;
+  }
+
+  std::vector<std::string> columns() const {
+    std::vector<std::string> c{"t"};
+    for (int i = 0; i < n(); ++i) c.push_back(names.empty() ? "q" + std::to_string(i) : names[static_cast<std::size_t>(i)]);
+    for (int i = 0; i < n(); ++i)
+      c.push_back(names.empty() ? "p" + std::to_string(i) : "p_" + names[static_cast<std::size_t>(i)]);
+    c.push_back("energy");
+    return c;
+  }
+  int row_size() const { return 2 * n() + 2; }
+  void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const {
+    row[0] = t;
+    for (int i = 0; i < n(); ++i) row[1 + i] = q[i], row[1 + n() + i] = p[i];
+    row[2 * n() + 1] = E;
+  }
+  double energy(const Point& q, const Covector& p) const { return dynamic_energy(L, q, legendre_inverse(L, q, p), p); }
+  int invariant_count() const { return static_cast<int>(dynamic_invariant_names(L).size()); }
+  void invariants(const Point& q, const Covector& p, double* out) const { dynamic_invariant_values(L, q, p, out); }
+  std::vector<InvariantReport> invariant_reports(const double* I0) const {
+    std::vector<InvariantReport> r = dynamic_invariant_names(L);
+    for (std::size_t i = 0; i < r.size(); ++i) r[i].initial[0] = I0[i];
+    return r;
+  }
+  double point_defect(const Point&) const { return -1.0; }
+  void finish_report(RunReport& r, const Point& q, const Covector& p) const {
+    r.q_final.assign(q.data(), q.data() + q.size());
+    r.p_final.assign(p.data(), p.data() + p.size());
+    r.q_embedded = r.q_final;
+  }
+  // what the Legendre transform looks like where a solve stopped (mechanics/hamiltonian.h)
+  void diagnose(std::string& message, const Point& q, const Covector& p) const {
+    try {
+      message += "; " + legendre_scale_diagnosis(matrix_hessian_scale(velocity_hessian(q, legendre_inverse(L, q, p))),
+                                                 sigma0);
+    } catch (const std::domain_error& e) {
+      message += std::string("; at the last completed state the Legendre transform cannot be inverted: ") + e.what();
+    }
+  }
+  bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
+};
+
+// The theta of the method's map as a ThetaMap (retraction-theta: the same map).
+inline ThetaMap dynamic_theta_map(const Method& me) {
+  const MapEntry& e = *me.map;
+  switch (e.family) {
+    case MapFamily::theta:
+    case MapFamily::retraction_theta:
+      return ThetaMap(me.theta, e.name);
+    case MapFamily::sphere:
+    case MapFamily::rotation:
+      break;
+  }
+  throw InputError("integrator.map: map \"" + e.name + "\" does not live on R^n");
+}
+
+// `hamiltonian`: the written H, when the scene gives one (null: H from L).
+template <class Sys>
+std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Method& me,
+                                      const std::vector<std::string>& names,
+                                      const std::shared_ptr<const WrittenSystem>& hamiltonian) {
+  using V = Eigen::VectorXd;
+  DynamicView<Sys> view{L, names};
+  RunReport base = base_report(pr, me, L.name());
+  const StepOptions opt = me.step_options();
+  const double h = pr.step;
+  const int n = L.dim();
+  const std::string where = pr.written ? pr.written_where : pr.origin;
+
+  // the initial state, with the velocity Hessian checked where it is used
+  const V q = Eigen::Map<const V>(pr.q.data(), n);
+  V p(n), v0(n);
+  auto check = [&](const V& v) { require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where); };
+  if (pr.momentum_given) {
+    p = Eigen::Map<const V>(pr.p.data(), n);
+    check(V::Zero(n));
+    try {
+      v0 = legendre_inverse(L, q, p);
+    } catch (const DegenerateLagrangianError& e) {
+      throw InputError(where + ": the Lagrangian is degenerate at the initial state: " + e.what());
+    }
+  } else {
+    v0 = Eigen::Map<const V>(pr.v.data(), n);
+    p = legendre(L, q, v0);
+  }
+  check(v0);
+  view.sigma0 = matrix_hessian_scale(view.velocity_hessian(q, v0));
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
+    if (hamiltonian) {
+      const double H = L.hamiltonian(q, p), E = energy(L, q, v0);
+      if (!(std::fabs(H - E) <= 1e-9 * std::fmax(1.0, std::fabs(E)))) {
+        std::ostringstream m;
+        m.precision(17);
+        m << pr.hamiltonian_where << ": system.hamiltonian does not match the Legendre transform of the Lagrangian at "
+          << "the initial state: H(q, p) = " << H << " but E_L(q, v) = <p, v> - L = " << E;
+        throw InputError(m.str());
+      }
+    }
+  }
+  if (!std::isfinite(view.energy(q, p))) throw InputError(pr.origin + ": the energy at the initial state is not finite");
+
+  if (me.galerkin)
+    return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
+  const ThetaMap R = dynamic_theta_map(me);
+  if (me.form == Form::hamiltonian) {
+    auto run_with = [&](const auto& H) {
+      using Step = DynamicHamiltonianThetaStep<std::decay_t<decltype(H)>>;
+      auto make = [&](double hk, bool adj) { return Step(H, adj ? R.adjoint() : R, hk, opt); };
+      return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+    };
+    if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+      if (hamiltonian) return run_with(WrittenDynamicHamiltonian(hamiltonian));
+    return run_with(LegendreDynamicHamiltonian<Sys>(L));
+  }
+  if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
+  auto make = [&](double hk, bool adj) { return DynamicThetaStep<Sys>(L, adj ? R.adjoint() : R, hk, opt); };
+  return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+}
+
+}  // namespace dvm::kernels

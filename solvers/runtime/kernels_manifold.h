@@ -1,0 +1,336 @@
+// Kernels for systems on S^2, (S^2)^n and SO(3): the system view (stored coordinates,
+// momentum maps, columns) and make_manifold_run, which picks the step type of the
+// method once. The steps are solved in the chart centred at the current point
+// (solvers/manifold_step.h); their output on each space:
+//   S^2     CSV  t, x, y, z, p0, p1, p2, energy, J3          (J3 = (x cross p)_3)
+//   (S^2)^n CSV  t, x1, y1, z1, ..., p0, ..., energy, J3
+//   SO(3)   CSV  t, qw, qx, qy, qz, pi0, pi1, pi2, energy, m0, m1, m2 (rigid body: the
+//                spatial angular momentum R pi) or J3 (heavy top: its vertical part)
+// Included only by the kernels_*.cc translation units.
+#pragma once
+
+#include <algorithm>
+#include <memory>
+#include <string>
+#include <type_traits>
+#include <vector>
+
+#include "mechanics/manifold_hamiltonian.h"
+#include "mechanics/manifold_systems.h"
+#include "solvers/manifold_boundary_value.h"
+#include "solvers/manifold_composition.h"
+#include "solvers/manifold_galerkin_step.h"
+#include "solvers/manifold_hamiltonian_step.h"
+#include "solvers/manifold_step.h"
+#include "solvers/runtime/kernels.h"
+
+namespace dvm::kernels {
+
+using V3 = Vec<double, 3>;
+using M3 = Mat<double, 3, 3>;
+
+// ---- maps from registry entries ------------------------------------------------------
+inline RetractionKind retraction_kind(const MapEntry& e) {
+  switch (e.retraction) {
+    case MapRetraction::exp: return RetractionKind::exp;
+    case MapRetraction::projection: return RetractionKind::projection;
+    case MapRetraction::cayley: return RetractionKind::cayley;
+    case MapRetraction::none: break;
+  }
+  throw InputError("integrator.map: map \"" + e.name + "\" is not built from a retraction of S^2 or SO(3)");
+}
+inline SphereMap sphere_map(const Method& m) {
+  if (m.map->family != MapFamily::sphere)
+    throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on S^2");
+  return SphereMap(retraction_kind(*m.map), m.theta, m.map->name);
+}
+inline SO3Map so3_map(const Method& m) {
+  if (m.map->family != MapFamily::rotation)
+    throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on SO(3)");
+  return SO3Map(retraction_kind(*m.map), m.theta, m.map->name);
+}
+
+// ---- per system: stored coordinates, momentum maps, columns ----------------------------
+template <int N>
+std::vector<double> stored(const Vec<double, N>& x) {
+  return std::vector<double>(x.data(), x.data() + N);
+}
+inline std::vector<double> stored(const M3& R) {
+  const Vec<double, 4> q = SO3::to_quaternion(R);
+  return {q[0], q[1], q[2], q[3]};
+}
+template <int N>
+std::vector<double> embedded(const Vec<double, N>& x) {
+  return stored(x);
+}
+inline std::vector<double> embedded(const M3& R) { return std::vector<double>(R.data(), R.data() + 9); }
+
+inline std::vector<double> momentum_map(const SphericalPendulum&, const V3& x, const V3& p) {
+  return {SphericalPendulum::vertical_momentum(x, p)};
+}
+inline std::vector<double> momentum_map(const RigidBody&, const M3& R, const V3& p) {
+  const V3 m = RigidBody::spatial_momentum(R, p);
+  return {m[0], m[1], m[2]};
+}
+inline std::vector<double> momentum_map(const HeavyTop&, const M3& R, const V3& p) {
+  return {HeavyTop::vertical_momentum(R, p)};
+}
+template <int K>
+std::vector<double> momentum_map(const SphericalChain<K>&, const Vec<double, 3 * K>& x, const Vec<double, 3 * K>& p) {
+  return {SphericalChain<K>::vertical_momentum(x, p)};
+}
+
+inline std::vector<std::string> point_columns(const SphericalPendulum&) { return {"x", "y", "z"}; }
+inline std::vector<std::string> point_columns(const RigidBody&) { return {"qw", "qx", "qy", "qz"}; }
+inline std::vector<std::string> point_columns(const HeavyTop&) { return {"qw", "qx", "qy", "qz"}; }
+template <int K>
+std::vector<std::string> point_columns(const SphericalChain<K>&) {
+  std::vector<std::string> out;
+  for (int i = 1; i <= K; ++i)
+    for (const char* c : {"x", "y", "z"}) out.push_back(c + std::to_string(i));
+  return out;
+}
+inline const char* momentum_prefix(const SphericalPendulum&) { return "p"; }
+inline const char* momentum_prefix(const RigidBody&) { return "pi"; }
+inline const char* momentum_prefix(const HeavyTop&) { return "pi"; }
+template <int K>
+const char* momentum_prefix(const SphericalChain<K>&) {
+  return "p";
+}
+inline std::vector<std::string> momentum_columns(const SphericalPendulum&) { return {"J3"}; }
+inline std::vector<std::string> momentum_columns(const RigidBody&) { return {"m0", "m1", "m2"}; }
+inline std::vector<std::string> momentum_columns(const HeavyTop&) { return {"J3"}; }
+template <int K>
+std::vector<std::string> momentum_columns(const SphericalChain<K>&) {
+  return {"J3"};
+}
+// The name of the conserved momentum in the report (and its historical JSON keys).
+template <class S>
+std::string momentum_name(const S&) {
+  return std::is_same_v<S, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
+}
+
+// ---- the view -------------------------------------------------------------------------
+template <class S, class Map>
+struct ManifoldView {
+  using Mf = typename Map::Manifold;
+  using Point = typename Mf::template Point<double>;
+  using Covector = typename Mf::template Tangent<double>;
+  static constexpr int C = Covector::RowsAtCompileTime;
+  S L;
+
+  std::vector<std::string> columns() const {
+    std::vector<std::string> c{"t"};
+    for (const auto& n : point_columns(L)) c.push_back(n);
+    for (int i = 0; i < C; ++i) c.push_back(momentum_prefix(L) + std::to_string(i));
+    c.push_back("energy");
+    for (const auto& n : momentum_columns(L)) c.push_back(n);
+    return c;
+  }
+  int row_size() const { return static_cast<int>(columns().size()); }
+  void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const {
+    int k = 0;
+    row[k++] = t;
+    for (double x : stored(q)) row[k++] = x;
+    for (int i = 0; i < C; ++i) row[k++] = p[i];
+    row[k++] = E;
+    for (double x : momentum_map(L, q, p)) row[k++] = x;
+  }
+  double energy(const Point& q, const Covector& p) const {
+    return manifold_energy(L, q, manifold_legendre_inverse(L, q, p));
+  }
+  int invariant_count() const { return static_cast<int>(momentum_columns(L).size()); }
+  void invariants(const Point& q, const Covector& p, double* out) const {
+    int k = 0;
+    for (double x : momentum_map(L, q, p)) out[k++] = x;
+  }
+  std::vector<InvariantReport> invariant_reports(const double* I0) const {
+    InvariantReport r;
+    r.name = momentum_name(L);
+    for (int i = 0; i < invariant_count(); ++i) r.initial.push_back(I0[i]);
+    r.legacy_key = momentum_name(L);
+    r.array = true;
+    std::replace(r.name.begin(), r.name.end(), '_', ' ');
+    return {r};
+  }
+  double point_defect(const Point& q) const { return Mf::point_defect(q); }
+  void finish_report(RunReport& r, const Point& q, const Covector& p) const {
+    r.q_final = stored(q);
+    r.p_final = std::vector<double>(p.data(), p.data() + C);
+    r.q_embedded = embedded(q);
+  }
+  void diagnose(std::string&, const Point&, const Covector&) const {}
+  bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
+};
+
+template <class S, class Map>
+void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifold::template Point<double>& q,
+                            typename Map::Manifold::template Tangent<double>& p,
+                            typename Map::Manifold::template Tangent<double>& v0) {
+  using Mf = typename Map::Manifold;
+  using Point = typename Mf::template Point<double>;
+  using Covector = typename Mf::template Tangent<double>;
+  if constexpr (std::is_same_v<Mf, SO3>)
+    q = SO3::from_quaternion(Vec<double, 4>(pr.q[0], pr.q[1], pr.q[2], pr.q[3]));
+  else
+    q = Eigen::Map<const Point>(pr.q.data());
+  if (pr.momentum_given) {
+    p = Eigen::Map<const Covector>(pr.p.data());
+    v0 = manifold_legendre_inverse(L, q, p);
+  } else {
+    v0 = Eigen::Map<const Covector>(pr.v.data());
+    p = manifold_legendre(L, q, v0);
+  }
+}
+
+// ---- boundary-value problems on S^2: one Ceres problem with ceres::SphereManifold -------
+template <class S, class Map>
+class SphereBoundaryValueRun final : public Run {
+ public:
+  SphereBoundaryValueRun(ManifoldView<S, Map> view, Map R, const Problem& pr, const Method& me, RunReport base)
+      : view_(std::move(view)),
+        B_(view_.L, std::move(R), pr.step),
+        qa_(pr.q[0], pr.q[1], pr.q[2]),
+        qb_(pr.q_final[0], pr.q_final[1], pr.q_final[2]),
+        steps_(pr.steps),
+        h_(pr.step),
+        max_iterations_(me.max_iterations),
+        base_(std::move(base)) {}
+
+  double initial_energy() const override { return 0.0; }
+  bool exact(double, std::vector<double>&, std::vector<double>&) const override { return false; }
+
+  RunReport execute(Recorder* rec) override {
+    RunReport r = base_;
+    if (rec) rec->open(view_.columns(), output_rows(steps_, rec->every()));  // room checked before the solve
+    BoundaryValueOptions bo;
+    bo.max_iterations = max_iterations_;
+    const auto start = std::chrono::steady_clock::now();
+    const auto res = B_.solve(qa_, qb_, static_cast<int>(steps_), bo);
+    r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    const auto K = static_cast<std::size_t>(steps_);
+    std::vector<double> row(static_cast<std::size_t>(view_.row_size()));
+    double emin = INFINITY, emax = -INFINITY, E0 = 0.0, EK = 0.0, defect = 0.0, jmin = INFINITY, jmax = -INFINITY;
+    for (std::size_t k = 0; k <= K; ++k) {
+      const double E = view_.energy(res.q[k], res.p[k]);
+      if (k == 0) E0 = E;
+      EK = E;
+      emin = std::fmin(emin, E);
+      emax = std::fmax(emax, E);
+      const double J = momentum_map(view_.L, res.q[k], res.p[k])[0];
+      jmin = std::fmin(jmin, J);
+      jmax = std::fmax(jmax, J);
+      defect = std::fmax(defect, view_.point_defect(res.q[k]));
+      if (rec && rec->wants(static_cast<std::int64_t>(k), steps_)) {
+        view_.fill_row(row.data(), static_cast<double>(k) * h_, res.q[k], res.p[k], E);
+        rec->row(row.data());
+      }
+    }
+    r.failed = !res.converged;
+    r.steps = steps_;
+    r.t_final = static_cast<double>(steps_) * h_;
+    r.q_initial = stored(res.q.front());
+    r.p_initial = stored(res.p.front());
+    view_.finish_report(r, res.q.back(), res.p.back());
+    r.energy_initial = E0;
+    r.energy_final = EK;
+    r.max_abs_energy_error = std::fmax(emax - E0, E0 - emin);
+    r.max_point_defect = defect;
+    r.momentum_spread = jmax - jmin;
+    r.max_del_residual = res.max_residual;
+    r.residual_scale = res.scale;
+    r.solver_iterations = res.iterations;
+    r.message = res.message;
+    if (rec) {
+      if (!rec->finish(res.converged, r.kept)) r.output_error = true;
+      if (res.converged && !r.output_error) {
+        if (!rec->spec().csv.empty()) r.written.push_back(rec->spec().csv);
+        if (!rec->spec().npy.empty()) r.written.push_back(rec->spec().npy);
+      }
+    }
+    return r;
+  }
+
+ private:
+  ManifoldView<S, Map> view_;
+  SphereBoundaryValueProblem<S, Map> B_;
+  V3 qa_, qb_;
+  std::int64_t steps_;
+  double h_;
+  int max_iterations_;
+  RunReport base_;
+};
+
+// ---- the factory ---------------------------------------------------------------------
+// Galerkin stage counts are compile-time sizes of ManifoldGalerkinStep: 1..6.
+template <class S, class View, class Point, class Covector>
+std::unique_ptr<Run> manifold_galerkin_run(const View& view, const S& L, const Method& me, double h,
+                                           const StepOptions& opt, const Point& q, const Covector& p,
+                                           const Covector& v0, const RunReport& base, std::int64_t steps) {
+  switch (me.stages) {
+    case 1: return stepper_run(view, ManifoldGalerkinStep<S, 1>(L, me.quadrature, h, opt), q, p, v0, base, steps);
+    case 2: return stepper_run(view, ManifoldGalerkinStep<S, 2>(L, me.quadrature, h, opt), q, p, v0, base, steps);
+    case 3: return stepper_run(view, ManifoldGalerkinStep<S, 3>(L, me.quadrature, h, opt), q, p, v0, base, steps);
+    case 4: return stepper_run(view, ManifoldGalerkinStep<S, 4>(L, me.quadrature, h, opt), q, p, v0, base, steps);
+    case 5: return stepper_run(view, ManifoldGalerkinStep<S, 5>(L, me.quadrature, h, opt), q, p, v0, base, steps);
+    case 6: return stepper_run(view, ManifoldGalerkinStep<S, 6>(L, me.quadrature, h, opt), q, p, v0, base, steps);
+    default: break;
+  }
+  throw InputError("integrator.stages: expected a whole number from 1 to 6");
+}
+
+// Which parts of the method are built for this system (the rest was refused by
+// validate() and is not instantiated): the Hamiltonian form, Galerkin, boundary values.
+template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue>
+std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& pr, const Method& me) {
+  using View = ManifoldView<S, Map>;
+  using Mf = typename Map::Manifold;
+  using Point = typename View::Point;
+  using Covector = typename View::Covector;
+  const View view{L};
+  RunReport base = base_report(pr, me, pr.system->name);
+  base.manifold = Mf::name;
+  const StepOptions opt = me.step_options();
+  const double h = pr.step;
+
+  if (pr.boundary_value) {
+    if constexpr (BoundaryValue)
+      return std::make_unique<SphereBoundaryValueRun<S, Map>>(view, R, pr, me, base);
+    else
+      throw InputError("problem.kind: unsupported");  // refused by validate()
+  }
+  Point q;
+  Covector p, v0;
+  manifold_initial_state<S, Map>(pr, L, q, p, v0);
+  if (!std::isfinite(view.energy(q, p))) throw InputError(pr.origin + ": the energy at the initial state is not finite");
+
+  if (me.galerkin) {
+    if constexpr (Galerkin)
+      return manifold_galerkin_run(view, L, me, h, opt, q, p, v0, base, pr.steps);
+    else
+      throw InputError("integrator.method: unsupported");  // refused by validate()
+  }
+  auto composed = [&](auto make) -> std::unique_ptr<Run> {
+    using Stage = decltype(make(h, false));
+    if (me.composition == "none") return stepper_run(view, make(h, false), q, p, v0, base, pr.steps);
+    ComposedPointStep<Stage> step(
+        h, substeps(find_composition(me.composition), R.symmetric()), [&](double hk) { return make(hk, false); },
+        [&](double hk) { return make(hk, true); });
+    return stepper_run(view, std::move(step), q, p, v0, base, pr.steps);
+  };
+  if (me.form == Form::hamiltonian) {
+    if constexpr (Hamiltonian) {
+      using H = decltype(hamiltonian_of(L));
+      return composed([&](double hk, bool adj) {
+        return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), adj ? adjoint_map(R) : R, hk, opt);
+      });
+    } else {
+      throw InputError("integrator.form: unsupported");  // refused by validate()
+    }
+  }
+  if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
+  return composed(
+      [&](double hk, bool adj) { return ManifoldStep<S, Map>(L, adj ? adjoint_map(R) : R, hk, opt); });
+}
+
+}  // namespace dvm::kernels

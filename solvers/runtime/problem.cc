@@ -1,0 +1,206 @@
+#include "solvers/runtime/problem.h"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "mechanics/written_lagrangian.h"
+
+namespace dvm {
+
+StepOptions Method::step_options() const {
+  StepOptions opt;
+  opt.solver = solver;
+  opt.max_iterations = max_iterations;
+  opt.residual_tolerance = tolerance;
+  opt.accept_tolerance = std::fmax(opt.accept_tolerance, tolerance);
+  return opt;
+}
+
+bool Method::basic_symmetric() const {
+  if (galerkin) return true;
+  if (form == Form::newmark) return newmark_gamma == 0.5;
+  return map && map->symmetric(theta);
+}
+
+int Method::order() const {
+  if (galerkin) return 2 * stages;
+  if (composition != "none") return find_composition(composition).order;
+  if (form == Form::newmark) return newmark_gamma == 0.5 ? 2 : 1;
+  return map ? map->order(theta) : 0;
+}
+
+std::string Method::map_label() const {
+  if (galerkin) return "none";
+  if (form == Form::newmark) return "newmark";
+  if (!map) return "none";
+  if (map->family == MapFamily::retraction_theta) return "retraction-theta(euclidean)";
+  return map->name;
+}
+
+std::string Method::label() const {
+  std::string s;
+  if (galerkin)
+    s = std::string("galerkin ") + to_string(quadrature) + " s=" + std::to_string(stages) + " (order " +
+        std::to_string(2 * stages) + ")";
+  else
+    s = map_label();
+  if (form != Form::lagrangian && !galerkin) s += ", " + std::string(to_string(form)) + " form";
+  if (composition != "none") s += ", composition " + composition;
+  return s;
+}
+
+namespace {
+
+std::string fmt(double x) {
+  std::ostringstream out;
+  out.precision(17);
+  out << x;
+  return out.str();
+}
+
+std::string form_list(const std::vector<Form>& forms) {
+  std::string out;
+  for (std::size_t i = 0; i < forms.size(); ++i)
+    out += (i == 0 ? "" : i + 1 == forms.size() ? " and " : ", ") + std::string(to_string(forms[i]));
+  return out;
+}
+
+}  // namespace
+
+void require_boundary_value(const SystemEntry& sys) {
+  if (!sys.caps.boundary_value)
+    throw InputError("problem.kind: boundary-value problems run on the fixed-size R^n systems and the spherical "
+                     "pendulum only, not on " + sys.name + (sys.caps.note.empty() ? "" : " (" + sys.caps.note + ")"));
+}
+
+void validate(const Problem& pr, const Method& me) {
+  if (!pr.system) throw InputError("system: no system given");
+  const SystemEntry& sys = *pr.system;
+  const SystemCapabilities& caps = sys.caps;
+  const std::string& name = sys.name;
+  const std::string note = caps.note.empty() ? "" : " (" + caps.note + ")";
+
+  // [problem]
+  if (pr.boundary_value) {
+    require_boundary_value(sys);
+    if (me.form != Form::lagrangian)
+      throw InputError("integrator.form: a boundary-value problem solves the discrete Euler-Lagrange equations; "
+                       "expected form = \"lagrangian\", got \"" + std::string(to_string(me.form)) + "\"");
+    if (me.composition != "none") throw InputError("integrator.composition: a boundary-value problem takes no composition");
+    if (me.galerkin) throw InputError("integrator.method: a boundary-value problem takes no method = \"galerkin\"");
+    if (pr.steps < 2 || pr.steps > 100000000)
+      throw InputError("problem.steps: got " + std::to_string(pr.steps) + ", expected a whole number from 2 to 100000000");
+  }
+
+  // [integrator] form
+  if (std::find(caps.forms.begin(), caps.forms.end(), me.form) == caps.forms.end())
+    throw InputError("integrator.form: " + name + " runs the " + form_list(caps.forms) + " form" +
+                     (caps.forms.size() > 1 ? "s" : "") + " only, got \"" + to_string(me.form) + "\"" + note);
+
+  // [integrator] method = "galerkin"
+  if (me.galerkin) {
+    if (!caps.galerkin) throw InputError("integrator.method: " + name + " takes no method = \"galerkin\"" + note);
+    if (me.form != Form::lagrangian)
+      throw InputError("integrator.method: method = \"galerkin\" is a discrete Lagrangian: it runs the lagrangian "
+                       "form only, not form = \"" + std::string(to_string(me.form)) + "\"");
+    if (me.composition != "none")
+      throw InputError("integrator.composition: method = \"galerkin\" takes no composition (it reaches high order "
+                       "itself: order 2 stages)");
+    if (me.stages < 1 || me.stages > kGalerkinStagesMax)
+      throw InputError("integrator.stages: got " + std::to_string(me.stages) + ", expected a whole number from 1 to " +
+                       std::to_string(kGalerkinStagesMax));
+  }
+
+  // [integrator] map
+  const bool needs_map = !me.galerkin && me.form != Form::newmark;
+  if (needs_map && !me.map) throw InputError("integrator.map: missing (form \"" + std::string(to_string(me.form)) + "\" is built from a map)");
+  if (me.map) {
+    const MapEntry& m = *me.map;
+    if (m.space != sys.space) {
+      std::string fitting;
+      for (const MapEntry& e : map_registry())
+        if (e.space == sys.space) fitting += (fitting.empty() ? "" : ", ") + e.name;
+      throw InputError("integrator.map: map \"" + m.name + "\" lives on " + to_string(m.space) + " but " + name +
+                       " lives on " + to_string(sys.space) + "; expected one of: " + fitting);
+    }
+    if (!(me.theta >= 0.0 && me.theta <= 1.0))
+      throw InputError("integrator.theta: got " + fmt(me.theta) + ", expected a number in [0, 1]");
+    if (!m.takes_theta && me.theta != m.theta)
+      throw InputError("integrator.theta: theta applies only to map = \"theta\" or \"retraction-theta\", not \"" +
+                       m.name + "\"");
+    if (m.family == MapFamily::retraction_theta && !caps.retraction_maps)
+      throw InputError("integrator.map: " + name + " runs the theta-family maps (explicit-euler, adjoint-euler, "
+                       "midpoint, theta), got \"" + m.name + "\"" + note);
+  }
+
+  // [integrator] composition
+  if (me.composition != "none") {
+    try {
+      find_composition(me.composition);
+    } catch (const std::invalid_argument& e) {
+      throw InputError("integrator.composition: got \"" + me.composition + "\"; " + e.what());
+    }
+    if (!caps.composition) throw InputError("integrator.composition: " + name + " takes no composition" + note);
+  }
+
+  // [integrator] newmark
+  if (me.form == Form::newmark) {
+    if (!(me.newmark_gamma >= 0.0 && me.newmark_gamma <= 1.0))
+      throw InputError("integrator.gamma: got " + fmt(me.newmark_gamma) + ", expected a number in [0, 1]");
+    if (!(me.newmark_beta >= 0.0 && me.newmark_beta <= 0.5))
+      throw InputError("integrator.beta: got " + fmt(me.newmark_beta) + ", expected a number in [0, 0.5]");
+  }
+
+  // the solve of each step
+  if (me.solver == SolverKind::tiny) {
+    if (!caps.tiny_solver)
+      throw InputError("integrator.solver: " + name + " takes no solver = \"tiny\"" + note);
+    if (me.galerkin)
+      throw InputError("integrator.solver: method = \"galerkin\" solves its stage equations by simplified Newton; "
+                       "solver = \"tiny\" applies to the map-based steps");
+    if (pr.boundary_value)
+      throw InputError("integrator.solver: a boundary-value problem is solved by Ceres' sparse least squares; "
+                       "solver = \"tiny\" applies to the steps of initial-value problems");
+  }
+  if (me.max_iterations < 1 || me.max_iterations > 1000)
+    throw InputError("integrator.max_iterations: got " + std::to_string(me.max_iterations) +
+                     ", expected a whole number from 1 to 1000");
+  if (!(me.tolerance > 0.0 && me.tolerance < 1.0))
+    throw InputError("integrator.tolerance: got " + fmt(me.tolerance) +
+                     ", expected a number in (0, 1) (relative residual tolerance)");
+
+  // the time grid
+  if (!(pr.step > 0.0) || !std::isfinite(pr.step))
+    throw InputError("integrator.step: got " + fmt(pr.step) + ", expected a positive number");
+  if (!pr.boundary_value) {
+    if (pr.steps < 1) throw InputError("integrator.steps: got " + std::to_string(pr.steps) + ", expected at least 1");
+    if (pr.steps > kMaxSteps)
+      throw InputError("integrator.steps: got " + std::to_string(pr.steps) + " steps, expected at most 2^53 = " +
+                       std::to_string(kMaxSteps) + " (beyond that the step index is not exact in t = k h)");
+    if (!std::isfinite(static_cast<double>(pr.steps) * pr.step))
+      throw InputError("integrator.steps: " + std::to_string(pr.steps) + " steps of " + fmt(pr.step) +
+                       " overflow the time (t_end = inf); expected a finite t_end");
+  }
+
+  // the state's sizes (a scene reader checks them with their positions; this guards
+  // every other caller)
+  auto size_check = [&](const std::vector<double>& x, std::size_t n, const char* key) {
+    if (x.size() != n)
+      throw InputError(std::string(key) + ": got " + std::to_string(x.size()) + " numbers, expected " +
+                       std::to_string(n));
+    for (double c : x)
+      if (!std::isfinite(c)) throw InputError(std::string(key) + ": expected finite numbers");
+  };
+  const std::size_t nq = sys.space == Space::rotation ? 4 : static_cast<std::size_t>(pr.dim);
+  const std::size_t nv = sys.space == Space::rotation ? 3 : static_cast<std::size_t>(pr.dim);
+  if (pr.dim < 1) throw InputError("system: the number of coordinates is not known");
+  size_check(pr.q, nq, "initial.q");
+  if (pr.boundary_value) {
+    size_check(pr.q_final, nq, "problem.q_final");
+  } else {
+    size_check(pr.momentum_given ? pr.p : pr.v, nv, pr.momentum_given ? "initial.p" : "initial.v");
+  }
+}
+
+}  // namespace dvm

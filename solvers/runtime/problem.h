@@ -1,0 +1,92 @@
+// What a run is: a Problem (what to integrate) and a Method (how), as typed values.
+//
+//   Problem   a system of the registry with its parameters (or a system written in a
+//             scene), the initial state or the boundary values, and the time grid
+//             t_k = k h, k = 0..steps.
+//   Method    the form, the discretization map (and its theta), the composition,
+//             the Galerkin stages and quadrature, Newmark's (gamma, beta), and the
+//             options of each step's solve.
+//
+// validate(problem, method) checks every rule that involves more than one value, once,
+// with one message per rule naming the keys as a scene writes them ('integrator.form',
+// 'problem.kind', ...). A scene reader (examples/dvm/scene.cc), a C++ caller or a
+// binding fills these structs; make_run (solvers/runtime/run.h) validates again, so
+// nothing unchecked reaches a kernel.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "solvers/newton.h"
+#include "solvers/runtime/registry.h"
+
+namespace dvm {
+
+struct WrittenSystem;  // mechanics/written_lagrangian.h
+
+struct Problem {
+  const SystemEntry* system = nullptr;
+  std::map<std::string, double> params;            // every parameter, defaults filled in
+  std::vector<double> masses;                      // nbody: one per body
+  std::shared_ptr<const WrittenSystem> written;    // the written system ("lagrangian")
+  int dim = 0;                                     // length of q as stored (see SystemEntry::dim)
+
+  // The initial state. R^n: q, and p or v. S^2: the unit vector(s) q and a tangent p
+  // or v. SO(3): q the unit quaternion [w, x, y, z], v the body angular velocity or p
+  // the body angular momentum.
+  std::vector<double> q, p, v;
+  bool momentum_given = false;
+
+  // A boundary-value problem: q is q_0, q_final is q_K, steps = K.
+  bool boundary_value = false;
+  std::vector<double> q_final;
+
+  double step = 0.0;        // h
+  std::int64_t steps = 0;   // K
+
+  // Where the problem came from, for messages ("examples/scenes/kepler.toml").
+  std::string origin;
+  // Where the written system's texts are, for messages about them.
+  std::string written_where, hamiltonian_where;
+};
+
+struct Method {
+  Form form = Form::lagrangian;
+  const MapEntry* map = nullptr;  // none: newmark, galerkin without a map
+  double theta = 0.5;             // the map's theta (set from the entry when it takes none)
+  // The composition ("none": the basic method's own step).
+  std::string composition = "none";
+  bool galerkin = false;
+  int stages = 2;
+  QuadratureKind quadrature = QuadratureKind::gauss;
+  double newmark_gamma = 0.5, newmark_beta = 0.25;
+  SolverKind solver = SolverKind::newton;
+  int max_iterations = 25;
+  double tolerance = 2e-15;
+
+  // The options of each step's solve.
+  StepOptions step_options() const;
+  // The basic method is its own adjoint.
+  bool basic_symmetric() const;
+  // The order the method is built to have.
+  int order() const;
+  // "midpoint", "galerkin gauss s=4 (order 8)", "newmark", ...
+  std::string map_label() const;
+  std::string label() const;
+};
+
+// Every rule between the values of a problem and a method; throws InputError naming
+// the keys. Single values (a theta in [0, 1], a positive step) are checked too.
+void validate(const Problem& problem, const Method& method);
+// The rule of [problem] kind = "boundary-value" alone (a reader checks it before
+// reading the keys that kind brings).
+void require_boundary_value(const SystemEntry& system);
+
+// The largest number of steps: t_k = k h is formed from k as a double, exact to 2^53.
+constexpr std::int64_t kMaxSteps = std::int64_t(1) << 53;
+
+}  // namespace dvm

@@ -1,0 +1,60 @@
+// The one writer of every run's rows: CSV and NumPy .npy, through the atomic output
+// files of solvers/runtime/output.h (temporary file, size check against the free space
+// before the run, rename when complete, PATH.partial when the run failed).
+//
+// A run declares its columns once (open), then hands over rows of that many doubles;
+// which steps are written is decided by wants(k, last): the initial state, every
+// `every`-th step and the last. The CSV header is the column names; the .npy file is
+// a little-endian float64 array of shape rows x columns (format version 1.0, header
+// rewritten with the row count when the file is finished).
+#pragma once
+
+#include <chrono>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solvers/runtime/output.h"
+
+namespace dvm {
+
+struct OutputSpec {
+  std::string csv, npy;                 // empty: not written
+  std::string csv_source, npy_source;   // what gave each path, for messages
+  std::int64_t every = 1;
+  bool progress = false;                // progress on stderr when it is a terminal
+};
+
+class Recorder {
+ public:
+  explicit Recorder(OutputSpec spec) : spec_(std::move(spec)) {}
+  Recorder(const Recorder&) = delete;
+  Recorder& operator=(const Recorder&) = delete;
+
+  // Checks the paths and the room for `rows` rows and creates the temporaries; throws
+  // InputError (nothing is written then).
+  void open(const std::vector<std::string>& columns, double rows);
+  bool wants(std::int64_t k, std::int64_t last) const { return k % spec_.every == 0 || k == last; }
+  void row(const double* values);
+  // Renames the files onto their paths (complete) or onto PATH.partial; returns false
+  // after printing any write error to stderr. `kept` lists the .partial files.
+  bool finish(bool complete, std::string& kept);
+  const OutputSpec& spec() const { return spec_; }
+  std::int64_t every() const { return spec_.every; }
+
+  // Progress on stderr (step, time, rate, time left), only when asked and stderr is
+  // a terminal; cheap to call every step.
+  void progress(std::int64_t k, std::int64_t total, double h);
+  void end_progress();
+
+ private:
+  void write_npy_header();
+  OutputSpec spec_;
+  OutputFile csv_, npy_;
+  int columns_ = 0;
+  long long npy_rows_ = 0;
+  bool progress_on_ = false, progress_shown_ = false;
+  std::chrono::steady_clock::time_point start_, last_;
+};
+
+}  // namespace dvm

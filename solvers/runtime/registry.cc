@@ -1,0 +1,273 @@
+#include "solvers/runtime/registry.h"
+
+#include "solvers/runtime/factories.h"
+
+namespace dvm {
+
+const char* to_string(Space s) {
+  switch (s) {
+    case Space::euclidean: return "R^n";
+    case Space::sphere: return "S^2";
+    case Space::rotation: return "SO(3)";
+  }
+  return "?";
+}
+
+const char* to_string(Form f) {
+  switch (f) {
+    case Form::lagrangian: return "lagrangian";
+    case Form::hamiltonian: return "hamiltonian";
+    case Form::sode1: return "sode1";
+    case Form::sode2: return "sode2";
+    case Form::newmark: return "newmark";
+  }
+  return "?";
+}
+
+namespace {
+
+std::string join(const std::vector<std::string>& names) {
+  std::string out;
+  for (std::size_t i = 0; i < names.size(); ++i) out += (i ? ", " : "") + names[i];
+  return out;
+}
+
+const std::vector<Form> kAllForms = {Form::lagrangian, Form::hamiltonian, Form::sode1, Form::sode2, Form::newmark};
+
+// Built-in systems on R^n of fixed size: every form, map, composition, Galerkin and
+// boundary values.
+SystemCapabilities fixed_rn() { return {kAllForms, true, true, true, true, ""}; }
+
+// Systems whose size is known only at run time (N bodies, written Lagrangians).
+SystemCapabilities run_time_sized() {
+  return {{Form::lagrangian, Form::hamiltonian},
+          true,
+          true,
+          true,
+          false,
+          "the SODE and Newmark forms, boundary-value problems and solver = \"tiny\" are built for the fixed-size "
+          "systems",
+          false};
+}
+
+}  // namespace
+
+const std::vector<FormEntry>& form_registry() {
+  static const std::vector<FormEntry> list = {
+      {Form::lagrangian, "lagrangian",
+       "position-momentum step of L_d(q0, q1) = h L(R_d^{-1}(q0, q1)/h): p0 = -D1 L_d, p1 = D2 L_d (Sec. 5.3)", true},
+      {Form::hamiltonian, "hamiltonian",
+       "Eq. 5.1: the inverse cotangent lift of the map equals h X_H at its base point (symplectic for any map)", true},
+      {Form::sode1, "sode1", "Eq. 4.1: the tangent lift of the map, the SODE sampled at both end points", true},
+      {Form::sode2, "sode2", "Eq. 4.2: the tangent lift of the map, the SODE sampled at its base point", true},
+      {Form::newmark, "newmark", "Newmark's family (gamma, beta) on the SODE (Sec. 4.1); uses no map", false},
+  };
+  return list;
+}
+
+Form find_form(const std::string& name, const std::string& key) {
+  std::vector<std::string> names;
+  for (const FormEntry& f : form_registry()) {
+    if (f.name == name) return f.form;
+    names.push_back(f.name);
+  }
+  throw InputError(key + ": got \"" + name + "\", expected one of: " + join(names));
+}
+
+const std::vector<MapEntry>& map_registry() {
+  using F = MapFamily;
+  using R = MapRetraction;
+  static const std::vector<MapEntry> list = {
+      {"explicit-euler", "R_d(x, v) = (x, x + v)", Space::euclidean, F::theta, R::none, 0.0, false, true, "theta = 0"},
+      {"adjoint-euler", "R_d(x, v) = (x - v, x)", Space::euclidean, F::theta, R::none, 1.0, false, true,
+       "theta = 1; the adjoint of explicit-euler"},
+      {"midpoint", "R_d(x, v) = (x - v/2, x + v/2)", Space::euclidean, F::theta, R::none, 0.5, false, true,
+       "theta = 1/2; self-adjoint"},
+      {"theta", "R_d(x, v) = (x - theta v, x + (1 - theta) v)", Space::euclidean, F::theta, R::none, 0.5, true, true,
+       "symmetric and of order 2 only at theta = 1/2"},
+      {"retraction-theta", "R_d(x, v) = (R_x(-theta v), R_x((1 - theta) v)), R_x(v) = x + v", Space::euclidean,
+       F::retraction_theta, R::none, 0.5, true, false,
+       "Prop. 2.3 from the flat retraction; inverted by Newton's method (the generic path)"},
+      {"sphere-exp", "(exp_x(-v/2), exp_x(v/2)), exp_x(v) = cos|v| x + sin|v| v/|v|", Space::sphere, F::sphere, R::exp,
+       0.5, false, true, "midpoint form on S^2 (Eq. 2.3)"},
+      {"sphere-projection", "((x - v/2)/|x - v/2|, (x + v/2)/|x + v/2|)", Space::sphere, F::sphere, R::projection, 0.5,
+       false, true, "projection midpoint on S^2"},
+      {"sphere-exp-fixed", "(x, exp_x(v))", Space::sphere, F::sphere, R::exp, 0.0, false, true,
+       "fixed-first-point form on S^2"},
+      {"sphere-projection-fixed", "(x, (x + v)/|x + v|)", Space::sphere, F::sphere, R::projection, 0.0, false, true,
+       "fixed-first-point projection map; inverse (x0, x1/(x0.x1) - x0) needs x0.x1 > 0"},
+      {"so3-exp", "(R exp(-w/2), R exp(w/2))", Space::rotation, F::rotation, R::exp, 0.5, false, true,
+       "group exponential midpoint on SO(3)"},
+      {"so3-cayley", "(R cay(-w/2), R cay(w/2))", Space::rotation, F::rotation, R::cayley, 0.5, false, true,
+       "Cayley midpoint on SO(3) (Ex. 2.8)"},
+      {"so3-exp-fixed", "(R, R exp(w))", Space::rotation, F::rotation, R::exp, 0.0, false, true,
+       "fixed-first-point form on SO(3)"},
+      {"so3-cayley-fixed", "(R, R cay(w))", Space::rotation, F::rotation, R::cayley, 0.0, false, true,
+       "fixed-first-point Cayley map; undefined for relative rotations by pi"},
+  };
+  return list;
+}
+
+const MapEntry& find_map_entry(const std::string& name, const std::string& where) {
+  std::vector<std::string> names;
+  for (const MapEntry& m : map_registry()) {
+    if (m.name == name) return m;
+    names.push_back(m.name);
+  }
+  throw InputError(where + ": unknown map \"" + name + "\"; expected one of: " + join(names));
+}
+
+const std::vector<GalerkinEntry>& galerkin_registry() {
+  static const std::vector<GalerkinEntry> list = [] {
+    std::vector<GalerkinEntry> out;
+    for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto})
+      for (int s = 1; s <= kGalerkinStagesMax; ++s)
+        out.push_back({kind, s, Quadrature(kind, s).points, 2 * s,
+                       "Marsden & West, Acta Numerica 2001, Sec. 2.6; equals Gauss collocation (gauss) or "
+                       "Lobatto IIIA-IIIB (lobatto)",
+                       s != 1 ? "" : kind == QuadratureKind::gauss ? "s = 1: the midpoint discrete Lagrangian"
+                                                                   : "s = 1: the trapezoidal discrete Lagrangian"});
+    return out;
+  }();
+  return list;
+}
+
+const std::vector<SystemEntry>& system_registry() {
+  static const std::vector<SystemEntry> list = {
+      {"harmonic", "L = v^2/2 - omega^2 q^2/2", Space::euclidean, 1, {{"omega", 1.0, "angular frequency"}}, fixed_rn(),
+       factories::harmonic, ""},
+      {"pendulum",
+       "L = m l^2 v^2/2 + m g l cos(q)   (q from the downward vertical)",
+       Space::euclidean,
+       1,
+       {{"m", 1.0, "mass"}, {"l", 1.0, "length"}, {"g", 1.0, "gravitational acceleration"}},
+       fixed_rn(),
+       factories::pendulum,
+       ""},
+      {"kepler", "L = |v|^2/2 + mu/|q|   (q in the plane)", Space::euclidean, 2,
+       {{"mu", 1.0, "gravitational parameter"}}, fixed_rn(), factories::kepler, ""},
+      {"spherical-pendulum",
+       "L = m l^2 |v|^2/2 - m g l x_3   (x a unit vector, x_3 upward)",
+       Space::sphere,
+       3,
+       {{"m", 1.0, "mass"}, {"l", 1.0, "length"}, {"g", 1.0, "gravitational acceleration"}},
+       {{Form::lagrangian, Form::hamiltonian}, true, true, true, true,
+        "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)"},
+       factories::spherical_pendulum,
+       ""},
+      {"spherical-chain",
+       "L = sum_i m |dr_i/dt|^2/2 - g sum_i m (r_i)_3,  r_i = l (x_1 + ... + x_i)   (n links, x_i unit vectors)",
+       Space::sphere,
+       3,
+       {{"n", 2.0, "number of links (1 to 4)"},
+        {"m", 1.0, "mass at the end of each link"},
+        {"l", 1.0, "length of each link"},
+        {"g", 1.0, "gravitational acceleration"}},
+       {{Form::lagrangian}, true, true, false, false,
+        "the spherical chain runs the lagrangian form only (it has no written-out Hamiltonian) and no Galerkin "
+        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)"},
+       factories::spherical_chain,
+       "3 per link"},
+      {"rigid-body",
+       "L = (I1 w1^2 + I2 w2^2 + I3 w3^2)/2   (w the body angular velocity)",
+       Space::rotation,
+       3,
+       {{"I1", 1.0, "principal moment of inertia"},
+        {"I2", 2.0, "principal moment of inertia"},
+        {"I3", 3.0, "principal moment of inertia"}},
+       {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
+        "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"},
+       factories::rigid_body,
+       ""},
+      {"heavy-top",
+       "L = w.I w/2 - m g e3.(R chi)   (chi the centre of mass in the body frame)",
+       Space::rotation,
+       3,
+       {{"I1", 1.0, "principal moment of inertia"},
+        {"I2", 1.0, "principal moment of inertia"},
+        {"I3", 0.5, "principal moment of inertia"},
+        {"m", 1.0, "mass"},
+        {"g", 1.0, "gravitational acceleration"},
+        {"chi1", 0.0, "centre of mass, body frame"},
+        {"chi2", 0.0, "centre of mass, body frame"},
+        {"chi3", 1.0, "centre of mass, body frame"}},
+       {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
+        "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"},
+       factories::heavy_top,
+       ""},
+      {"chain",
+       "L = sum m v_i^2/2 - sum_bonds (k r^2/2 + alpha r^3/3 + beta r^4/4),  r = q_i - q_{i-1}",
+       Space::euclidean,
+       0,
+       {{"n", 8.0, "number of particles"},
+        {"m", 1.0, "mass of each particle"},
+        {"k", 1.0, "linear spring constant"},
+        {"alpha", 0.0, "cubic (FPU-alpha) coefficient"},
+        {"beta", 0.0, "quartic (FPU-beta) coefficient"},
+        {"fixed", 1.0, "1: ends tied to walls; 0: free ends (total momentum conserved)"}},
+       {{Form::lagrangian}, false, true, false, false,
+        "the chain's step solves its tridiagonal equations by its own Newton iteration, for the theta-family maps in "
+        "the lagrangian form only",
+        false},
+       factories::chain,
+       "params.n"},
+      {"double-pendulum",
+       "L = (m1+m2) l1^2 w1^2/2 + m2 l2^2 w2^2/2 + m2 l1 l2 w1 w2 cos(q1-q2) + (m1+m2) g l1 cos q1 + m2 g l2 cos q2",
+       Space::euclidean,
+       2,
+       {{"m1", 1.0, "upper mass"},
+        {"m2", 1.0, "lower mass"},
+        {"l1", 1.0, "upper rod length"},
+        {"l2", 1.0, "lower rod length"},
+        {"g", 1.0, "gravitational acceleration"}},
+       fixed_rn(),
+       factories::double_pendulum,
+       ""},
+      {"henon-heiles", "L = |v|^2/2 - (x^2 + y^2)/2 - lambda (x^2 y - y^3/3)", Space::euclidean, 2,
+       {{"lambda", 1.0, "coupling"}}, fixed_rn(), factories::henon_heiles, ""},
+      {"fpu",
+       "GNI Sec. I.5.1, m = 3: L = |v|^2/2 - omega^2/4 sum (q_2i - q_2i-1)^2 - sum (q_2i+1 - q_2i)^4",
+       Space::euclidean,
+       6,
+       {{"omega", 50.0, "stiff spring frequency"}},
+       fixed_rn(),
+       factories::fpu,
+       ""},
+      {"duffing", "L = v^2/2 - alpha q^2/2 - beta q^4/4", Space::euclidean, 1,
+       {{"alpha", 1.0, "linear stiffness"}, {"beta", 1.0, "cubic stiffness"}}, fixed_rn(), factories::duffing, ""},
+      {"charged-particle",
+       "L = m |v|^2/2 + (c B/2)(x v_y - y v_x) - k |q|^2/2   (uniform field B normal to the plane)",
+       Space::euclidean,
+       2,
+       {{"m", 1.0, "mass"}, {"c", 1.0, "charge"}, {"B", 1.0, "magnetic field"}, {"k", 0.0, "electric potential k |q|^2/2"}},
+       fixed_rn(),
+       factories::charged_particle,
+       ""},
+      {"nbody",
+       "L = sum m_i |v_i|^2/2 + G sum_{i<j} m_i m_j/|q_i - q_j|   (in R^3; [system] masses = [...], 2 or more bodies)",
+       Space::euclidean,
+       0,
+       {{"G", 1.0, "gravitational constant"}},
+       run_time_sized(),
+       factories::nbody,
+       "3 x bodies"},
+  };
+  return list;
+}
+
+const SystemEntry& find_system_entry(const std::string& name, const std::string& where) {
+  std::vector<std::string> names;
+  for (const SystemEntry& s : system_registry()) {
+    if (s.name == name) return s;
+    names.push_back(s.name);
+  }
+  throw InputError(where + ": unknown system \"" + name + "\"; expected one of: " + join(names));
+}
+
+const SystemEntry& written_system_entry() {
+  static const SystemEntry entry = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
+                                    factories::written, "the coordinates"};
+  return entry;
+}
+
+}  // namespace dvm

@@ -1,0 +1,197 @@
+#include "solvers/runtime/run.h"
+
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <iostream>
+
+#include "solvers/runtime/json.h"
+#include "solvers/runtime/kernels.h"
+
+namespace dvm {
+
+std::unique_ptr<Run> make_run(const Problem& problem, const Method& method) {
+  validate(problem, method);
+  try {
+    std::unique_ptr<Run> run = problem.system->factory(problem, method);
+    return run;
+  } catch (const std::invalid_argument& e) {
+    // a parameter a system's constructor refuses (a negative mass, ...)
+    throw InputError(problem.origin + ": " + e.what());
+  } catch (const DegenerateLagrangianError& e) {
+    throw InputError(problem.origin + ": " + e.what());
+  }
+}
+
+namespace kernels {
+
+RunReport base_report(const Problem& pr, const Method& me, const std::string& system_name) {
+  RunReport r;
+  r.system = system_name;
+  r.map = me.map_label();
+  r.method = me.galerkin ? "galerkin" : "map";
+  r.composition = me.composition;
+  r.solver = to_string(me.solver);
+  r.form = to_string(me.form);
+  r.method_label = me.label();
+  r.boundary_value = pr.boundary_value;
+  r.step = pr.step;
+  r.steps_requested = pr.steps;
+  if (me.galerkin) {
+    r.stages = me.stages;
+    r.quadrature = to_string(me.quadrature);
+    r.order = 2 * me.stages;
+  }
+  if (me.form == Form::newmark) {
+    r.newmark = true;
+    r.gamma = me.newmark_gamma;
+    r.beta = me.newmark_beta;
+  }
+  return r;
+}
+
+}  // namespace kernels
+
+std::string shortest(double x) {
+  char buf[32];
+  for (int digits = 15; digits <= 17; ++digits) {
+    std::snprintf(buf, sizeof buf, "%.*g", digits, x);
+    if (std::strtod(buf, nullptr) == x) break;
+  }
+  return buf;
+}
+
+namespace {
+
+std::string sci(double x) {
+  char buf[32];
+  std::snprintf(buf, sizeof buf, "%.3e", x);
+  return buf;
+}
+
+std::string failure_json(const RunSummary& run) {
+  Json::Object f;
+  f.num("step", static_cast<double>(run.failed_step))
+      .num("time", run.failed_time)
+      .num("residual", run.failure.residual)
+      .num("scale", run.failure.scale)
+      .num("iterations", run.failure.iterations)
+      .str("message", run.failure.message);
+  return f.dump(4);
+}
+
+// The message on stderr for a run stopped by a failed step: a solve that did not
+// converge (with its residual), a non-finite state, or a map or Legendre transform
+// outside its domain.
+void print_failure(const RunReport& r) {
+  const RunSummary& run = r.loop;
+  const auto& f = run.failure;
+  const bool solve = f.iterations > 0 && std::isfinite(f.residual) && std::isfinite(f.scale);
+  if (solve)
+    std::fprintf(stderr,
+                 "dvm: step %lld (t = %s -> %s) did not converge: residual %.3e against scale %.3e after %d "
+                 "iterations (%s)",
+                 static_cast<long long>(run.failed_step), shortest(run.failed_time).c_str(),
+                 shortest(run.failed_time + r.step).c_str(), f.residual, f.scale, f.iterations, f.message.c_str());
+  else  // (a non-finite residual is named in the message already)
+    std::fprintf(stderr, "dvm: step %lld (t = %s -> %s) failed: %s%s", static_cast<long long>(run.failed_step),
+                 shortest(run.failed_time).c_str(), shortest(run.failed_time + r.step).c_str(), f.message.c_str(),
+                 std::isfinite(f.residual) ? (" (residual " + sci(f.residual) + ")").c_str() : "");
+  std::fprintf(stderr, "; stopped after %lld completed steps%s%s\n", static_cast<long long>(run.steps_done),
+               r.kept.empty() ? "" : "; their rows are in ", r.kept.c_str());
+}
+
+}  // namespace
+
+std::string report_json(const RunReport& r) {
+  Json::Object j;
+  j.str("status", r.failed ? "failed" : "ok").str("system", r.system);
+  if (!r.manifold.empty()) j.str("manifold", r.manifold);
+  j.str("map", r.map).str("method", r.method).str("composition", r.composition).str("solver", r.solver);
+  j.str("form", r.form).str("problem", r.boundary_value ? "boundary-value" : "initial-value");
+  j.num("step", r.step).num("steps", static_cast<double>(r.steps));
+  if (!r.boundary_value) j.num("steps_requested", static_cast<double>(r.steps_requested));
+  j.num("t_final", r.t_final);
+  if (r.boundary_value) j.arr("q_initial", r.q_initial).arr("p_initial", r.p_initial);
+  j.arr("q_final", r.q_final).arr("p_final", r.p_final);
+  j.num("energy_initial", r.energy_initial).num("energy_final", r.energy_final);
+  j.num("max_abs_energy_error", r.max_abs_energy_error);
+  if (r.max_point_defect >= 0.0) j.num("max_point_defect", r.max_point_defect);
+  for (const InvariantReport& inv : r.invariants) {
+    if (inv.legacy_key.empty()) continue;
+    if (inv.array)
+      j.arr(inv.legacy_key + "_initial", inv.initial);
+    else
+      j.num(inv.legacy_key + "_initial", inv.initial.empty() ? NAN : inv.initial[0]);
+    j.num("max_abs_" + inv.legacy_key + "_error", inv.max_abs_error);
+  }
+  if (r.momentum_spread >= 0.0) j.num("vertical_angular_momentum_spread", r.momentum_spread);
+  if (r.boundary_value) j.num("max_del_residual", r.max_del_residual).num("residual_scale", r.residual_scale);
+  j.num("wall_seconds", r.wall_seconds).num("solver_iterations", static_cast<double>(r.solver_iterations));
+  if (!r.boundary_value) j.num("max_step_iterations", r.max_step_iterations);
+  if (r.stages > 0) j.num("stages", r.stages).str("quadrature", r.quadrature).num("order", r.order);
+  if (r.newmark) j.num("gamma", r.gamma).num("beta", r.beta);
+  if (!r.invariants.empty()) {
+    Json::Object inv;
+    for (const InvariantReport& i : r.invariants) {
+      Json::Object e;
+      if (i.array)
+        e.arr("initial", i.initial);
+      else
+        e.num("initial", i.initial.empty() ? NAN : i.initial[0]);
+      e.num("max_abs_error", i.max_abs_error);
+      inv.raw(i.name, e.dump(6));
+    }
+    j.raw("invariants", inv.dump(4));
+  }
+  if (r.boundary_value && r.failed) j.str("message", r.message);
+  if (!r.boundary_value && r.failed) j.raw("failure", failure_json(r.loop));
+  return j.dump();
+}
+
+void print_report(const RunReport& r, bool json, bool quiet) {
+  if (json) {
+    std::cout << report_json(r) << "\n";
+  } else if (!quiet) {
+    const std::string space = r.manifold.empty() ? "" : " on " + r.manifold;
+    if (r.boundary_value) {
+      std::printf("%s%s boundary-value problem with %s (h = %g, %lld steps): %s in %.3f s\n", r.system.c_str(),
+                  space.c_str(), r.method_label.c_str(), r.step, static_cast<long long>(r.steps),
+                  r.failed ? "FAILED" : "solved", r.wall_seconds);
+      std::printf("  max DEL residual %.3e (scale %.3e), %lld Ceres iterations\n", r.max_del_residual,
+                  r.residual_scale, static_cast<long long>(r.solver_iterations));
+      std::printf("  p_initial [");
+      for (std::size_t i = 0; i < r.p_initial.size(); ++i) std::printf("%s%.15g", i ? ", " : "", r.p_initial[i]);
+      std::printf("]; energy varies by %.3e along the solution\n", r.max_abs_energy_error);
+    } else {
+      std::printf("%s%s with %s (h = %g): %lld steps to t = %.6g\n", r.system.c_str(), space.c_str(),
+                  r.method_label.c_str(), r.step, static_cast<long long>(r.steps), r.t_final);
+      std::printf("  %-44s %22s %12s\n", "quantity", "initial", "max |change|");
+      std::printf("  %-44s %22.15g %12.3e\n", "energy", r.energy_initial, r.max_abs_energy_error);
+      for (const InvariantReport& inv : r.invariants)
+        for (std::size_t c = 0; c < inv.initial.size(); ++c) {
+          const std::string n = inv.initial.size() > 1 ? inv.name + " [" + std::to_string(c) + "]" : inv.name;
+          std::printf("  %-44s %22.15g %12.3e\n", n.c_str(), inv.initial[c], inv.max_abs_error);
+        }
+      if (r.max_point_defect >= 0.0)
+        std::printf("  largest distance from %s: %.1e\n", r.manifold.c_str(), r.max_point_defect);
+      std::printf("  solver iterations %lld (%.2f per step, at most %d in a step); wall time %.3f s (%.3g us/step)\n",
+                  static_cast<long long>(r.solver_iterations),
+                  static_cast<double>(r.solver_iterations) / std::fmax(1.0, static_cast<double>(r.steps)),
+                  r.max_step_iterations, r.wall_seconds,
+                  1e6 * r.wall_seconds / std::fmax(1.0, static_cast<double>(r.steps)));
+    }
+    for (const std::string& f : r.written) std::printf("  wrote %s\n", f.c_str());
+  }
+  if (!r.failed) return;
+  if (r.boundary_value)
+    std::fprintf(stderr,
+                 "dvm: the boundary-value problem did not converge after %lld Ceres iterations: largest discrete "
+                 "Euler-Lagrange residual %.3e against scale %.3e (%s)%s%s\n",
+                 static_cast<long long>(r.solver_iterations), r.max_del_residual, r.residual_scale, r.message.c_str(),
+                 r.kept.empty() ? "" : "; the nodes are in ", r.kept.c_str());
+  else
+    print_failure(r);
+}
+
+}  // namespace dvm

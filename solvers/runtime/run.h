@@ -1,0 +1,111 @@
+// A Run: one problem integrated by one method, built once by make_run.
+//
+//   auto run = dvm::make_run(problem, method);   // validates, dispatches once
+//   dvm::Recorder rec(output);                   // optional: CSV / .npy rows
+//   dvm::RunReport r = run->execute(&rec);       // the whole loop, then the summary
+//   dvm::print_report(r, json);                  // the end-of-run table or JSON
+//
+// make_run resolves every choice of the problem and the method once, into one
+// instantiation of a templated kernel (solvers/runtime/kernels.h): the loop inside
+// execute() has no runtime dispatch and no virtual call per step. The kernel owns its
+// step object and workspace. Initial-value and boundary-value problems, every form,
+// every space, return the same report; numerical failures are reported in it
+// (status "failed", the step, time, residual and message), never thrown.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "solvers/integrate.h"
+#include "solvers/runtime/problem.h"
+#include "solvers/runtime/recorder.h"
+
+namespace dvm {
+
+// A conserved quantity monitored along the run (besides the energy).
+struct InvariantReport {
+  std::string name;              // "angular momentum", "p_phi (cyclic)", ...
+  std::vector<double> initial;   // its components at t = 0
+  double max_abs_error = 0.0;    // max over the run and the components of |I(t) - I(0)|
+  // The JSON keys it was reported under before the "invariants" object existed:
+  // "<key>_initial" and "max_abs_<key>_error" (empty: none). The value is an array when
+  // `array` is set.
+  std::string legacy_key;
+  bool array = false;
+};
+
+struct RunReport {
+  bool failed = false;
+  std::string system;        // the system's display name
+  std::string manifold;      // "S^2", "SO(3)", "(S^2)^n"; empty on R^n
+  std::string map;           // the map's name; "none" for galerkin, "newmark" for newmark
+  std::string method;        // "map" or "galerkin"
+  std::string composition;   // "none" or the composition's name
+  std::string solver;        // "newton" or "tiny"
+  std::string form;
+  std::string method_label;  // for the text table
+  bool boundary_value = false;
+  double step = 0.0;
+  std::int64_t steps = 0, steps_requested = 0;
+  double t_final = 0.0;
+  std::vector<double> q_final, p_final;   // as stored (SO(3): quaternion [w, x, y, z])
+  std::vector<double> q_initial, p_initial;  // boundary-value problems: the solved end
+  // The final point in embedding coordinates (SO(3): the nine entries of R), for
+  // distances between runs.
+  std::vector<double> q_embedded;
+  double energy_initial = 0.0, energy_final = 0.0, max_abs_energy_error = 0.0;
+  double max_point_defect = -1.0;  // manifolds only (< 0: not reported)
+  std::vector<InvariantReport> invariants;
+  double wall_seconds = 0.0;
+  std::int64_t solver_iterations = 0;
+  int max_step_iterations = 0;
+  // galerkin
+  int stages = 0, order = 0;
+  std::string quadrature;
+  // newmark
+  bool newmark = false;
+  double gamma = 0.0, beta = 0.0;
+  // boundary-value problems
+  double max_del_residual = 0.0, residual_scale = 0.0;
+  double momentum_spread = -1.0;  // S^2: spread of J3 along the solution (< 0: none)
+  std::string message;
+  // initial-value problems: the loop's summary (failure: step, time, residual, message)
+  RunSummary loop;
+  // output
+  std::vector<std::string> written;  // files written (complete runs)
+  std::string kept;                  // the .partial files of a failed run
+  bool output_error = false;         // a file could not be finished (write error)
+};
+
+class Run {
+ public:
+  virtual ~Run() = default;
+  // Integrates (or solves the boundary-value problem), writing rows to `recorder`
+  // when given. Throws InputError only for output that cannot be opened (before any
+  // step); numerical failures are in the report.
+  virtual RunReport execute(Recorder* recorder) = 0;
+  // The exact solution at time t from the initial state, where the system has one
+  // (q in embedding coordinates as RunReport::q_embedded, p as stored); false if not.
+  virtual bool exact(double t, std::vector<double>& q, std::vector<double>& p) const = 0;
+  // The energy at the initial state (finite, or the problem was refused).
+  virtual double initial_energy() const = 0;
+};
+
+// Validates the problem and the method (validate in problem.h) and builds the run.
+// Throws InputError for bad input (unknown names, combinations the registry does not
+// support, a degenerate Lagrangian at the initial state, a non-finite initial energy).
+std::unique_ptr<Run> make_run(const Problem& problem, const Method& method);
+
+// The end-of-run summary: a table on stdout (quiet: nothing) or JSON; a failure's
+// message on stderr.
+void print_report(const RunReport& report, bool json, bool quiet);
+
+// The JSON object of a report (the "failure" object included).
+std::string report_json(const RunReport& report);
+
+// x with the fewest significant digits (15 to 17) that read back as x.
+std::string shortest(double x);
+
+}  // namespace dvm

@@ -1,0 +1,243 @@
+// What the single path from a scene to a step guarantees, end to end:
+//   - `dvm converge` measures the method the scene names (composition, Galerkin, any
+//     form, S^2 and SO(3)), against a reference that reports its own accuracy, and
+//     does not print an order it cannot support;
+//   - every run writes its rows through the same atomic recorder (CSV and .npy, on
+//     every space, initial- and boundary-value problems alike);
+//   - written systems name their CSV columns after their coordinates.
+#define BOOST_TEST_MODULE cli_one_path
+#include <boost/test/unit_test.hpp>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <string>
+#include <vector>
+
+#include "tests/cli/cli_harness.h"
+
+namespace {
+
+using namespace cli_test;
+
+double fitted(const Output& o) { return json_number(o.out, "fitted_order"); }
+
+std::string first_line(const std::string& path) {
+  std::ifstream f(path);
+  std::string line;
+  std::getline(f, line);
+  return line;
+}
+
+}  // namespace
+
+// The composition the scene names is the method measured: kahan-li8 on the Stormer-
+// Verlet of the Euler maps is of order 8 on Kepler (against the exact solution); the
+// map alone, explicit Euler, is of order 1.
+BOOST_AUTO_TEST_CASE(converge_measures_the_composition_the_scene_names) {
+  const Output o = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list",
+                        "10,14,20,28,40", "--json"});
+  BOOST_TEST_MESSAGE("kepler-composition, kahan-li8: fitted order " << fitted(o) << "\n" << o.out);
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(json_string(o.out, "composition") == "kahan-li8");
+  BOOST_TEST(json_string(o.out, "reference") == "exact solution");
+  BOOST_TEST(std::fabs(fitted(o) - 8.0) <= 0.3);
+  const Output e = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list",
+                        "1000,2000,4000", "--set", "integrator.composition=none", "--json"});
+  BOOST_TEST(e.status == 0, e.err);
+  BOOST_TEST(std::fabs(fitted(e) - 1.0) <= 0.1, e.out);
+
+  // a written double pendulum composed with kahan-li8 (reference: Galerkin s = 6,
+  // refined until it reports an accuracy below the errors measured)
+  const Output w = dvm({"converge", scene("double_pendulum_written.toml"), "--t-end", "1", "--steps-list",
+                        "4,6,8,12", "--set", "integrator.composition=kahan-li8", "--json"});
+  BOOST_TEST_MESSAGE("written double pendulum, kahan-li8: fitted order " << fitted(w) << "\n" << w.out);
+  BOOST_TEST(w.status == 0, w.err);
+  BOOST_TEST(std::fabs(fitted(w) - 8.0) <= 0.3);
+  BOOST_TEST(json_number(w.out, "reference_accuracy") <= 1e-13);
+}
+
+// Galerkin s = 4 on the double pendulum: order 8, with a reference good enough to say so.
+BOOST_AUTO_TEST_CASE(converge_measures_galerkin_against_a_reference_that_reports_its_accuracy) {
+  const Output o = dvm({"converge", scene("double_pendulum.toml"), "--t-end", "1", "--steps-list", "5,7,10,14",
+                        "--set", "integrator.method=galerkin", "--set", "integrator.stages=4", "--json"});
+  BOOST_TEST_MESSAGE("double pendulum, galerkin s = 4: fitted order " << fitted(o) << "\n" << o.out);
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(json_string(o.out, "method") == "galerkin");
+  BOOST_TEST(std::fabs(fitted(o) - 8.0) <= 0.3);
+  const double acc = json_number(o.out, "reference_accuracy");
+  BOOST_TEST(acc > 0.0);
+  // every fitted run's error is well above the reference's accuracy
+  for (std::size_t at = o.out.find("\"fitted\": true"); at != std::string::npos;
+       at = o.out.find("\"fitted\": true", at + 1)) {
+    const auto row = o.out.rfind("\"error\": ", at);
+    BOOST_TEST(std::strtod(o.out.c_str() + row + 9, nullptr) > 10.0 * acc);
+  }
+}
+
+// On S^2 and SO(3), and in the Hamiltonian form, converge makes a table (it used to
+// run the scene once and overwrite its CSV): the triple jump of the sphere's midpoint
+// map is of order 4 on the spherical pendulum, the error measured on the manifold.
+BOOST_AUTO_TEST_CASE(converge_works_on_curved_spaces_and_in_every_form) {
+  const std::string csv = temp_dir() + "/not_written.csv";
+  const Output s = dvm({"converge", scene("spherical-pendulum.toml"), "--t-end", "1", "--steps-list", "10,20,40,80",
+                        "--set", "integrator.composition=triple-jump", "--set", "output.csv=\"" + csv + "\"",
+                        "--json"});
+  BOOST_TEST_MESSAGE("spherical pendulum, triple jump: fitted order " << fitted(s) << "\n" << s.out);
+  BOOST_TEST(s.status == 0, s.err);
+  BOOST_TEST(std::fabs(fitted(s) - 4.0) <= 0.3);
+  BOOST_TEST(!file_exists(csv));
+
+  const Output r = dvm({"converge", scene("rigid-body.toml"), "--t-end", "1", "--steps-list", "10,20,40", "--json"});
+  BOOST_TEST(r.status == 0, r.err);
+  BOOST_TEST(std::fabs(fitted(r) - 2.0) <= 0.2, r.out);
+
+  const Output h = dvm({"converge", scene("pendulum.toml"), "--t-end", "1", "--steps-list", "10,20,40", "--set",
+                        "integrator.form=hamiltonian", "--set", "integrator.map=adjoint-euler", "--json"});
+  BOOST_TEST(h.status == 0, h.err);
+  BOOST_TEST(json_string(h.out, "form") == "hamiltonian");
+  BOOST_TEST(std::fabs(fitted(h) - 1.0) <= 0.15, h.out);
+}
+
+// What a convergence study cannot measure is refused, or flagged instead of printed.
+BOOST_AUTO_TEST_CASE(converge_refuses_or_flags_what_it_cannot_measure) {
+  const Output same = dvm({"converge", scene("pendulum.toml"), "--steps-list", "100,100"});
+  BOOST_TEST(same.status == 2);
+  BOOST_TEST(same.err.find("appears twice") != std::string::npos, same.err);
+  const Output bvp = dvm({"converge", scene("pendulum_bvp.toml")});
+  BOOST_TEST(bvp.status == 2);
+  BOOST_TEST(bvp.err.find("problem.kind") != std::string::npos, bvp.err);
+  // the double pendulum far beyond its predictable horizon: errors of the size of the
+  // solution, no order printed, the reason given
+  const Output chaos = dvm({"converge", scene("double_pendulum.toml"), "--t-end", "100", "--steps-list",
+                            "2000,4000", "--json"});
+  BOOST_TEST(chaos.status == 0, chaos.err);
+  BOOST_TEST(chaos.out.find("\"fitted_order\": null") != std::string::npos, chaos.out);
+  BOOST_TEST(chaos.out.find("not determined") != std::string::npos, chaos.out);
+}
+
+// Every space writes .npy (S^2 used to write nothing and exit 0), with the CSV's columns.
+BOOST_AUTO_TEST_CASE(npy_is_written_on_every_space) {
+  for (const char* name : {"spherical-pendulum.toml", "rigid-body.toml", "spherical-chain.toml", "chain.toml"}) {
+    const std::string npy = temp_dir() + "/" + name + ".npy", csv = temp_dir() + "/" + name + ".csv";
+    const Output o = dvm({"run", scene(name), "--quiet", "--npy", npy, "--csv", csv, "--set", "integrator.t_end=1.0"});
+    BOOST_TEST_CONTEXT(name << "\n" << o.err) {
+      BOOST_TEST(o.status == 0);
+      const std::string data = slurp(npy);
+      BOOST_REQUIRE(data.size() > 128);
+      BOOST_TEST(data.compare(1, 5, "NUMPY") == 0);
+      // rows x columns in the header, and the CSV's column count
+      const std::string header = first_line(csv);
+      const int columns = 1 + static_cast<int>(std::count(header.begin(), header.end(), ','));
+      const auto shape = data.find("'shape': (");
+      BOOST_REQUIRE(shape != std::string::npos);
+      const long rows = std::strtol(data.c_str() + shape + 10, nullptr, 10);
+      const long cols = std::strtol(data.c_str() + data.find(',', shape) + 1, nullptr, 10);
+      BOOST_TEST(cols == columns);
+      BOOST_TEST(static_cast<std::size_t>(rows * cols * 8 + 128) == data.size());
+    }
+  }
+}
+
+// The boundary-value run on S^2 writes through the same atomic recorder: a symlink at
+// the output path is replaced, never followed; a run that fails leaves the final path
+// as it was and its nodes in PATH.partial.
+BOOST_AUTO_TEST_CASE(boundary_values_on_the_sphere_write_atomically) {
+  const std::string dir = temp_dir();
+  const std::string bvp = write_scene(
+      "s2bvp.toml",
+      "[system]\nbuiltin = \"spherical-pendulum\"\nparams = { m = 1.0, l = 1.0, g = 9.81 }\n[initial]\n"
+      "q = [0.6, 0.0, -0.8]\n[problem]\nkind = \"boundary-value\"\nq_final = [0.0, 0.6, -0.8]\nsteps = 50\n"
+      "[integrator]\nmap = \"sphere-exp\"\nstep = 0.01\n");
+  const std::string target = dir + "/target.txt", link = dir + "/link.csv";
+  std::ofstream(target) << "keep\n";
+  BOOST_REQUIRE(symlink(target.c_str(), link.c_str()) == 0);
+  const Output o = dvm({"run", bvp, "--quiet", "--csv", link});
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(slurp(target) == "keep\n");
+  struct stat st {};
+  BOOST_TEST(lstat(link.c_str(), &st) == 0);
+  BOOST_TEST(S_ISREG(st.st_mode));
+  BOOST_TEST(first_line(link) == "t,x,y,z,p0,p1,p2,energy,J3");
+
+  // a failed solve (one Ceres iteration allowed) keeps an existing file and writes .partial
+  const std::string csv = dir + "/s2old.csv";
+  std::ofstream(csv) << "old\n";
+  const Output f = dvm({"run", bvp, "--quiet", "--csv", csv, "--set", "integrator.max_iterations=1", "--set",
+                        "problem.steps=2000", "--set", "integrator.step=0.0005"});
+  BOOST_TEST_MESSAGE("S^2 boundary value, 1 iteration: exit " << f.status << ": " << f.err);
+  BOOST_TEST(f.status == 3);
+  BOOST_TEST(slurp(csv) == "old\n");
+  BOOST_TEST(file_exists(csv + ".partial"));
+  // bad input leaves it as it was too
+  const Output bad = dvm({"run", bvp, "--quiet", "--csv", csv, "--set", "problem.q_final=[0.0, 0.6, -0.9]"});
+  BOOST_TEST(bad.status == 2);
+  BOOST_TEST(slurp(csv) == "old\n");
+}
+
+// A written system's CSV names its columns after its coordinates; built-in systems
+// keep q0.., p0...
+BOOST_AUTO_TEST_CASE(written_systems_name_their_columns) {
+  const std::string csv = temp_dir() + "/dpw.csv", csv2 = temp_dir() + "/dp.csv";
+  BOOST_TEST(dvm({"run", scene("double_pendulum_written.toml"), "--quiet", "--csv", csv, "--set",
+                  "integrator.t_end=0.1"})
+                 .status == 0);
+  BOOST_TEST(first_line(csv) == "t,a,b,p_a,p_b,energy");
+  BOOST_TEST(dvm({"run", scene("double_pendulum.toml"), "--quiet", "--csv", csv2, "--set", "integrator.t_end=0.1"})
+                 .status == 0);
+  BOOST_TEST(first_line(csv2) == "t,q0,q1,p0,p1,energy");
+}
+
+// Sizes known only at run time run through the run-time-sized kernels: a written chain
+// of 12 coordinates (its total momentum conserved to round-off: the potential depends
+// on differences only) and 8 bodies (beyond the 6 that fixed sizes once allowed).
+BOOST_AUTO_TEST_CASE(sizes_known_only_at_run_time) {
+  const int n = 12;
+  std::string coords, kinetic, potential, q, v;
+  for (int i = 0; i < n; ++i) {
+    const std::string c = "x" + std::to_string(i);
+    coords += (i ? ", \"" : "\"") + c + "\"";
+    kinetic += (i ? " + " : "") + c + "_dot^2/2";
+    if (i > 0) potential += (i > 1 ? " + " : "") + ("(" + c + " - x" + std::to_string(i - 1) + ")^4/4");
+    q += (i ? ", " : "") + std::to_string(0.1 * std::sin(i));
+    v += (i ? ", " : "") + std::to_string(i == 0 ? 0.3 : 0.0);
+  }
+  const std::string chain = write_scene(
+      "chain12.toml", "[system]\ncoordinates = [" + coords + "]\nlagrangian = \"" + kinetic + " - (" + potential +
+                          ")\"\n[initial]\nq = [" + q + "]\nv = [" + v + "]\n[integrator]\nmap = \"midpoint\"\n"
+                          "step = 0.01\nsteps = 200\n");
+  const Output c = dvm({"run", chain, "--json"});
+  BOOST_TEST(c.status == 0, c.err);
+  BOOST_TEST(json_array(c.out, "q_final").size() == static_cast<std::size_t>(n));
+  BOOST_TEST(json_number(c.out, "max_abs_energy_error") <= 1e-4, c.out);
+  const std::vector<double> p = json_array(c.out, "p_final");
+  double total = 0.0;
+  for (double x : p) total += x;
+  BOOST_TEST(std::fabs(total - 0.3) <= 1e-14, c.out);
+
+  std::string masses, qb, vb;
+  for (int i = 0; i < 8; ++i) {
+    const double a = 2.0 * M_PI * i / 8.0;
+    masses += (i ? ", " : "") + std::string("1.0");
+    char buf[128];
+    std::snprintf(buf, sizeof buf, "%s%.17g, %.17g, 0.0", i ? ", " : "", std::cos(a), std::sin(a));
+    qb += buf;
+    std::snprintf(buf, sizeof buf, "%s%.17g, %.17g, 0.0", i ? ", " : "", -std::sin(a), std::cos(a));
+    vb += buf;
+  }
+  const std::string bodies = write_scene(
+      "nbody8.toml", "[system]\nbuiltin = \"nbody\"\nmasses = [" + masses + "]\nparams = { G = 0.1 }\n[initial]\nq = [" +
+                         qb + "]\nv = [" + vb + "]\n[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = 200\n");
+  const Output b = dvm({"run", bodies, "--json"});
+  BOOST_TEST(b.status == 0, b.err);
+  BOOST_TEST(json_array(b.out, "q_final").size() == 24u);
+  for (const char* inv : {"momentum x", "angular momentum z"}) {
+    const auto at = b.out.find(std::string("\"") + inv + "\": {");
+    BOOST_REQUIRE(at != std::string::npos);
+    BOOST_TEST(json_number(b.out, "max_abs_error", at) <= 1e-13, inv);
+  }
+}
