@@ -65,49 +65,19 @@ class DynamicGalerkinStep {
   using V = Eigen::VectorXd;
 
   DynamicGalerkinStep(Sys L, QuadratureKind kind, int stages, double h, StepOptions options = {})
-      : L_(std::move(L)), quad_(kind, check_stages(stages)), s_(stages), h_(h), options_(options) {
+      : L_(std::move(L)), quad_(kind, check_stages(stages)), s_(stages), h_(h), options_(options), t_(quad_, s_) {
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
     if (options.solver != SolverKind::newton)
       throw std::invalid_argument("run-time-sized steps solve by Newton's method only (solver = \"newton\")");
     const int s = s_, m = quad_.points, n = L_.dim();
-    // the tables of GalerkinStep's constructor
-    std::array<long double, SMax + 1> d{};
-    for (int j = 0; j <= s; ++j) d[j] = static_cast<long double>(j) / s;
-    auto basis = [&](int j, long double t, long double& l, long double& dl) {
-      l = 1.0L;
-      dl = 0.0L;
-      for (int k = 0; k <= s; ++k) {
-        if (k == j) continue;
-        const long double f = (t - d[k]) / (d[j] - d[k]);
-        dl = dl * f + l / (d[j] - d[k]);
-        l *= f;
-      }
-    };
     for (int i = 0; i < m; ++i) {
-      b_[i] = static_cast<double>(quad_.b[i]);
-      for (int j = 0; j <= s; ++j) {
-        long double l, dl;
-        basis(j, quad_.c[i], l, dl);
-        A_[i][j] = static_cast<double>(l);
-        B_[i][j] = static_cast<double>(dl);
-        WA_[i][j] = static_cast<double>(quad_.b[i] * l);
-        WB_[i][j] = static_cast<double>(quad_.b[i] * dl);
-      }
-    }
-    for (int i = 0; i < m; ++i) {
-      bh_[i] = h_ * b_[i];
+      bh_[i] = h_ * t_.b[i];
       for (int j = 1; j <= s; ++j) {
-        Af_[j - 1][i] = A_[i][j];
-        Bf_[j - 1][i] = B_[i][j] / h_;
+        Af_[j - 1][i] = t_.A[i][j];
+        Bf_[j - 1][i] = t_.B[i][j] / h_;
       }
-      for (int j = 0; j < s; ++j) WAf_[i][j] = h_ * WA_[i][j];
+      for (int j = 0; j < s; ++j) WAf_[i][j] = h_ * t_.WA[i][j];
     }
-    for (int j = 1; j <= s; ++j)
-      for (int k = 1; k <= s; ++k) {
-        long double l, dl;
-        basis(k, 1.0L + d[j], l, dl);
-        E_[j][k] = static_cast<double>(l - (k == s ? 1.0L : 0.0L));
-      }
     const int K = s * n;
     for (V* x : {&X_, &Xprev_, &Xext_, &err1_, &err2_, &corr_, &R_, &delta_}) x->setZero(K);
     q_end_.setZero(n);
@@ -291,7 +261,7 @@ class DynamicGalerkinStep {
       for (int i = 1; i < m; ++i)
         for (int a = 0; a < n; ++a) r[a] += WAf_[i][j] * G_(a, i);
       for (int i = 0; i < m; ++i)
-        for (int a = 0; a < n; ++a) r[a] += WB_[i][j] * P_(a, i);
+        for (int a = 0; a < n; ++a) r[a] += t_.WB[i][j] * P_(a, i);
     }
     for (int a = 0; a < n; ++a) {
       R[a] += p0[a];
@@ -320,7 +290,7 @@ class DynamicGalerkinStep {
       double* a = Xext_.data() + (j - 1) * n;
       for (int c = 0; c < n; ++c) a[c] = 0.0;
       for (int k = 1; k <= s; ++k) {
-        const double e = E_[j][k];
+        const double e = t_.E[j][k];
         const double* x = Xprev_.data() + (k - 1) * n;
         for (int c = 0; c < n; ++c) a[c] += e * x[c];
       }
@@ -337,16 +307,16 @@ class DynamicGalerkinStep {
       x_ = q0;
       v_.setZero();
       for (int j = 1; j <= s; ++j) {
-        x_ += A_[i][j] * X_.segment((j - 1) * n, n);
-        v_ += B_[i][j] * X_.segment((j - 1) * n, n);
+        x_ += t_.A[i][j] * X_.segment((j - 1) * n, n);
+        v_ += t_.B[i][j] * X_.segment((j - 1) * n, n);
       }
       v_ *= inv_h;
       L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
       for (int k = 1; k <= s; ++k) {
         // d(h g_i)/dX_k and d(p_i)/dX_k
-        dg_ = h_ * (A_[i][k] * Lqq_ + (B_[i][k] / h_) * Lqv_);
-        dpk_ = A_[i][k] * Lqv_.transpose() + (B_[i][k] / h_) * Lvv_;
-        for (int j = 0; j < s; ++j) J_.block(j * n, (k - 1) * n, n, n) += WA_[i][j] * dg_ + WB_[i][j] * dpk_;
+        dg_ = h_ * (t_.A[i][k] * Lqq_ + (t_.B[i][k] / h_) * Lqv_);
+        dpk_ = t_.A[i][k] * Lqv_.transpose() + (t_.B[i][k] / h_) * Lvv_;
+        for (int j = 0; j < s; ++j) J_.block(j * n, (k - 1) * n, n, n) += t_.WA[i][j] * dg_ + t_.WB[i][j] * dpk_;
       }
     }
     if (!std::isfinite(J_.template lpNorm<Eigen::Infinity>())) throw std::domain_error("non-finite Galerkin Jacobian");
@@ -372,10 +342,10 @@ class DynamicGalerkinStep {
   int s_;
   double h_;
   StepOptions options_;
-  std::array<double, MMax> b_{}, bh_{};
-  std::array<std::array<double, SMax + 1>, MMax> A_{}, B_{}, WA_{}, WB_{}, WAf_{};
+  GalerkinTables<SMax> t_;
+  std::array<double, MMax> bh_{};
+  std::array<std::array<double, SMax + 1>, MMax> WAf_{};
   std::array<std::array<double, MMax>, SMax> Af_{}, Bf_{};
-  std::array<std::array<double, SMax + 1>, SMax + 1> E_{};
   // workspace and the state carried from step to step (as GalerkinStep)
   mutable V X_, Xprev_, R_, delta_, Xext_, err1_, err2_, corr_;
   mutable int errors_known_ = 0;

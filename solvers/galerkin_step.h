@@ -73,6 +73,53 @@ namespace dvm {
 
 constexpr int kGalerkinMaxStages = 6;
 
+// The coefficient tables of a Galerkin step with s stages (s <= SMax) and a quadrature
+// (c_i, b_i) of m points: b_i, A_ij = l_j(c_i), B_ij = l_j'(c_i), WA_ij = b_i l_j(c_i),
+// WB_ij = b_i l_j'(c_i) (l_j the Lagrange basis on the control points j / s), and E, the
+// extrapolation of the previous step's polynomial to tau = 1 + d_j relative to its end
+// (see the top of this file). Computed in long double, stored in double; shared by the
+// fixed-size step below and the run-time-sized one (solvers/dynamic_galerkin_step.h).
+template <int SMax>
+struct GalerkinTables {
+  static constexpr int MMax = SMax + 1;  // quadrature points (Lobatto: s + 1)
+  std::array<double, MMax> b{};
+  std::array<std::array<double, SMax + 1>, MMax> A{}, B{}, WA{}, WB{};
+  std::array<std::array<double, SMax + 1>, SMax + 1> E{};
+
+  GalerkinTables(const Quadrature& quad, int s) {
+    const int m = quad.points;
+    std::array<long double, SMax + 1> d{};
+    for (int j = 0; j <= s; ++j) d[j] = static_cast<long double>(j) / s;
+    auto basis = [&](int j, long double t, long double& l, long double& dl) {
+      l = 1.0L;
+      dl = 0.0L;
+      for (int k = 0; k <= s; ++k) {
+        if (k == j) continue;
+        const long double f = (t - d[k]) / (d[j] - d[k]);
+        dl = dl * f + l / (d[j] - d[k]);
+        l *= f;
+      }
+    };
+    for (int i = 0; i < m; ++i) {
+      b[i] = static_cast<double>(quad.b[i]);
+      for (int j = 0; j <= s; ++j) {
+        long double l, dl;
+        basis(j, quad.c[i], l, dl);
+        A[i][j] = static_cast<double>(l);
+        B[i][j] = static_cast<double>(dl);
+        WA[i][j] = static_cast<double>(quad.b[i] * l);
+        WB[i][j] = static_cast<double>(quad.b[i] * dl);
+      }
+    }
+    for (int j = 1; j <= s; ++j)
+      for (int k = 1; k <= s; ++k) {
+        long double l, dl;
+        basis(k, 1.0L + d[j], l, dl);
+        E[j][k] = static_cast<double>(l - (k == s ? 1.0L : 0.0L));
+      }
+  }
+};
+
 template <class System, int S = 0>
 class GalerkinStep {
   static_assert(S >= 0 && S <= kGalerkinMaxStages, "Galerkin stages 1..6 (0: chosen at run time)");
@@ -89,50 +136,20 @@ class GalerkinStep {
   using XM = Eigen::Matrix<double, K, K, 0, KMax, KMax>;
 
   GalerkinStep(System L, QuadratureKind kind, int stages, double h, StepOptions options = {})
-      : L_(std::move(L)), quad_(kind, check_stages(stages)), s_(stages), h_(h), options_(options) {
+      : L_(std::move(L)), quad_(kind, check_stages(stages)), s_(stages), h_(h), options_(options), t_(quad_, s_) {
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
     const int s = s_, m = quad_.points;
-    std::array<long double, SMax + 1> d{};
-    for (int j = 0; j <= s; ++j) d[j] = static_cast<long double>(j) / s;
-    auto basis = [&](int j, long double t, long double& l, long double& dl) {
-      l = 1.0L;
-      dl = 0.0L;
-      for (int k = 0; k <= s; ++k) {
-        if (k == j) continue;
-        const long double f = (t - d[k]) / (d[j] - d[k]);
-        dl = dl * f + l / (d[j] - d[k]);
-        l *= f;
-      }
-    };
     for (int i = 0; i < m; ++i) {
-      b_[i] = static_cast<double>(quad_.b[i]);
-      for (int j = 0; j <= s; ++j) {
-        long double l, dl;
-        basis(j, quad_.c[i], l, dl);
-        A_[i][j] = static_cast<double>(l);
-        B_[i][j] = static_cast<double>(dl);
-        WA_[i][j] = static_cast<double>(quad_.b[i] * l);
-        WB_[i][j] = static_cast<double>(quad_.b[i] * dl);
-      }
-    }
-    for (int i = 0; i < m; ++i) {
-      bh_[i] = h_ * b_[i];
+      bh_[i] = h_ * t_.b[i];
       for (int j = 1; j <= s; ++j) {
-        Af_(j - 1, i) = A_[i][j];
-        Bf_(j - 1, i) = B_[i][j] / h_;
+        Af_(j - 1, i) = t_.A[i][j];
+        Bf_(j - 1, i) = t_.B[i][j] / h_;
       }
       for (int j = 0; j < s; ++j) {
-        WAf_(i, j) = h_ * WA_[i][j];
-        WBf_(i, j) = WB_[i][j];
+        WAf_(i, j) = h_ * t_.WA[i][j];
+        WBf_(i, j) = t_.WB[i][j];
       }
     }
-    // extrapolation of the previous polynomial to tau = 1 + d_j, relative to its end
-    for (int j = 1; j <= s; ++j)
-      for (int k = 1; k <= s; ++k) {
-        long double l, dl;
-        basis(k, 1.0L + d[j], l, dl);
-        E_[j][k] = static_cast<double>(l - (k == s ? 1.0L : 0.0L));
-      }
     X_.setZero(s * N);
     Xprev_.setZero(s * N);
     Xext_.setZero(s * N);
@@ -180,7 +197,7 @@ class GalerkinStep {
     for (int i = 0; i < quad_.points; ++i) {
       Vec<T, N> x, v;
       node(i, q0, X, x, v);
-      sum += (h_ * b_[i]) * L_(x, v);
+      sum += (h_ * t_.b[i]) * L_(x, v);
     }
     return sum;
   }
@@ -197,8 +214,8 @@ class GalerkinStep {
       node(i, q0, X, x, v);
       lagrangian_gradient(L_, x, v, g, p);
       for (int a = 0; a < N; ++a) g[a] = g[a] * h_;
-      for (int j = 0; j < s; ++j) R.template segment<N>(j * N) += WA_[i][j] * g + WB_[i][j] * p;
-      force += b_[i] * g;
+      for (int j = 0; j < s; ++j) R.template segment<N>(j * N) += t_.WA[i][j] * g + t_.WB[i][j] * p;
+      force += t_.b[i] * g;
     }
     R.template segment<N>(0) += p0;
   }
@@ -353,8 +370,8 @@ class GalerkinStep {
     v.setConstant(constant<T>(0.0));
     for (int j = 1; j <= s_; ++j) {
       const auto Xj = X.template segment<N>((j - 1) * N);
-      x += A_[i][j] * Xj;
-      v += B_[i][j] * Xj;
+      x += t_.A[i][j] * Xj;
+      v += t_.B[i][j] * Xj;
     }
     const double inv_h = 1.0 / h_;
     for (int a = 0; a < N; ++a) v[a] = v[a] * inv_h;
@@ -400,7 +417,7 @@ class GalerkinStep {
   void extrapolate() const {
     for (int j = 1; j <= s_; ++j) {
       V a = V::Zero();
-      for (int k = 1; k <= s_; ++k) a += E_[j][k] * Xprev_.template segment<N>((k - 1) * N);
+      for (int k = 1; k <= s_; ++k) a += t_.E[j][k] * Xprev_.template segment<N>((k - 1) * N);
       Xext_.template segment<N>((j - 1) * N) = a;
     }
   }
@@ -428,10 +445,10 @@ class GalerkinStep {
       }
       for (int k = 1; k <= s; ++k) {
         // d(h g_i)/dX_k and d(p_i)/dX_k
-        const Mat<double, N, N> dg = h_ * (A_[i][k] * Gq + (B_[i][k] / h_) * Gv);
-        const Mat<double, N, N> dp = A_[i][k] * Pq + (B_[i][k] / h_) * Pv;
+        const Mat<double, N, N> dg = h_ * (t_.A[i][k] * Gq + (t_.B[i][k] / h_) * Gv);
+        const Mat<double, N, N> dp = t_.A[i][k] * Pq + (t_.B[i][k] / h_) * Pv;
         for (int j = 0; j < s; ++j)
-          J_.template block<N, N>(j * N, (k - 1) * N) += WA_[i][j] * dg + WB_[i][j] * dp;
+          J_.template block<N, N>(j * N, (k - 1) * N) += t_.WA[i][j] * dg + t_.WB[i][j] * dp;
       }
     }
     if (!std::isfinite(J_.template lpNorm<Eigen::Infinity>())) throw std::domain_error("non-finite Galerkin Jacobian");
@@ -448,9 +465,7 @@ class GalerkinStep {
   int s_;
   double h_;
   StepOptions options_;
-  std::array<double, MMax> b_{};
-  std::array<std::array<double, SMax + 1>, MMax> A_{}, B_{}, WA_{}, WB_{};
-  std::array<std::array<double, SMax + 1>, SMax + 1> E_{};
+  GalerkinTables<SMax> t_;
   // the same tables as matrices for the fixed-size hot path (columns past the
   // quadrature's points are zero)
   Eigen::Matrix<double, SMax, MMax> Af_ = Eigen::Matrix<double, SMax, MMax>::Zero(),
