@@ -37,6 +37,7 @@
 
 #include "mechanics/hamiltonian.h"
 #include "mechanics/lagrangian.h"
+#include "solvers/boundary_value.h"
 #include "solvers/composition.h"
 #include "solvers/integrate.h"
 #include "solvers/runtime/run.h"
@@ -194,6 +195,98 @@ std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h
       [&](double hk) { return make(hk, true); });
   return stepper_run(view, std::move(step), q0, p0, v0, base, steps);
 }
+
+// ---- boundary-value problems: one solve of every interior node -------------------------
+// Solver is BoundaryValueProblem<S, Map> (R^n) or SphereBoundaryValueProblem<S, Map>
+// (S^2): solve(qa, qb, K, options) -> nodes q_k, p_k. The nodes are written through the
+// recorder as a run's rows (its room checked before the solve); the report gives the
+// ends, the energy's spread, and on a manifold the distance from it and (spread = true)
+// the spread of the conserved momentum along the solution.
+template <class View, class Solver>
+class BoundaryValueRun final : public Run {
+ public:
+  using Point = typename View::Point;
+  BoundaryValueRun(View view, Solver solver, Point qa, Point qb, std::int64_t steps, double h, int max_iterations,
+                   RunReport base, bool spread)
+      : view_(std::move(view)),
+        solver_(std::move(solver)),
+        qa_(std::move(qa)),
+        qb_(std::move(qb)),
+        steps_(steps),
+        h_(h),
+        max_iterations_(max_iterations),
+        base_(std::move(base)),
+        spread_(spread) {}
+
+  double initial_energy() const override { return 0.0; }
+  bool exact(double, std::vector<double>&, std::vector<double>&) const override { return false; }
+
+  RunReport execute(Recorder* rec) override {
+    RunReport r = base_;
+    if (rec) rec->open(view_.columns(), output_rows(steps_, rec->every()));
+    BoundaryValueOptions bo;
+    bo.max_iterations = max_iterations_;
+    const auto start = std::chrono::steady_clock::now();
+    const auto res = solver_.solve(qa_, qb_, static_cast<int>(steps_), bo);
+    r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::vector<double> row(static_cast<std::size_t>(view_.row_size()));
+    double emin = INFINITY, emax = -INFINITY, E0 = 0.0, EK = 0.0, jmin = INFINITY, jmax = -INFINITY;
+    double defect = view_.point_defect(res.q.front());
+    double inv[kMaxInvariantValues] = {};
+    for (std::size_t k = 0; k <= static_cast<std::size_t>(steps_); ++k) {
+      const double E = view_.energy(res.q[k], res.p[k]);
+      if (k == 0) E0 = E;
+      EK = E;
+      emin = std::fmin(emin, E);
+      emax = std::fmax(emax, E);
+      if (spread_) {
+        view_.invariants(res.q[k], res.p[k], inv);
+        jmin = std::fmin(jmin, inv[0]);
+        jmax = std::fmax(jmax, inv[0]);
+      }
+      if (defect >= 0.0) defect = std::fmax(defect, view_.point_defect(res.q[k]));
+      if (rec && rec->wants(static_cast<std::int64_t>(k), steps_)) {
+        view_.fill_row(row.data(), static_cast<double>(k) * h_, res.q[k], res.p[k], E);
+        rec->row(row.data());
+      }
+    }
+    r.failed = !res.converged;
+    r.steps = steps_;
+    r.t_final = static_cast<double>(steps_) * h_;
+    RunReport first;
+    view_.finish_report(first, res.q.front(), res.p.front());
+    r.q_initial = first.q_final;
+    r.p_initial = first.p_final;
+    view_.finish_report(r, res.q.back(), res.p.back());
+    r.energy_initial = E0;
+    r.energy_final = EK;
+    r.max_abs_energy_error = std::fmax(emax - E0, E0 - emin);
+    r.max_point_defect = defect;
+    if (spread_) r.momentum_spread = jmax - jmin;
+    r.max_del_residual = res.max_residual;
+    r.residual_scale = res.scale;
+    r.solver_iterations = res.iterations;
+    r.message = res.message;
+    if (rec) {
+      if (!rec->finish(res.converged, r.kept)) r.output_error = true;
+      if (res.converged && !r.output_error) {
+        if (!rec->spec().csv.empty()) r.written.push_back(rec->spec().csv);
+        if (!rec->spec().npy.empty()) r.written.push_back(rec->spec().npy);
+      }
+    }
+    return r;
+  }
+
+ private:
+  View view_;
+  Solver solver_;
+  Point qa_, qb_;
+  std::int64_t steps_;
+  double h_;
+  int max_iterations_;
+  RunReport base_;
+  bool spread_;
+};
 
 // The fields every report shares, from the problem and the method.
 RunReport base_report(const Problem& pr, const Method& me, const std::string& system_name);

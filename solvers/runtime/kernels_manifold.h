@@ -183,84 +183,6 @@ void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifol
   }
 }
 
-// ---- boundary-value problems on S^2: one Ceres problem with ceres::SphereManifold -------
-template <class S, class Map>
-class SphereBoundaryValueRun final : public Run {
- public:
-  SphereBoundaryValueRun(ManifoldView<S, Map> view, Map R, const Problem& pr, const Method& me, RunReport base)
-      : view_(std::move(view)),
-        B_(view_.L, std::move(R), pr.step),
-        qa_(pr.q[0], pr.q[1], pr.q[2]),
-        qb_(pr.q_final[0], pr.q_final[1], pr.q_final[2]),
-        steps_(pr.steps),
-        h_(pr.step),
-        max_iterations_(me.max_iterations),
-        base_(std::move(base)) {}
-
-  double initial_energy() const override { return 0.0; }
-  bool exact(double, std::vector<double>&, std::vector<double>&) const override { return false; }
-
-  RunReport execute(Recorder* rec) override {
-    RunReport r = base_;
-    if (rec) rec->open(view_.columns(), output_rows(steps_, rec->every()));  // room checked before the solve
-    BoundaryValueOptions bo;
-    bo.max_iterations = max_iterations_;
-    const auto start = std::chrono::steady_clock::now();
-    const auto res = B_.solve(qa_, qb_, static_cast<int>(steps_), bo);
-    r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const auto K = static_cast<std::size_t>(steps_);
-    std::vector<double> row(static_cast<std::size_t>(view_.row_size()));
-    double emin = INFINITY, emax = -INFINITY, E0 = 0.0, EK = 0.0, defect = 0.0, jmin = INFINITY, jmax = -INFINITY;
-    for (std::size_t k = 0; k <= K; ++k) {
-      const double E = view_.energy(res.q[k], res.p[k]);
-      if (k == 0) E0 = E;
-      EK = E;
-      emin = std::fmin(emin, E);
-      emax = std::fmax(emax, E);
-      const double J = momentum_map(view_.L, res.q[k], res.p[k])[0];
-      jmin = std::fmin(jmin, J);
-      jmax = std::fmax(jmax, J);
-      defect = std::fmax(defect, view_.point_defect(res.q[k]));
-      if (rec && rec->wants(static_cast<std::int64_t>(k), steps_)) {
-        view_.fill_row(row.data(), static_cast<double>(k) * h_, res.q[k], res.p[k], E);
-        rec->row(row.data());
-      }
-    }
-    r.failed = !res.converged;
-    r.steps = steps_;
-    r.t_final = static_cast<double>(steps_) * h_;
-    r.q_initial = stored(res.q.front());
-    r.p_initial = stored(res.p.front());
-    view_.finish_report(r, res.q.back(), res.p.back());
-    r.energy_initial = E0;
-    r.energy_final = EK;
-    r.max_abs_energy_error = std::fmax(emax - E0, E0 - emin);
-    r.max_point_defect = defect;
-    r.momentum_spread = jmax - jmin;
-    r.max_del_residual = res.max_residual;
-    r.residual_scale = res.scale;
-    r.solver_iterations = res.iterations;
-    r.message = res.message;
-    if (rec) {
-      if (!rec->finish(res.converged, r.kept)) r.output_error = true;
-      if (res.converged && !r.output_error) {
-        if (!rec->spec().csv.empty()) r.written.push_back(rec->spec().csv);
-        if (!rec->spec().npy.empty()) r.written.push_back(rec->spec().npy);
-      }
-    }
-    return r;
-  }
-
- private:
-  ManifoldView<S, Map> view_;
-  SphereBoundaryValueProblem<S, Map> B_;
-  V3 qa_, qb_;
-  std::int64_t steps_;
-  double h_;
-  int max_iterations_;
-  RunReport base_;
-};
-
 // ---- the factory ---------------------------------------------------------------------
 // Galerkin stage counts are compile-time sizes of ManifoldGalerkinStep: 1..6.
 template <class S, class View, class Point, class Covector>
@@ -295,7 +217,9 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
 
   if (pr.boundary_value) {
     if constexpr (BoundaryValue)
-      return std::make_unique<SphereBoundaryValueRun<S, Map>>(view, R, pr, me, base);
+      return std::make_unique<BoundaryValueRun<View, SphereBoundaryValueProblem<S, Map>>>(
+          view, SphereBoundaryValueProblem<S, Map>(L, R, h), Point(pr.q[0], pr.q[1], pr.q[2]),
+          Point(pr.q_final[0], pr.q_final[1], pr.q_final[2]), pr.steps, h, me.max_iterations, base, true);
     else
       throw InputError("problem.kind: unsupported");  // refused by validate()
   }

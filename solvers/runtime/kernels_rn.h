@@ -16,7 +16,6 @@
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
-#include "solvers/boundary_value.h"
 #include "solvers/composition.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/hamiltonian_step.h"
@@ -237,78 +236,6 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
   }
 }
 
-// ---- boundary-value problems on R^n: one sparse Ceres problem -------------------------
-template <class S, class Map>
-class BoundaryValueRun final : public Run {
- public:
-  static constexpr int N = S::dim;
-  using V = Vec<double, N>;
-  BoundaryValueRun(RnView<S> view, Map R, const Problem& pr, const Method& me, RunReport base)
-      : view_(std::move(view)),
-        B_(view_.L, std::move(R), pr.step),
-        qa_(to_vec<N>(pr.q)),
-        qb_(to_vec<N>(pr.q_final)),
-        steps_(pr.steps),
-        max_iterations_(me.max_iterations),
-        base_(std::move(base)) {}
-
-  double initial_energy() const override { return 0.0; }
-  bool exact(double, std::vector<double>&, std::vector<double>&) const override { return false; }
-
-  RunReport execute(Recorder* rec) override {
-    RunReport r = base_;
-    if (rec) rec->open(view_.columns(), output_rows(steps_, rec->every()));  // room checked before the solve
-    BoundaryValueOptions bo;
-    bo.max_iterations = max_iterations_;
-    const auto start = std::chrono::steady_clock::now();
-    const auto res = B_.solve(qa_, qb_, static_cast<int>(steps_), bo);
-    r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    const auto K = static_cast<std::size_t>(steps_);
-    std::vector<double> row(static_cast<std::size_t>(view_.row_size()));
-    double emin = INFINITY, emax = -INFINITY, E0 = 0.0, EK = 0.0;
-    for (std::size_t k = 0; k <= K; ++k) {
-      const double E = view_.energy(res.q[k], res.p[k]);
-      if (k == 0) E0 = E;
-      EK = E;
-      emin = std::fmin(emin, E);
-      emax = std::fmax(emax, E);
-      if (rec && rec->wants(static_cast<std::int64_t>(k), steps_)) {
-        view_.fill_row(row.data(), static_cast<double>(k) * B_.discrete_lagrangian().step(), res.q[k], res.p[k], E);
-        rec->row(row.data());
-      }
-    }
-    r.failed = !res.converged;
-    r.steps = steps_;
-    r.t_final = static_cast<double>(steps_) * B_.discrete_lagrangian().step();
-    r.q_initial = to_std(res.q.front());
-    r.p_initial = to_std(res.p.front());
-    view_.finish_report(r, res.q.back(), res.p.back());
-    r.energy_initial = E0;
-    r.energy_final = EK;
-    r.max_abs_energy_error = std::fmax(emax - E0, E0 - emin);
-    r.max_del_residual = res.max_residual;
-    r.residual_scale = res.scale;
-    r.solver_iterations = res.iterations;
-    r.message = res.message;
-    if (rec) {
-      if (!rec->finish(res.converged, r.kept)) r.output_error = true;
-      if (res.converged && !r.output_error) {
-        if (!rec->spec().csv.empty()) r.written.push_back(rec->spec().csv);
-        if (!rec->spec().npy.empty()) r.written.push_back(rec->spec().npy);
-      }
-    }
-    return r;
-  }
-
- private:
-  RnView<S> view_;
-  BoundaryValueProblem<S, Map> B_;
-  V qa_, qb_;
-  std::int64_t steps_;
-  int max_iterations_;
-  RunReport base_;
-};
-
 // ---- the factory ---------------------------------------------------------------------
 // Which parts of the method table are built for a system type (what validate() refuses
 // for the system is not instantiated): the forms other than lagrangian and
@@ -339,7 +266,9 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
       return std::visit(
           [&](const auto& R) -> std::unique_ptr<Run> {
             using Map = std::decay_t<decltype(R)>;
-            return std::make_unique<BoundaryValueRun<S, Map>>(view, R, pr, me, base);
+            return std::make_unique<BoundaryValueRun<RnView<S>, BoundaryValueProblem<S, Map>>>(
+                view, BoundaryValueProblem<S, Map>(L, R, h), to_vec<N>(pr.q), to_vec<N>(pr.q_final), pr.steps, h,
+                me.max_iterations, base, false);
           },
           rn_map(me));
     } else {
