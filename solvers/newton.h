@@ -127,11 +127,15 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       s.message = "non-finite residual or Jacobian";
       return s;
     }
-    // a residual formed from points of size |x| + x0 (a map inverted by Newton's
-    // method forms q1 = q0 + dq) cannot go below |J| eps (|x| + x0): 64 times that is
-    // round-off, whatever the scale of its terms
-    const double floor = 64.0 * std::numeric_limits<double>::epsilon() * max_abs(J) * (max_abs(x) + x0);
-    const NewtonVerdict verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt, floor);
+    NewtonVerdict verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt);
+    if (verdict == NewtonVerdict::failed) {
+      // stalled above the tolerances: a residual formed from points of size |x| + x0 (a
+      // map inverted by Newton's method forms q1 = q0 + dq) cannot go below
+      // |J| eps (|x| + x0), and 64 times that is round-off, whatever the scale of its terms
+      const double floor = 64.0 * std::numeric_limits<double>::epsilon() * max_abs(J) * (max_abs(x) + x0);
+      verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt, floor);
+      if (verdict == NewtonVerdict::converged) s.message.clear();
+    }
     if (verdict == NewtonVerdict::failed) return s;
     if (verdict == NewtonVerdict::converged) {
       // Apply the Newton correction already paid for: it takes the residual from
