@@ -30,7 +30,7 @@ int run_scene(const Scene& s, const RunOptions& o) {
   out.csv_source = output_source(s, o.csv, "--csv", "output.csv");
   out.npy_source = output_source(s, o.npy, "--npy", "output.npy");
   out.every = s.every;
-  out.progress = !o.quiet && !o.json;
+  out.progress = !o.quiet;
   Recorder recorder(out);
   const RunReport r = run->execute(&recorder);
   print_report(r, o.json, o.quiet);
