@@ -112,9 +112,9 @@ void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenS
   const Result c = measure(WrittenLagrangian<N>(text), q0, p0, h, steps, repeats);
   const Result d = measure_dynamic(text, q0, p0, h, steps, repeats);
   auto diff = [&](const Result& r) {
-    double d = 0;
-    for (std::size_t i = 0; i < r.state.size(); ++i) d = std::fmax(d, std::fabs(r.state[i] - a.state[i]));
-    return d;
+    double m = 0;
+    for (std::size_t i = 0; i < r.state.size(); ++i) m = std::fmax(m, std::fabs(r.state[i] - a.state[i]));
+    return m;
   };
   std::printf("%s, h = %g, %lld steps, best of %d\n  L = %s\n", title, h, static_cast<long long>(steps), repeats,
               text->lagrangian.text().c_str());
