@@ -4,8 +4,10 @@
 #   make bench  build and run the benchmark programs
 #   make charts build the benchmark suite, regenerate examples/charts (CSV, PNG, SVG)
 #               and the numbers of the README's charts section
-#   make sanitize  build the whole test suite with AddressSanitizer and
-#               UndefinedBehaviorSanitizer (in build-sanitize/) and run it
+#   make sanitize  build the suites labelled "sanitize" (tests/CMakeLists.txt: input,
+#               files, run-time memory, the runtime layer and the CLI, which drives
+#               every kernel) with AddressSanitizer and UndefinedBehaviorSanitizer (in
+#               build-sanitize/) and run them
 #   make fuzz   build the libFuzzer targets with clang in the sanitizer build and run
 #               each for FUZZ_SECONDS (default 60) from the seed corpus in
 #               tests/fuzz/corpus; fails on a crash, leak or undefined behaviour (the
@@ -55,8 +57,12 @@ endef
 deps:
 	$(call install_missing,$(PKGS))
 
+# `make build` (and so run and test) leaves out the three benchmark programs no test
+# runs; `make bench` builds them.
+configure = cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DDVM_BUILD_BENCH=$(1)
+
 build: deps
-	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release
+	$(call configure,OFF)
 	cmake --build $(BUILD) -j $(JOBS)
 
 run: build
@@ -65,7 +71,9 @@ run: build
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
 
-bench: build
+bench: deps
+	$(call configure,ON)
+	cmake --build $(BUILD) -j $(JOBS)
 	./$(BUILD)/examples/bench_midpoint_step
 	./$(BUILD)/examples/bench_written_lagrangian
 	./$(BUILD)/examples/bench_ratios
@@ -74,7 +82,7 @@ bench: build
 CHARTS := examples/charts
 charts: deps
 	$(call install_missing,gnuplot-nox)
-	cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release
+	$(call configure,OFF)
 	cmake --build $(BUILD) -j $(JOBS) --target dvm_charts bench_ratios
 	./$(BUILD)/examples/dvm_charts --out $(CHARTS)
 	./$(BUILD)/examples/bench_ratios --out $(CHARTS)
@@ -90,8 +98,8 @@ SAN_CONFIGURE = cmake -S . -B $(SAN_BUILD) -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_C
 	  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined"
 sanitize: fuzz-deps
 	$(SAN_CONFIGURE)
-	cmake --build $(SAN_BUILD) -j $(JOBS)
-	cd $(SAN_BUILD) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS)
+	cmake --build $(SAN_BUILD) -j $(JOBS) --target sanitized_suites
+	cd $(SAN_BUILD) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS) -L sanitize
 
 fuzz-deps: deps
 	$(call install_missing,$(FUZZ_PKGS))

@@ -91,7 +91,7 @@ BOOST_AUTO_TEST_CASE(charts_program_writes_well_formed_csv) {
     for (const auto& r : wp) ok = ok || (r[0] == "kepler" && r[1] == g && r[11] == "1");
     BOOST_TEST(ok, g);
   }
-  // and on the rigid body (SO(3), generating functions in charts; issue 9)
+  // and on the rigid body (SO(3), generating functions in charts)
   for (const char* g : {"dvm galerkin gauss s=2", "dvm galerkin gauss s=4"}) {
     bool ok = false;
     for (const auto& r : wp) ok = ok || (r[0] == "rigid-body" && r[1] == g && r[11] == "1");

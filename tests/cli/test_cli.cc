@@ -164,7 +164,7 @@ BOOST_AUTO_TEST_CASE(non_convergence_exits_3_and_keeps_converged_steps) {
   BOOST_TEST(o.err.find("residual") != std::string::npos);
   const double steps = json_number(o.out, "steps");
   BOOST_TEST(steps < 100);
-  // the final path is left alone; the converged steps are in PATH.partial (issue 8)
+  // the final path is left alone; the converged steps are in PATH.partial
   BOOST_TEST(!file_exists(csv));
   std::ifstream f(csv + ".partial");
   std::string line;
@@ -322,7 +322,7 @@ BOOST_AUTO_TEST_CASE(check_map_on_manifold_maps) {
   }
 }
 
-// [integrator] composition and `dvm methods` (issue 5).
+// [integrator] composition and `dvm methods`.
 BOOST_AUTO_TEST_CASE(composition_key_runs_and_raises_the_order) {
   // Harmonic oscillator, omega = 2, q0 = 1, p0 = 0: exact q(1) = cos 2, p(1) = -2 sin 2.
   // With h omega = 0.2 the midpoint map alone errs by about 6e-3 (phase error
@@ -413,7 +413,7 @@ BOOST_AUTO_TEST_CASE(methods_lists_every_method) {
   BOOST_TEST(dvm({"methods", "--bogus"}).status == 2);
 }
 
-// ---- issue 3: integrator forms, the chain, boundary-value problems ----
+// ---- integrator forms, the chain, boundary-value problems ----
 
 namespace {
 
@@ -688,7 +688,7 @@ double cli_order(const std::string& path, std::vector<std::string> sets, double 
 
 }  // namespace
 
-// [integrator] composition with every form and on S^2 / SO(3) (issue 5).
+// [integrator] composition with every form and on S^2 / SO(3).
 BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
   const std::string pend = write_scene(
       "comp_forms.toml", "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.2]\np = [0.3]\n"

@@ -1,4 +1,4 @@
-// End-to-end tests of `[integrator] method = "galerkin"` (issue 9): the shipped scenes
+// End-to-end tests of `[integrator] method = "galerkin"`: the shipped scenes
 // against Kepler's exact solution and, on S^2 and SO(3), against an order-8 composition
 // of a midpoint map at a small step (with the momentum maps conserved to round-off), built-in and written Lagrangians giving the same
 // run, `dvm converge` measuring order 2s, `dvm methods` listing the methods, and bad
@@ -108,7 +108,7 @@ BOOST_AUTO_TEST_CASE(bad_galerkin_values_are_refused_with_status_2) {
       {{"integrator.quadrature=gauss"}, "kepler.toml", "applies only to method = \"galerkin\""},
       {{"integrator.form=hamiltonian", "integrator.map=midpoint"}, "kepler-galerkin.toml", "lagrangian form only"},
       {{"integrator.composition=triple-jump", "integrator.map=midpoint"}, "kepler-galerkin.toml", "no composition"},
-      // on curved spaces: the chain, other forms, compositions (issue 9, S^2 and SO(3))
+      // on curved spaces: the chain, other forms, compositions (S^2 and SO(3))
       {{"integrator.method=galerkin"}, "spherical-chain.toml", "spherical-chain takes no method = \"galerkin\""},
       {{"integrator.form=hamiltonian"}, "spherical-pendulum-galerkin.toml", "lagrangian form only"},
       {{"integrator.form=hamiltonian", "integrator.method=galerkin"}, "rigid-body.toml", "lagrangian form only"},

@@ -1,4 +1,4 @@
-// Bad input, numerical faults and atomic output of the dvm program (issue 8).
+// Bad input, numerical faults and atomic output of the dvm program.
 //
 // Every bad input exits with status 2 before anything is written, with a message
 // naming where the value came from (file:line:column and key, or the option), the

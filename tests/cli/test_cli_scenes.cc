@@ -1,4 +1,4 @@
-// End-to-end tests of what issue 6 added to the dvm program: every shipped scene runs
+// End-to-end tests of the dvm program on its scenes: every shipped scene runs
 // with its invariants checked, written Lagrangians agree with the built-in systems,
 // expression errors point at the scene's line and column, .npy output, and the
 // systems / methods / converge commands.
