@@ -241,3 +241,130 @@ BOOST_AUTO_TEST_CASE(sizes_known_only_at_run_time) {
     BOOST_TEST(json_number(b.out, "max_abs_error", at) <= 1e-13, inv);
   }
 }
+
+namespace {
+
+// The objects of a JSON array printed by `dvm maps|methods|systems --json`: the text
+// of each, from its "name" to the next one.
+std::vector<std::string> json_objects(const std::string& json) {
+  std::vector<std::string> out;
+  const std::string key = "\"name\": \"";
+  for (std::size_t at = json.find(key); at != std::string::npos;) {
+    const std::size_t next = json.find(key, at + key.size());
+    out.push_back(json.substr(at, next == std::string::npos ? std::string::npos : next - at));
+    at = next;
+  }
+  return out;
+}
+
+// The text between `open` and the next `close` in `text` ("" if absent).
+std::string between(const std::string& text, const std::string& open, const std::string& close) {
+  const std::size_t at = text.find(open);
+  if (at == std::string::npos) return "";
+  const std::size_t from = at + open.size();
+  return text.substr(from, text.find(close, from) - from);
+}
+
+// The cells of the README's table row for `name` ("| name | a | b |" -> {name, a, b});
+// empty when the README has no such row.
+std::vector<std::string> readme_row(const std::string& readme, const std::string& name) {
+  const std::size_t at = readme.find("\n| " + name + " |");
+  if (at == std::string::npos) return {};
+  const std::string line = readme.substr(at + 1, readme.find('\n', at + 1) - at - 1);
+  std::vector<std::string> cells;
+  std::size_t from = 1;
+  for (std::size_t bar; (bar = line.find(" |", from)) != std::string::npos; from = bar + 2) {
+    std::string cell = line.substr(from, bar - from);
+    while (!cell.empty() && cell.front() == ' ') cell.erase(0, 1);
+    cells.push_back(cell);
+  }
+  return cells;
+}
+
+}  // namespace
+
+// The README's tables of maps and composition methods, and its mentions of the systems,
+// agree with the registries the program dispatches from: every entry has its row, with
+// the order (and for the maps on R^n, the symmetry) the registry states.
+BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
+  const std::string readme = slurp(std::string(DVM_SCENES) + "/../../README.md");
+  BOOST_REQUIRE(readme.size() > 10000);
+
+  const Output maps = dvm({"maps", "--json"});
+  BOOST_REQUIRE_EQUAL(maps.status, 0);
+  const auto map_entries = json_objects(maps.out);
+  BOOST_REQUIRE_GE(map_entries.size(), 13u);
+  for (const std::string& m : map_entries) {
+    const std::string name = json_string(m, "name");
+    BOOST_TEST_CONTEXT("map " << name) {
+      const auto row = readme_row(readme, name);
+      BOOST_REQUIRE(!row.empty());
+      const std::string order = std::to_string(static_cast<int>(json_number(m, "order")));
+      if (json_string(m, "space") == "R^n") {
+        // | name | R_d(x, v) | symmetric | order | inverse |
+        BOOST_REQUIRE_EQUAL(row.size(), 5u);
+        const bool symmetric = m.find("\"symmetric\": true") != std::string::npos;
+        const bool takes_theta = m.find("\"takes_theta\": true") != std::string::npos;
+        BOOST_TEST((row[2] == (symmetric ? "yes" : "no") || (takes_theta && row[2] == "at θ = 1/2")));
+        BOOST_TEST(row[3].rfind(order, 0) == 0);
+      } else {
+        // | name | R_d(x, v) | order | domain of the inverse |
+        BOOST_REQUIRE_EQUAL(row.size(), 4u);
+        BOOST_TEST(row[2] == order);
+      }
+    }
+  }
+
+  const Output methods = dvm({"methods", "--json"});
+  BOOST_REQUIRE_EQUAL(methods.status, 0);
+  int compositions = 0;
+  for (const std::string& m : json_objects(methods.out)) {
+    const std::string name = json_string(m, "name");
+    // the basic method alone and the Galerkin methods (their own table) are not
+    // compositions; of the recursive triple jumps (triple-jump:<order>), a family, the
+    // README lists some
+    if (name == "none" || m.find("\"quadrature\"") != std::string::npos) continue;
+    const auto row = readme_row(readme, name);
+    if (name.find(':') != std::string::npos && row.empty()) continue;
+    ++compositions;
+    BOOST_TEST_CONTEXT("composition " << name) {
+      // | method | order | stages | global | local | threshold |
+      BOOST_REQUIRE_EQUAL(row.size(), 6u);
+      BOOST_TEST(row[1] == std::to_string(static_cast<int>(json_number(m, "order"))));
+      BOOST_TEST(row[2] == std::to_string(static_cast<int>(json_number(m, "stages"))));
+    }
+  }
+  BOOST_TEST(compositions >= 17);
+
+  // | name | space | coordinates | parameters (defaults) | forms | also |
+  const Output systems = dvm({"systems", "--json"});
+  BOOST_REQUIRE_EQUAL(systems.status, 0);
+  const auto system_entries = json_objects(systems.out);
+  BOOST_REQUIRE_GE(system_entries.size(), 14u);
+  for (const std::string& s : system_entries) {
+    const std::string name = json_string(s, "name");
+    BOOST_TEST_CONTEXT("system " << name) {
+      const auto row = readme_row(readme, name);
+      BOOST_REQUIRE_EQUAL(row.size(), 6u);
+      BOOST_TEST(row[1] == json_string(s, "space"));
+      // "params": {"m": 1, "l": 1} -> "m = 1, l = 1"; "forms": ["a", "b"] -> "a, b"
+      std::string params = between(s, "\"params\": {", "}"), forms = between(s, "\"forms\": [", "]");
+      for (std::size_t at; (at = params.find("\": ")) != std::string::npos;) params.replace(at, 3, " = ");
+      params.erase(std::remove_if(params.begin(), params.end(), [](char c) { return c == '"' || c == '\n'; }),
+                   params.end());
+      while (params.find("  ") != std::string::npos) params.replace(params.find("  "), 2, " ");
+      while (!params.empty() && params.front() == ' ') params.erase(0, 1);
+      while (!params.empty() && params.back() == ' ') params.pop_back();
+      forms.erase(std::remove(forms.begin(), forms.end(), '"'), forms.end());
+      BOOST_TEST(row[3] == params);
+      BOOST_TEST(row[4] == forms);
+      std::string also;
+      for (const auto& [key, label] : {std::pair<std::string, std::string>{"retraction_maps", "retraction maps"},
+                                       {"composition", "composition"},
+                                       {"galerkin", "galerkin"},
+                                       {"boundary_value", "boundary values"}})
+        if (s.find("\"" + key + "\": true") != std::string::npos) also += (also.empty() ? "" : ", ") + label;
+      BOOST_TEST(row[5] == also);
+    }
+  }
+}
