@@ -467,6 +467,29 @@ BOOST_AUTO_TEST_CASE(hamiltonian_form_writes_the_same_csv_and_json) {
   BOOST_TEST(rows == 102);  // header, t = 0 and 100 steps
 }
 
+// sode1 is the paper's first option (Sec. 4) only for a symmetric map: with any other
+// map it is refused, naming both keys; sode2 takes every map.
+BOOST_AUTO_TEST_CASE(sode1_is_refused_with_a_map_that_is_not_symmetric) {
+  const std::string path = write_scene("sode1_maps.toml", kGood);
+  for (const std::vector<std::string>& sets :
+       {std::vector<std::string>{"integrator.map=explicit-euler"}, {"integrator.map=adjoint-euler"},
+        {"integrator.map=theta", "integrator.theta=0.3"}, {"integrator.map=retraction-theta", "integrator.theta=0"}}) {
+    std::vector<std::string> args = {"run", path, "--quiet", "--set", "integrator.form=sode1"};
+    for (const auto& s : sets) args.insert(args.end(), {"--set", s});
+    const Output o = dvm(args);
+    BOOST_TEST_CONTEXT(sets.front() << "\n" << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find("integrator.form") != std::string::npos);
+      BOOST_TEST(o.err.find("integrator.map") != std::string::npos);
+      args[4] = "integrator.form=sode2";
+      BOOST_TEST(dvm(args).status == 0);
+    }
+  }
+  const Output ok = dvm({"run", path, "--quiet", "--set", "integrator.form=sode1", "--set", "integrator.map=theta",
+                         "--set", "integrator.theta=0.5"});
+  BOOST_TEST(ok.status == 0, ok.err);
+}
+
 BOOST_AUTO_TEST_CASE(sode_and_newmark_forms_run) {
   const std::string path = write_scene("forms2.toml", kGood);
   for (const char* form : {"sode1", "sode2", "newmark"}) {
