@@ -8,15 +8,15 @@
 // (Y0, Y1) = ((q0, v0), (q1, v1)) to a base point X in TQ and a tangent vector W at it,
 // (X, W) = R^{-1}(Y0, Y1), and the step asks W to be h times the vector field. Two
 // ways of sampling the vector field give the two discretizations:
-//   sode1 (Eq. 4.1, the "first option"):  W = h (Gamma(Y0) + Gamma(Y1)) / 2
+//   sode1 (Eq. 4.1, the "first option"):  R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1))
 //   sode2 (Eq. 4.2):                       W = h Gamma(X)
+// For a theta map of TQ sode1 is Y1 - Y0 = h ((1 - theta) Gamma(Y0) + theta Gamma(Y1))
+// (explicit Euler at theta = 0, the trapezoidal rule at 1/2).
 // With the midpoint map (or the tangent lift of the midpoint map on Q, which is the
 // midpoint map of TQ) sode1 is the trapezoidal rule and sode2 the implicit midpoint
 // rule: they agree for linear a and differ at O(h^3) per step otherwise (the paper's
-// worked example; tests/solvers/test_sode.cc measures it). Note on provenance: the
-// names follow the reading of the paper (Eq. 4.1 = end-point sampling, the
-// form whose Hamiltonian analogue is the non-symplectic trapezoidal method of the
-// remark after Sec. 5.1; Eq. 4.2 = base-point sampling, the analogue of Eq. 5.1).
+// worked example after the two options in Sec. 4; tests/solvers/test_sode.cc measures
+// it).
 //
 // Newmark (Newmark 1959; Hughes, The Finite Element Method, Sec. 9.1): with a_k = a(q_k, v_k)
 //   q1 = q0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1)
@@ -29,12 +29,12 @@
 // agree), so (X, W) = (R^{TTQ})^{-1}(Y0, Y1) = (Y0, Y1 - Y0). The vector of T_{Y0}TQ
 // that W is asked to equal is h times the Newmark quadrature of Gamma along the step,
 //   N^{gamma,beta}(Y0, Y1) = (v0 + h ((1/2 - beta) a0 + beta a1),  (1 - gamma) a0 + gamma a1),
-// an end-point ("first option") sampling like sode1's with the weights (gamma, beta):
-//   sode1:   W = h (Gamma(Y0) + Gamma(Y1)) / 2,      newmark:  W = h N^{gamma,beta}(Y0, Y1).
+// an end-point sampling with the weights (gamma, beta): W = h N^{gamma,beta}(Y0, Y1).
 // W = h N is the classical update above, term by term. For gamma = 1/2, beta = 1/4
 // the velocity row gives h (a0 + a1)/2 = v1 - v0, so the position row is
-// h (v0 + (v1 - v0)/2) = h (v0 + v1)/2: N = (Gamma(Y0) + Gamma(Y1))/2 and Newmark is
-// sode1 through R^{TTQ} (the trapezoidal rule; tested to round-off on the pendulum).
+// h (v0 + (v1 - v0)/2) = h (v0 + v1)/2: N = (Gamma(Y0) + Gamma(Y1))/2, the trapezoidal
+// rule, which is sode1 through the midpoint map of TQ (tested to round-off on the
+// pendulum).
 // Why the weights have to sit in the sampling and cannot sit in the map alone: every
 // map on TQ that does not depend on h and satisfies Def. 2.2 with a linear inverse
 // (the theta maps of TQ and their tangent-lift forms) has W = Y1 - Y0, and its
@@ -178,7 +178,13 @@ class SodeStep {
     const TangentPoint<T, 2 * N> t = inverse_increment(R_, Y0, dY);
     if (sampling_.form == SodeForm::sode2) return t.v - h_ * gamma(t.x);
     const Vec<T, 2 * N> Y1 = Y0 + dY;
-    if (sampling_.form == SodeForm::sode1) return t.v - (0.5 * h_) * (gamma(Y0) + gamma(Y1));
+    if (sampling_.form == SodeForm::sode1) {
+      // the first option: R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1)), written as
+      // R^1(Y1, .) - R^2(Y0, .) so that for the midpoint map it reads
+      // dY - h (Gamma(Y0) + Gamma(Y1))/2
+      const Vec<T, 2 * N> g0 = h_ * gamma(Y0), g1 = h_ * gamma(Y1);
+      return Vec<T, 2 * N>(R_(Y1, g1).q0 - R_(Y0, g0).q1);
+    }
     // Newmark's quadrature N^{gamma,beta}(Y0, Y1) of Gamma
     const double g = sampling_.gamma, b = sampling_.beta;
     const Vec<T, N> v0 = Y0.template tail<N>();

@@ -129,15 +129,6 @@ void validate(const Problem& pr, const Method& me) {
     if (!m.takes_theta && me.theta != m.theta)
       throw InputError("integrator.theta: theta applies only to map = \"theta\" or \"retraction-theta\", not \"" +
                        m.name + "\"");
-    // The paper's first option (Sec. 4), (R^TTQ)^2(Y0, h Gamma(Y0)) = (R^TTQ)^1(Y1, h Gamma(Y1)),
-    // weighs the end points (1 - theta, theta) for a theta lift; the sode1 step averages
-    // them (1/2, 1/2) for every map, which is the first option only for a symmetric map.
-    if (me.form == Form::sode1 && !m.symmetric(me.theta))
-      throw InputError("integrator.form: form = \"sode1\" with integrator.map = \"" + m.name + "\"" +
-                       (m.takes_theta ? " at theta = " + fmt(me.theta) : std::string()) +
-                       ", which is not symmetric: sode1 averages Gamma over the end points, the paper's first option "
-                       "(Sec. 4) only for a symmetric map; use form = \"sode2\" or a symmetric map (midpoint, "
-                       "theta = 0.5)");
     if (m.family == MapFamily::retraction_theta && !caps.retraction_maps)
       throw InputError("integrator.map: " + name + " runs the theta-family maps (explicit-euler, adjoint-euler, "
                        "midpoint, theta), got \"" + m.name + "\"" + note);

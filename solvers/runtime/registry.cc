@@ -58,7 +58,7 @@ const std::vector<FormEntry>& form_registry() {
        "position-momentum step of L_d(q0, q1) = h L(R_d^{-1}(q0, q1)/h): p0 = -D1 L_d, p1 = D2 L_d (Sec. 5.3)", true},
       {Form::hamiltonian, "hamiltonian",
        "Eq. 5.1: the inverse cotangent lift of the map equals h X_H at its base point (symplectic for any map)", true},
-      {Form::sode1, "sode1", "Eq. 4.1: the tangent lift of the map, the SODE averaged over both end points (symmetric maps only)", true},
+      {Form::sode1, "sode1", "Eq. 4.1: the tangent lift of the map, R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1)) (the first option)", true},
       {Form::sode2, "sode2", "Eq. 4.2: the tangent lift of the map, the SODE sampled at its base point", true},
       {Form::newmark, "newmark", "Newmark's family (gamma, beta) on the SODE (Sec. 4.1); uses no map", false},
   };
