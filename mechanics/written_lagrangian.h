@@ -95,7 +95,7 @@ struct WrittenLagrangian {
   // No `gradient` member on purpose: Expression::gradient (reverse mode) exists and is
   // tested, but measured on 1- and 2-dof systems the engine's forward-mode nested Jets
   // through operator() were faster (examples/bench/bench_written_lagrangian.cc, see
-  // README): 2.4-2.8x the built-in closed forms against 2.8-4.5x with reverse mode.
+  // mechanics/README.md): 2.4-2.8x the built-in closed forms against 2.8-4.5x with reverse mode.
 
   // The monitored energy: the written one if given, else E_L = <dL/dv, v> - L.
   double energy_at(const Vec<double, N>& q, const Vec<double, N>& v, const Vec<double, N>& p) const {
