@@ -96,6 +96,7 @@
 #include "core/map_operations.h"
 #include "core/scalar.h"
 #include "mechanics/lagrangian.h"
+#include "mechanics/nbody_momenta.h"
 #include "mechanics/systems.h"
 #include "mechanics/written_lagrangian.h"
 
@@ -521,20 +522,9 @@ class NBodyDynamic {
       for (int a = 0; a < 3; ++a) v[3 * i + a] = p[3 * i + a] / m(i);
   }
 
-  // Total momentum (3) and total angular momentum (3), as NBody<B>::momenta.
+  // Total momentum (3) and total angular momentum (3) (mechanics/nbody_momenta.h).
   static std::array<double, 6> momenta(const DynIn& q, const DynIn& p) {
-    std::array<double, 6> out{};
-    for (Eigen::Index i = 0; i + 2 < q.size(); i += 3) {
-      const double* x = q.data() + i;
-      const double* y = p.data() + i;
-      out[0] += y[0];
-      out[1] += y[1];
-      out[2] += y[2];
-      out[3] += x[1] * y[2] - x[2] * y[1];
-      out[4] += x[2] * y[0] - x[0] * y[2];
-      out[5] += x[0] * y[1] - x[1] * y[0];
-    }
-    return out;
+    return nbody_momenta(q.data(), p.data(), static_cast<int>(q.size() / 3));
   }
 };
 

@@ -44,6 +44,7 @@
 #include <vector>
 
 #include "core/scalar.h"
+#include "mechanics/nbody_momenta.h"
 #include "mechanics/systems.h"
 
 namespace dvm {
@@ -391,18 +392,7 @@ struct NBody {
   }
   // Total momentum (3) and total angular momentum (3).
   static std::array<double, 6> momenta(const Vec<double, dim>& q, const Vec<double, dim>& p) {
-    std::array<double, 6> out{};
-    for (int i = 0; i < B; ++i) {
-      const double* x = q.data() + 3 * i;
-      const double* y = p.data() + 3 * i;
-      out[0] += y[0];
-      out[1] += y[1];
-      out[2] += y[2];
-      out[3] += x[1] * y[2] - x[2] * y[1];
-      out[4] += x[2] * y[0] - x[0] * y[2];
-      out[5] += x[0] * y[1] - x[1] * y[0];
-    }
-    return out;
+    return nbody_momenta(q.data(), p.data(), B);
   }
 };
 
