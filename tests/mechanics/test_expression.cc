@@ -335,16 +335,18 @@ BOOST_AUTO_TEST_CASE(fpu_oscillatory_energy_is_an_adiabatic_invariant) {
 }
 
 // Reverse mode on the tape against forward mode (Jets through operator()), for every
-// operation, also with Jet scalars (second derivatives), and the fallback for tapes
-// longer than Expression::kMaxTape.
+// operation, also with Jet scalars (second derivatives), and the refusal of tapes
+// longer than Expression::kMaxTape (at the boundary: kMaxTape taken, kMaxTape + 1
+// refused).
 namespace {
-// dL/dq, dL/dv by Expression::gradient (reverse mode), forward mode if the tape is long.
+// dL/dq, dL/dv by Expression::gradient (reverse mode) only, never forward mode: returns
+// whether the tape was taken (false for tapes longer than Expression::kMaxTape). The
+// comparisons require true, so forward mode is never compared with itself.
 template <class T>
-void reverse_gradient(const WrittenLagrangian<2>& L, const Vec<T, 2>& q, const Vec<T, 2>& v, Vec<T, 2>& dLdq,
+bool reverse_gradient(const WrittenLagrangian<2>& L, const Vec<T, 2>& q, const Vec<T, 2>& v, Vec<T, 2>& dLdq,
                       Vec<T, 2>& dLdv) {
   for (int i = 0; i < 2; ++i) dLdq[i] = dLdv[i] = constant<T>(0.0);
-  if (!L.system->lagrangian.gradient(q.data(), v.data(), dLdq.data(), dLdv.data()))
-    lagrangian_gradient(L, q, v, dLdq, dLdv);
+  return L.system->lagrangian.gradient(q.data(), v.data(), dLdq.data(), dLdv.data());
 }
 }  // namespace
 
@@ -356,10 +358,11 @@ BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operat
   };
   for (const auto& text : texts) {
     const WrittenLagrangian<2> L(written({"x", "y"}, {}, text));
+    BOOST_REQUIRE_MESSAGE(static_cast<int>(L.system->lagrangian.tape().size()) <= Expression::kMaxTape, text);
     for (const auto& [q, v] : {std::pair{Vec<double, 2>(0.7, 1.3), Vec<double, 2>(0.2, -0.4)},
                                std::pair{Vec<double, 2>(1.1, 0.6), Vec<double, 2>(-0.9, 0.5)}}) {
       Vec<double, 2> a1, b1, a2, b2;
-      reverse_gradient(L, q, v, a1, b1);
+      BOOST_REQUIRE_MESSAGE(reverse_gradient(L, q, v, a1, b1), text << ": reverse mode declined the tape");
       lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{L}, q, v, a2, b2);
       BOOST_TEST(max_abs(a1 - a2) <= 1e-14 * std::fmax(1.0, max_abs(a2)), text);
       BOOST_TEST(max_abs(b1 - b2) <= 1e-14 * std::fmax(1.0, max_abs(b2)), text);
@@ -370,7 +373,7 @@ BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operat
         qd[i] = D(q[i], i);
         vd[i] = D(v[i], 2 + i);
       }
-      reverse_gradient(L, qd, vd, ga, pa);
+      BOOST_REQUIRE_MESSAGE(reverse_gradient(L, qd, vd, ga, pa), text << ": reverse mode declined the tape (Jets)");
       lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{L}, qd, vd, gb, pb);
       for (int i = 0; i < 2; ++i) {
         BOOST_TEST(max_abs(ga[i].v - gb[i].v) <= 1e-13 * std::fmax(1.0, max_abs(gb[i].v)), text);
@@ -386,4 +389,29 @@ BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operat
   const Vec<double, 2> q(0.3, 0.1), v(0.5, 0.7);
   Vec<double, 2> a1, b1;
   BOOST_TEST(!L.system->lagrangian.gradient(q.data(), v.data(), a1.data(), b1.data()));
+  // at the boundary: a tape of exactly kMaxTape instructions is taken (and right), one of
+  // kMaxTape + 1 refused. Heads of 3, 4 and 5 instructions and terms " + sin(x)" of 3
+  // (Var, Sin, Add) reach every length; the lengths are read from the tape.
+  int found = 0;
+  for (const std::string head : {"x_dot*y", "-(x_dot*y)", "x_dot*y*x"})
+    for (int k = 0; k <= Expression::kMaxTape / 3; ++k) {
+      std::string text = head;
+      for (int i = 0; i < k; ++i) text += " + sin(x)";
+      const WrittenLagrangian<2> B(written({"x", "y"}, {}, text));
+      const int n = static_cast<int>(B.system->lagrangian.tape().size());
+      if (n != Expression::kMaxTape && n != Expression::kMaxTape + 1) continue;
+      found |= n == Expression::kMaxTape ? 1 : 2;
+      BOOST_TEST_CONTEXT("tape of " << n << " instructions: " << head << " + " << k << " x sin(x)") {
+        Vec<double, 2> a2, b2, a3, b3;
+        const bool taken = reverse_gradient(B, q, v, a2, b2);
+        BOOST_TEST(taken == (n == Expression::kMaxTape));
+        if (taken) {
+          lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{B}, q, v, a3, b3);
+          BOOST_TEST(max_abs(a2 - a3) <= 1e-14 * std::fmax(1.0, max_abs(a3)));
+          BOOST_TEST(max_abs(b2 - b3) <= 1e-14 * std::fmax(1.0, max_abs(b3)));
+        }
+      }
+    }
+  BOOST_TEST(found == 3);  // both lengths were built
 }
+
