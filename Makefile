@@ -42,6 +42,9 @@ SAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:strict_string_checks=1
 # llvm-14 (only recommended by clang-14) holds llvm-symbolizer-14: file:line in the stack traces
 FUZZ_PKGS    := clang-14 libclang-rt-14-dev llvm-14
 FUZZ_SECONDS ?= 60
+# inputs up to 256 KiB: the corpus holds deep and long cases (15000 parentheses, sums of
+# 20000 terms, nested arrays) that a small -max_len would cut short
+FUZZ_MAX_LEN ?= 262144
 
 .PHONY: deps build run test bench charts clean sanitize fuzz fuzz-deps
 
@@ -114,7 +117,7 @@ fuzz: fuzz-deps
 	  mkdir -p $(SAN_BUILD)/corpus-$$t && \
 	  echo "fuzzing $$t for $(FUZZ_SECONDS) s" && \
 	  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -max_len=4096 \
+	  ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -max_len=$(FUZZ_MAX_LEN) \
 	    -print_final_stats=1 -artifact_prefix=$(SAN_BUILD)/$$t- \
 	    $(SAN_BUILD)/corpus-$$t tests/fuzz/corpus/$$t || exit 1; \
 	done

@@ -26,8 +26,17 @@
 //
 // Errors are thrown as ExpressionError with the offset (0-based, in bytes) in the
 // text where the problem is, and a message saying what was expected.
+//
+// Limits (input beyond them is refused with the offset, never a crash): the text is at
+// most Expression::kMaxText bytes; parentheses, signs, right-hand sides of '^' and
+// function arguments nest at most Expression::kMaxNesting levels (the parser recurses
+// once per level; everything after it walks the tree without recursion, so a flat sum
+// of any length within kMaxText is fine); evaluation needs a stack of at most
+// Expression::kMaxStack values (an expression leaning right, a+(b+(c+...)), needs one
+// per level).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <map>
@@ -72,6 +81,9 @@ class Expression {
  public:
   // Largest stack depth the evaluator supports (checked at parse time).
   static constexpr int kMaxStack = 24;
+  // Longest text and deepest nesting the parser accepts (see the header comment).
+  static constexpr std::size_t kMaxText = std::size_t{1} << 20;
+  static constexpr int kMaxNesting = 256;
 
   enum class Op : std::uint8_t {
     Const, Var,
@@ -363,6 +375,21 @@ struct Node {
   int block = 0, index = 0;
   std::vector<std::unique_ptr<Node>> kids;
   bool is_const() const { return op == Expression::Op::Const; }
+  Node() = default;
+  Node(const Node&) = delete;
+  Node& operator=(const Node&) = delete;
+  // A flat sum of n terms is a tree n deep: tear it down from a work list, so that no
+  // destructor runs with children left (the default would recurse n deep).
+  ~Node() {
+    std::vector<std::unique_ptr<Node>> pending = std::move(kids);
+    while (!pending.empty()) {
+      std::unique_ptr<Node> n = std::move(pending.back());
+      pending.pop_back();
+      if (!n) continue;  // a slot left empty by an exception in simplify()
+      for (auto& k : n->kids) pending.push_back(std::move(k));
+      n->kids.clear();
+    }
+  }
 };
 using NodePtr = std::unique_ptr<Node>;
 
@@ -392,6 +419,9 @@ class Parser {
   Parser(const std::string& text, const ExpressionSymbols& symbols) : t_(text), sym_(symbols) {}
 
   NodePtr parse() {
+    if (t_.size() > Expression::kMaxText)
+      fail(Expression::kMaxText, "the expression is " + std::to_string(t_.size()) + " bytes long; at most " +
+                                     std::to_string(Expression::kMaxText) + " are accepted");
     skip();
     if (i_ >= t_.size()) fail(i_, "expected an expression, got an empty text");
     NodePtr n = expr();
@@ -481,8 +511,21 @@ class Parser {
     }
   }
 
+  // Every recursion of the parser passes through unary(): parentheses and function
+  // arguments (primary -> expr -> term -> unary), signs and the right side of '^'.
+  struct Nesting {
+    explicit Nesting(Parser& p) : p_(p) {
+      if (++p_.nesting_ > Expression::kMaxNesting)
+        p_.fail(p_.i_, "the expression nests deeper than " + std::to_string(Expression::kMaxNesting) +
+                           " levels (parentheses, signs, powers and function calls); write it flatter");
+    }
+    ~Nesting() { --p_.nesting_; }
+    Parser& p_;
+  };
+
   NodePtr unary() {
     skip();
+    const Nesting level(*this);
     const std::size_t at = i_;
     if (accept('-')) {
       need_operand("'-'");
@@ -582,12 +625,12 @@ class Parser {
   const std::string& t_;
   const ExpressionSymbols& sym_;
   std::size_t i_ = 0;
+  int nesting_ = 0;
 };
 
-// Constant folding and strength reduction, bottom up.
-inline NodePtr simplify(NodePtr n) {
+// Constant folding and strength reduction of one node whose children are simplified.
+inline NodePtr simplify_node(NodePtr n) {
   using O = Expression::Op;
-  for (auto& k : n->kids) k = simplify(std::move(k));
   if (n->kids.empty()) return n;
   bool all_const = true;
   for (const auto& k : n->kids) all_const = all_const && k->is_const();
@@ -599,6 +642,10 @@ inline NodePtr simplify(NodePtr n) {
     else
       x = n->op == O::Pow ? std::pow(n->kids[0]->c, n->kids[1]->c)
                           : Expression::binary<double>(n->op, n->kids[0]->c, n->kids[1]->c);
+    if (!std::isfinite(x))
+      throw ExpressionError(n->pos, std::string("this operation on constants gives ") + (std::isnan(x) ? "nan" : "inf") +
+                                        " (an overflow, a division by zero or a value outside a function's "
+                                        "domain); expected finite values");
     n->kids.clear();
     n->op = O::Const;
     n->c = x;
@@ -649,27 +696,70 @@ inline NodePtr simplify(NodePtr n) {
   return n;
 }
 
-// Postfix emission; returns the stack depth the sub-tree needs.
-inline int emit(const Node& n, std::vector<Expression::Instr>& tape) {
+// Constant folding and strength reduction, bottom up (a post-order walk with a work
+// list: the tree may be as deep as a sum is long).
+inline NodePtr simplify(NodePtr root) {
+  struct Item {
+    NodePtr* slot;
+    bool expanded;
+  };
+  std::vector<Item> work{{&root, false}};
+  while (!work.empty()) {
+    Item& top = work.back();
+    NodePtr* slot = top.slot;
+    if (!top.expanded) {
+      top.expanded = true;  // before the push below moves `top`
+      for (auto& k : (*slot)->kids) work.push_back({&k, false});
+      continue;
+    }
+    work.pop_back();
+    *slot = simplify_node(std::move(*slot));
+  }
+  return root;
+}
+
+// Postfix emission (post-order with a work list); returns the stack depth the tree
+// needs: a node with children needing da and db needs max(da, 1 + db).
+inline int emit(const Node& root, std::vector<Expression::Instr>& tape) {
   using O = Expression::Op;
-  Expression::Instr in{};
-  in.op = n.op;
-  in.c = n.c;
-  if (n.op == O::Var) {
-    in.block = static_cast<std::int8_t>(n.block);
-    in.index = n.index;
+  struct Item {
+    const Node* n;
+    bool expanded;
+  };
+  std::vector<Item> work{{&root, false}};
+  std::vector<int> depths;
+  while (!work.empty()) {
+    Item& top = work.back();
+    const Node& n = *top.n;
+    if (!top.expanded) {
+      top.expanded = true;
+      for (auto k = n.kids.rbegin(); k != n.kids.rend(); ++k) work.push_back({k->get(), false});
+      continue;
+    }
+    work.pop_back();
+    Expression::Instr in{};
+    in.op = n.op;
+    in.c = n.c;
+    if (n.op == O::Var) {
+      in.block = static_cast<std::int8_t>(n.block);
+      in.index = n.index;
+    }
+    if (n.op == O::PowI) in.index = n.index;
+    int depth = 1;
+    if (n.kids.size() == 1) {
+      depth = depths.back();
+      depths.pop_back();
+    } else if (n.kids.size() == 2) {
+      const int db = depths.back();
+      depths.pop_back();
+      const int da = depths.back();
+      depths.pop_back();
+      depth = std::max(da, 1 + db);
+    }
+    tape.push_back(in);
+    depths.push_back(depth);
   }
-  if (n.op == O::PowI) in.index = n.index;
-  int depth = 1;
-  if (n.kids.size() == 1) {
-    depth = emit(*n.kids[0], tape);
-  } else if (n.kids.size() == 2) {
-    const int da = emit(*n.kids[0], tape);
-    const int db = emit(*n.kids[1], tape);
-    depth = std::max(da, 1 + db);
-  }
-  tape.push_back(in);
-  return depth;
+  return depths.back();
 }
 
 }  // namespace expression_detail

@@ -415,3 +415,53 @@ BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operat
   BOOST_TEST(found == 3);  // both lengths were built
 }
 
+// Inputs that grow: deep nesting, long flat sums, long chains of signs and powers. The
+// parser recurses once per nesting level and walks the tree without recursion, so these
+// are either evaluated or refused with the offset where the limit was crossed: a crash
+// (stack overflow) ends the test program.
+BOOST_AUTO_TEST_CASE(growing_inputs_are_parsed_or_refused_never_crash) {
+  const int deep = 15000;
+  std::string msg;
+  // nesting beyond kMaxNesting: parentheses, signs, powers, function calls
+  const std::string parens = std::string(deep, '(') + "x" + std::string(deep, ')');
+  BOOST_TEST(error_offset(parens, msg) == static_cast<std::size_t>(Expression::kMaxNesting));
+  BOOST_TEST(msg.find("nests deeper than 256 levels") != std::string::npos, msg);
+  std::string signs = "x + ";
+  for (int i = 0; i < 60000; ++i) signs += '-';
+  signs += "x";
+  BOOST_TEST(error_offset(signs, msg) == 4u + Expression::kMaxNesting);  // the sign that opens one level too many
+  std::string powers = "x";
+  for (int i = 0; i < 60000; ++i) powers += "^1";
+  BOOST_TEST(error_offset(powers, msg) != std::string::npos);
+  BOOST_TEST(msg.find("nests deeper") != std::string::npos, msg);
+  std::string calls;
+  for (int i = 0; i < deep; ++i) calls += "sin(";
+  calls += "x" + std::string(deep, ')');
+  BOOST_TEST(error_offset(calls, msg) != std::string::npos);
+  BOOST_TEST(msg.find("nests deeper") != std::string::npos, msg);
+  // at the limit itself the parentheses are accepted (and need a stack of one)
+  const int n = Expression::kMaxNesting - 1;
+  BOOST_TEST(eval1(std::string(n, '(') + "x" + std::string(n, ')'), 0.25) == 0.25);
+
+  // longer than kMaxText: refused at the limit, before any parsing
+  std::string huge(Expression::kMaxText + 1, ' ');
+  huge[0] = 'x';
+  BOOST_TEST(error_offset(huge, msg) == Expression::kMaxText);
+  BOOST_TEST(msg.find("at most 1048576 are accepted") != std::string::npos, msg);
+
+  // a flat sum of 60000 terms (a tree 60000 deep) is within kMaxText: it parses,
+  // folds, emits and tears down without recursion, and evaluates right
+  std::string sum = "x";
+  for (int i = 1; i < 60000; ++i) sum += (i % 2 ? "+x" : "-a");
+  const double x = 0.5;
+  BOOST_TEST(eval1(sum, x) == 30001 * x - 29999 * 0.7, boost::test_tools::tolerance(1e-12));  // 30001 x's, 29999 a's
+  // a long product and a long chain of unary functions within the nesting limit
+  std::string prod = "x";
+  for (int i = 1; i < 20000; ++i) prod += "*1.0";
+  BOOST_TEST(eval1(prod, x) == x);
+  std::string chain = "x";
+  for (int i = 0; i < 200; ++i) chain = "sin(" + chain + ")";
+  double expected = x;
+  for (int i = 0; i < 200; ++i) expected = std::sin(expected);
+  BOOST_TEST(eval1(chain, x) == expected);
+}
