@@ -7,19 +7,12 @@
 
 namespace dvm::cli {
 
-namespace {
-
-std::string output_source(const Scene& s, const std::string& option_value, const char* option, const char* key) {
-  return option_value.empty() ? s.path + ": key '" + key + "'" : std::string(option);
-}
-
-}  // namespace
-
 int run_scene(const Scene& s, const RunOptions& o) {
   if (o.converge) {
     ConvergeOptions co;
     co.steps_list = o.steps_list;
     co.t_end = o.t_end;
+    co.max_total_steps = o.max_total_steps;
     const ConvergeReport r = converge(s.problem, s.method, co);
     return print_converge(r, o.json);
   }
@@ -27,13 +20,16 @@ int run_scene(const Scene& s, const RunOptions& o) {
   OutputSpec out;
   out.csv = o.csv.empty() ? s.csv : o.csv;
   out.npy = o.npy.empty() ? s.npy : o.npy;
-  out.csv_source = output_source(s, o.csv, "--csv", "output.csv");
-  out.npy_source = output_source(s, o.npy, "--npy", "output.npy");
+  out.csv_source = output_source(s.path, o.csv, "--csv", "output.csv");
+  out.npy_source = output_source(s.path, o.npy, "--npy", "output.npy");
+  out.inputs = {s.path};
   out.every = s.every;
   out.progress = !o.quiet;
+  // rows on standard output: the summary moves to standard error
+  const bool rows_on_stdout = descriptor_path(out.csv) == 1 || descriptor_path(out.npy) == 1;
   Recorder recorder(out);
   const RunReport r = run->execute(&recorder);
-  print_report(r, o.json, o.quiet);
+  print_report(r, o.json, o.quiet, rows_on_stdout ? stderr : stdout);
   return r.failed || r.output_error ? 3 : 0;
 }
 

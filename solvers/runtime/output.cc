@@ -1,5 +1,6 @@
 #include "solvers/runtime/output.h"
 
+#include <fcntl.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -103,9 +104,52 @@ std::string human_bytes(double bytes) {
   return buf;
 }
 
+int descriptor_path(const std::string& path) {
+  if (path == "-" || path == "/dev/stdout") return 1;
+  if (path == "/dev/stderr") return 2;
+  for (const char* prefix : {"/dev/fd/", "/proc/self/fd/"}) {
+    const std::size_t n = std::strlen(prefix);
+    if (path.compare(0, n, prefix) != 0 || path.size() == n || path.size() > n + 6) continue;
+    if (path.find_first_not_of("0123456789", n) != std::string::npos) continue;
+    return std::atoi(path.c_str() + n);
+  }
+  return -1;
+}
+
+void OutputFile::open_stream(const std::string& path, const std::string& where, int fd) {
+  f_ = fdopen(fd, "wb");
+  if (!f_) {
+    const int e = errno;
+    ::close(fd);
+    throw InputError(where + ": cannot write to it (" + std::strerror(e) + ")");
+  }
+  path_ = path;
+  streamed_ = true;
+}
+
+bool OutputFile::seekable() const { return f_ && lseek(fileno(f_), 0, SEEK_CUR) != static_cast<off_t>(-1); }
+
 void OutputFile::open(const std::string& path, const std::string& what, double bytes) {
   discard();
-  const std::string where = what + " '" + path + "'";
+  const std::string where = what + " '" + echo(path) + "'";
+  if (path.find('\0') != std::string::npos)
+    throw InputError(what + ": the path contains a NUL character; expected a file name");
+  // this process's descriptors, and existing paths that are not regular files: write
+  // to them directly (renaming a temporary over a device node would replace it)
+  if (const int d = descriptor_path(path); d >= 0) {
+    const int fd = fcntl(d, F_DUPFD_CLOEXEC, 3);
+    if (fd < 0) throw InputError(where + ": descriptor " + std::to_string(d) + " is not open (" + std::strerror(errno) + ")");
+    open_stream(path, where, fd);
+    return;
+  }
+  struct stat target {};
+  if (::stat(path.c_str(), &target) == 0 && !S_ISREG(target.st_mode) && !S_ISDIR(target.st_mode)) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_NOCTTY | O_CLOEXEC);
+    if (fd < 0) throw InputError(where + ": exists and is not a regular file, and cannot be opened for writing (" +
+                                 std::strerror(errno) + ")");
+    open_stream(path, where, fd);
+    return;
+  }
   const fs::path p(path);
   if (p.filename().empty()) throw InputError(where + ": expected a file name, got a directory path");
   const fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
@@ -164,6 +208,10 @@ std::string OutputFile::finish(bool complete) {
   const int write_errno = errno;
   const bool close_error = std::fclose(f_) != 0;
   f_ = nullptr;
+  if (streamed_) {
+    if (write_error || close_error) return "error writing '" + path_ + "' (" + std::strerror(write_errno) + ")";
+    return "";
+  }
   if (write_error || close_error) {
     const std::string msg = "error writing '" + path_ + "' (" + std::strerror(write_errno) + "); nothing was kept";
     std::remove(temp_.c_str());
@@ -187,6 +235,7 @@ std::string OutputFile::finish(bool complete) {
 void OutputFile::discard() {
   if (f_) std::fclose(f_);
   f_ = nullptr;
+  streamed_ = false;
   if (!temp_.empty()) std::remove(temp_.c_str());
   unregister_temporary(slot_);  // after the removal: a signal in between finds no file
   temp_.clear();
@@ -205,7 +254,7 @@ bool finish_outputs(bool complete, std::initializer_list<OutputFile*> files, std
       std::fprintf(stderr, "dvm: %s\n", err.c_str());
       ok = false;
     } else if (!complete) {
-      kept += (kept.empty() ? "" : ", ") + f->path() + ".partial";
+      kept += (kept.empty() ? "" : ", ") + f->path() + (f->streamed() ? " (as streamed)" : ".partial");
     }
   }
   return ok;

@@ -16,6 +16,12 @@
 //     temporaries (the handler unlinks paths kept in static buffers, then re-raises
 //     the signal, so the process still ends by it). Only a run killed outright
 //     (SIGKILL, a crash) leaves a hidden temporary behind.
+//   - A path that is not a regular file is written directly, as a stream, and never
+//     replaced: "-" and /dev/stdout (standard output), /dev/stderr, /dev/fd/N and
+//     /proc/self/fd/N (this process's descriptors), and any existing character
+//     device, FIFO or socket. There is no size check and no rename; a write error
+//     (/dev/full) is reported when the file is finished, and a failed run's rows
+//     stay where they were streamed.
 #pragma once
 
 #include <cstdint>
@@ -46,6 +52,10 @@ class OutputFile {
   std::FILE* get() const { return f_; }
   explicit operator bool() const { return f_ != nullptr; }
   const std::string& path() const { return path_; }
+  // Written directly (see the header comment), not through a temporary.
+  bool streamed() const { return streamed_; }
+  // Whether the file can be rewound (a .npy header is rewritten at the end).
+  bool seekable() const;
 
   // Flushes and closes the file and renames it onto the final path (complete) or
   // onto path() + ".partial" (a failed run). Returns an empty string on success,
@@ -54,7 +64,9 @@ class OutputFile {
 
  private:
   void discard();
+  void open_stream(const std::string& path, const std::string& where, int fd);
   std::FILE* f_ = nullptr;
+  bool streamed_ = false;
   std::string path_, temp_;
   double reserved_ = 0.0;
   unsigned long long device_ = 0;
@@ -65,6 +77,10 @@ class OutputFile {
 // stderr; returns false if one failed. For a failed run `kept` lists the .partial
 // files written.
 bool finish_outputs(bool complete, std::initializer_list<OutputFile*> files, std::string& kept);
+
+// The descriptor a path names when it is one of this process's (-, /dev/stdout,
+// /dev/stderr, /dev/fd/N, /proc/self/fd/N), else -1.
+int descriptor_path(const std::string& path);
 
 // What gave an output path, for messages: the option (when given) or the scene key.
 std::string output_source(const std::string& scene_path, const std::string& option_value, const char* option,

@@ -2,12 +2,41 @@
 
 #include <unistd.h>
 
+#include <cmath>
 #include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <utility>
+
+#include "solvers/runtime/errors.h"
 
 namespace dvm {
 
+namespace {
+
+// Whether two paths name the same file: the same descriptor, the same existing file
+// (through links), or the same normalised path for files not yet there.
+bool same_file(const std::string& a, const std::string& b) {
+  namespace fs = std::filesystem;
+  const int da = descriptor_path(a), db = descriptor_path(b);
+  if (da >= 0 || db >= 0) return da == db;
+  std::error_code ec;
+  if (fs::exists(a, ec) && fs::exists(b, ec)) return fs::equivalent(a, b, ec);
+  return fs::absolute(a, ec).lexically_normal() == fs::absolute(b, ec).lexically_normal();
+}
+
+}  // namespace
+
 void Recorder::open(const std::vector<std::string>& columns, double rows) {
   columns_ = static_cast<int>(columns.size());
+  if (!spec_.csv.empty() && !spec_.npy.empty() && same_file(spec_.csv, spec_.npy))
+    throw InputError(spec_.csv_source + " '" + spec_.csv + "' and " + spec_.npy_source + " '" + spec_.npy +
+                     "' name the same file; expected two different paths");
+  for (const std::string& in : spec_.inputs)
+    for (const auto& [path, source] : {std::pair{spec_.csv, spec_.csv_source}, std::pair{spec_.npy, spec_.npy_source}})
+      if (!path.empty() && same_file(path, in))
+        throw InputError(source + " '" + path + "' is the scene file '" + in +
+                         "' this run reads; expected another path for the output");
   if (!spec_.csv.empty()) {
     csv_.open(spec_.csv, spec_.csv_source, csv_bytes(rows, columns_));
     for (std::size_t i = 0; i < columns.size(); ++i)
@@ -16,11 +45,24 @@ void Recorder::open(const std::vector<std::string>& columns, double rows) {
   }
   if (!spec_.npy.empty()) {
     npy_.open(spec_.npy, spec_.npy_source, npy_bytes(rows, columns_));
+    if (npy_.streamed() && !npy_.seekable()) {
+      // (the destructors remove what open() created)
+      throw InputError(spec_.npy_source + " '" + spec_.npy +
+                       "': cannot be rewound (a pipe or a terminal), and a .npy file's header holds the row count "
+                       "written at the end; expected a regular file or a seekable device");
+    }
     write_npy_header();
   }
   if (spec_.progress && isatty(fileno(stderr))) {
     progress_on_ = true;
     start_ = last_ = std::chrono::steady_clock::now();
+    // DVM_PROGRESS_INTERVAL: the least time in seconds between two progress lines (see
+    // recorder.h); a value that is not a finite number >= 0 leaves the default
+    if (const char* s = std::getenv("DVM_PROGRESS_INTERVAL")) {
+      char* end = nullptr;
+      const double v = std::strtod(s, &end);
+      if (end != s && *end == '\0' && std::isfinite(v) && v >= 0.0) progress_interval_ = v;
+    }
   }
 }
 
@@ -62,9 +104,9 @@ bool Recorder::finish(bool complete, std::string& kept) {
 }
 
 void Recorder::progress(std::int64_t k, std::int64_t total, double h) {
-  if (!progress_on_ || (k & 1023) != 0) return;
+  if (!progress_on_ || k == 0 || (k & 1023) != 0) return;
   const auto now = std::chrono::steady_clock::now();
-  if (std::chrono::duration<double>(now - last_).count() < 0.25) return;
+  if (std::chrono::duration<double>(now - last_).count() < progress_interval_) return;
   last_ = now;
   const double el = std::chrono::duration<double>(now - start_).count();
   const double rate = static_cast<double>(k) / el;

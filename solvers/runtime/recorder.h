@@ -21,6 +21,7 @@ namespace dvm {
 struct OutputSpec {
   std::string csv, npy;                 // empty: not written
   std::string csv_source, npy_source;   // what gave each path, for messages
+  std::vector<std::string> inputs;      // files the run reads (the scene): never written over
   std::int64_t every = 1;
   bool progress = false;                // progress on stderr when it is a terminal
 };
@@ -32,7 +33,8 @@ class Recorder {
   Recorder& operator=(const Recorder&) = delete;
 
   // Checks the paths and the room for `rows` rows and creates the temporaries; throws
-  // InputError (nothing is written then).
+  // InputError (nothing is written then). Refused: the CSV and the .npy naming the same
+  // file, an output naming one of the inputs, a .npy that cannot be rewound (a pipe).
   void open(const std::vector<std::string>& columns, double rows);
   bool wants(std::int64_t k, std::int64_t last) const { return k % spec_.every == 0 || k == last; }
   void row(const double* values);
@@ -43,7 +45,11 @@ class Recorder {
   std::int64_t every() const { return spec_.every; }
 
   // Progress on stderr (step, time, rate, time left), only when asked and stderr is
-  // a terminal; cheap to call every step.
+  // a terminal; cheap to call every step. A line is written at every 1024th step k > 0
+  // once at least the progress interval has passed since the last one: 0.25 s, or the
+  // value of the environment variable DVM_PROGRESS_INTERVAL (seconds, a finite number
+  // >= 0, read by open()). The tests set it to 0, so that every 1024th step is shown
+  // whatever the speed of the machine (tests/README.md).
   void progress(std::int64_t k, std::int64_t total, double h);
   void end_progress();
 
@@ -54,6 +60,7 @@ class Recorder {
   int columns_ = 0;
   long long npy_rows_ = 0;
   bool progress_on_ = false, progress_shown_ = false;
+  double progress_interval_ = 0.25;  // seconds between progress lines (DVM_PROGRESS_INTERVAL)
   std::chrono::steady_clock::time_point start_, last_;
 };
 

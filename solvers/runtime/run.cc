@@ -3,7 +3,6 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
-#include <iostream>
 
 #include "solvers/runtime/json.h"
 #include "solvers/runtime/kernels.h"
@@ -149,39 +148,39 @@ std::string report_json(const RunReport& r) {
   return j.dump();
 }
 
-void print_report(const RunReport& r, bool json, bool quiet) {
+void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
   if (json) {
-    std::cout << report_json(r) << "\n";
+    std::fprintf(to, "%s\n", report_json(r).c_str());
   } else if (!quiet) {
     const std::string space = r.manifold.empty() ? "" : " on " + r.manifold;
     if (r.boundary_value) {
-      std::printf("%s%s boundary-value problem with %s (h = %g, %lld steps): %s in %.3f s\n", r.system.c_str(),
+      std::fprintf(to, "%s%s boundary-value problem with %s (h = %g, %lld steps): %s in %.3f s\n", r.system.c_str(),
                   space.c_str(), r.method_label.c_str(), r.step, static_cast<long long>(r.steps),
                   r.failed ? "FAILED" : "solved", r.wall_seconds);
-      std::printf("  max DEL residual %.3e (scale %.3e), %lld Ceres iterations\n", r.max_del_residual,
+      std::fprintf(to, "  max DEL residual %.3e (scale %.3e), %lld Ceres iterations\n", r.max_del_residual,
                   r.residual_scale, static_cast<long long>(r.solver_iterations));
-      std::printf("  p_initial [");
-      for (std::size_t i = 0; i < r.p_initial.size(); ++i) std::printf("%s%.15g", i ? ", " : "", r.p_initial[i]);
-      std::printf("]; energy varies by %.3e along the solution\n", r.max_abs_energy_error);
+      std::fprintf(to, "  p_initial [");
+      for (std::size_t i = 0; i < r.p_initial.size(); ++i) std::fprintf(to, "%s%.15g", i ? ", " : "", r.p_initial[i]);
+      std::fprintf(to, "]; energy varies by %.3e along the solution\n", r.max_abs_energy_error);
     } else {
-      std::printf("%s%s with %s (h = %g): %lld steps to t = %.6g\n", r.system.c_str(), space.c_str(),
+      std::fprintf(to, "%s%s with %s (h = %g): %lld steps to t = %.6g\n", r.system.c_str(), space.c_str(),
                   r.method_label.c_str(), r.step, static_cast<long long>(r.steps), r.t_final);
-      std::printf("  %-44s %22s %12s\n", "quantity", "initial", "max |change|");
-      std::printf("  %-44s %22.15g %12.3e\n", "energy", r.energy_initial, r.max_abs_energy_error);
+      std::fprintf(to, "  %-44s %22s %12s\n", "quantity", "initial", "max |change|");
+      std::fprintf(to, "  %-44s %22.15g %12.3e\n", "energy", r.energy_initial, r.max_abs_energy_error);
       for (const InvariantReport& inv : r.invariants)
         for (std::size_t c = 0; c < inv.initial.size(); ++c) {
           const std::string n = inv.initial.size() > 1 ? inv.name + " [" + std::to_string(c) + "]" : inv.name;
-          std::printf("  %-44s %22.15g %12.3e\n", n.c_str(), inv.initial[c], inv.max_abs_error);
+          std::fprintf(to, "  %-44s %22.15g %12.3e\n", n.c_str(), inv.initial[c], inv.max_abs_error);
         }
       if (r.max_point_defect >= 0.0)
-        std::printf("  largest distance from %s: %.1e\n", r.manifold.c_str(), r.max_point_defect);
-      std::printf("  solver iterations %lld (%.2f per step, at most %d in a step); wall time %.3f s (%.3g us/step)\n",
+        std::fprintf(to, "  largest distance from %s: %.1e\n", r.manifold.c_str(), r.max_point_defect);
+      std::fprintf(to, "  solver iterations %lld (%.2f per step, at most %d in a step); wall time %.3f s (%.3g us/step)\n",
                   static_cast<long long>(r.solver_iterations),
                   static_cast<double>(r.solver_iterations) / std::fmax(1.0, static_cast<double>(r.steps)),
                   r.max_step_iterations, r.wall_seconds,
                   1e6 * r.wall_seconds / std::fmax(1.0, static_cast<double>(r.steps)));
     }
-    for (const std::string& f : r.written) std::printf("  wrote %s\n", f.c_str());
+    for (const std::string& f : r.written) std::fprintf(to, "  wrote %s\n", f.c_str());
   }
   if (!r.failed) return;
   if (r.boundary_value)

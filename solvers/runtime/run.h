@@ -14,6 +14,7 @@
 #pragma once
 
 #include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <string>
 #include <vector>
@@ -100,7 +101,9 @@ std::unique_ptr<Run> make_run(const Problem& problem, const Method& method);
 
 // The end-of-run summary: a table on stdout (quiet: nothing) or JSON; a failure's
 // message on stderr.
-void print_report(const RunReport& report, bool json, bool quiet);
+// The summary goes to `to`: standard output, or standard error when the rows stream to
+// standard output.
+void print_report(const RunReport& report, bool json, bool quiet, std::FILE* to = stdout);
 
 // The JSON object of a report (the "failure" object included).
 std::string report_json(const RunReport& report);
