@@ -379,16 +379,19 @@ inline const std::vector<CompositionScheme>& composition_schemes() {
 inline CompositionScheme find_composition(const std::string& name) {
   for (const auto& s : composition_schemes())
     if (s.name == name) return s;
+  // messages quote at most 80 bytes of the name
+  const std::string shown =
+      name.size() > 80 ? name.substr(0, 80) + "... (" + std::to_string(name.size()) + " bytes)" : name;
   const std::string prefix = "triple-jump:";
   if (name.rfind(prefix, 0) == 0) {
     const std::string digits = name.substr(prefix.size());
     if (!digits.empty() && digits.size() <= 3 && digits.find_first_not_of("0123456789") == std::string::npos)
       return RecursiveTripleJump::scheme(std::stoi(digits));
-    throw std::invalid_argument("triple-jump: expected triple-jump:<even order>, got \"" + name + "\"");
+    throw std::invalid_argument("triple-jump: expected triple-jump:<even order>, got \"" + shown + "\"");
   }
   std::string names;
   for (const auto& s : composition_schemes()) names += ", " + s.name;
-  throw std::invalid_argument("unknown composition \"" + name + "\"; expected one of: none" + names +
+  throw std::invalid_argument("unknown composition \"" + shown + "\"; expected one of: none" + names +
                               ", triple-jump:<even order 2.." + std::to_string(RecursiveTripleJump::max_order) + ">");
 }
 

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "examples/dvm/scene.h"
+#include "solvers/runtime/converge.h"
 
 namespace dvm::cli {
 
@@ -18,6 +19,7 @@ struct RunOptions {
   bool converge = false;                 // `dvm converge`: a convergence study instead of a run
   std::vector<std::int64_t> steps_list;  // converge: the step counts (empty: the default)
   double t_end = 0.0;                    // converge: the time span (0: the scene's)
+  double max_total_steps = ConvergeOptions::kDefaultMaxTotalSteps;  // converge: --max-steps
 };
 
 // `dvm run` and `dvm converge` on a loaded scene (run.cc). Throws InputError.

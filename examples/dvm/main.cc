@@ -44,7 +44,9 @@ const char* kRunHelp =
     "              --set integrator.step=0.001  --set initial.q=[0.5]\n"
     "              --set integrator.map='\"theta\"'\n"
     "  --csv PATH  write the trajectory (columns t, q0.., p0.., energy) to PATH,\n"
-    "              overriding [output] csv; rows every [output] every steps\n"
+    "              overriding [output] csv; rows every [output] every steps.\n"
+    "              PATH - (or /dev/stdout) writes to standard output, and the\n"
+    "              summary goes to standard error\n"
     "  --json      print a JSON summary (steps, t_final, q_final, p_final,\n"
     "              energy_initial, energy_final, max_abs_energy_error, wall_seconds,\n"
     "              solver_iterations, status, and failure when a step fails)\n"
@@ -101,6 +103,11 @@ const char* kRunHelp =
     "the residual) or an output write error. Output files are written under a\n"
     "temporary name and renamed when the run is complete: a failed run leaves the\n"
     "final path as it was and its rows in PATH.partial; the JSON says \"failed\".\n"
+    "A path that exists and is not a regular file (a device, a FIFO) is written\n"
+    "directly, never replaced; a write error there (/dev/full) exits 3. An output\n"
+    "path naming the scene file, or the CSV and the .npy naming one file, is refused\n"
+    "(exit 2). Limits: a scene file of at most 16 MiB; a written expression of at most\n"
+    "1 MiB nesting at most 256 levels; at most 9e15 steps.\n"
     "\n"
     "example:\n"
     "  dvm run examples/scenes/pendulum.toml --set integrator.step=0.001 --json\n";
@@ -157,7 +164,7 @@ const char* kSystemsHelp =
 
 const char* kConvergeHelp =
     "usage: dvm converge SCENE.toml [--steps-list N1,N2,...] [--t-end T]\n"
-    "                   [--set section.key=value]... [--json]\n"
+    "                   [--max-steps M] [--set section.key=value]... [--json]\n"
     "\n"
     "Runs the scene to the time T (default: the scene's steps x step) with each step\n"
     "count N of the list (h = T/N; default: the scene's count times 1, 2, 4, 8), and\n"
@@ -167,6 +174,9 @@ const char* kConvergeHelp =
     "where the system has one (harmonic, kepler, duffing, charged-particle), else a\n"
     "classical Runge-Kutta run on Hamilton's equations with 16 times the largest N.\n"
     "Chaotic systems (double pendulum, Henon-Heiles at high energy) need a short T.\n"
+    "A study whose runs take more than M steps together (default 1e8, the reference\n"
+    "runs not counted) is refused with exit 2 before it starts; on a terminal, stderr\n"
+    "shows which run is under way.\n"
     "\n"
     "example:\n"
     "  dvm converge examples/scenes/duffing.toml --steps-list 100,200,400,800 --t-end 10\n";
@@ -394,12 +404,19 @@ int cmd_converge(const std::vector<std::string>& args) {
         const std::size_t comma = std::min(list.find(',', start), list.size());
         const std::string item = list.substr(start, comma - start);
         const double n = parse_number("--steps-list", item, kConvergeHelp);
-        if (n != std::floor(n) || n < 1 || n > 1e12)
+        if (n != std::floor(n) || n < 1)
           usage_error("--steps-list: '" + item + "' is not a whole number of steps >= 1", kConvergeHelp);
+        if (n > 9e15)
+          usage_error("--steps-list: '" + item + "' is more steps than a run can count (at most 9e15)", kConvergeHelp);
         o.steps_list.push_back(static_cast<std::int64_t>(n));
         start = comma + 1;
       }
       if (o.steps_list.size() < 2) usage_error("--steps-list needs at least two step counts", kConvergeHelp);
+    } else if (a == "--max-steps") {
+      const std::string text = value("--max-steps");
+      o.max_total_steps = parse_number("--max-steps", text, kConvergeHelp);
+      if (o.max_total_steps != std::floor(o.max_total_steps) || o.max_total_steps < 1)
+        usage_error("--max-steps: got '" + text + "', expected a whole number >= 1", kConvergeHelp);
     } else if (a == "--t-end") {
       o.t_end = parse_number("--t-end", value("--t-end"), kConvergeHelp);
       if (!(o.t_end > 0)) usage_error("--t-end: expected a positive number", kConvergeHelp);

@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <set>
@@ -28,6 +29,10 @@ std::string fmt(double x) {
   return out.str();
 }
 
+}  // namespace
+
+namespace {
+
 std::string join_names(const std::vector<std::string>& names) {
   std::string out;
   for (std::size_t i = 0; i < names.size(); ++i) out += (i ? ", " : "") + names[i];
@@ -37,6 +42,8 @@ std::string join_names(const std::vector<std::string>& names) {
 }  // namespace
 
 namespace {
+
+void check_toml_text(const std::string& text, const std::string& path);
 
 class Reader {
  public:
@@ -50,14 +57,14 @@ class Reader {
       out << ":" << node->source().begin.line << ":" << node->source().begin.column;
     else if (node)
       out << " (from --set)";
-    out << ": key '" << key << "'";
+    out << ": key '" << echo(key) << "'";
     return out.str();
   }
 
   static std::string describe(const toml::node& n) {
     std::ostringstream out;
     if (n.is_string())
-      out << '"' << n.value<std::string>().value_or("") << '"';
+      out << '"' << echo(n.value<std::string>().value_or("")) << '"';
     else if (n.is_array())
       out << "an array";
     else if (n.is_table())
@@ -139,7 +146,7 @@ class Reader {
 void apply_override(toml::table& root, const std::string& spec) {
   const auto eq = spec.find('=');
   if (eq == std::string::npos || eq == 0)
-    throw InputError("--set: expected section.key=value, got '" + spec + "'");
+    throw InputError("--set: expected section.key=value, got '" + echo(spec) + "'");
   const std::string key = spec.substr(0, eq), value = spec.substr(eq + 1);
   std::vector<std::string> parts;
   std::size_t start = 0;
@@ -150,13 +157,18 @@ void apply_override(toml::table& root, const std::string& spec) {
     start = dot + 1;
   }
   if (parts.size() < 2)
-    throw InputError("--set: expected section.key=value, got '" + spec + "' (the key needs a section)");
+    throw InputError("--set: expected section.key=value, got '" + echo(spec) + "' (the key needs a section)");
   for (const auto& p : parts)
-    if (p.empty()) throw InputError("--set: empty key component in '" + spec + "'");
+    if (p.empty()) throw InputError("--set: empty key component in '" + echo(spec) + "'");
   toml::table parsed;
   try {
     const std::string doc = "value = " + value;
+    check_toml_text(doc, "--set " + echo(key));
     parsed = toml::parse(std::string_view(doc), std::string_view("--set"));
+    // "0.5\njunk = 1" parses as a document of two keys: one value only
+    if (parsed.size() != 1)
+      throw InputError("--set " + echo(key) + ": value '" + echo(value) +
+                       "' is not one TOML value (more text follows it, on another line); expected one value");
   } catch (const toml::parse_error& e) {
     // A bare word (--set integrator.map=theta) is taken as a string, so that shells
     // need no nested quotes; anything else must be a TOML value.
@@ -164,7 +176,7 @@ void apply_override(toml::table& root, const std::string& spec) {
                       value.find_first_not_of("abcdefghijklmnopqrstuvwxyzABCDEFGHIJKLMNOPQRSTUVWXYZ0123456789_-./") ==
                           std::string::npos;
     if (!bare)
-      throw InputError("--set " + key + ": value '" + value + "' is not a TOML value (" +
+      throw InputError("--set " + echo(key) + ": value '" + echo(value) + "' is not a TOML value (" +
                        std::string(e.description()) + ")");
     parsed.insert_or_assign("value", value);
   }
@@ -175,7 +187,7 @@ void apply_override(toml::table& root, const std::string& spec) {
       t->insert(parts[i], toml::table{});
       n = t->get(parts[i]);
     }
-    if (!n->is_table()) throw InputError("--set " + key + ": '" + parts[i] + "' is not a table");
+    if (!n->is_table()) throw InputError("--set " + echo(key) + ": '" + echo(parts[i]) + "' is not a table");
     t = n->as_table();
   }
   // Overrides carry no source position, which where() reports as "(from --set)".
@@ -306,22 +318,27 @@ void read_rotation_initial(const Reader& r, const toml::table& ini, const std::s
 
 
 // The number of coordinates of a system whose size comes from its parameters.
-int resolve_dimension(const std::string& path, const SystemEntry& info, const std::map<std::string, double>& params) {
+// `params` is the scene's [system] params table (null when absent): messages point at
+// the key when the scene gave it, else at the file (a default value).
+int resolve_dimension(const Reader& r, const toml::node* params, const SystemEntry& info,
+                      const std::map<std::string, double>& values) {
+  auto where = [&](const std::string& name) {
+    const toml::node* n = params && params->is_table() ? params->as_table()->get(name) : nullptr;
+    return n ? r.where(n, "system.params." + name) : r.path() + ": key 'system.params." + name + "' (default)";
+  };
   if (info.name == "chain") {
-    const double n = params.at("n");
+    const double n = values.at("n");
     if (!(n >= 1.0 && n <= 1e7) || n != std::floor(n))
-      throw InputError(path + ": key 'system.params.n': got " + fmt(n) +
-                       ", expected a whole number of particles from 1 to 10000000");
-    const double fixed = params.at("fixed");
+      throw InputError(where("n") + ": got " + fmt(n) + ", expected a whole number of particles from 1 to 10000000");
+    const double fixed = values.at("fixed");
     if (fixed != 0.0 && fixed != 1.0)
-      throw InputError(path + ": key 'system.params.fixed': got " + fmt(fixed) +
-                       ", expected 1 (ends tied to walls) or 0 (free ends)");
+      throw InputError(where("fixed") + ": got " + fmt(fixed) + ", expected 1 (ends tied to walls) or 0 (free ends)");
     return static_cast<int>(n);
   }
   if (info.name == "spherical-chain") {
-    const double n = params.at("n");
+    const double n = values.at("n");
     if (n != std::floor(n) || n < 1 || n > 4)
-      throw InputError(path + ": key 'system.params.n': got " + fmt(n) + ", expected a whole number from 1 to 4");
+      throw InputError(where("n") + ": got " + fmt(n) + ", expected a whole number from 1 to 4");
     return 3 * static_cast<int>(n);
   }
   return info.dim;
@@ -334,7 +351,7 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
   if (const toml::node* k = pr.get("kind")) {
     const std::string kind = r.string(*k, "problem.kind");
     if (kind != "initial-value" && kind != "boundary-value")
-      throw InputError(r.where(k, "problem.kind") + ": got \"" + kind +
+      throw InputError(r.where(k, "problem.kind") + ": got \"" + echo(kind) +
                        "\", expected \"initial-value\" or \"boundary-value\"");
     s.boundary_value = kind == "boundary-value";
     if (s.boundary_value) {
@@ -384,7 +401,7 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
   if (const toml::node* m = in.get("method")) {
     const std::string method = r.string(*m, "integrator.method");
     if (method != "map" && method != "galerkin")
-      throw InputError(r.where(m, "integrator.method") + ": got \"" + method +
+      throw InputError(r.where(m, "integrator.method") + ": got \"" + echo(method) +
                        "\", expected \"map\" (the map's own step) or \"galerkin\" (Galerkin discrete Lagrangians)");
     me.galerkin = method == "galerkin";
   }
@@ -404,7 +421,7 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
   if (const toml::node* qu = in.get("quadrature")) {
     const std::string q = r.string(*qu, "integrator.quadrature");
     if (q != "gauss" && q != "lobatto")
-      throw InputError(r.where(qu, "integrator.quadrature") + ": got \"" + q +
+      throw InputError(r.where(qu, "integrator.quadrature") + ": got \"" + echo(q) +
                        "\", expected \"gauss\" (s points) or \"lobatto\" (s + 1 points)");
     me.quadrature = q == "gauss" ? QuadratureKind::gauss : QuadratureKind::lobatto;
   }
@@ -458,7 +475,7 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
   if (const toml::node* so = in.get("solver")) {
     const std::string solver = r.string(*so, "integrator.solver");
     if (solver != "newton" && solver != "tiny")
-      throw InputError(r.where(so, "integrator.solver") + ": got \"" + solver + "\", expected \"newton\" or \"tiny\"");
+      throw InputError(r.where(so, "integrator.solver") + ": got \"" + echo(solver) + "\", expected \"newton\" or \"tiny\"");
     me.solver = solver == "tiny" ? SolverKind::tiny : SolverKind::newton;
   }
   if (const toml::node* mi = in.get("max_iterations")) {
@@ -539,12 +556,21 @@ InputError parse_failure(const std::string& path, const toml::parse_error& e) {
 }  // namespace
 
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw InputError(path + ": is a directory; expected a scene file (TOML text)");
   std::ifstream in(path, std::ios::binary);
   if (!in) throw InputError(path + ": cannot open the scene file (" + std::strerror(errno) + ")");
-  std::ostringstream text;
-  text << in.rdbuf();
+  // read at most one byte more than the limit: /dev/zero or a huge file is refused
+  // without being loaded
+  std::string text(kMaxSceneBytes + 1, '\0');
+  in.read(text.data(), static_cast<std::streamsize>(text.size()));
   if (in.bad()) throw InputError(path + ": cannot read the scene file");
-  return load_scene_text(text.str(), path, overrides);
+  text.resize(static_cast<std::size_t>(in.gcount()));
+  if (text.size() > kMaxSceneBytes)
+    throw InputError(path + ": the scene is larger than " + std::to_string(kMaxSceneBytes) +
+                     " bytes (16 MiB), the most dvm reads; expected a smaller scene");
+  return load_scene_text(text, path, overrides);
 }
 
 Scene load_scene_text(const std::string& text, const std::string& path, const std::vector<std::string>& overrides) {
@@ -628,7 +654,8 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
         pr.params[name] = r.number(v, "system.params." + name);
       }
     }
-    if (pr.dim == 0 || pr.system->name == "spherical-chain") pr.dim = resolve_dimension(path, *pr.system, pr.params);
+    if (pr.dim == 0 || pr.system->name == "spherical-chain")
+      pr.dim = resolve_dimension(r, sys.get("params"), *pr.system, pr.params);
   }
   const SystemEntry& info = *pr.system;
 
@@ -645,9 +672,10 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     for (const auto* end : {&pr.q, &pr.q_final}) {
       const auto& x = *end;
       const double defect = std::fabs(std::sqrt(x[0] * x[0] + x[1] * x[1] + x[2] * x[2]) - 1.0);
+      const std::string key = end == &pr.q ? "initial.q" : "problem.q_final";
       if (!(defect <= 1e-12))
-        throw InputError(path + ": key '" + (end == &pr.q ? "initial.q" : "problem.q_final") +
-                         "': not a unit vector (| |q| - 1 | = " + fmt(defect) + "); expected a point of S^2 to 1e-12");
+        throw InputError(r.where(root.at_path(key).node(), key) + ": not a unit vector (| |q| - 1 | = " + fmt(defect) +
+                         "); expected a point of S^2 to 1e-12");
     }
   }
 

@@ -17,6 +17,7 @@
 // projected).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -26,6 +27,7 @@
 namespace dvm::cli {
 
 using dvm::InputError;
+using dvm::echo;
 
 struct Scene {
   std::string path;
@@ -35,8 +37,11 @@ struct Scene {
   std::int64_t every = 1;
 };
 
+// The largest scene file dvm reads (16 MiB); a larger one is bad input.
+constexpr std::size_t kMaxSceneBytes = std::size_t{16} << 20;
+
 // Loads and validates a scene; overrides are "section.key=value" with value written
-// as in TOML. Throws InputError.
+// as in TOML (exactly one value). Throws InputError.
 Scene load_scene(const std::string& path, const std::vector<std::string>& overrides);
 // The same for a scene given as text; `path` names it in messages.
 Scene load_scene_text(const std::string& text, const std::string& path, const std::vector<std::string>& overrides);

@@ -8,6 +8,8 @@
 #include <set>
 #include <sstream>
 
+#include <unistd.h>
+
 #include "solvers/runtime/json.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/runtime/run.h"
@@ -100,11 +102,22 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
   }
   if (list.size() < 2) throw InputError("--steps-list: a convergence study needs at least two step counts");
   std::set<std::int64_t> seen;
+  double total = 0.0;
+  std::string shown;
   for (std::int64_t n : list) {
     if (n < 1) throw InputError("--steps-list: step counts must be at least 1");
     if (!seen.insert(n).second)
       throw InputError("--steps-list: the step count " + std::to_string(n) +
                        " appears twice; an order needs different step sizes");
+    total += static_cast<double>(n);
+    shown += (shown.empty() ? "" : ",") + std::to_string(n);
+  }
+  if (total > o.max_total_steps) {
+    char buf[160];
+    std::snprintf(buf, sizeof buf, "the study's runs (%s) would take %.4g steps in all, more than the limit of %.4g",
+                  echo(shown).c_str(), total, o.max_total_steps);
+    throw InputError(std::string(o.steps_list.empty() ? "integrator.steps" : "--steps-list") + ": " + buf +
+                     "; expected fewer or smaller step counts (or raise the limit with --max-steps)");
   }
 
   ConvergeReport rep;
@@ -124,7 +137,13 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
   // the runs of the study
   std::vector<State> finals(list.size());
   std::vector<bool> ok(list.size(), false);
+  const bool show = isatty(fileno(stderr));
   for (std::size_t i = 0; i < list.size(); ++i) {
+    if (show) {
+      std::fprintf(stderr, "\r  converge: run %zu of %zu (%lld steps)   ", i + 1, list.size(),
+                   static_cast<long long>(list[i]));
+      std::fflush(stderr);
+    }
     ConvergeRow row;
     row.steps = list[i];
     row.h = T / static_cast<double>(list[i]);
@@ -156,6 +175,10 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
     double d = INFINITY;
     for (int level = 0; level < 5; ++level) {
       n *= 2;
+      if (show) {
+        std::fprintf(stderr, "\r  converge: reference run (%lld steps)          ", static_cast<long long>(n));
+        std::fflush(stderr);
+      }
       if (!final_state(pr, rm, T, n, r2, it, failure))
         throw InputError("converge: the reference run (" + name + ") failed: " + failure);
       d = distance(r1, r2);
@@ -172,6 +195,7 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
     rep.reference = name + " with " + std::to_string(n) + " steps";
     rep.reference_accuracy = d;
   }
+  if (show) std::fprintf(stderr, "\r%*s\r", 60, "");
   rep.scale = size_of(ref);
 
   // errors, orders, the fit

@@ -33,6 +33,10 @@ namespace dvm {
 struct ConvergeOptions {
   std::vector<std::int64_t> steps_list;  // empty: the problem's count times 1, 2, 4, 8
   double t_end = 0.0;                    // 0: the problem's steps x step
+  // The most steps the study's runs may take together (the reference runs not
+  // counted); a longer study is refused before it starts.
+  double max_total_steps = kDefaultMaxTotalSteps;
+  static constexpr double kDefaultMaxTotalSteps = 1e8;
 };
 
 struct ConvergeRow {
@@ -61,7 +65,8 @@ struct ConvergeReport {
 };
 
 // Throws InputError for a boundary-value problem, fewer than two step counts, equal
-// step counts, or anything make_run refuses.
+// step counts, more steps in all than options.max_total_steps, or anything make_run
+// refuses. Shows which run is under way on stderr when stderr is a terminal.
 ConvergeReport converge(const Problem& problem, const Method& method, const ConvergeOptions& options);
 
 // The table (or JSON) on stdout; returns the exit status (3 when a run failed).

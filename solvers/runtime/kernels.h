@@ -291,10 +291,27 @@ class BoundaryValueRun final : public Run {
 // The fields every report shares, from the problem and the method.
 RunReport base_report(const Problem& pr, const Method& me, const std::string& system_name);
 
+// The keys that give the initial state, for messages about it.
+inline std::string initial_state_keys(const Problem& pr) {
+  return std::string("initial.q and ") + (pr.momentum_given ? "initial.p" : "initial.v");
+}
+
+// Refuses an initial state where the energy is not finite (an overflow, a division by
+// zero in the system's expressions there).
+[[noreturn]] inline void refuse_nonfinite_energy(const Problem& pr) {
+  const std::string where = pr.written ? pr.written_where : pr.origin + ": system";
+  throw InputError(where + ": the energy is not finite at the initial state (keys " + initial_state_keys(pr) +
+                   "): an overflow or a division by zero there; expected a state where it is finite");
+}
+
 // "the Lagrangian is degenerate at the initial state" when the velocity Hessian is
-// singular there; `where` names the system's text or the scene.
+// singular there, "not finite at the initial state" when it overflows; `where` names
+// the system's text or the scene.
 template <int N>
 void require_regular_hessian(const Mat<double, N, N>& H, const std::string& where) {
+  if (!H.allFinite())
+    throw InputError(where + ": the velocity Hessian d2L/dv2 is not finite at the initial state (an overflow or a "
+                     "division by zero there); expected a Lagrangian that is finite at initial.q and initial.p/v");
   const Eigen::MatrixXd Hd = H;  // dynamic size: the fixed 1x1 SVD trips GCC's uninitialised warnings
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(Hd);
   const auto sv = svd.singularValues();

@@ -63,7 +63,7 @@ std::unique_ptr<Run> chain(const Problem& pr, const Method& me) {
     v0 = Eigen::Map<const Eigen::VectorXd>(pr.v.data(), C.n);
     p = C.m * v0;
   }
-  if (!std::isfinite(view.energy(q, p))) throw InputError(pr.origin + ": the energy at the initial state is not finite");
+  if (!std::isfinite(view.energy(q, p))) kernels::refuse_nonfinite_energy(pr);
   const RunReport base = kernels::base_report(pr, me, "chain");
   const ThetaMap R = std::get<ThetaMap>(kernels::rn_map(me));
   const StepOptions opt = me.step_options();

@@ -188,7 +188,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       }
     }
   }
-  if (!std::isfinite(view.energy(q, p))) throw InputError(pr.origin + ": the energy at the initial state is not finite");
+  if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
   if (me.galerkin)
     return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);

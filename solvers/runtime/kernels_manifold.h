@@ -226,7 +226,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   Point q;
   Covector p, v0;
   manifold_initial_state<S, Map>(pr, L, q, p, v0);
-  if (!std::isfinite(view.energy(q, p))) throw InputError(pr.origin + ": the energy at the initial state is not finite");
+  if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
   if (me.galerkin) {
     if constexpr (Galerkin)

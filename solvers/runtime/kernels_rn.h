@@ -280,8 +280,7 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
   initial_state(pr, L, q, p, v0);
   view.v0 = v0;
   view.sigma0 = velocity_hessian_scale(L, q, v0);
-  if (!std::isfinite(view.energy(q, p)))
-    throw InputError(pr.origin + ": the energy at the initial state is not finite");
+  if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
   if (me.galerkin) return stepper_run(view, GalerkinStep<S>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
 

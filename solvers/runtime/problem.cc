@@ -139,7 +139,7 @@ void validate(const Problem& pr, const Method& me) {
     try {
       find_composition(me.composition);
     } catch (const std::invalid_argument& e) {
-      throw InputError("integrator.composition: got \"" + me.composition + "\"; " + e.what());
+      throw InputError(std::string("integrator.composition: ") + e.what());
     }
     if (!caps.composition) throw InputError("integrator.composition: " + name + " takes no composition" + note);
   }

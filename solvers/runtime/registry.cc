@@ -71,7 +71,7 @@ Form find_form(const std::string& name, const std::string& key) {
     if (f.name == name) return f.form;
     names.push_back(f.name);
   }
-  throw InputError(key + ": got \"" + name + "\", expected one of: " + join(names));
+  throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names));
 }
 
 const std::vector<MapEntry>& map_registry() {
@@ -114,7 +114,7 @@ const MapEntry& find_map_entry(const std::string& name, const std::string& where
     if (m.name == name) return m;
     names.push_back(m.name);
   }
-  throw InputError(where + ": unknown map \"" + name + "\"; expected one of: " + join(names));
+  throw InputError(where + ": unknown map \"" + echo(name) + "\"; expected one of: " + join(names));
 }
 
 const std::vector<GalerkinEntry>& galerkin_registry() {
@@ -261,7 +261,7 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
     if (s.name == name) return s;
     names.push_back(s.name);
   }
-  throw InputError(where + ": unknown system \"" + name + "\"; expected one of: " + join(names));
+  throw InputError(where + ": unknown system \"" + echo(name) + "\"; expected one of: " + join(names));
 }
 
 const SystemEntry& written_system_entry() {
