@@ -13,13 +13,16 @@
 
 #include <fcntl.h>
 #include <sys/stat.h>
+#include <sys/sysmacros.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -430,6 +433,222 @@ BOOST_AUTO_TEST_CASE(a_run_stopped_by_sigint_or_sigterm_removes_its_temporary) {
       BOOST_TEST(!file_exists(csv + ".partial"));
     }
   }
+}
+
+// A written Lagrangian "L" in a one-coordinate scene (x, x_dot), initial q = [q0].
+std::string written_scene(const std::string& name, const std::string& L, double q0 = 1.0) {
+  std::ostringstream s;
+  s << "[system]\ncoordinates = [\"x\"]\nparams = { a = 0.0 }\nlagrangian = \"" << L << "\"\n"
+    << "[initial]\nq = [" << q0 << "]\np = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.01\nsteps = 10\n";
+  return write_scene(name, s.str());
+}
+
+BOOST_AUTO_TEST_CASE(expressions_that_grow_are_refused_with_the_position_never_a_crash) {
+  // the parser recurses once per nesting level (at most 256) and walks everything else
+  // without recursion: each of these crashed the program (stack overflow) before
+  const std::string deep(15000, '('), shut(15000, ')');
+  std::string signs(60000, '-'), powers;
+  for (int i = 0; i < 60000; ++i) powers += "^1";
+  std::string calls;
+  for (int i = 0; i < 15000; ++i) calls += "sin(";
+  // "lagrangian = \"" is 14 bytes: the expression starts at column 15 of line 4
+  const std::vector<std::pair<std::string, std::string>> nested = {
+      {"15000 parentheses", "x_dot^2 + " + deep + "x" + shut},        // level 257 opens at offset 10 + 256
+      {"60000 unary minus signs", "x_dot^2 + " + signs + "x"},
+      {"60000 chained ^1", "x_dot^2 + x" + powers},
+      {"15000 nested calls", "x_dot^2 + " + calls + "x" + shut},
+  };
+  int i = 0;
+  for (const auto& [name, L] : nested) {
+    const std::string path = written_scene("grow" + std::to_string(i++) + ".toml", L);
+    check({name, {"run", path, "--quiet"}, 2, {":4:", "system.lagrangian", "nests deeper than 256 levels"}});
+  }
+  check({"the position of the 257th level", {"run", written_scene("g.toml", "x_dot^2 + " + deep + "x" + shut), "--quiet"},
+         2, {"g.toml:4:281:"}});
+  // longer than 1 MiB: refused at the limit
+  std::string huge = "x_dot^2";
+  while (huge.size() <= (1u << 20)) huge += "+x_dot^2";
+  check({"an expression over 1 MiB", {"run", written_scene("huge.toml", huge), "--quiet"}, 2,
+         {"system.lagrangian", "at most 1048576 are accepted"}});
+  // a flat sum of 60000 terms (a tree 60000 deep) within the limit runs: the harmonic
+  // oscillator plus 59998 times the parameter a = 0, E = q0^2 / 2 with q0 = 1, p0 = 0
+  std::string sum = "x_dot^2/2 - x^2/2";
+  for (int k = 0; k < 59998; ++k) sum += " + a";
+  const Output o = dvm({"run", written_scene("sum.toml", sum), "--json"});
+  BOOST_TEST(o.status == 0, o.err);
+  BOOST_TEST(json_number(o.out, "energy_initial") == 0.5);
+}
+
+BOOST_AUTO_TEST_CASE(values_that_are_not_finite_at_the_initial_state_are_named) {
+  const std::vector<Case> cases = {
+      {"a constant that overflows", {"run", written_scene("o1.toml", "x_dot^2/2 * 2^2^2^2^2^2"), "--quiet"}, 2,
+       {"o1.toml:4:", "system.lagrangian", "gives inf"}},
+      {"a division by a parameter that is 0", {"run", written_scene("o2.toml", "x_dot^2/2 + 1/a"), "--quiet"}, 2,
+       {"o2.toml:4:", "gives inf"}},
+      {"a velocity Hessian that divides by q = 0",
+       {"run", written_scene("o3.toml", "x_dot^2/(2*x)", 0.0), "--quiet"}, 2,
+       {"o3.toml:4:", "not finite at the initial state"}},
+      {"an energy that divides by q = 0", {"run", written_scene("o4.toml", "x_dot^2/2 + 1/x", 0.0), "--quiet"}, 2,
+       {"o4.toml:4:", "energy is not finite at the initial state", "initial.q and initial.p"}},
+  };
+  for (const auto& c : cases) check(c);
+}
+
+BOOST_AUTO_TEST_CASE(outputs_that_are_not_regular_files_are_written_directly) {
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::string dir = temp_dir();
+  // device nodes of our own (as root; renaming over them would replace them), else the
+  // system's, which a user cannot replace anyway
+  std::string null_dev = "/dev/null", full_dev = "/dev/full";
+  if (geteuid() == 0) {
+    null_dev = dir + "/null";
+    full_dev = dir + "/full";
+    BOOST_REQUIRE(mknod(null_dev.c_str(), S_IFCHR | 0666, makedev(1, 3)) == 0);
+    BOOST_REQUIRE(mknod(full_dev.c_str(), S_IFCHR | 0666, makedev(1, 7)) == 0);
+  }
+  auto is_char_device = [](const std::string& p) {
+    struct stat st {};
+    return lstat(p.c_str(), &st) == 0 && S_ISCHR(st.st_mode);
+  };
+  const Output to_null = dvm({"run", h, "--quiet", "--csv", null_dev, "--npy", dir + "/side.npy"});
+  BOOST_TEST(to_null.status == 0, to_null.err);
+  BOOST_TEST(is_char_device(null_dev));
+  const Output to_full = dvm({"run", h, "--quiet", "--csv", full_dev});
+  BOOST_TEST(to_full.status == 3, to_full.err);
+  BOOST_TEST(to_full.err.find("error writing '" + full_dev + "' (No space left on device)") != std::string::npos,
+             to_full.err);
+  BOOST_TEST(is_char_device(full_dev));
+  // a FIFO: the rows reach the reader, and the FIFO stays a FIFO
+  const std::string fifo = dir + "/rows.fifo";
+  BOOST_REQUIRE(mkfifo(fifo.c_str(), 0600) == 0);
+  const pid_t reader = fork();
+  BOOST_REQUIRE(reader >= 0);
+  if (reader == 0) {
+    std::ifstream in(fifo);
+    std::ofstream(dir + "/from_fifo.csv") << in.rdbuf();
+    _exit(0);
+  }
+  const Output to_fifo = dvm({"run", h, "--quiet", "--csv", fifo});
+  int st = 0;
+  waitpid(reader, &st, 0);
+  BOOST_TEST(to_fifo.status == 0, to_fifo.err);
+  BOOST_TEST(count_lines(dir + "/from_fifo.csv") == 102u);  // header, t = 0 and 100 steps
+  struct stat fs {};
+  BOOST_TEST((lstat(fifo.c_str(), &fs) == 0 && S_ISFIFO(fs.st_mode)));
+  // "-" and /dev/stdout: the rows on standard output, the summary on standard error
+  for (const std::string path : {"-", "/dev/stdout"}) {
+    const Output o = dvm({"run", h, "--csv", path});
+    BOOST_TEST_CONTEXT(path) {
+      BOOST_TEST(o.status == 0, o.err);
+      BOOST_TEST(o.out.rfind("t,q0,p0,energy\n0,1,0,", 0) == 0u, o.out.substr(0, 80));
+      BOOST_TEST(std::count(o.out.begin(), o.out.end(), '\n') == 102);
+      BOOST_TEST(o.err.find("harmonic with midpoint") != std::string::npos, o.err);
+    }
+  }
+  BOOST_TEST(!file_exists("-"));
+  // a .npy needs a file it can rewind: a pipe is refused, and nothing is written
+  check({"--npy - on a pipe", {"run", h, "--npy", "-"}, 2, {"--npy '-'", "cannot be rewound"}});
+}
+
+BOOST_AUTO_TEST_CASE(outputs_never_overwrite_the_scene_or_each_other) {
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::string dir = temp_dir(), text = slurp(h);
+  std::filesystem::create_symlink(h, dir + "/link.toml");
+  const std::vector<Case> cases = {
+      {"--csv naming the scene", {"run", h, "--csv", h}, 2, {"--csv", "is the scene file"}},
+      {"output.npy naming the scene", {"run", h, "--set", "output.npy=\"" + h + "\""}, 2,
+       {"key 'output.npy'", "is the scene file"}},
+      {"--csv naming a link to the scene", {"run", h, "--csv", dir + "/link.toml"}, 2, {"is the scene file"}},
+      {"--csv and --npy naming one file", {"run", h, "--csv", dir + "/same.out", "--npy", dir + "/./same.out"}, 2,
+       {"--csv", "--npy", "name the same file"}},
+      {"--csv - and --npy /dev/stdout", {"run", h, "--csv", "-", "--npy", "/dev/stdout"}, 2, {"name the same file"}},
+  };
+  for (const auto& c : cases) check(c);
+  BOOST_TEST(slurp(h) == text);
+  BOOST_TEST(!file_exists(dir + "/same.out"));
+}
+
+BOOST_AUTO_TEST_CASE(inputs_beyond_the_limits_are_refused_with_what_was_wrong) {
+  const std::string h = write_scene("h.toml", kHarmonic), dir = temp_dir();
+  // a scene larger than 16 MiB (a regular file, and /dev/zero), read without loading it
+  {
+    std::ofstream big(dir + "/big.toml");
+    big << kHarmonic << "# " << std::string((16u << 20), 'x') << "\n";
+  }
+  // a chain scene for the position of system.params.n
+  const std::string chain = write_scene("c.toml", "[system]\nbuiltin = \"chain\"\nparams = { n = 2.5 }\n");
+  const std::string sphere_bvp = write_scene(
+      "s.toml", "[system]\nbuiltin = \"spherical-pendulum\"\n[problem]\nkind = \"boundary-value\"\n"
+                "q_final = [0.0, 0.6, -0.9]\nsteps = 10\n[initial]\nq = [0.6, 0.0, -0.8]\n"
+                "[integrator]\nmap = \"sphere-exp\"\nstep = 0.01\n");
+  const std::string million(1000000, 'a');
+  const std::string long_csv = write_scene("m.toml", std::string(kHarmonic) + "[output]\ncsv = \"" + million + "\"\n");
+  const std::vector<Case> cases = {
+      {"a scene over 16 MiB", {"run", dir + "/big.toml"}, 2, {"larger than 16777216 bytes"}},
+      {"/dev/zero as the scene", {"run", "/dev/zero"}, 2, {"/dev/zero", "larger than 16777216 bytes"}},
+      {"a directory as the scene", {"run", dir}, 2, {"is a directory; expected a scene file"}},
+      {"--set with a second line", {"run", h, "--set", "integrator.step=0.5\njunk = 1"}, 2,
+       {"--set integrator.step", "not one TOML value"}},
+      {"--set with a second table", {"run", h, "--set", "integrator.step=0.5\n[output]\nevery = 2"}, 2,
+       {"not one TOML value"}},
+      {"a NUL in an output path", {"run", h, "--set", "output.csv=\"a\\u0000b.csv\""}, 2,
+       {"output.csv", "NUL character"}},
+      {"a control character echoed", {"run", h, "--set", "integrator.map=\"mid\\u0001point\""}, 2,
+       {"unknown map \"mid\\x01point\""}},
+      {"system.params.n with its position", {"run", chain}, 2, {"c.toml:3:16: key 'system.params.n': got 2.5"}},
+      {"problem.q_final off the sphere with its position", {"run", sphere_bvp}, 2,
+       {"s.toml:5:11: key 'problem.q_final': not a unit vector"}},
+      {"check-map --dim on S^2", {"check-map", "sphere-exp", "--dim", "3"}, 2, {"--dim applies only to maps on R^n"}},
+  };
+  for (const auto& c : cases) check(c);
+  // a 1 MB value is echoed in 80 bytes with its length, not whole
+  for (const std::string key : {"integrator.map", "integrator.form", "integrator.composition", "integrator.method",
+                                "integrator.solver", "problem.kind", "system.builtin", "integrator.step"}) {
+    // the harmonic scene with the key set to a string of 10^6 bytes
+    std::map<std::string, std::vector<std::string>> sections = {
+        {"system", {"builtin = \"harmonic\""}},
+        {"initial", {"q = [1.0]", "p = [0.0]"}},
+        {"integrator", {"map = \"midpoint\"", "step = 0.01", "steps = 100"}}};
+    const std::string section = key.substr(0, key.find('.')), name = key.substr(key.find('.') + 1);
+    auto& lines = sections[section];
+    lines.erase(std::remove_if(lines.begin(), lines.end(),
+                               [&](const std::string& l) { return l.rfind(name + " ", 0) == 0; }),
+                lines.end());
+    lines.push_back(name + " = \"" + million + "\"");
+    std::string text;
+    for (const auto& [sec, ls] : sections) {
+      text += "[" + sec + "]\n";
+      for (const auto& l : ls) text += l + "\n";
+    }
+    const std::string path = write_scene("v.toml", text);
+    const Output o = dvm({"run", path, "--quiet"});
+    BOOST_TEST_CONTEXT(key << " -> " << o.err.substr(0, 300)) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.size() < 1000u);
+      BOOST_TEST(o.err.find("(1000000 bytes)") != std::string::npos);
+    }
+  }
+  const Output lm = dvm({"run", long_csv, "--quiet"});
+  BOOST_TEST(lm.status == 2);
+  BOOST_TEST(lm.err.size() < 1000u, lm.err.substr(0, 300));
+}
+
+BOOST_AUTO_TEST_CASE(a_convergence_study_beyond_its_work_limit_is_refused_before_it_starts) {
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::vector<Case> cases = {
+      {"10^12 steps", {"converge", h, "--steps-list", "999999999999,1000000000000"}, 2,
+       {"--steps-list", "2e+12 steps in all", "limit of 1e+08", "--max-steps"}},
+      {"1e13: the limit, not the form of the number", {"converge", h, "--steps-list", "1e13,2e13"}, 2,
+       {"limit of 1e+08"}},
+      {"the scene's own count", {"converge", h, "--set", "integrator.steps=100000000"}, 2,
+       {"integrator.steps", "1.5e+09 steps in all"}},
+      {"a lower --max-steps", {"converge", h, "--steps-list", "100,200", "--max-steps", "299"}, 2,
+       {"300 steps in all", "limit of 299"}},
+      {"equal step counts", {"converge", h, "--steps-list", "100,100"}, 2, {"appears twice"}},
+      {"--max-steps not a whole number", {"converge", h, "--max-steps", "1.5"}, 2, {"--max-steps"}},
+  };
+  for (const auto& c : cases) check(c);
+  BOOST_TEST(dvm({"converge", h, "--steps-list", "100,200", "--max-steps", "300"}).status == 0);
 }
 
 BOOST_AUTO_TEST_CASE(the_harness_removes_its_temporary_folder) {
