@@ -30,9 +30,19 @@ const char* kUsage =
     "  systems            list the built-in systems, their parameters and defaults\n"
     "  check-map NAME     check the identities of a discretization map, as JSON\n"
     "  converge SCENE     run a scene at several step sizes: errors and observed order\n"
+    "  version            print the version and the git revision it was built from\n"
+    "  help [COMMAND]     print this list, or the help of COMMAND\n"
     "\n"
-    "'dvm <command> --help' describes a command. Exit status: 0 success, 1 a check\n"
-    "that did not pass, 2 bad input or usage, 3 a numerical failure during a run.\n";
+    "'dvm <command> --help' describes a command; 'dvm --version' is 'dvm version'.\n"
+    "Exit status: 0 success, 1 a check that did not pass, 2 bad input or usage, 3 a\n"
+    "numerical failure during a run.\n";
+
+const char* kVersionHelp =
+    "usage: dvm version   (or dvm --version)\n"
+    "\n"
+    "Prints 'dvm VERSION (git REVISION)': the project version of CMakeLists.txt and the\n"
+    "git revision of the source tree when the build was configured ('unknown' when it\n"
+    "was not a git checkout). Exit status 0.\n";
 
 const char* kRunHelp =
     "usage: dvm run SCENE.toml [--set section.key=value]... [--csv PATH] [--json] [--quiet]\n"
@@ -434,6 +444,25 @@ int cmd_converge(const std::vector<std::string>& args) {
   return run_scene(load_scene(scene, sets), o);
 }
 
+#ifndef DVM_VERSION
+#define DVM_VERSION "unknown"
+#endif
+#ifndef DVM_GIT_REVISION
+#define DVM_GIT_REVISION "unknown"
+#endif
+
+int cmd_version(const std::vector<std::string>& args) {
+  for (const auto& a : args) {
+    if (is_help(a)) {
+      std::cout << kVersionHelp;
+      return 0;
+    }
+    usage_error("unknown argument " + a, kVersionHelp);
+  }
+  std::cout << "dvm " << DVM_VERSION << " (git " << DVM_GIT_REVISION << ")\n";
+  return 0;
+}
+
 int cmd_check_map(const std::vector<std::string>& args) {
   std::string name;
   double theta = -1.0, tol = 1e-12;  // theta < 0, dim 0: not given
@@ -479,17 +508,28 @@ int main(int argc, char** argv) {
   const std::string cmd = args[0];
   args.erase(args.begin());
   try {
-    if (is_help(cmd) || cmd == "help") {
+    if (is_help(cmd) || (cmd == "help" && (args.empty() || is_help(args[0])))) {
       std::cout << kUsage;
       return 0;
     }
-    if (cmd == "run") return cmd_run(args);
-    if (cmd == "maps") return cmd_maps(args);
-    if (cmd == "check-map") return cmd_check_map(args);
-    if (cmd == "systems") return cmd_systems(args);
-    if (cmd == "methods") return cmd_methods(args);
-    if (cmd == "converge") return cmd_converge(args);
-    usage_error("unknown command '" + cmd + "'", kUsage);
+    std::string command = cmd;
+    if (cmd == "help") {  // dvm help COMMAND = dvm COMMAND --help
+      if (args.size() > 1) usage_error("help takes one command name", kUsage);
+      command = args[0];
+      args = {"--help"};
+      if (command == "help") {
+        std::cout << kUsage;
+        return 0;
+      }
+    }
+    if (command == "version" || command == "--version") return cmd_version(args);
+    if (command == "run") return cmd_run(args);
+    if (command == "maps") return cmd_maps(args);
+    if (command == "check-map") return cmd_check_map(args);
+    if (command == "systems") return cmd_systems(args);
+    if (command == "methods") return cmd_methods(args);
+    if (command == "converge") return cmd_converge(args);
+    usage_error("unknown command '" + command + "'", kUsage);
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";
     return 2;
