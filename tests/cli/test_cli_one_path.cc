@@ -12,9 +12,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
+#include <map>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -79,8 +83,8 @@ BOOST_AUTO_TEST_CASE(converge_measures_galerkin_against_a_reference_that_reports
   }
 }
 
-// On S^2 and SO(3), and in the Hamiltonian form, converge makes a table (it used to
-// run the scene once and overwrite its CSV): the triple jump of the sphere's midpoint
+// On S^2 and SO(3), and in the Hamiltonian form, converge makes a table (and leaves
+// the scene's CSV unwritten): the triple jump of the sphere's midpoint
 // map is of order 4 on the spherical pendulum, the error measured on the manifold.
 BOOST_AUTO_TEST_CASE(converge_works_on_curved_spaces_and_in_every_form) {
   const std::string csv = temp_dir() + "/not_written.csv";
@@ -120,7 +124,7 @@ BOOST_AUTO_TEST_CASE(converge_refuses_or_flags_what_it_cannot_measure) {
   BOOST_TEST(chaos.out.find("not determined") != std::string::npos, chaos.out);
 }
 
-// Every space writes .npy (S^2 used to write nothing and exit 0), with the CSV's columns.
+// Every space writes .npy (never nothing with exit 0), with the CSV's columns.
 BOOST_AUTO_TEST_CASE(npy_is_written_on_every_space) {
   for (const char* name : {"spherical-pendulum.toml", "rigid-body.toml", "spherical-chain.toml", "chain.toml"}) {
     const std::string npy = temp_dir() + "/" + name + ".npy", csv = temp_dir() + "/" + name + ".csv";
@@ -194,7 +198,7 @@ BOOST_AUTO_TEST_CASE(written_systems_name_their_columns) {
 
 // Sizes known only at run time run through the run-time-sized kernels: a written chain
 // of 12 coordinates (its total momentum conserved to round-off: the potential depends
-// on differences only) and 8 bodies (beyond the 6 that fixed sizes once allowed).
+// on differences only) and an N-body scene of 8 bodies.
 BOOST_AUTO_TEST_CASE(sizes_known_only_at_run_time) {
   const int n = 12;
   std::string coords, kinetic, potential, q, v;
@@ -371,4 +375,356 @@ BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
       BOOST_TEST(row[5] == also);
     }
   }
+}
+
+// ---------------------------------------------------------------------------------
+// The documentation agrees with the program: the commands README.md shows run, every
+// command `dvm help` lists has a --help that names the options the README uses, the
+// shipped scenes are each listed once in examples/scenes/README.md, and no
+// documentation file narrates history.
+
+namespace {
+
+std::string repo_file(const std::string& rel) { return std::string(DVM_SCENES) + "/../../" + rel; }
+
+std::vector<std::string> lines_of(const std::string& text) {
+  std::vector<std::string> out;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+std::string trim(const std::string& s) {
+  const auto b = s.find_first_not_of(" \t"), e = s.find_last_not_of(" \t");
+  return b == std::string::npos ? "" : s.substr(b, e - b + 1);
+}
+
+std::vector<std::string> words(const std::string& s) {
+  std::vector<std::string> out;
+  std::istringstream in(s);
+  for (std::string w; in >> w;) out.push_back(w);
+  return out;
+}
+
+// A fenced block of a Markdown text: its info string ("sh", "toml", ...), the line
+// number (1-based) of its first line of content, and its lines.
+struct Fence {
+  std::string info;
+  int line = 0;
+  std::vector<std::string> lines;
+};
+
+std::vector<Fence> fences(const std::string& md) {
+  std::vector<Fence> out;
+  const auto ls = lines_of(md);
+  for (std::size_t i = 0; i < ls.size(); ++i) {
+    if (ls[i].rfind("```", 0) != 0) continue;
+    Fence f;
+    f.info = trim(ls[i].substr(3));
+    f.line = static_cast<int>(i) + 2;
+    for (++i; i < ls.size() && ls[i].rfind("```", 0) != 0; ++i) f.lines.push_back(ls[i]);
+    out.push_back(f);
+  }
+  return out;
+}
+
+// A command line of a fenced shell block that starts with `dvm ` or `make run` (a
+// line "a && b" is two commands), with the README line it is on.
+struct Shown {
+  std::string text;
+  int line;
+};
+
+std::vector<Shown> shown_commands(const std::string& md) {
+  std::vector<Shown> out;
+  for (const Fence& f : fences(md)) {
+    if (f.info != "sh" && f.info != "bash" && f.info != "shell" && f.info != "console") continue;
+    for (std::size_t i = 0; i < f.lines.size(); ++i) {
+      std::string rest = f.lines[i];
+      for (;;) {
+        const auto amp = rest.find("&&");
+        const std::string part = trim(rest.substr(0, amp));
+        if (part.rfind("dvm ", 0) == 0 || part == "dvm" || part.rfind("make run", 0) == 0)
+          out.push_back({part, f.line + static_cast<int>(i)});
+        if (amp == std::string::npos) break;
+        rest = rest.substr(amp + 2);
+      }
+    }
+  }
+  return out;
+}
+
+// The text of a command line before its comment (" # ..."; quotes respected).
+std::string without_comment(const std::string& line) {
+  char quote = 0;
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    const char c = line[i];
+    if (quote) {
+      if (c == quote) quote = 0;
+    } else if (c == '\'' || c == '"') {
+      quote = c;
+    } else if (c == '#' && (i == 0 || line[i - 1] == ' ')) {
+      return trim(line.substr(0, i));
+    }
+  }
+  return trim(line);
+}
+
+// A word of a synopsis rather than of a command one can type: SCENE.toml, NAME, PATH,
+// [--json], <command>, N1,N2,...
+bool is_placeholder(const std::string& w) {
+  if (w.find_first_of("[<") != std::string::npos || w.find("...") != std::string::npos) return true;
+  const std::string stem = w.size() > 5 && w.compare(w.size() - 5, 5, ".toml") == 0 ? w.substr(0, w.size() - 5) : w;
+  if (stem.empty() || !std::isupper(static_cast<unsigned char>(stem[0]))) return false;
+  return std::all_of(stem.begin(), stem.end(), [](char c) {
+    return std::isupper(static_cast<unsigned char>(c)) || std::isdigit(static_cast<unsigned char>(c)) || c == '_';
+  });
+}
+
+bool is_synopsis(const std::string& command) {
+  const auto ws = words(without_comment(command));
+  return std::any_of(ws.begin(), ws.end(), is_placeholder);
+}
+
+// Runs a shell command line in `dir` (stdout and stderr captured).
+Output sh_in(const std::string& dir, const std::string& line) {
+  const std::string err = temp_dir() + "/sh_stderr.txt";
+  const std::string cmd = "cd '" + dir + "' && {\n" + line + "\n} 2>'" + err + "'";
+  FILE* pipe = popen(cmd.c_str(), "r");
+  BOOST_REQUIRE(pipe);
+  std::string out;
+  char buf[4096];
+  for (std::size_t n; (n = fread(buf, 1, sizeof buf, pipe)) > 0;) out.append(buf, n);
+  const int st = pclose(pipe);
+  return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out, slurp(err)};
+}
+
+// The commands `dvm help` lists: the first word of each line of its "commands:" list.
+std::vector<std::string> listed_commands() {
+  const Output h = dvm({"help"});
+  BOOST_REQUIRE_EQUAL(h.status, 0);
+  std::vector<std::string> out;
+  bool in_list = false;
+  for (const std::string& l : lines_of(h.out)) {
+    if (l == "commands:") {
+      in_list = true;
+    } else if (in_list && trim(l).empty()) {
+      break;
+    } else if (in_list) {
+      out.push_back(words(l).at(0));
+    }
+  }
+  return out;
+}
+
+// The options (--name) of a command line or synopsis, without brackets or values.
+std::vector<std::string> options_of(const std::string& text) {
+  std::vector<std::string> out;
+  for (std::string w : words(without_comment(text))) {
+    while (!w.empty() && (w.front() == '[' || w.front() == '`')) w.erase(0, 1);
+    if (w.rfind("--", 0) != 0 || w.size() < 3) continue;
+    const auto end = w.find_first_of("=]`.");
+    out.push_back(w.substr(0, end));
+  }
+  return out;
+}
+
+}  // namespace
+
+// `dvm --version` and `dvm version` print the CMake project version and the git
+// revision captured when the build was configured (or "unknown"), and exit 0;
+// `dvm help COMMAND` is `dvm COMMAND --help`.
+BOOST_AUTO_TEST_CASE(version_and_help) {
+  const Output v = dvm({"--version"}), w = dvm({"version"});
+  BOOST_TEST(v.status == 0, v.err);
+  BOOST_TEST(w.status == 0, w.err);
+  BOOST_TEST(v.out == w.out);
+  const std::string prefix = std::string("dvm ") + DVM_PROJECT_VERSION + " (git ";
+  BOOST_TEST(v.out.rfind(prefix, 0) == 0, v.out);
+  const std::string rev = v.out.substr(std::min(prefix.size(), v.out.size()));
+  BOOST_TEST((rev == "unknown)\n" || (rev.size() == 14 && rev.find_first_not_of("0123456789abcdef") == 12 &&
+                                      rev.compare(12, 2, ")\n") == 0)),
+             v.out);
+  BOOST_TEST(dvm({"version", "--bogus"}).status == 2);
+
+  const Output h = dvm({"help"}), hh = dvm({"--help"});
+  BOOST_TEST(h.status == 0);
+  BOOST_TEST(h.out == hh.out);
+  const auto commands = listed_commands();
+  for (const char* c : {"run", "converge", "maps", "methods", "systems", "check-map", "version", "help"})
+    BOOST_TEST((std::find(commands.begin(), commands.end(), c) != commands.end()), "dvm help lists " << c);
+  const Output hr = dvm({"help", "run"}), rh = dvm({"run", "--help"});
+  BOOST_TEST(hr.status == 0);
+  BOOST_TEST(hr.out == rh.out);
+  BOOST_TEST(dvm({"help", "no-such-command"}).status == 2);
+}
+
+// Every command `dvm help` lists has a --help that exits 0; every dvm command README.md
+// shows (in its fenced shell lines and its inline code) is one of them, and each option
+// it names is in that command's --help; an option named alone (`--set`) is in some
+// command's --help.
+BOOST_AUTO_TEST_CASE(readme_commands_and_options_are_in_the_help) {
+  std::map<std::string, std::string> help;
+  std::string all_help = dvm({"help"}).out;
+  for (const std::string& c : listed_commands()) {
+    const Output o = dvm({c, "--help"});
+    BOOST_TEST_CONTEXT("dvm " << c << " --help") {
+      BOOST_TEST(o.status == 0, o.err);
+      BOOST_TEST(o.out.size() > 40u, o.out);
+    }
+    help[c] = o.out;
+    all_help += o.out;
+  }
+  const std::string readme = slurp(repo_file("README.md"));
+  std::vector<Shown> uses = shown_commands(readme);
+  // inline code: `dvm ...` and `--option ...`
+  const auto ls = lines_of(readme);
+  std::vector<Shown> alone;
+  for (std::size_t i = 0; i < ls.size(); ++i)
+    for (std::size_t at = ls[i].find('`'); at != std::string::npos;) {
+      const auto end = ls[i].find('`', at + 1);
+      if (end == std::string::npos) break;
+      const std::string code = ls[i].substr(at + 1, end - at - 1);
+      if (code.rfind("dvm ", 0) == 0) uses.push_back({code, static_cast<int>(i) + 1});
+      if (code.rfind("--", 0) == 0) alone.push_back({code, static_cast<int>(i) + 1});
+      at = ls[i].find('`', end + 1);
+    }
+  int checked = 0;
+  for (const Shown& s : uses) {
+    if (s.text.rfind("dvm", 0) != 0) continue;
+    const auto ws = words(without_comment(s.text));
+    if (ws.size() < 2 || ws[1].front() == '<') continue;  // dvm <command> --help
+    BOOST_TEST_CONTEXT("README.md:" << s.line << ": " << s.text) {
+      if (ws[1].rfind("--", 0) == 0) {  // dvm --version, dvm --help
+        BOOST_TEST(all_help.find(ws[1]) != std::string::npos);
+        continue;
+      }
+      BOOST_REQUIRE(help.count(ws[1]));
+      for (const std::string& opt : options_of(s.text)) {
+        BOOST_TEST(help[ws[1]].find(opt) != std::string::npos, opt << " is not in dvm " << ws[1] << " --help");
+        ++checked;
+      }
+    }
+  }
+  for (const Shown& s : alone)
+    for (const std::string& opt : options_of(s.text))
+      BOOST_TEST(all_help.find(opt) != std::string::npos, "README.md:" << s.line << ": " << opt << " in no --help");
+  BOOST_TEST(checked >= 10);  // the synopsis alone names more options than that
+}
+
+// Every command README.md shows in a fenced shell block runs: each `dvm ...` line
+// (a synopsis with placeholders such as SCENE.toml excepted) exits 0 with dvm the
+// built binary, in a scratch folder holding a copy of the shipped scenes as
+// examples/scenes and the README's own scenes (a toml block whose first line is
+// "# NAME.toml"), where the files they write land; `make run` is the Makefile's run
+// target, whose dvm command is run the same way (without make), and whose scene is
+// the one the README's comment names.
+BOOST_AUTO_TEST_CASE(readme_commands_run) {
+  namespace fs = std::filesystem;
+  const std::string readme = slurp(repo_file("README.md"));
+  const std::string dir = temp_dir() + "/readme";
+  // a copy of the shipped scenes, so that nothing a command writes reaches the sources
+  fs::create_directories(dir + "/examples");
+  fs::copy(DVM_SCENES, dir + "/examples/scenes", fs::copy_options::recursive);
+  int written = 0;
+  for (const Fence& f : fences(readme)) {
+    if (f.info != "toml" || f.lines.empty() || f.lines[0].rfind("# ", 0) != 0) continue;
+    const std::string name = trim(f.lines[0].substr(2));
+    if (name.find('/') != std::string::npos || name.size() < 6 || name.compare(name.size() - 5, 5, ".toml") != 0)
+      continue;
+    std::ofstream out(dir + "/" + name);
+    for (const auto& l : f.lines) out << l << "\n";
+    ++written;
+  }
+  BOOST_TEST_MESSAGE("README scenes written: " << written);
+
+  int ran = 0, make_runs = 0;
+  for (const Shown& s : shown_commands(readme)) {
+    BOOST_TEST_CONTEXT("README.md:" << s.line << ": " << s.text) {
+      std::string line = without_comment(s.text);
+      if (line.rfind("make run", 0) == 0) {
+        ++make_runs;
+        // the recipe of the run target: its line that runs the built dvm
+        const auto mk = lines_of(slurp(repo_file("Makefile")));
+        const auto target = std::find_if(mk.begin(), mk.end(), [](const std::string& l) { return l.rfind("run:", 0) == 0; });
+        BOOST_REQUIRE(target != mk.end());
+        std::string recipe;
+        for (auto it = target + 1; it != mk.end() && !it->empty() && (*it)[0] == '\t'; ++it)
+          if (it->find("/examples/dvm ") != std::string::npos) recipe = *it;
+        BOOST_REQUIRE(!recipe.empty());
+        const std::string args = recipe.substr(recipe.find("/examples/dvm ") + 13);
+        // the scene the README's comment names is the one the target runs
+        const auto toml = s.text.find(".toml");
+        if (s.text.find('#') != std::string::npos && toml != std::string::npos) {
+          const auto from = s.text.rfind(' ', toml) + 1;
+          BOOST_TEST(args.find(s.text.substr(from, toml + 5 - from)) != std::string::npos, recipe);
+        }
+        line = "dvm" + args;
+      } else if (is_synopsis(line)) {
+        continue;
+      }
+      const Output o = sh_in(dir, "'" + std::string(DVM_BINARY) + "'" + line.substr(3));
+      BOOST_TEST(o.status == 0, o.err);
+      ++ran;
+    }
+  }
+  BOOST_TEST(make_runs >= 1);
+  BOOST_TEST(ran >= 4);
+}
+
+// No documentation file narrates history: what was measured before a change, what a
+// figure predates, what the code used to do. Documentation states what is, with the
+// figure and the command that produces it; history is in git.
+BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
+  namespace fs = std::filesystem;
+  const std::string root = fs::canonical(repo_file("")).string();
+  const std::vector<std::string> phrases = {
+      "before this work", "earlier still", "predate",        "the issue's target", "was measured at",
+      "no longer",        "previously",    "formerly",       "until recently",     "so far",
+      "not regenerated",  "used to",       "issue #",        "after the fix",      "before the fix"};
+  // "used to" after these words is the passive ("is used to build"), not history
+  const std::vector<std::string> passive = {"is ", "are ", "be ", "been ", "was ", "were "};
+  int files = 0;
+  std::vector<std::string> found;
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
+    const std::string name = it->path().filename().string();
+    if (it->is_directory()) {
+      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
+      continue;
+    }
+    if (it->path().extension() != ".md") continue;
+    ++files;
+    const std::string rel = it->path().string().substr(root.size() + 1);
+    const auto ls = lines_of(slurp(it->path().string()));
+    for (std::size_t i = 0; i < ls.size(); ++i) {
+      std::string low = ls[i];
+      std::transform(low.begin(), low.end(), low.begin(), [](unsigned char c) { return std::tolower(c); });
+      // a whole word or phrase: no letter or digit just before it, nor just after it
+      // when it ends in one ("issue #" is followed by a number; "predate" may go on)
+      auto alnum = [](char c) { return std::isalnum(static_cast<unsigned char>(c)) != 0; };
+      auto starts_word = [&](std::size_t at) { return at == 0 || !alnum(low[at - 1]); };
+      auto ends_word = [&](std::size_t end) { return !alnum(low[end - 1]) || end == low.size() || !alnum(low[end]); };
+      std::vector<std::string> hits;
+      for (const std::string& p : phrases)
+        for (std::size_t at = low.find(p); at != std::string::npos; at = low.find(p, at + 1)) {
+          if (!starts_word(at) || (p != "predate" && !ends_word(at + p.size()))) continue;
+          if (p == "used to" && std::any_of(passive.begin(), passive.end(), [&](const std::string& w) {
+                return at >= w.size() && low.compare(at - w.size(), w.size(), w) == 0;
+              }))
+            continue;
+          hits.push_back(p);
+          break;
+        }
+      for (std::size_t at = low.find("now"); at != std::string::npos; at = low.find("now", at + 1))
+        if (starts_word(at) && ends_word(at + 3)) {
+          hits.push_back("now");
+          break;
+        }
+      for (const std::string& h : hits) found.push_back(rel + ":" + std::to_string(i + 1) + ": \"" + h + "\": " + ls[i]);
+    }
+  }
+  BOOST_TEST(files >= 8);
+  std::string report;
+  for (const auto& f : found) report += "\n  " + f;
+  BOOST_TEST(found.empty(), "history in the documentation:" << report);
 }
