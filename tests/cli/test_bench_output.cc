@@ -1,10 +1,12 @@
 // The benchmark programs of `make charts` run on a tiny size and write well-formed
 // output: every CSV has its header and rows of the same width, with finite numbers
-// wherever a run converged; the gnuplot data and the README tables are written.
+// wherever a run converged, and the two independent references of each problem agree
+// to round-off; the gnuplot data and the README tables are written.
 // (Benchmarks are not unit tests: nothing here judges a timing.)
 #define BOOST_TEST_MODULE bench_output
 #include <boost/test/unit_test.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
@@ -97,7 +99,43 @@ BOOST_AUTO_TEST_CASE(charts_program_writes_well_formed_csv) {
     for (const auto& r : wp) ok = ok || (r[0] == "rigid-body" && r[1] == g && r[11] == "1");
     BOOST_TEST(ok, "rigid-body " << g);
   }
-  for (const auto& r : read_csv(dir + "/references.csv", "problem,reference,agreement")) BOOST_TEST(finite_number(r[2]));
+  // references.csv: per problem, how the reference q(T) the errors are measured against
+  // was obtained ("reference") and the max-norm difference of two independent
+  // computations of it ("agreement"): an exact solution has nothing to disagree with
+  // (0); otherwise dvm's kahan-li8 composition of the midpoint rule (order 8) against
+  // Odeint's RKF78 (order 8) with 5 to 10 times as many steps. Both are converged to
+  // round-off at these sizes (their truncation errors lie below it: the agreements are
+  // 2e-15 .. 9e-14), so their difference is round-off, at most one rounding of q per
+  // step or substep: (n_ref x 17 stages + n_check) eps |q|, largest for the outer solar
+  // system (|q| ~ 30 au, 40 x 17 + 400 roundings): 7e-12. Asserted: at most 1e-11,
+  // and above 0 (0 would mean the reference was compared with itself). The sweeps
+  // stop fitting at 10 x the agreement, so a looser reference would hide the errors
+  // they measure.
+  std::vector<std::string> problems;
+  for (const auto& r : wp)
+    if (std::find(problems.begin(), problems.end(), r[0]) == problems.end()) problems.push_back(r[0]);
+  const auto refs = read_csv(dir + "/references.csv", "problem,reference,agreement");
+  BOOST_TEST(refs.size() == problems.size());
+  for (const auto& r : refs) {
+    BOOST_TEST_CONTEXT(r[0] << ": " << r[1] << ", agreement " << r[2]) {
+      BOOST_TEST((std::find(problems.begin(), problems.end(), r[0]) != problems.end()));
+      BOOST_REQUIRE(finite_number(r[2]));
+      const double agreement = std::strtod(r[2].c_str(), nullptr);
+      if (r[1] == "\"exact solution\"") {
+        BOOST_TEST(agreement == 0.0);
+        continue;
+      }
+      BOOST_TEST(r[1].find("kahan-li8") != std::string::npos);
+      BOOST_TEST(r[1].find("RKF78") != std::string::npos);
+      BOOST_TEST(agreement > 0.0);
+      BOOST_TEST(agreement <= 1e-11);
+      // the note quotes the same number (two significant digits)
+      const std::size_t at = r[1].find("agrees to ");
+      BOOST_REQUIRE(at != std::string::npos);
+      const double quoted = std::strtod(r[1].c_str() + at + 10, nullptr);
+      BOOST_TEST(std::fabs(quoted - agreement) <= 0.051 * agreement);
+    }
+  }
   for (const auto& r : read_csv(dir + "/energy_long.csv", "method,t,max_energy_error_in_block")) {
     BOOST_TEST(finite_number(r[1]));
     BOOST_TEST(finite_number(r[2]));
