@@ -728,3 +728,68 @@ BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
   for (const auto& f : found) report += "\n  " + f;
   BOOST_TEST(found.empty(), "history in the documentation:" << report);
 }
+
+namespace {
+
+// The string value of `key = "value"` in a scene's text ("" if absent).
+std::string scene_value(const std::string& text, const std::string& key) {
+  for (const std::string& l : lines_of(text)) {
+    const std::string t = trim(l);
+    if (t.rfind(key, 0) != 0) continue;
+    const std::string rest = trim(t.substr(key.size()));
+    if (rest.empty() || rest[0] != '=') continue;
+    const auto open = rest.find('"');
+    if (open == std::string::npos) continue;
+    return rest.substr(open + 1, rest.find('"', open + 1) - open - 1);
+  }
+  return "";
+}
+
+}  // namespace
+
+// examples/scenes/README.md has one line per shipped scene and none for a scene that
+// does not exist; each line names the scene's system (or "written") and its method:
+// the map, the composition, galerkin, the boundary-value problem, as the scene says.
+BOOST_AUTO_TEST_CASE(scenes_readme_lists_every_scene) {
+  namespace fs = std::filesystem;
+  std::map<std::string, std::vector<std::string>> rows;  // file -> cells
+  const auto ls = lines_of(slurp(std::string(DVM_SCENES) + "/README.md"));
+  for (std::size_t i = 0; i < ls.size(); ++i) {
+    if (ls[i].rfind("| `", 0) != 0) continue;
+    const std::string file = ls[i].substr(3, ls[i].find('`', 3) - 3);
+    BOOST_TEST(rows.count(file) == 0u, "examples/scenes/README.md:" << i + 1 << ": " << file << " listed twice");
+    std::vector<std::string> cells;
+    std::size_t from = 1;
+    for (std::size_t bar; (bar = ls[i].find(" |", from)) != std::string::npos; from = bar + 2)
+      cells.push_back(trim(ls[i].substr(from, bar - from)));
+    rows[file] = cells;
+    BOOST_TEST(fs::exists(std::string(DVM_SCENES) + "/" + file),
+               "examples/scenes/README.md:" << i + 1 << ": " << file << " is not a shipped scene");
+  }
+  int scenes = 0;
+  for (const auto& e : fs::directory_iterator(DVM_SCENES)) {
+    if (e.path().extension() != ".toml") continue;
+    ++scenes;
+    const std::string file = e.path().filename().string();
+    BOOST_TEST_CONTEXT("examples/scenes/" << file) {
+      if (!rows.count(file)) {
+        BOOST_TEST(false, "no line in examples/scenes/README.md");
+        continue;
+      }
+      const auto& cells = rows[file];
+      BOOST_REQUIRE_EQUAL(cells.size(), 4u);
+      const std::string text = slurp(e.path().string());
+      const std::string builtin = scene_value(text, "builtin");
+      const std::string system = builtin.empty() ? "written" : builtin;
+      BOOST_TEST(cells[1].rfind(system, 0) == 0, cells[1] << " does not name " << system);
+      for (const char* key : {"map", "composition", "method", "kind"}) {
+        std::string v = scene_value(text, key);
+        if (v.empty() || v == "none" || v == "initial-value" || (std::string(key) == "method" && v == "map")) continue;
+        BOOST_TEST(cells[2].find(v) != std::string::npos, cells[2] << " does not name " << key << " " << v);
+      }
+      BOOST_TEST(cells[3].size() > 20u);
+    }
+  }
+  BOOST_TEST(scenes >= 20);
+  BOOST_TEST(rows.size() == static_cast<std::size_t>(scenes));
+}
