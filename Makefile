@@ -3,7 +3,7 @@
 #   make test   build and run the whole test suite
 #   make bench  build and run the benchmark programs
 #   make charts build the benchmark suite, regenerate examples/charts (CSV, PNG, SVG)
-#               and the numbers of examples/README.md
+#               and the numbers at the end of examples/charts/README.md
 #   make sanitize  build the suites labelled "sanitize" (tests/CMakeLists.txt: input,
 #               files, run-time memory, the runtime layer and the CLI, which drives
 #               every kernel) with AddressSanitizer and UndefinedBehaviorSanitizer (in
@@ -90,7 +90,7 @@ charts: deps
 	./$(BUILD)/examples/dvm_charts --out $(CHARTS)
 	./$(BUILD)/examples/bench_ratios --out $(CHARTS)
 	/usr/bin/gnuplot -e "dir='$(CHARTS)'" $(CHARTS)/plot.gp
-	sh $(CHARTS)/update_readme.sh examples/README.md $(CHARTS)/ratios.md $(CHARTS)/table_sweeps.md \
+	sh $(CHARTS)/update_readme.sh $(CHARTS)/README.md $(CHARTS)/ratios.md $(CHARTS)/table_sweeps.md \
 	  $(CHARTS)/table_long.md $(CHARTS)/table_stability.md
 
 # The benchmark programs no test runs are left out (DVM_BUILD_BENCH=OFF). The fuzz

@@ -9,8 +9,8 @@
 //
 // For comparison it also times the same step solved as a ceres::Problem built once
 // per chain and reused for every step (one residual block per particle on the
-// increments of it and its neighbours, SPARSE_NORMAL_CHOLESKY), which is the
-// alternative named in the issue; the ratio is the measured reason for the
+// increments of it and its neighbours, SPARSE_NORMAL_CHOLESKY), the general-purpose
+// alternative for large systems; the ratio is the measured reason for the
 // tridiagonal Newton. Both solve to the same residual tolerance; the maximum
 // difference of the end states is printed.
 //

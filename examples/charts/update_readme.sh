@@ -1,6 +1,7 @@
 #!/bin/sh
 # Replaces the lines between the markers <!-- charts:begin --> and <!-- charts:end -->
-# of a README with the given generated Markdown files (the numbers of `make charts`).
+# of a README (`make charts` passes examples/charts/README.md) with the given generated
+# Markdown files (the numbers of `make charts`).
 # usage: update_readme.sh README.md ratios.md table_sweeps.md table_long.md table_stability.md
 set -eu
 readme=$1

@@ -727,6 +727,36 @@ BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
   std::string report;
   for (const auto& f : found) report += "\n  " + f;
   BOOST_TEST(found.empty(), "history in the documentation:" << report);
+
+  // no issue numbers in code either (the word followed by a number, with or without #)
+  std::vector<std::string> numbered;
+  int sources = 0;
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
+    const std::string name = it->path().filename().string(), ext = it->path().extension().string();
+    if (it->is_directory()) {
+      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
+      continue;
+    }
+    if (ext != ".h" && ext != ".cc" && ext != ".txt" && ext != ".cmake" && ext != ".sh" && ext != ".gp" &&
+        ext != ".toml" && name != "Makefile")
+      continue;
+    ++sources;
+    const auto ls = lines_of(slurp(it->path().string()));
+    for (std::size_t i = 0; i < ls.size(); ++i) {
+      std::string low = ls[i];
+      std::transform(low.begin(), low.end(), low.begin(), [](unsigned char c) { return std::tolower(c); });
+      for (std::size_t at = low.find("issue"); at != std::string::npos; at = low.find("issue", at + 1)) {
+        std::size_t k = at + 5;
+        while (k < low.size() && (low[k] == ' ' || low[k] == '#')) ++k;
+        if (k > at + 5 && k < low.size() && std::isdigit(static_cast<unsigned char>(low[k])))
+          numbered.push_back(it->path().string().substr(root.size() + 1) + ":" + std::to_string(i + 1) + ": " + ls[i]);
+      }
+    }
+  }
+  BOOST_TEST(sources >= 100);
+  report.clear();
+  for (const auto& f : numbered) report += "\n  " + f;
+  BOOST_TEST(numbered.empty(), "issue numbers in the sources:" << report);
 }
 
 namespace {
@@ -792,4 +822,63 @@ BOOST_AUTO_TEST_CASE(scenes_readme_lists_every_scene) {
   }
   BOOST_TEST(scenes >= 20);
   BOOST_TEST(rows.size() == static_cast<std::size_t>(scenes));
+}
+
+// The numbers `make charts` generates have one home: the file the Makefile's charts
+// target passes to update_readme.sh holds the markers it writes between, and no other
+// Markdown file holds them.
+BOOST_AUTO_TEST_CASE(chart_numbers_have_one_home) {
+  namespace fs = std::filesystem;
+  std::string target;
+  for (const std::string& l : lines_of(slurp(repo_file("Makefile")))) {
+    const auto at = l.find("update_readme.sh ");
+    if (at == std::string::npos) continue;
+    target = words(l.substr(at))[1];
+    const auto var = target.find("$(CHARTS)");
+    if (var != std::string::npos) target.replace(var, 9, "examples/charts");
+  }
+  BOOST_REQUIRE_MESSAGE(!target.empty(), "the Makefile does not run update_readme.sh");
+  const std::string text = slurp(repo_file(target));
+  BOOST_TEST(text.find("\n<!-- charts:begin -->\n") != std::string::npos, target);
+  BOOST_TEST(text.find("\n<!-- charts:end -->\n") != std::string::npos, target);
+  const std::string root = fs::canonical(repo_file("")).string();
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
+    const std::string name = it->path().filename().string();
+    if (it->is_directory()) {
+      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
+      continue;
+    }
+    if (it->path().extension() != ".md" || fs::equivalent(it->path(), repo_file(target))) continue;
+    BOOST_TEST(slurp(it->path().string()).find("<!-- charts:begin -->") == std::string::npos,
+               it->path().string() << " holds the charts markers too");
+  }
+}
+
+// Every relative link of every Markdown file (`[text](path)`, `![img](path)`) names a
+// file or folder that exists.
+BOOST_AUTO_TEST_CASE(documentation_links_resolve) {
+  namespace fs = std::filesystem;
+  const std::string root = fs::canonical(repo_file("")).string();
+  int links = 0;
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
+    const std::string name = it->path().filename().string();
+    if (it->is_directory()) {
+      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
+      continue;
+    }
+    if (it->path().extension() != ".md") continue;
+    const auto ls = lines_of(slurp(it->path().string()));
+    for (std::size_t i = 0; i < ls.size(); ++i)
+      for (std::size_t at = ls[i].find("]("); at != std::string::npos; at = ls[i].find("](", at + 2)) {
+        const auto end = ls[i].find(')', at + 2);
+        if (end == std::string::npos) break;
+        std::string target = ls[i].substr(at + 2, end - at - 2);
+        if (target.find("://") != std::string::npos || target.empty() || target[0] == '#') continue;
+        target = target.substr(0, target.find('#'));
+        ++links;
+        BOOST_TEST(fs::exists(it->path().parent_path() / target),
+                   it->path().string().substr(root.size() + 1) << ":" << i + 1 << ": " << target << " does not exist");
+      }
+  }
+  BOOST_TEST(links >= 20);
 }

@@ -307,7 +307,7 @@ BOOST_AUTO_TEST_CASE(spherical_chain) {
 }
 
 BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
-  // Issue 5 on curved spaces: the composition tables applied to the midpoint and the
+  // Compositions on curved spaces: the composition tables applied to the midpoint and the
   // fixed-first-point maps of S^2 (spherical pendulum) and SO(3) (heavy top); measured
   // order within 0.3 of the claim, at t = 1, against the long-double RK4 references.
   struct Case {
