@@ -47,7 +47,10 @@ const char* kVersionHelp =
     "\n"
     "Prints 'dvm VERSION (git REVISION)': the project version of CMakeLists.txt and the\n"
     "git revision of the source tree when the build was configured ('unknown' when it\n"
-    "was not a git checkout). Exit status 0.\n";
+    "was not a git checkout). Exit status 0.\n"
+    "\n"
+    "example:\n"
+    "  dvm --version\n";
 
 const char* kRunHelp =
     "usage: dvm run SCENE.toml [--set section.key=value]... [--csv PATH] [--json] [--quiet]\n"
@@ -71,45 +74,81 @@ const char* kRunHelp =
     "              stderr); progress (step, time, rate, time left) is shown on\n"
     "              stderr only when stderr is a terminal\n"
     "\n"
-    "Scene keys:\n"
-    "  [system]      builtin = NAME  (see 'dvm systems'; @SYSTEMS@)\n"
-    "                params = { ... }   (the system's parameters; defaults otherwise)\n"
-    "                or a Lagrangian written in the scene:\n"
-    "                coordinates = [\"x\", \"y\"]   velocities are x_dot, y_dot\n"
-    "                lagrangian = \"m/2*(x_dot^2 + y_dot^2) - k/2*(x^2 + y^2)\"\n"
-    "                params = { m = 1.0, k = 2.0 }   (any names)\n"
-    "                energy = \"...\"  (optional; may use x, x_dot, p_x; else E = <p,v> - L)\n"
-    "                hamiltonian = \"...\"  (optional; in x and p_x; checked against L)\n"
-    "                name = \"...\"  (optional)\n"
-    "                Expressions: + - * / ^ (or **), parentheses, numbers, pi, and\n"
-    "                sin cos tan asin acos atan exp log sqrt cbrt abs sinh cosh tanh\n"
-    "                atan2(y, x) pow(x, y). Any number of coordinates.\n"
-    "  [initial]     q = [...]   and   p = [...] or v = [...]   (S^2: q a unit vector, v tangent)\n"
-    "                SO(3): rotation = [w, x, y, z] or R = [[...], [...], [...]],\n"
-    "                       and omega = [...] (body angular velocity) or pi = [...]\n"
-    "  [integrator]  map = NAME  (see 'dvm maps'; @MAPS@)\n"
-    "                theta = 0.5  (map theta only)   step = 0.01   steps = N  or  t_end = T\n"
-    "                solver = \"newton\" (default) | \"tiny\" (ceres::TinySolver)\n"
-    "                max_iterations = 25   tolerance = 2e-15  (relative residual)\n"
-    "                composition = \"none\" (default) | NAME  (see 'dvm methods'; @COMPOSITIONS@)\n"
-    "                    | \"triple-jump:<even order>\"   (the basic method's step\n"
-    "                    composed, in every form and on S^2/SO(3) too; one that is not\n"
-    "                    symmetric enters as Phi_{h/2} o Phi*_{h/2}; see 'dvm methods')\n"
-    "                method = \"map\" (default) | \"galerkin\"   stages = 1..6 (default 2)\n"
-    "                quadrature = \"gauss\" (default, s points) | \"lobatto\" (s + 1 points)\n"
-    "                    (Galerkin discrete Lagrangians of order 2 stages; R^n systems and\n"
-    "                    the S^2/SO(3) systems but the spherical chain, lagrangian form;\n"
-    "                    no map needed; see 'dvm methods')\n"
-    "  [output]      csv = \"out.csv\"   npy = \"out.npy\"   every = 1\n"
-    "  [integrator]  form = \"lagrangian\" (default) | \"hamiltonian\" (Eq. 5.1, cotangent lift)\n"
-    "                    | \"sode1\" | \"sode2\" (Eq. 4.1 / 4.2, tangent lift of the map)\n"
-    "                    | \"newmark\" (gamma = 0.5, beta = 0.25; uses no map)\n"
-    "  [problem]     kind = \"initial-value\" (default) | \"boundary-value\"\n"
-    "                q_final = [...]   steps = K   (boundary-value: [initial] q only,\n"
-    "                no integrator steps/t_end; lagrangian form; R^n systems and\n"
-    "                spherical-pendulum)\n"
-    "  [system]      builtin = \"chain\"   params = { n, m, k, alpha, beta, fixed }\n"
-    "                (FPU chain of n particles; lagrangian form, theta-family maps)\n"
+    "Scene keys, by section: key = its default (or a placeholder), * required, then\n"
+    "its type and values. A key that applies only to another choice is refused where\n"
+    "it is written.\n"
+    "  [system]    builtin or lagrangian *\n"
+    "    builtin = \"NAME\"           string, a built-in system (parameters and defaults:\n"
+    "                               'dvm systems'): @SYSTEMS@\n"
+    "    params = { k = x, ... }    numbers, the system's parameters; each not given keeps\n"
+    "                               its default (chain: n particles 1..1e7, fixed = 1 walls\n"
+    "                               or 0 free ends; spherical-chain: n links 1..4)\n"
+    "    masses = [m1, m2, ...]     positive numbers, nbody only (required there): one\n"
+    "                               per body, 2 or more; q, p and v hold 3 per body\n"
+    "    or a Lagrangian written in the scene:\n"
+    "    lagrangian = \"EXPR\"        string, L in the coordinates and their velocities\n"
+    "                               x_dot, y_dot, e.g. \"m/2*(x_dot^2 + y_dot^2) - k/2*(x^2 + y^2)\"\n"
+    "    coordinates = [\"x\", ...]   strings, the coordinate names (required with lagrangian)\n"
+    "    params = { m = 1.0, ... }  numbers, any names the expressions use\n"
+    "    energy = \"EXPR\"            string, optional; may use x, x_dot, p_x\n"
+    "                               (default E = <p, v> - L)\n"
+    "    hamiltonian = \"EXPR\"       string, optional; in x and p_x, checked against L\n"
+    "    name = \"...\"               string, optional; the system's name in reports\n"
+    "                               Expressions: + - * / ^ (or **), parentheses, numbers,\n"
+    "                               pi, and sin cos tan asin acos atan exp log sqrt cbrt\n"
+    "                               abs sinh cosh tanh atan2(y, x) pow(x, y). Any number\n"
+    "                               of coordinates.\n"
+    "  [initial]   R^n and S^2:\n"
+    "    q = [...] *                numbers, one per coordinate (S^2: a unit vector per link)\n"
+    "    p = [...] or v = [...] *   numbers, the momenta, or the velocities (then p = dL/dv);\n"
+    "                               S^2: tangent to q\n"
+    "              SO(3):\n"
+    "    rotation = [w, x, y, z]    numbers, a unit quaternion, or\n"
+    "      or R = [[...], ...] *    a 3 x 3 rotation matrix\n"
+    "    omega = [...]              numbers, the body angular velocity, or\n"
+    "      or pi = [...] *          the body angular momentum\n"
+    "  [integrator]\n"
+    "    map = \"NAME\" *             string (see 'dvm maps'; not needed by form newmark or\n"
+    "                               method galerkin): @MAPS@\n"
+    "    theta = 0.5                number in [0, 1], only for the maps that take it:\n"
+    "                               @THETA_MAPS@\n"
+    "    step = H *                 positive number\n"
+    "    steps = N or t_end = T *   whole number >= 1, or a whole multiple of step\n"
+    "                               (neither for a boundary-value problem)\n"
+    "    form = \"lagrangian\"        string: @FORMS@\n"
+    "                               (hamiltonian: Eq. 5.1, cotangent lift; sode1, sode2:\n"
+    "                               Eq. 4.1, 4.2, tangent lift of the map; newmark: no map)\n"
+    "    gamma = 0.5, beta = 0.25   numbers, form newmark only\n"
+    "    composition = \"none\"       string (see 'dvm methods'): @COMPOSITIONS@,\n"
+    "                               or \"triple-jump:<even order>\"; the basic method's step\n"
+    "                               composed, in every form and on S^2/SO(3) too; one that\n"
+    "                               is not symmetric enters as Phi_{h/2} o Phi*_{h/2}\n"
+    "    method = \"map\"             string: \"map\" (the map's own step) | \"galerkin\"\n"
+    "                               (Galerkin discrete Lagrangians of order 2 stages;\n"
+    "                               the systems with galerkin \"yes\" in the table below,\n"
+    "                               lagrangian form; no map needed)\n"
+    "    stages = 2                 whole number 1..@STAGES_MAX@, method galerkin only\n"
+    "    quadrature = \"gauss\"       string: \"gauss\" (s points) | \"lobatto\" (s + 1 points),\n"
+    "                               method galerkin only\n"
+    "    solver = \"newton\"          string: \"newton\" | \"tiny\" (ceres::TinySolver)\n"
+    "    max_iterations = 25        whole number 1..1000, the bound of each step's solve\n"
+    "                               (a boundary-value problem: 100)\n"
+    "    tolerance = 2e-15          number, relative residual tolerance of each step's\n"
+    "                               solve (initial-value problems)\n"
+    "  [problem]\n"
+    "    kind = \"initial-value\"     string: \"initial-value\" | \"boundary-value\"\n"
+    "                               (boundary-value: [initial] q only, no integrator steps\n"
+    "                               or t_end; lagrangian form; the systems with\n"
+    "                               boundary-value \"yes\" in the table below)\n"
+    "    q_final = [...]            numbers, the end point (boundary-value only, required)\n"
+    "    steps = K                  whole number 2..1e8, the steps between the end points\n"
+    "                               (boundary-value only, required)\n"
+    "  [output]    no output file unless csv or npy is given\n"
+    "    csv = \"PATH\"               string, the CSV file (columns t, q.., p.., energy and\n"
+    "                               the system's invariants), relative to the working\n"
+    "                               directory\n"
+    "    npy = \"PATH\"               string, a NumPy .npy file of the same rows\n"
+    "    every = 1                  whole number >= 1, a row every N steps (and the last)\n"
     "\n"
     "Exit status: 0 complete run; 2 bad input, an unwritable output path or output\n"
     "that would not fit on its filesystem (refused before the run; nothing is written);\n"
@@ -203,28 +242,41 @@ std::string run_help() {
     const auto at = h.find(tag);
     if (at != std::string::npos) h.replace(at, tag.size(), text);
   };
-  std::string systems, maps, compositions;
-  for (const auto& e : dvm::system_registry()) systems += (systems.empty() ? "" : ", ") + e.name;
-  for (const auto& m : dvm::map_registry()) maps += (maps.empty() ? "" : ", ") + m.name;
-  for (const auto& c : dvm::composition_schemes()) compositions += (compositions.empty() ? "" : ", ") + c.name;
-  auto wrap = [](const std::string& list) {
-    std::string out, line;
-    std::size_t start = 0;
-    while (start < list.size()) {
-      auto end = list.find(", ", start);
-      const std::string word = list.substr(start, end == std::string::npos ? std::string::npos : end - start + 1);
-      if (line.size() + word.size() > 60) {
-        out += line + "\n                  ";
-        line.clear();
+  // the names of each registry, quoted, wrapped at 80 columns under the description
+  // column (31 spaces in), the first line continuing the text before the tag
+  auto wrap = [&](const std::string& tag, const std::vector<std::string>& names) {
+    const auto at = h.find(tag);
+    if (at == std::string::npos) return;
+    std::size_t column = at - (h.rfind('\n', at) + 1);
+    std::string out;
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      const std::string word = "\"" + names[i] + "\"" + (i + 1 < names.size() ? "," : "");
+      if (i > 0 && column + 1 + word.size() > 80) {
+        out += "\n" + std::string(31, ' ');
+        column = 31;
+      } else if (i > 0) {
+        out += " ";
+        ++column;
       }
-      line += word + (end == std::string::npos ? "" : " ");
-      start = end == std::string::npos ? list.size() : end + 2;
+      out += word;
+      column += word.size();
     }
-    return out + line;
+    h.replace(at, tag.size(), out);
   };
-  fill("@SYSTEMS@", wrap(systems));
-  fill("@MAPS@", wrap(maps));
-  fill("@COMPOSITIONS@", wrap(compositions));
+  std::vector<std::string> systems, maps, theta_maps, form_names, compositions;
+  for (const auto& e : dvm::system_registry()) systems.push_back(e.name);
+  for (const auto& m : dvm::map_registry()) {
+    maps.push_back(m.name);
+    if (m.takes_theta) theta_maps.push_back(m.name);
+  }
+  for (const auto& f : dvm::form_registry()) form_names.push_back(f.name);
+  for (const auto& c : dvm::composition_schemes()) compositions.push_back(c.name);
+  wrap("@SYSTEMS@", systems);
+  wrap("@MAPS@", maps);
+  wrap("@THETA_MAPS@", theta_maps);
+  wrap("@FORMS@", form_names);
+  wrap("@COMPOSITIONS@", compositions);
+  fill("@STAGES_MAX@", std::to_string(dvm::kGalerkinStagesMax));
   h += "\nWhat each system runs (any other combination is refused with exit 2):\n";
   char line[256];
   std::snprintf(line, sizeof line, "  %-18s %-6s %-38s %-5s %-8s %s\n", "system", "space", "forms", "comp.", "galerkin",

@@ -882,3 +882,55 @@ BOOST_AUTO_TEST_CASE(documentation_links_resolve) {
   }
   BOOST_TEST(links >= 20);
 }
+
+// `dvm run --help` documents every scene key the scene reader accepts: for each
+// section the reader names (the message for an unknown section), and each key it takes
+// there (the message for an unknown key; [initial] on R^n and on SO(3)), the help's
+// block for that section has a line "key = ...".
+BOOST_AUTO_TEST_CASE(run_help_lists_every_scene_key) {
+  const std::string help = dvm({"run", "--help"}).out;
+  auto after = [](const std::string& text, const std::string& marker) {
+    const auto at = text.find(marker);
+    return at == std::string::npos ? std::string() : text.substr(at + marker.size(), text.find('\n', at) - at - marker.size());
+  };
+  auto split = [](const std::string& list) {
+    std::vector<std::string> out;
+    std::istringstream in(list);
+    for (std::string w; std::getline(in, w, ',');) out.push_back(trim(w));
+    return out;
+  };
+  const Output bad = dvm({"run", scene("pendulum.toml"), "--set", "no_such_section.key=1"});
+  BOOST_REQUIRE_EQUAL(bad.status, 2);
+  const auto sections = split(after(bad.err, "unknown section; expected "));
+  BOOST_REQUIRE_GE(sections.size(), 5u);
+  int keys = 0;
+  for (const std::string& sec : sections) {
+    // the help's block of the section: from "  [sec]" to the next "  [" or blank line
+    const auto ls = lines_of(help);
+    std::string block;
+    for (std::size_t i = 0; i < ls.size(); ++i) {
+      if (ls[i].rfind("  [" + sec + "]", 0) != 0) continue;
+      block = ls[i] + "\n";
+      for (++i; i < ls.size() && ls[i].rfind("  [", 0) != 0 && !trim(ls[i]).empty(); ++i) block += ls[i] + "\n";
+      break;
+    }
+    BOOST_TEST_CONTEXT("[" << sec << "]") {
+      BOOST_REQUIRE_MESSAGE(!block.empty(), "no block for the section in dvm run --help");
+      for (const char* s : {"pendulum.toml", "rigid-body.toml"}) {
+        const Output o = dvm({"run", scene(s), "--set", sec + ".no_such_key=1"});
+        BOOST_REQUIRE_EQUAL(o.status, 2);
+        const auto taken = split(after(o.err, "[" + sec + "] takes: "));
+        BOOST_REQUIRE_MESSAGE(!taken.empty(), o.err);
+        for (const std::string& key : taken) {
+          ++keys;
+          bool found = false;
+          for (std::size_t at = block.find(key + " = "); at != std::string::npos && !found;
+               at = block.find(key + " = ", at + 1))
+            found = at > 0 && (block[at - 1] == ' ' || block[at - 1] == '{');
+          BOOST_TEST(found, key << " is not in the [" << sec << "] block of dvm run --help");
+        }
+      }
+    }
+  }
+  BOOST_TEST(keys >= 33);
+}
