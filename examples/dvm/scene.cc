@@ -158,6 +158,9 @@ void apply_override(toml::table& root, const std::string& spec) {
   }
   if (parts.size() < 2)
     throw InputError("--set: expected section.key=value, got '" + echo(spec) + "' (the key needs a section)");
+  if (parts.size() > kMaxKeyParts)
+    throw InputError("--set: the key '" + echo(key) + "' has " + std::to_string(parts.size()) + " parts; at most " +
+                     std::to_string(kMaxKeyParts) + " are accepted");
   for (const auto& p : parts)
     if (p.empty()) throw InputError("--set: empty key component in '" + echo(spec) + "'");
   toml::table parsed;
@@ -503,6 +506,58 @@ namespace {
 void check_toml_text(const std::string& text, const std::string& path);
 Scene validate_scene(toml::table& root, const std::string& path, const std::vector<std::string>& overrides);
 
+// "file:line:column: " of a byte offset (columns in code points, as toml++ counts).
+std::string text_position(const std::string& text, std::size_t at, const std::string& path) {
+  std::size_t line = 1, column = 1;
+  for (std::size_t i = 0; i < at && i < text.size(); ++i) {
+    const unsigned char c = static_cast<unsigned char>(text[i]);
+    if (c == '\n') {
+      ++line;
+      column = 1;
+    } else if ((c & 0xC0) != 0x80) {
+      ++column;
+    }
+  }
+  return path + ":" + std::to_string(line) + ":" + std::to_string(column) + ": ";
+}
+
+// toml++ 3.3 records the source region of a dotted key (a.b.c = 1, [a.b.c]) by a
+// recursion as deep as the key has parts: a key of some ten thousand parts overflows the
+// stack (found by fuzzing). Keys of more than kMaxKeyParts parts are refused before
+// toml++ sees the text. The scan skips strings and comments and counts the dots of each
+// run of bare or quoted key parts joined by dots (a number such as 1.5 is one dot).
+void check_dotted_keys(const std::string& text, const std::string& path) {
+  const std::size_t n = text.size();
+  std::size_t dots = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const char c = text[i];
+    if (c == '#') {
+      while (i < n && text[i] != '\n') ++i;
+      dots = 0;
+    } else if (c == '"' || c == '\'') {
+      const bool triple = i + 2 < n && text[i + 1] == c && text[i + 2] == c;
+      std::size_t j = i + (triple ? 3 : 1);
+      while (j < n) {
+        if (c == '"' && text[j] == '\\') {
+          j += 2;
+          continue;
+        }
+        if (!triple && text[j] == '\n') break;  // unterminated: toml++ says so
+        if (text[j] == c && (!triple || (j + 2 < n && text[j + 1] == c && text[j + 2] == c))) break;
+        ++j;
+      }
+      i = triple ? j + 2 : j;  // a quoted part: the run goes on
+    } else if (c == '.') {
+      if (++dots > kMaxKeyParts - 1)
+        throw InputError(text_position(text, i, path) + "a dotted key of more than " + std::to_string(kMaxKeyParts) +
+                         " parts; expected at most " + std::to_string(kMaxKeyParts));
+    } else if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '_' || c == '-' || c == ' ' || c == '\t' ||
+                 c == '+')) {
+      dots = 0;
+    }
+  }
+}
+
 // toml++ 3.3 (Debian bookworm's) reaches TOML_UNREACHABLE - undefined behaviour - in
 // is_non_ascii_horizontal_whitespace for the code points U+00A1..U+0499,
 // U+2C5E..U+2FFF, U+3001..U+3057 and U+FB26..U+FEFE (its generated range table misses
@@ -512,6 +567,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
 // Text holding one of them, or a NUL (never valid TOML), is refused here, before the
 // parser sees it, with the line and column (in code points, as toml++ counts).
 void check_toml_text(const std::string& text, const std::string& path) {
+  check_dotted_keys(text, path);
   std::size_t line = 1, column = 1;
   const std::size_t n = text.size();
   auto cont = [&](std::size_t k) { return k < n && (static_cast<unsigned char>(text[k]) & 0xC0) == 0x80; };

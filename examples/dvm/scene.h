@@ -39,6 +39,8 @@ struct Scene {
 
 // The largest scene file dvm reads (16 MiB); a larger one is bad input.
 constexpr std::size_t kMaxSceneBytes = std::size_t{16} << 20;
+// The most parts a dotted key may have (a.b.c has 3), in a scene or in --set.
+constexpr std::size_t kMaxKeyParts = 64;
 
 // Loads and validates a scene; overrides are "section.key=value" with value written
 // as in TOML (exactly one value). Throws InputError.

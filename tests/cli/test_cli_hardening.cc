@@ -582,6 +582,22 @@ BOOST_AUTO_TEST_CASE(inputs_beyond_the_limits_are_refused_with_what_was_wrong) {
                 "q_final = [0.0, 0.6, -0.9]\nsteps = 10\n[initial]\nq = [0.6, 0.0, -0.8]\n"
                 "[integrator]\nmap = \"sphere-exp\"\nstep = 0.01\n");
   const std::string million(1000000, 'a');
+  std::string parts = "a", many_parts = "integrator";
+  for (int k = 1; k < 100000; ++k) parts += ".a";
+  for (int k = 1; k < 100; ++k) many_parts += ".a";
+  const std::string dotted = write_scene("d.toml", std::string(kHarmonic) + "[output]\n" + parts + " = 1\n");
+  const std::string header = write_scene("e.toml", "[system]\nbuiltin = \"harmonic\"\n[" + parts + "]\n");
+  // 64 parts are accepted by the scan (and refused by the reader as an unknown key)
+  std::string sixty_four = "a";
+  for (int k = 1; k < 64; ++k) sixty_four += ".a";
+  const Output ok64 = dvm({"run", write_scene("f.toml", std::string(kHarmonic) + "[output]\n" + sixty_four + " = 1\n")});
+  BOOST_TEST(ok64.status == 2);
+  BOOST_TEST(ok64.err.find("unknown key") != std::string::npos, ok64.err);
+  // dots inside a string are not key parts
+  const Output quoted = dvm({"run", write_scene("g.toml", std::string(kHarmonic) +
+                                                              "[output]\ncsv = \"" + std::string(200, '.') + "x.csv\"\n"),
+                             "--quiet", "--csv", temp_dir() + "/floats.csv"});
+  BOOST_TEST(quoted.status == 0, quoted.err);
   const std::string long_csv = write_scene("m.toml", std::string(kHarmonic) + "[output]\ncsv = \"" + million + "\"\n");
   const std::vector<Case> cases = {
       {"a scene over 16 MiB", {"run", dir + "/big.toml"}, 2, {"larger than 16777216 bytes"}},
@@ -599,6 +615,10 @@ BOOST_AUTO_TEST_CASE(inputs_beyond_the_limits_are_refused_with_what_was_wrong) {
       {"problem.q_final off the sphere with its position", {"run", sphere_bvp}, 2,
        {"s.toml:5:11: key 'problem.q_final': not a unit vector"}},
       {"check-map --dim on S^2", {"check-map", "sphere-exp", "--dim", "3"}, 2, {"--dim applies only to maps on R^n"}},
+      // toml++ recurses once per part of a dotted key: found by fuzzing as a stack overflow
+      {"a dotted key of 100000 parts", {"run", dotted}, 2, {"d.toml:12:128: a dotted key of more than 64 parts"}},
+      {"a table header of 100000 parts", {"run", header}, 2, {"e.toml:3:129: a dotted key of more than 64 parts"}},
+      {"a --set key of 100 parts", {"run", h, "--set", many_parts + "=1"}, 2, {"--set", "has 100 parts; at most 64"}},
   };
   for (const auto& c : cases) check(c);
   // a 1 MB value is echoed in 80 bytes with its length, not whole
