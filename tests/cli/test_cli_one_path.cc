@@ -394,6 +394,21 @@ std::vector<std::string> lines_of(const std::string& text) {
   return out;
 }
 
+// The files of the checkout under `root`, leaving out build folders and hidden ones.
+std::vector<std::filesystem::path> checkout_files(const std::string& root) {
+  namespace fs = std::filesystem;
+  std::vector<fs::path> files;
+  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
+    const std::string name = it->path().filename().string();
+    if (it->is_directory()) {
+      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
+    } else {
+      files.push_back(it->path());
+    }
+  }
+  return files;
+}
+
 std::string trim(const std::string& s) {
   const auto b = s.find_first_not_of(" \t"), e = s.find_last_not_of(" \t");
   return b == std::string::npos ? "" : s.substr(b, e - b + 1);
@@ -686,16 +701,11 @@ BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
   const std::vector<std::string> passive = {"is ", "are ", "be ", "been ", "was ", "were "};
   int files = 0;
   std::vector<std::string> found;
-  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
-    const std::string name = it->path().filename().string();
-    if (it->is_directory()) {
-      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
-      continue;
-    }
-    if (it->path().extension() != ".md") continue;
+  for (const fs::path& file : checkout_files(root)) {
+    if (file.extension() != ".md") continue;
     ++files;
-    const std::string rel = it->path().string().substr(root.size() + 1);
-    const auto ls = lines_of(slurp(it->path().string()));
+    const std::string rel = file.string().substr(root.size() + 1);
+    const auto ls = lines_of(slurp(file.string()));
     for (std::size_t i = 0; i < ls.size(); ++i) {
       std::string low = ls[i];
       std::transform(low.begin(), low.end(), low.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -731,17 +741,13 @@ BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
   // no issue numbers in code either (the word followed by a number, with or without #)
   std::vector<std::string> numbered;
   int sources = 0;
-  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
-    const std::string name = it->path().filename().string(), ext = it->path().extension().string();
-    if (it->is_directory()) {
-      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
-      continue;
-    }
+  for (const fs::path& file : checkout_files(root)) {
+    const std::string name = file.filename().string(), ext = file.extension().string();
     if (ext != ".h" && ext != ".cc" && ext != ".txt" && ext != ".cmake" && ext != ".sh" && ext != ".gp" &&
         ext != ".toml" && name != "Makefile")
       continue;
     ++sources;
-    const auto ls = lines_of(slurp(it->path().string()));
+    const auto ls = lines_of(slurp(file.string()));
     for (std::size_t i = 0; i < ls.size(); ++i) {
       std::string low = ls[i];
       std::transform(low.begin(), low.end(), low.begin(), [](unsigned char c) { return std::tolower(c); });
@@ -749,7 +755,7 @@ BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
         std::size_t k = at + 5;
         while (k < low.size() && (low[k] == ' ' || low[k] == '#')) ++k;
         if (k > at + 5 && k < low.size() && std::isdigit(static_cast<unsigned char>(low[k])))
-          numbered.push_back(it->path().string().substr(root.size() + 1) + ":" + std::to_string(i + 1) + ": " + ls[i]);
+          numbered.push_back(file.string().substr(root.size() + 1) + ":" + std::to_string(i + 1) + ": " + ls[i]);
       }
     }
   }
@@ -842,15 +848,10 @@ BOOST_AUTO_TEST_CASE(chart_numbers_have_one_home) {
   BOOST_TEST(text.find("\n<!-- charts:begin -->\n") != std::string::npos, target);
   BOOST_TEST(text.find("\n<!-- charts:end -->\n") != std::string::npos, target);
   const std::string root = fs::canonical(repo_file("")).string();
-  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
-    const std::string name = it->path().filename().string();
-    if (it->is_directory()) {
-      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
-      continue;
-    }
-    if (it->path().extension() != ".md" || fs::equivalent(it->path(), repo_file(target))) continue;
-    BOOST_TEST(slurp(it->path().string()).find("<!-- charts:begin -->") == std::string::npos,
-               it->path().string() << " holds the charts markers too");
+  for (const fs::path& file : checkout_files(root)) {
+    if (file.extension() != ".md" || fs::equivalent(file, repo_file(target))) continue;
+    BOOST_TEST(slurp(file.string()).find("<!-- charts:begin -->") == std::string::npos,
+               file.string() << " holds the charts markers too");
   }
 }
 
@@ -860,14 +861,9 @@ BOOST_AUTO_TEST_CASE(documentation_links_resolve) {
   namespace fs = std::filesystem;
   const std::string root = fs::canonical(repo_file("")).string();
   int links = 0;
-  for (auto it = fs::recursive_directory_iterator(root); it != fs::recursive_directory_iterator(); ++it) {
-    const std::string name = it->path().filename().string();
-    if (it->is_directory()) {
-      if (name.rfind("build", 0) == 0 || name[0] == '.') it.disable_recursion_pending();
-      continue;
-    }
-    if (it->path().extension() != ".md") continue;
-    const auto ls = lines_of(slurp(it->path().string()));
+  for (const fs::path& file : checkout_files(root)) {
+    if (file.extension() != ".md") continue;
+    const auto ls = lines_of(slurp(file.string()));
     for (std::size_t i = 0; i < ls.size(); ++i)
       for (std::size_t at = ls[i].find("]("); at != std::string::npos; at = ls[i].find("](", at + 2)) {
         const auto end = ls[i].find(')', at + 2);
@@ -876,8 +872,8 @@ BOOST_AUTO_TEST_CASE(documentation_links_resolve) {
         if (target.find("://") != std::string::npos || target.empty() || target[0] == '#') continue;
         target = target.substr(0, target.find('#'));
         ++links;
-        BOOST_TEST(fs::exists(it->path().parent_path() / target),
-                   it->path().string().substr(root.size() + 1) << ":" << i + 1 << ": " << target << " does not exist");
+        BOOST_TEST(fs::exists(file.parent_path() / target),
+                   file.string().substr(root.size() + 1) << ":" << i + 1 << ": " << target << " does not exist");
       }
   }
   BOOST_TEST(links >= 20);
