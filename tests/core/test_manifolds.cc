@@ -1,7 +1,10 @@
 // S^2 and SO(3): retractions, discretization maps, closed-form inverses and domains,
-// and every identity of the R^n checks on each map's local representation.
+// every identity of the R^n checks on each map's local representation, and the
+// tangent lifts of the paper's Ex. 3.5 (S^2) and Ex. 3.6 (SO(3), Cayley) in closed form.
 #define BOOST_TEST_MODULE core_manifolds
 #include <boost/test/unit_test.hpp>
+
+#include <random>
 
 #include "core/manifold_checks.h"
 
@@ -134,4 +137,104 @@ BOOST_AUTO_TEST_CASE(identities_of_the_product_maps) {
     if (m.theta() == 0.3) continue;
     expect_identities(SpherePowerMap<2>(m));
   }
+}
+
+namespace {
+
+using J1 = ceres::Jet<double, 1>;
+
+template <int R, int C>
+Mat<double, R, C> values(const Mat<J1, R, C>& a) {
+  Mat<double, R, C> out;
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < C; ++j) out(i, j) = a(i, j).a;
+  return out;
+}
+template <int R, int C>
+Mat<double, R, C> derivatives(const Mat<J1, R, C>& a) {
+  Mat<double, R, C> out;
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < C; ++j) out(i, j) = a(i, j).v[0];
+  return out;
+}
+template <int R, int C>
+Mat<J1, R, C> moving(const Mat<double, R, C>& a, const Mat<double, R, C>& da) {
+  Mat<J1, R, C> out;
+  for (int i = 0; i < R; ++i)
+    for (int j = 0; j < C; ++j) out(i, j) = J1(a(i, j), Vec<double, 1>::Constant(da(i, j)));
+  return out;
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(tangent_lift_on_the_sphere_is_the_papers_ex_3_5) {
+  // Ex. 3.5: R_d(x, xi) = (x, cos|xi| x + sin|xi| xi/|xi|) (the exp map with theta = 0),
+  // and its tangent lift R_d^T(x, xdot, xi, xidot) = (x, xdot; R^2(x, xi),
+  // cos|xi| xdot + N xidot) in the embedding R^3, with N the derivative of R^2 in xi:
+  //   N_ij = -sin|xi| x_i xi_j/|xi| + cos|xi| xi_i xi_j/|xi|^2 + sin|xi| (delta_ij |xi|^2 - xi_i xi_j)/|xi|^3.
+  // (The paper prints the middle term over |xi|; differentiating cos|xi| x + sin|xi| xi/|xi|
+  // gives |xi|^2, and the two agree only where |xi| = 1.) The generic path is the map
+  // itself evaluated on Jets moving along (xdot, xidot), a tangent vector of TS^2 at (x, xi):
+  // x.xdot = 0 and x.xidot + xdot.xi = 0.
+  const SphereMap map(RetractionKind::exp, 0.0, "sphere-exp");
+  std::mt19937 rng(35);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  double worst = 0.0;
+  for (int k = 0; k < 12; ++k) {
+    const Vec<double, 3> x = Vec<double, 3>(U(rng), U(rng), U(rng)).normalized();
+    const Vec<double, 3> xi = Sphere::tangent(x, Vec<double, 2>(2.0 * U(rng), 2.0 * U(rng)));  // |xi| up to 2.8
+    const Vec<double, 3> xdot = Sphere::tangent(x, Vec<double, 2>(U(rng), U(rng)));
+    Vec<double, 3> xidot = Vec<double, 3>(U(rng), U(rng), U(rng));
+    xidot -= (x.dot(xidot) + xdot.dot(xi)) * x;  // x.xidot = -xdot.xi
+    BOOST_REQUIRE(std::fabs(x.dot(xidot) + xdot.dot(xi)) <= 1e-15);
+
+    const auto r = map(moving<3, 1>(x, xdot), moving<3, 1>(xi, xidot));
+    const double n = xi.norm(), c = std::cos(n), s = std::sin(n);
+    Mat<double, 3, 3> N;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        N(i, j) = -s * x[i] * xi[j] / n + c * xi[i] * xi[j] / (n * n) +
+                  s * ((i == j ? n * n : 0.0) - xi[i] * xi[j]) / (n * n * n);
+    const Vec<double, 3> q1 = c * x + s * xi / n, q1dot = c * xdot + N * xidot;
+    worst = std::fmax(worst, max_abs(Vec<double, 3>(values<3, 1>(r.q0) - x)));
+    worst = std::fmax(worst, max_abs(Vec<double, 3>(derivatives<3, 1>(r.q0) - xdot)));
+    worst = std::fmax(worst, max_abs(Vec<double, 3>(values<3, 1>(r.q1) - q1)));
+    worst = std::fmax(worst, max_abs(Vec<double, 3>(derivatives<3, 1>(r.q1) - q1dot)));
+  }
+  BOOST_TEST(worst <= 1e-14);
+}
+
+BOOST_AUTO_TEST_CASE(tangent_lift_of_the_cayley_map_is_the_papers_ex_3_6) {
+  // Ex. 3.6: R_d,cay(A, X) = (A, A cay(A^T X)), cay(Y) = (I - Y/2)^{-1} (I + Y/2), and
+  // R^T(A, Adot, X, Xdot) = (A, Adot; A cay(A^T X), M Adot + N Xdot) with
+  //   M Adot = Adot cay(A^T X) + A dcay(A^T X)[Adot^T X],   N Xdot = A dcay(A^T X)[A^T Xdot],
+  // the two partial derivatives of A cay(A^T X), where dcay(Y)[Z] = (I - Y/2)^{-1} (Z/2)
+  // (I + cay(Y)) (differentiate (I - Y/2) cay(Y) = I + Y/2). dvm's map takes the body
+  // velocity w, X = A hat(w); along A(t) = A exp(t hat(eta)), w(t) = w + t wdot, the
+  // velocities are Adot = A hat(eta), Xdot = Adot hat(w) + A hat(wdot), and the generic
+  // path is the map evaluated on Jets moving along (Adot, wdot).
+  const SO3Map map(RetractionKind::cayley, 0.0, "so3-cayley");
+  using M3 = Mat<double, 3, 3>;
+  using V3 = Vec<double, 3>;
+  const M3 I = M3::Identity();
+  auto cay = [&](const M3& Y) { return M3((I - Y / 2).inverse() * (I + Y / 2)); };
+  auto dcay = [&](const M3& Y, const M3& Z) { return M3((I - Y / 2).inverse() * (Z / 2) * (I + cay(Y))); };
+  std::mt19937 rng(36);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  double worst = 0.0;
+  for (int k = 0; k < 12; ++k) {
+    const M3 A = SO3::exp(V3(2 * U(rng), 2 * U(rng), 2 * U(rng)));
+    const V3 w(2 * U(rng), 2 * U(rng), 2 * U(rng)), eta(U(rng), U(rng), U(rng)), wdot(U(rng), U(rng), U(rng));
+    const M3 X = A * SO3::hat(w), Adot = A * SO3::hat(eta), Xdot = Adot * SO3::hat(w) + A * SO3::hat(wdot);
+
+    const auto r = map(moving<3, 3>(A, Adot), moving<3, 1>(w, wdot));
+    const M3 Y = A.transpose() * X;
+    const M3 q1 = A * cay(Y);
+    const M3 q1dot = Adot * cay(Y) + A * dcay(Y, Adot.transpose() * X) + A * dcay(Y, A.transpose() * Xdot);
+    worst = std::fmax(worst, max_abs(M3(values<3, 3>(r.q0) - A)));
+    worst = std::fmax(worst, max_abs(M3(derivatives<3, 3>(r.q0) - Adot)));
+    worst = std::fmax(worst, max_abs(M3(values<3, 3>(r.q1) - q1)));
+    worst = std::fmax(worst, max_abs(M3(derivatives<3, 3>(r.q1) - q1dot)));
+  }
+  BOOST_TEST(worst <= 1e-14);
 }

@@ -1,7 +1,10 @@
-// Discretization maps on R^n: the identities of Def. 2.2, Prop. 2.4, 3.2, 3.4 and the
-// paper's closed forms (Ex. 3.4, Eqs. 3.8-3.9, Sec. 5.1).
+// Discretization maps on R^n: the identities of Def. 2.2, Prop. 2.4, 3.2, 3.4, the
+// relations between lifts and adjoints (Props. 3.3, 3.6, 3.7) and the paper's closed
+// forms (Ex. 3.4, Eqs. 3.8-3.9, Sec. 5.1).
 #define BOOST_TEST_MODULE core_maps
 #include <boost/test/unit_test.hpp>
+
+#include <random>
 
 #include "core/map_checks.h"
 
@@ -194,4 +197,120 @@ BOOST_AUTO_TEST_CASE(invalid_theta_is_rejected) {
   BOOST_CHECK_THROW(ThetaMap(1.5), std::invalid_argument);
   BOOST_CHECK_THROW(ThetaMap(-0.1), std::invalid_argument);
   BOOST_CHECK_THROW(ThetaMap(NAN), std::invalid_argument);
+}
+
+namespace {
+
+// Sample points of R^3 (entries uniform in [-a, a]) for the lift relations below.
+struct Samples {
+  std::mt19937 rng{7};
+  Vec<double, 3> operator()(double a) {
+    std::uniform_real_distribution<double> U(-a, a);
+    return Vec<double, 3>(U(rng), U(rng), U(rng));
+  }
+};
+
+// Non-symmetric maps with closed-form, generic (Newton) and no user-given inverse, and
+// a symmetric map from a curved retraction, each applied to the checks below.
+template <class F>
+void for_lift_test_maps(F&& check) {
+  check(ThetaMap(0.3));
+  check(RetractionMap<CurvedRetraction>({}, 0.3));
+  check(UserMap{});
+  check(RetractionMap<CurvedRetraction>({}, 0.5));
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(tangent_lift_of_the_adjoint_is_the_adjoint_of_the_tangent_lift) {
+  // Prop. 3.3: (R_d^*)^T = (R_d^T)^*, so the tangent lift of a symmetric map is symmetric.
+  // Both sides through different code: the left differentiates the adjoint map, the
+  // right swaps the points of the lifted map at the reversed velocity of TQ.
+  Samples rnd;
+  for_lift_test_maps([&](const auto& map) {
+    const auto left = tangent_lift(adjoint(map));
+    const auto right = adjoint(tangent_lift(map));
+    double d = 0.0, sym = 0.0;
+    for (int k = 0; k < 8; ++k) {
+      Vec<double, 6> X, V;  // (q, v) and (qdot, vdot) with n = 3
+      X << rnd(1.0), rnd(0.5);
+      V << rnd(0.5), rnd(0.5);
+      const auto a = left(X, V), b = right(X, V), c = tangent_lift(map)(X, V);
+      d = std::fmax(d, std::fmax(max_abs(a.q0 - b.q0), max_abs(a.q1 - b.q1)));
+      sym = std::fmax(sym, std::fmax(max_abs(c.q0 - b.q0), max_abs(c.q1 - b.q1)));
+    }
+    BOOST_TEST_CONTEXT(map.name() << " symmetric=" << map.symmetric()) {
+      BOOST_TEST(d <= 1e-15);
+      if (map.symmetric())
+        BOOST_TEST(sym <= 1e-15);
+      else
+        BOOST_TEST(sym > 1e-3);
+    }
+  });
+}
+
+BOOST_AUTO_TEST_CASE(cotangent_lift_of_the_adjoint_is_the_adjoint_of_the_cotangent_lift) {
+  // Prop. 3.7: (R_d^*)^{T*} = (R_d^{T*})^*, where the adjoint of a map on T*Q swaps the two
+  // points of the map at the reversed velocity: (R^{T*})^*(z, zdot) = (R^{T*}_2(z, -zdot),
+  // R^{T*}_1(z, -zdot)) with z = (q, p), zdot = (qdot, pdot). A symmetric map's cotangent
+  // lift is symmetric.
+  Samples rnd;
+  for_lift_test_maps([&](const auto& map) {
+    double d = 0.0, sym = 0.0;
+    for (int k = 0; k < 8; ++k) {
+      const Vec<double, 3> q = rnd(1.0), p = rnd(1.0), qd = rnd(0.5), pd = rnd(0.5);
+      const auto a = cotangent_lift(adjoint(map), q, p, qd, pd);
+      const auto b = cotangent_lift(map, q, p, Vec<double, 3>(-qd), Vec<double, 3>(-pd));  // swapped below
+      const auto c = cotangent_lift(map, q, p, qd, pd);
+      d = std::fmax(d, std::fmax(std::fmax(max_abs(a.q0 - b.q1), max_abs(a.p0 - b.p1)),
+                                 std::fmax(max_abs(a.q1 - b.q0), max_abs(a.p1 - b.p0))));
+      sym = std::fmax(sym, std::fmax(std::fmax(max_abs(c.q0 - b.q1), max_abs(c.p0 - b.p1)),
+                                     std::fmax(max_abs(c.q1 - b.q0), max_abs(c.p1 - b.p0))));
+    }
+    BOOST_TEST_CONTEXT(map.name() << " symmetric=" << map.symmetric()) {
+      BOOST_TEST(d <= 1e-14);
+      if (map.symmetric())
+        BOOST_TEST(sym <= 1e-14);
+      else
+        BOOST_TEST(sym > 1e-3);
+    }
+  });
+}
+
+BOOST_AUTO_TEST_CASE(tangent_and_cotangent_lifts_are_dual) {
+  // Prop. 3.6: <Phi(alpha_q0, alpha_q1), R_d^T(w)> = <(R_d^{T*})^{-1}(alpha_q0, alpha_q1), w>^T
+  // for w in TTQ based at (q, v) = R_d^{-1}(q0, q1). In coordinates, with w = (dq, dv),
+  // Phi(q0, p0; q1, p1) = (q0, q1; -p0, p1) and alpha_Q(q, p, qdot, pdot) = (q, qdot; pdot, p):
+  //   -p0 . dq0 + p1 . dq1 = pdot . dq + p . dv,
+  // where R_d^T((q, v), (dq, dv)) = ((q0, dq0), (q1, dq1)) is the tangent lift (forward
+  // Jets through the map) and (q, p, qdot = v, pdot) the inverse cotangent lift (the
+  // transposed Jacobian, Eq. 3.6) at (q0, p0; q1, p1).
+  Samples rnd;
+  for_lift_test_maps([&](const auto& map) {
+    double worst = 0.0, size = 0.0;
+    for (int k = 0; k < 8; ++k) {
+      const Vec<double, 3> q = rnd(1.0), v = rnd(0.5), p0 = rnd(1.0), p1 = rnd(1.0);
+      const auto pts = map(q, v);
+      const auto back = cotangent_lift_inverse(map, pts.q0, p0, pts.q1, p1);
+      BOOST_TEST(max_abs(back.q - q) <= 1e-14);
+      BOOST_TEST(max_abs(back.qdot - v) <= 1e-14);
+      for (int j = 0; j < 4; ++j) {
+        const Vec<double, 3> dq = rnd(1.0), dv = rnd(1.0);
+        // R_d^T = T R_d o kappa_Q: tangent_lift(X, V) differentiates R_d at (X.head, V.head)
+        // along (X.tail, V.tail)
+        Vec<double, 6> X, W;
+        X << q, dq;
+        W << v, dv;
+        const auto t = tangent_lift(map)(X, W);
+        const double left = -p0.dot(t.q0.template tail<3>()) + p1.dot(t.q1.template tail<3>());
+        const double right = back.pdot.dot(dq) + back.p.dot(dv);
+        worst = std::fmax(worst, std::fabs(left - right));
+        size = std::fmax(size, std::fabs(left));
+      }
+    }
+    BOOST_TEST_CONTEXT(map.name()) {
+      BOOST_TEST(size > 0.1);  // the pairing is not trivially zero
+      BOOST_TEST(worst <= 1e-14);
+    }
+  });
 }
