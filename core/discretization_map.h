@@ -32,7 +32,11 @@
 // with dq much smaller than q0 (the step equations are solved for dq),
 //   template <class T, int N>
 //   TangentPoint<T, N> inverse_increment(const Vec<T, N>& q0, const Vec<T, N>& dq) const;
-//   returning R_d^{-1}(q0, q0 + dq).
+//   returning R_d^{-1}(q0, q0 + dq), and, for the same reason in equations that compare
+//   points of two maps (the first SODE form, solvers/sode_step.h),
+//   template <class T, int N>
+//   PointPair<T, N> displacement(const Vec<T, N>& x, const Vec<T, N>& v) const;
+//   returning R_d(x, v) - (x, x) without forming R_d(x, v).
 // operator() must be written for any scalar T (double and nested ceres::Jet). A map
 // that provides no inverse is inverted by Newton's method (see map_operations.h).
 #pragma once
@@ -92,6 +96,10 @@ class ThetaMap {
   template <class T, int N>
   TangentPoint<T, N> inverse_increment(const Vec<T, N>& q0, const Vec<T, N>& dq) const {
     return {q0 + theta_ * dq, dq};
+  }
+  template <class T, int N>
+  PointPair<T, N> displacement(const Vec<T, N>&, const Vec<T, N>& v) const {
+    return {-theta_ * v, (1.0 - theta_) * v};
   }
 
   // The adjoint of the theta map is the (1 - theta) map (Prop. 2.4).

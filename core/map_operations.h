@@ -173,6 +173,25 @@ TangentPoint<T, N> inverse_increment(const M& map, const Vec<T, N>& q0, const Ve
   }
 }
 
+template <class M, class = void>
+struct has_displacement : std::false_type {};
+template <class M>
+struct has_displacement<M, std::void_t<decltype(std::declval<const M&>().displacement(
+                               std::declval<const Vec<double, 1>&>(), std::declval<const Vec<double, 1>&>()))>>
+    : std::true_type {};
+
+// R_d(x, v) - (x, x), without forming R_d(x, v) when the map can avoid it (for points
+// near x of size much larger than v, forming them rounds v away).
+template <class M, class T, int N>
+PointPair<T, N> displacement(const M& map, const Vec<T, N>& x, const Vec<T, N>& v) {
+  if constexpr (has_displacement<M>::value) {
+    return map.displacement(x, v);
+  } else {
+    const PointPair<T, N> r = map(x, v);
+    return {Vec<T, N>(r.q0 - x), Vec<T, N>(r.q1 - x)};
+  }
+}
+
 // The adjoint map R_d^*(x, v) = (R^2_x(-v), R^1_x(-v)) (Prop. 2.4).
 template <class M>
 class Adjoint {
@@ -187,6 +206,11 @@ class Adjoint {
   template <class T, int N>
   PointPair<T, N> operator()(const Vec<T, N>& x, const Vec<T, N>& v) const {
     const PointPair<T, N> r = map_(x, Vec<T, N>(-v));
+    return {r.q1, r.q0};
+  }
+  template <class T, int N>
+  PointPair<T, N> displacement(const Vec<T, N>& x, const Vec<T, N>& v) const {
+    const PointPair<T, N> r = dvm::displacement(map_, x, Vec<T, N>(-v));
     return {r.q1, r.q0};
   }
   // R_d^*(x, v) = (q0, q1)  <=>  R_d(x, -v) = (q1, q0).
@@ -225,23 +249,13 @@ class TangentLift {
 
   template <class T, int N2>
   PointPair<T, N2> operator()(const Vec<T, N2>& X, const Vec<T, N2>& V) const {
-    static_assert(N2 != Eigen::Dynamic && N2 % 2 == 0, "a point of TQ has 2N coordinates");
-    constexpr int N = N2 / 2;
-    using D = ceres::Jet<T, 1>;
-    Vec<D, N> x, xdot;
-    for (int i = 0; i < N; ++i) {
-      x[i] = D(X[i], Vec<T, 1>::Constant(X[N + i]));
-      xdot[i] = D(V[i], Vec<T, 1>::Constant(V[N + i]));
-    }
-    const PointPair<D, N> r = map_(x, xdot);
-    PointPair<T, N2> out;
-    for (int i = 0; i < N; ++i) {
-      out.q0[i] = r.q0[i].a;
-      out.q0[N + i] = r.q0[i].v[0];
-      out.q1[i] = r.q1[i].a;
-      out.q1[N + i] = r.q1[i].v[0];
-    }
-    return out;
+    return lifted(X, V, [this](const auto& x, const auto& xdot) { return map_(x, xdot); });
+  }
+  // R_d^T(X, V) - (X, X): the base map's displacement, differentiated along V (the
+  // derivative of R^i(x + e v, ...) - (x + e v) is that of R^i minus v).
+  template <class T, int N2>
+  PointPair<T, N2> displacement(const Vec<T, N2>& X, const Vec<T, N2>& V) const {
+    return lifted(X, V, [this](const auto& x, const auto& xdot) { return dvm::displacement(map_, x, xdot); });
   }
 
   // (R_d^T)^{-1} = kappa_Q^{-1} o T(R_d^{-1}).
@@ -266,6 +280,29 @@ class TangentLift {
   }
 
  private:
+  // f (the map or its displacement) at (x + e v, xdot + e vdot), X = (x, v), V = (xdot,
+  // vdot), with one Jet: values and derivatives unpacked into points of TQ.
+  template <class T, int N2, class F>
+  static PointPair<T, N2> lifted(const Vec<T, N2>& X, const Vec<T, N2>& V, const F& f) {
+    static_assert(N2 != Eigen::Dynamic && N2 % 2 == 0, "a point of TQ has 2N coordinates");
+    constexpr int N = N2 / 2;
+    using D = ceres::Jet<T, 1>;
+    Vec<D, N> x, xdot;
+    for (int i = 0; i < N; ++i) {
+      x[i] = D(X[i], Vec<T, 1>::Constant(X[N + i]));
+      xdot[i] = D(V[i], Vec<T, 1>::Constant(V[N + i]));
+    }
+    const PointPair<D, N> r = f(x, xdot);
+    PointPair<T, N2> out;
+    for (int i = 0; i < N; ++i) {
+      out.q0[i] = r.q0[i].a;
+      out.q0[N + i] = r.q0[i].v[0];
+      out.q1[i] = r.q1[i].a;
+      out.q1[N + i] = r.q1[i].v[0];
+    }
+    return out;
+  }
+
   M map_;
 };
 

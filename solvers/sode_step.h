@@ -20,30 +20,18 @@
 //
 // Newmark (Newmark 1959; Hughes, The Finite Element Method, Sec. 9.1): with a_k = a(q_k, v_k)
 //   q1 = q0 + h v0 + h^2 ((1/2 - beta) a0 + beta a1)
-//   v1 = v0 + h ((1 - gamma) a0 + gamma a1).
-// As an instance of the SODE machinery (a reconstruction: the paper's construction of
-// Sec. 4.1 was not available when this was written). The map is R^{TTQ}, the tangent
-// lift of the explicit-Euler map of Q, a map on TTQ:
-//   R^{TTQ}(q, v; dq, dv) = ((q, v), (q + dq, v + dv)),
-// which is the explicit-Euler map of TQ (tests/solvers/test_sode.cc checks the two
-// agree), so (X, W) = (R^{TTQ})^{-1}(Y0, Y1) = (Y0, Y1 - Y0). The vector of T_{Y0}TQ
-// that W is asked to equal is h times the Newmark quadrature of Gamma along the step,
-//   N^{gamma,beta}(Y0, Y1) = (v0 + h ((1/2 - beta) a0 + beta a1),  (1 - gamma) a0 + gamma a1),
-// an end-point sampling with the weights (gamma, beta): W = h N^{gamma,beta}(Y0, Y1).
-// W = h N is the classical update above, term by term. For gamma = 1/2, beta = 1/4
-// the velocity row gives h (a0 + a1)/2 = v1 - v0, so the position row is
-// h (v0 + (v1 - v0)/2) = h (v0 + v1)/2: N = (Gamma(Y0) + Gamma(Y1))/2, the trapezoidal
-// rule, which is sode1 through the midpoint map of TQ (tested to round-off on the
-// pendulum).
-// Why the weights have to sit in the sampling and cannot sit in the map alone: every
-// map on TQ that does not depend on h and satisfies Def. 2.2 with a linear inverse
-// (the theta maps of TQ and their tangent-lift forms) has W = Y1 - Y0, and its
-// sampled vector is h times a combination of Gamma(Y0) = (v0, a0), Gamma(Y1) =
-// (v1, a1) or Gamma(X). A single sample Gamma(X) cannot give the two accelerations a0
-// and a1 of a nonlinear a, and end-point samples give the position row
-// h (c0 v0 + c1 v1) = h v0 + c1 h^2 ((1 - gamma) a0 + gamma a1), i.e. only beta = gamma/2
-// (c1 = 1/2); the h^2 weights (1/2 - beta, beta) of the general member need the
-// quadrature above.
+//   v1 = v0 + h ((1 - gamma) a0 + gamma a1),
+// built as in the paper's Sec. 4.1: sode1 (Eq. 4.1) with the h-dependent map on TQ
+//   R^1(q, v; qd, vd) = (q - qd/2 + (h/2)(gamma - 2 beta) vd,  v - gamma vd)
+//   R^2(q, v; qd, vd) = (q + qd/2 + (h/2)(gamma - 2 beta) vd,  v + (1 - gamma) vd)
+// (NewmarkMap below). Eq. 4.1, R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1)), reads
+//   q0 + h v0/2 + (h^2/2)(gamma - 2 beta) a0 = q1 - h v1/2 + (h^2/2)(gamma - 2 beta) a1
+//   v0 + h (1 - gamma) a0 = v1 - h gamma a1,
+// and substituting the second row into the first gives the update above. (The paper's
+// display of these two rows has -(h^2/2)(gamma - 2 beta) a1 on the right; with the map as
+// the paper defines it the sign is +, which is what yields Newmark.) For gamma = 1/2,
+// beta = 1/4 the map is the tangent lift of the midpoint map of Q, and Newmark is sode1
+// through it, the trapezoidal rule.
 // The adjoint method Phi*_h = (Phi_{-h})^{-1} is Newmark again, with
 // gamma* = 1 - gamma, beta* = 1/2 - gamma + beta (symmetric exactly for gamma = 1/2).
 // Linear stability on q'' = -w^2 q: for gamma >= 1/2 the method is unconditionally
@@ -54,7 +42,9 @@
 // them to the (q, p) interface of the integrate loop through the Legendre map.
 #pragma once
 
+#include <array>
 #include <stdexcept>
+#include <utility>
 
 #include "core/map_operations.h"
 #include "mechanics/hamiltonian.h"
@@ -124,23 +114,77 @@ StepSummary solve_increments(const Step& step, const Vec<double, 2 * N>& Y0, dou
   return s;
 }
 
-enum class SodeForm { sode1, sode2, newmark };
-inline const char* to_string(SodeForm f) {
-  return f == SodeForm::sode1 ? "sode1" : f == SodeForm::sode2 ? "sode2" : "newmark";
-}
+enum class SodeForm { sode1, sode2 };
+inline const char* to_string(SodeForm f) { return f == SodeForm::sode1 ? "sode1" : "sode2"; }
 
-// How a SODE step samples the vector field: the form, and Newmark's weights (used by
-// SodeForm::newmark only).
-struct SodeSampling {
-  SodeForm form = SodeForm::sode2;
-  double gamma = 0.5, beta = 0.25;
-  SodeSampling(SodeForm f) : form(f) {}  // implicit: a form is a sampling
-  static SodeSampling newmark(double gamma, double beta) {
-    SodeSampling s(SodeForm::newmark);
-    s.gamma = gamma;
-    s.beta = beta;
-    return s;
+// The paper's discretization map on TQ = R^{2n} of the Newmark family (Sec. 4.1), for the
+// step h and the parameters (gamma, beta); a point X = (q, v), a velocity W = (qd, vd):
+//   R^1(X, W) = (q - qd/2 + c vd, v - gamma vd),  R^2(X, W) = (q + qd/2 + c vd, v + (1 - gamma) vd),
+// c = (h/2)(gamma - 2 beta). R(X, 0) = (X, X) and d/dW (R^2 - R^1) = Id (Def. 2.2). Its
+// inverse is linear: W = Y1 - Y0, X = ((q0 + q1)/2 - c (v1 - v0), v0 + gamma (v1 - v0)).
+// It is symmetric (its own adjoint) only for gamma = 1/2, beta = 1/4, where it is the
+// tangent lift of the midpoint map (c = 0).
+class NewmarkMap {
+ public:
+  static constexpr bool provides_inverse = true;
+  NewmarkMap(double h, double gamma, double beta) : h_(h), gamma_(gamma), beta_(beta) {
+    if (!std::isfinite(h) || !std::isfinite(gamma) || !std::isfinite(beta))
+      throw std::invalid_argument("newmark map: h, gamma and beta must be finite");
   }
+  std::string name() const { return "newmark-map"; }
+  bool symmetric() const { return gamma_ == 0.5 && beta_ == 0.25; }
+  int order() const { return symmetric() ? 2 : 1; }
+  double step_size() const { return h_; }
+  double gamma() const { return gamma_; }
+  double beta() const { return beta_; }
+
+  template <class T, int N2>
+  PointPair<T, N2> operator()(const Vec<T, N2>& X, const Vec<T, N2>& W) const {
+    static_assert(N2 != Eigen::Dynamic && N2 % 2 == 0, "a point of TQ has 2N coordinates");
+    constexpr int N = N2 / 2;
+    const double c = shift();
+    PointPair<T, N2> r;
+    for (int i = 0; i < N; ++i) {
+      r.q0[i] = X[i] - 0.5 * W[i] + c * W[N + i];
+      r.q1[i] = X[i] + 0.5 * W[i] + c * W[N + i];
+      r.q0[N + i] = X[N + i] - gamma_ * W[N + i];
+      r.q1[N + i] = X[N + i] + (1.0 - gamma_) * W[N + i];
+    }
+    return r;
+  }
+  template <class T, int N2>
+  PointPair<T, N2> displacement(const Vec<T, N2>&, const Vec<T, N2>& W) const {
+    constexpr int N = N2 / 2;
+    const double c = shift();
+    PointPair<T, N2> r;
+    for (int i = 0; i < N; ++i) {
+      r.q0[i] = -0.5 * W[i] + c * W[N + i];
+      r.q1[i] = 0.5 * W[i] + c * W[N + i];
+      r.q0[N + i] = -gamma_ * W[N + i];
+      r.q1[N + i] = (1.0 - gamma_) * W[N + i];
+    }
+    return r;
+  }
+  template <class T, int N2>
+  TangentPoint<T, N2> inverse(const Vec<T, N2>& Y0, const Vec<T, N2>& Y1) const {
+    return inverse_increment(Y0, Vec<T, N2>(Y1 - Y0));
+  }
+  template <class T, int N2>
+  TangentPoint<T, N2> inverse_increment(const Vec<T, N2>& Y0, const Vec<T, N2>& dY) const {
+    constexpr int N = N2 / 2;
+    const double c = shift();
+    TangentPoint<T, N2> t;
+    t.v = dY;
+    for (int i = 0; i < N; ++i) {
+      t.x[i] = Y0[i] + 0.5 * dY[i] - c * dY[N + i];
+      t.x[N + i] = Y0[N + i] + gamma_ * dY[N + i];
+    }
+    return t;
+  }
+
+ private:
+  double shift() const { return 0.5 * h_ * (gamma_ - 2.0 * beta_); }
+  double h_, gamma_, beta_;
 };
 
 // Discretization of the SODE of L by a map MapTQ on TQ = R^{2n}.
@@ -151,21 +195,17 @@ class SodeStep {
   using V = Vec<double, N>;
   using V2 = Vec<double, 2 * N>;
 
-  SodeStep(System L, MapTQ R, double h, SodeSampling sampling, StepOptions options = {})
-      : L_(std::move(L)), R_(std::move(R)), h_(h), sampling_(sampling), options_(options) {
+  SodeStep(System L, MapTQ R, double h, SodeForm form, StepOptions options = {})
+      : L_(std::move(L)), R_(std::move(R)), h_(h), form_(form), options_(options) {
     // negative sizes are the backward substeps of compositions (solvers/composition.h)
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
   double step_size() const { return h_; }
   const System& lagrangian() const { return L_; }
-  SodeForm form() const { return sampling_.form; }
-  const SodeSampling& sampling() const { return sampling_; }
-  void set_step_size(double h) {
-    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
-    h_ = h;
-  }
-  void set_sampling(const SodeSampling& s) { sampling_ = s; }
-  std::string name() const { return std::string(to_string(sampling_.form)) + "(" + R_.name() + ")"; }
+  SodeForm form() const { return form_; }
+  const MapTQ& map() const { return R_; }
+  const StepOptions& options() const { return options_; }
+  std::string name() const { return std::string(to_string(form_)) + "(" + R_.name() + ")"; }
 
   template <class T>
   Vec<T, 2 * N> gamma(const Vec<T, 2 * N>& Y) const {
@@ -175,23 +215,17 @@ class SodeStep {
 
   template <class T>
   Vec<T, 2 * N> residual(const Vec<T, 2 * N>& Y0, const Vec<T, 2 * N>& dY) const {
-    const TangentPoint<T, 2 * N> t = inverse_increment(R_, Y0, dY);
-    if (sampling_.form == SodeForm::sode2) return t.v - h_ * gamma(t.x);
-    const Vec<T, 2 * N> Y1 = Y0 + dY;
-    if (sampling_.form == SodeForm::sode1) {
-      // the first option: R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1)), written as
-      // R^1(Y1, .) - R^2(Y0, .) so that for the midpoint map it reads
-      // dY - h (Gamma(Y0) + Gamma(Y1))/2
-      const Vec<T, 2 * N> g0 = h_ * gamma(Y0), g1 = h_ * gamma(Y1);
-      return Vec<T, 2 * N>(R_(Y1, g1).q0 - R_(Y0, g0).q1);
+    if (form_ == SodeForm::sode2) {
+      const TangentPoint<T, 2 * N> t = inverse_increment(R_, Y0, dY);
+      return t.v - h_ * gamma(t.x);
     }
-    // Newmark's quadrature N^{gamma,beta}(Y0, Y1) of Gamma
-    const double g = sampling_.gamma, b = sampling_.beta;
-    const Vec<T, N> v0 = Y0.template tail<N>();
-    const Vec<T, N> a0 = lagrangian_acceleration(L_, Vec<T, N>(Y0.template head<N>()), v0);
-    const Vec<T, N> a1 = lagrangian_acceleration(L_, Vec<T, N>(Y1.template head<N>()), Vec<T, N>(Y1.template tail<N>()));
-    const Vec<T, N> Nq = v0 + h_ * ((0.5 - b) * a0 + b * a1), Nv = (1.0 - g) * a0 + g * a1;
-    return t.v - h_ * stack(Nq, Nv);
+    // the first option: R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1)), written as
+    // R^1(Y1, .) - R^2(Y0, .) = dY + (R^1(Y1, .) - Y1) - (R^2(Y0, .) - Y0) through the
+    // map's displacements, so that no point of size |Y| is formed and subtracted (for
+    // the midpoint map it reads dY - h (Gamma(Y0) + Gamma(Y1))/2)
+    const Vec<T, 2 * N> Y1 = Y0 + dY;
+    const Vec<T, 2 * N> g0 = h_ * gamma(Y0), g1 = h_ * gamma(Y1);
+    return Vec<T, 2 * N>(dY + displacement(R_, Y1, g1).q0 - displacement(R_, Y0, g0).q1);
   }
 
   // One step in (q, v); (dq, dv) carry the guess in and the increments out.
@@ -204,29 +238,49 @@ class SodeStep {
   System L_;
   MapTQ R_;
   double h_;
-  SodeSampling sampling_;
+  SodeForm form_;
   StepOptions options_;
 };
 
-// The Newmark family on the SODE of L: the SODE step of the map R^{TTQ} (the
-// explicit-Euler map of TQ) with Newmark's sampling (see the top of this file).
+// Sec. 4.2, Eq. 4.3: the four points (R_d, R_d)(R_d^T(Gamma(q, v))) of Q for a map R_d on
+// Q and a second-order vector field Gamma(q, v) = (v, a) at (q, v): with
+// Y_i = (R^i(q, v), T R^i (v, a)) the two points of TQ given by the tangent lift,
+// (R^1(Y_1), R^2(Y_1), R^1(Y_2), R^2(Y_2)). The map defines a second-order discrete
+// equation through Gamma when the middle two coincide, R^2(Y_1) = R^1(Y_2) (Eq. 4.3):
+// true for every theta map and for every map whose first point is the base point
+// (R^1 = tau_Q, a retraction map), not in general.
+template <class M, int N>
+std::array<Vec<double, N>, 4> sode_diagram_points(const M& map, const Vec<double, N>& q, const Vec<double, N>& v,
+                                                  const Vec<double, N>& a) {
+  // R_d^T at the point (q, v) of TQ with velocity (v, a): TangentLift takes X = (q, v)
+  // and V = (v, a) and differentiates R_d at (X.head, V.head) along (X.tail, V.tail)
+  const PointPair<double, 2 * N> Y = tangent_lift(map)(stack(q, v), stack(v, a));
+  auto point = [](const Vec<double, 2 * N>& y) { return std::make_pair(Vec<double, N>(y.template head<N>()), Vec<double, N>(y.template tail<N>())); };
+  const auto [x1, u1] = point(Y.q0);
+  const auto [x2, u2] = point(Y.q1);
+  const PointPair<double, N> a1 = map(x1, u1), a2 = map(x2, u2);
+  return {a1.q0, a1.q1, a2.q0, a2.q1};
+}
+
+// The Newmark family on the SODE of L: sode1 with the paper's NewmarkMap (see the top of
+// this file).
 template <class System>
 class NewmarkStep {
  public:
   static constexpr int N = System::dim;
   using V = Vec<double, N>;
   using V2 = Vec<double, 2 * N>;
-  using Sode = SodeStep<System, ThetaMap>;
+  using Sode = SodeStep<System, NewmarkMap>;
 
   NewmarkStep(System L, double h, double gamma, double beta, StepOptions options = {})
-      : sode_(std::move(L), ThetaMap::explicit_euler(), h, SodeSampling::newmark(gamma, beta), options) {
+      : sode_(std::move(L), NewmarkMap(h, gamma, beta), h, SodeForm::sode1, options) {
     if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
     if (!(gamma >= 0.0 && gamma <= 1.0) || !(beta >= 0.0 && beta <= 0.5))
       throw std::invalid_argument("newmark: expected gamma in [0, 1] and beta in [0, 1/2]");
   }
   double step_size() const { return sode_.step_size(); }
-  double gamma() const { return sode_.sampling().gamma; }
-  double beta() const { return sode_.sampling().beta; }
+  double gamma() const { return sode_.map().gamma(); }
+  double beta() const { return sode_.map().beta(); }
   const System& lagrangian() const { return sode_.lagrangian(); }
   const Sode& sode() const { return sode_; }
   std::string name() const { return "newmark"; }
@@ -234,17 +288,10 @@ class NewmarkStep {
   // The adjoint method (gamma, beta) -> (1 - gamma, 1/2 - gamma + beta). beta* may
   // leave [0, 1/2]; it is the adjoint stage of a composition, not a user choice, and
   // is not checked.
-  NewmarkStep adjoint() const {
-    NewmarkStep a = *this;
-    a.sode_.set_sampling(SodeSampling::newmark(1.0 - gamma(), 0.5 - gamma() + beta()));
-    return a;
-  }
-  // The same method with step h (negative for the backward substeps of compositions).
-  NewmarkStep with_step(double h) const {
-    NewmarkStep a = *this;
-    a.sode_.set_step_size(h);
-    return a;
-  }
+  NewmarkStep adjoint() const { return with(step_size(), 1.0 - gamma(), 0.5 - gamma() + beta()); }
+  // The same method with step h (negative for the backward substeps of compositions);
+  // the map depends on h and changes with it.
+  NewmarkStep with_step(double h) const { return with(h, gamma(), beta()); }
 
   template <class T>
   Vec<T, 2 * N> residual(const Vec<T, 2 * N>& Y0, const Vec<T, 2 * N>& dY) const {
@@ -253,6 +300,10 @@ class NewmarkStep {
   StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const { return sode_.step_qv(q0, v0, dq, dv); }
 
  private:
+  explicit NewmarkStep(Sode s) : sode_(std::move(s)) {}
+  NewmarkStep with(double h, double gamma, double beta) const {
+    return NewmarkStep(Sode(lagrangian(), NewmarkMap(h, gamma, beta), h, SodeForm::sode1, sode_.options()));
+  }
   Sode sode_;
 };
 

@@ -60,7 +60,7 @@ const std::vector<FormEntry>& form_registry() {
        "Eq. 5.1: the inverse cotangent lift of the map equals h X_H at its base point (symplectic for any map)", true},
       {Form::sode1, "sode1", "Eq. 4.1: the tangent lift of the map, R^2(Y0, h Gamma(Y0)) = R^1(Y1, h Gamma(Y1)) (the first option)", true},
       {Form::sode2, "sode2", "Eq. 4.2: the tangent lift of the map, the SODE sampled at its base point", true},
-      {Form::newmark, "newmark", "Newmark's family (gamma, beta) on the SODE (Sec. 4.1); uses no map", false},
+      {Form::newmark, "newmark", "Newmark's family (gamma, beta): sode1 through the paper's map on TQ (Sec. 4.1), not integrator.map", false},
   };
   return list;
 }

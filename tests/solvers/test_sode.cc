@@ -1,11 +1,15 @@
-// SODE discretizations (Eq. 4.1 and 4.2) from maps on TQ, and the Newmark family:
-// the two SODE forms differ, Newmark equals the classical update, and its stability
-// thresholds on q'' = -w^2 q are where the theory puts them.
+// SODE discretizations (Eq. 4.1 and 4.2) from maps on TQ, and the Newmark family from
+// the paper's map on TQ (Sec. 4.1): the two SODE forms differ, the Newmark map is a
+// discretization map with the paper's Jacobian, Newmark equals the classical update,
+// and its orders and stability thresholds on q'' = -w^2 q are where the theory puts them.
 #define BOOST_TEST_MODULE sode
 #include <boost/test/unit_test.hpp>
 
 #include <Eigen/Eigenvalues>
+#include <tuple>
+#include <vector>
 
+#include "core/map_checks.h"
 #include "mechanics/systems.h"
 #include "solvers/integrate.h"
 #include "solvers/sode_step.h"
@@ -34,6 +38,13 @@ std::pair<V1, V1> one_step(const Step& S, const V1& q0, const V1& v0) {
   const StepSummary s = S.step_qv(q0, v0, dq, dv);
   BOOST_REQUIRE(s.converged);
   return {V1(q0 + dq), V1(v0 + dv)};
+}
+
+// n steps of S from (q, v), guess h v for the position increment.
+template <class Step>
+std::pair<V1, V1> n_steps(const Step& S, V1 q, V1 v, int n) {
+  for (int i = 0; i < n; ++i) std::tie(q, v) = one_step(S, q, v);
+  return {q, v};
 }
 
 }  // namespace
@@ -105,13 +116,7 @@ BOOST_AUTO_TEST_CASE(sode_orders_for_linear_and_nonlinear_maps) {
     for (int k = 0; k < 3; ++k) {
       const int n = 20 << k;
       const SodeStep<HarmonicOscillator, std::decay_t<decltype(map)>> S(H, map, 1.0 / n, f);
-      V1 q(1.0), v(0.5);
-      for (int i = 0; i < n; ++i) {
-        V1 dq = v / n, dv = V1::Zero();
-        BOOST_REQUIRE(S.step_qv(q, v, dq, dv).converged);
-        q += dq;
-        v += dv;
-      }
+      const auto [q, v] = n_steps(S, V1(1.0), V1(0.5), n);
       V1 qe, pe;
       H.exact(1.0, V1(1.0), V1(0.5), qe, pe);
       err.push_back(std::fmax(std::fabs(q[0] - qe[0]), std::fabs(v[0] - pe[0])));
@@ -126,8 +131,10 @@ BOOST_AUTO_TEST_CASE(sode_orders_for_linear_and_nonlinear_maps) {
   // sode2 samples Gamma at the base point, which the theta map places off-centre:
   // order 1.
   BOOST_TEST(std::fabs(order_of(tangent_lift(ThetaMap(0.3)), SodeForm::sode2) - 1.0) <= 0.1);
-  // sode1 through the theta map weighs the end points (1 - theta, theta): order 1.
-  BOOST_TEST(std::fabs(order_of(tangent_lift(ThetaMap(0.3)), SodeForm::sode1) - 1.0) <= 0.1);
+  // sode1 through the theta map weighs the end points (1 - theta, theta): order 1 for
+  // theta in {0, 0.3, 1} (explicit Euler of TQ at 0), order 2 at 1/2 (above).
+  for (double th : {0.0, 0.3, 1.0})
+    BOOST_TEST(std::fabs(order_of(tangent_lift(ThetaMap(th)), SodeForm::sode1) - 1.0) <= 0.1, "theta " << th);
 }
 
 BOOST_AUTO_TEST_CASE(sode1_is_the_first_option_of_the_paper) {
@@ -204,6 +211,80 @@ double newmark_amplitude(double wh, double gamma, double beta) {
 }
 
 }  // namespace
+
+BOOST_AUTO_TEST_CASE(sode_diagram_commutes_for_theta_maps_and_retractions) {
+  // Sec. 4.2, Eq. 4.3: R^2(T R^1(Gamma)) = R^1(T R^2(Gamma)). For the theta map the four
+  // points are (q - 2 theta v + theta^2 a, q + (1 - 2 theta) v - theta (1 - theta) a (twice),
+  // q + 2 (1 - theta) v + (1 - theta)^2 a), written out here; for a map whose first point
+  // is the base point (theta = 0 of a curved retraction) the diagram commutes too; the
+  // midpoint map of the curved retraction R_x(v) = x + v + v^2/2 breaks it.
+  const V1 q(0.7), v(-1.3), a(2.1);
+  double worst = 0.0;
+  for (double th : {0.0, 0.3, 0.5, 1.0}) {
+    const auto P = sode_diagram_points(ThetaMap(th), q, v, a);
+    const double e[4] = {q[0] - 2 * th * v[0] + th * th * a[0], q[0] + (1 - 2 * th) * v[0] - th * (1 - th) * a[0],
+                         q[0] + (1 - 2 * th) * v[0] - th * (1 - th) * a[0],
+                         q[0] + 2 * (1 - th) * v[0] + (1 - th) * (1 - th) * a[0]};
+    for (int i = 0; i < 4; ++i) worst = std::fmax(worst, std::fabs(P[static_cast<std::size_t>(i)][0] - e[i]));
+  }
+  BOOST_TEST(worst <= 1e-15);
+  const auto R0 = sode_diagram_points(RetractionMap<CurvedRetraction>({}, 0.0), q, v, a);
+  BOOST_TEST(std::fabs(R0[1][0] - R0[2][0]) <= 1e-15);
+  const auto Rh = sode_diagram_points(RetractionMap<CurvedRetraction>({}, 0.5), q, v, a);
+  BOOST_TEST(std::fabs(Rh[1][0] - Rh[2][0]) > 1e-2);
+}
+
+BOOST_AUTO_TEST_CASE(newmark_map_is_a_discretization_map_with_the_papers_jacobian) {
+  // Sec. 4.1: R^{TTQ} satisfies Def. 2.2 (every identity of core/map_checks.h, on TQ of R
+  // and of R^2), is symmetric only for (gamma, beta) = (1/2, 1/4), and its Jacobian in
+  // the columns (q, v, qdot, vdot) is the paper's
+  //   [Id 0 -Id/2 (h/2)(gamma - 2 beta) Id; 0 Id 0 -gamma Id;
+  //    Id 0  Id/2 (h/2)(gamma - 2 beta) Id; 0 Id 0 (1 - gamma) Id].
+  for (const auto& [gamma, beta] : std::vector<std::pair<double, double>>{
+           {0.5, 0.25}, {0.5, 0.0}, {0.6, 0.3025}, {0.5, 1.0 / 6.0}, {0.7, 0.1}, {1.0, 0.5}}) {
+    const double h = 0.3;
+    const NewmarkMap R(h, gamma, beta);
+    BOOST_TEST_CONTEXT("gamma " << gamma << " beta " << beta) {
+      for (const MapCheckReport& r : {check_map<2>(R), check_map<4>(R)}) {
+        for (const auto& name : identity_names()) BOOST_TEST(r.residual(name) <= 1e-13, name << " = " << r.residual(name));
+        if (gamma == 0.5 && beta == 0.25)
+          BOOST_TEST(r.residual("adjoint_difference") <= 1e-15);
+        else
+          BOOST_TEST(r.residual("adjoint_difference") > 1e-3);
+      }
+      const double c = 0.5 * h * (gamma - 2.0 * beta);
+      Mat<double, 4, 4> paper;
+      paper << 1, 0, -0.5, c, 0, 1, 0, -gamma, 1, 0, 0.5, c, 0, 1, 0, 1.0 - gamma;
+      Mat<double, 4, 4> J;
+      map_with_jacobian(R, V2(0.4, -1.3), V2(0.2, 0.7), J);
+      BOOST_TEST(max_abs(Mat<double, 4, 4>(J - paper)) == 0.0);
+    }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(newmark_orders) {
+  // Error at t = 1 on the pendulum against a fine trapezoidal reference (Newmark (1/2, 1/4)
+  // with 2^14 steps, error about 1e-10): order 2 exactly for gamma = 1/2, whatever beta,
+  // order 1 otherwise.
+  const Pendulum P(1.0, 2.0, 9.81);
+  auto final_state = [&](double gamma, double beta, int n) {
+    const auto [q, v] = n_steps(NewmarkStep<Pendulum>(P, 1.0 / n, gamma, beta), V1(1.0), V1(0.5), n);
+    return std::make_pair(q[0], v[0]);
+  };
+  const auto [qr, vr] = final_state(0.5, 0.25, 1 << 14);
+  for (const auto& [gamma, beta, order] : std::vector<std::tuple<double, double, double>>{
+           {0.5, 0.25, 2.0}, {0.5, 0.0, 2.0}, {0.5, 1.0 / 6.0, 2.0}, {0.6, 0.3025, 1.0}, {0.7, 0.1, 1.0}}) {
+    std::vector<double> err;
+    for (int n : {100, 200}) {
+      const auto [q, v] = final_state(gamma, beta, n);
+      err.push_back(std::fmax(std::fabs(q - qr), std::fabs(v - vr)));
+    }
+    const double p = std::log2(err[0] / err[1]);
+    BOOST_TEST_MESSAGE("newmark gamma " << gamma << " beta " << beta << ": errors " << err[0] << ", " << err[1]
+                                        << ", order " << p);
+    BOOST_TEST(std::fabs(p - order) <= 0.05, "gamma " << gamma << " beta " << beta << " order " << p);
+  }
+}
 
 BOOST_AUTO_TEST_CASE(newmark_equals_the_classical_update) {
   for (const auto& [gamma, beta] : std::vector<std::pair<double, double>>{
