@@ -166,6 +166,31 @@ Vec<double, S::dim> legendre_inverse_checked(const S& L, const Vec<double, S::di
   return v;
 }
 
+// v = FL^{-1}(q, p) for any scalar, from its value v0 in doubles and the inverse Winv of
+// d2L/dv2 at (values(q), v0): for Jet scalars, the fixed-point sweeps
+// v <- v - Winv (dL/dv(q, v) - p) described at the top of this file.
+template <class S, class T>
+Vec<T, S::dim> legendre_inverse_sweeps(const S& L, const Vec<T, S::dim>& q, const Vec<T, S::dim>& p,
+                                       const Vec<double, S::dim>& v0, const Mat<double, S::dim, S::dim>& Winv) {
+  constexpr int N = S::dim;
+  Vec<T, N> v = constants<T>(v0);
+  if constexpr (is_jet_v<T>) {
+    for (int sweep = 0; sweep <= jet_depth<T>::value; ++sweep) {
+      Vec<T, N> a, b;
+      lagrangian_gradient(L, q, v, a, b);
+      const Vec<T, N> r = b - p;
+      for (int i = 0; i < N; ++i) {
+        T c = constant<T>(0.0);
+        for (int j = 0; j < N; ++j) c = c + Winv(i, j) * r[j];
+        v[i] = v[i] - c;
+      }
+    }
+  } else {
+    (void)L, (void)q, (void)p, (void)Winv;
+  }
+  return v;
+}
+
 // The Hamiltonian H(q, p) = <p, v> - L(q, v), v = FL^{-1}(q, p), of a regular Lagrangian.
 template <class S>
 struct LegendreHamiltonian {
@@ -195,19 +220,7 @@ struct LegendreHamiltonian {
     const Mat<double, N, N> W = velocity_hessian(lagrangian, q0, v0);
     const Mat<double, N, N> Winv = W.inverse();
     require_regular(lagrangian, q0, v0, W, Winv);
-    Vec<T, N> v = constants<T>(v0);
-    if constexpr (is_jet_v<T>) {
-      for (int sweep = 0; sweep <= jet_depth<T>::value; ++sweep) {
-        Vec<T, N> a, b;
-        lagrangian_gradient(lagrangian, q, v, a, b);
-        const Vec<T, N> r = b - p;
-        for (int i = 0; i < N; ++i) {
-          T c = constant<T>(0.0);
-          for (int j = 0; j < N; ++j) c = c + Winv(i, j) * r[j];
-          v[i] = v[i] - c;
-        }
-      }
-    }
+    const Vec<T, N> v = legendre_inverse_sweeps(lagrangian, q, p, v0, Winv);
     T pv = constant<T>(0.0);
     for (int i = 0; i < N; ++i) pv = pv + p[i] * v[i];
     return pv - lagrangian(q, v);
