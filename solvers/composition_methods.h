@@ -31,6 +31,7 @@
 // b = (g, 1 - 2g, g), g = 1/(2 - 2^{1/3}).
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -393,6 +394,34 @@ inline CompositionScheme find_composition(const std::string& name) {
   for (const auto& s : composition_schemes()) names += ", " + s.name;
   throw std::invalid_argument("unknown composition \"" + shown + "\"; expected one of: none" + names +
                               ", triple-jump:<even order 2.." + std::to_string(RecursiveTripleJump::max_order) + ">");
+}
+
+// The symplectic DIRK with weights b_1..b_s (paper Sec. 6.2): the Runge-Kutta method
+// a_ij = b_j (j < i), a_ii = b_i / 2 is the composition of implicit midpoint steps of
+// sizes b_1 h, ..., b_s h, in that order, so its scheme has gamma = b. The weights must
+// be nonzero and finite with sum 1. Its order as a composition of a symmetric method of
+// order 2: 2; at least 3 when sum b_i^3 = 0 (the h^3 error terms cancel); at least 4 when
+// b is moreover a palindrome (a symmetric method has even order).
+inline CompositionScheme dirk_scheme(const std::vector<double>& b) {
+  if (b.empty()) throw std::invalid_argument("dirk: expected at least one weight");
+  double sum = 0.0, cubes = 0.0, size = 0.0;
+  for (double x : b) {
+    if (!(x != 0.0) || !std::isfinite(x)) throw std::invalid_argument("dirk: weights must be nonzero and finite");
+    sum += x;
+    cubes += x * x * x;
+    size += std::fabs(x * x * x);
+  }
+  if (!(std::fabs(sum - 1.0) <= 1e-14 * static_cast<double>(b.size())))
+    throw std::invalid_argument("dirk: the weights must sum to 1, got " + std::to_string(sum));
+  CompositionScheme s;
+  s.name = "dirk";
+  s.stages = static_cast<int>(b.size());
+  s.gamma = b;
+  s.symmetric = std::equal(b.begin(), b.end(), b.rbegin());
+  const bool third = std::fabs(cubes) <= 1e-14 * size;
+  s.order = third ? (s.symmetric ? 4 : 3) : 2;
+  s.citation = "symplectic DIRK as a composition of midpoint steps (Barbero-Linan, Martin de Diego, Sec. 6.2)";
+  return s;
 }
 
 // One substep of a composition: a step of fraction `weight` of h with the basic map

@@ -335,20 +335,16 @@ BOOST_AUTO_TEST_CASE(composed_lagrangian_is_stationary_at_the_micro_nodes) {
   BOOST_TEST(std::fabs((B.value(plus) - B.value(minus)) / (2 * eps)) >= 1e-5);
 }
 
-BOOST_AUTO_TEST_CASE(midpoint_compositions_are_symplectic_dirk_methods) {
-  // Sec. 6.2: the Runge-Kutta method with a_ij = b_j (j < i), a_ii = b_i/2, weights b
-  // is the composition of implicit midpoint steps of sizes b_i h. Here solved as a
-  // Runge-Kutta method (stage by stage, fixed-point iteration) on the pendulum and
-  // compared with the composition of midpoint-map steps; b is the triple jump, the
-  // 3-stage order-4 symplectic DIRK.
-  const std::vector<double> b = TripleJump4::gamma();
-  const double h = 0.1;
-  const int steps = 30;
-  double y0 = 1.1, y1 = 0.2;  // (q, p)
+namespace {
+
+// `steps` steps of the Runge-Kutta method a_ij = b_j (j < i), a_ii = b_i/2 with weights b
+// on the pendulum q' = p, p' = -sin q, solved as a Runge-Kutta method: stage by stage,
+// each implicit stage by fixed-point iteration to a repeated iterate.
+std::pair<double, double> dirk_pendulum(const std::vector<double>& b, double h, int steps, double q, double p) {
   for (int n = 0; n < steps; ++n) {
     std::vector<double> kq(b.size()), kp(b.size());
     for (std::size_t i = 0; i < b.size(); ++i) {
-      double Q = y0, P = y1;
+      double Q = q, P = p;
       for (std::size_t j = 0; j < i; ++j) {
         Q += h * b[j] * kq[j];
         P += h * b[j] * kp[j];
@@ -365,17 +361,46 @@ BOOST_AUTO_TEST_CASE(midpoint_compositions_are_symplectic_dirk_methods) {
       kp[i] = gp;
     }
     for (std::size_t i = 0; i < b.size(); ++i) {
-      y0 += h * b[i] * kq[i];
-      y1 += h * b[i] * kp[i];
+      q += h * b[i] * kq[i];
+      p += h * b[i] * kp[i];
     }
   }
+  return {q, p};
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(midpoint_compositions_are_symplectic_dirk_methods) {
+  // Sec. 6.2: the Runge-Kutta method with a_ij = b_j (j < i), a_ii = b_i/2, weights b
+  // is the composition of implicit midpoint steps of sizes b_1 h, ..., b_s h
+  // (dirk_scheme). Solved as a Runge-Kutta method and compared with the composition of
+  // midpoint-map steps over 30 steps of the pendulum, for the triple jump (the 3-stage
+  // order-4 symplectic DIRK), a 2-stage and a 4-stage set of weights that are not
+  // palindromes (so the order of the substeps matters and is checked).
+  const double h = 0.1;
+  const int steps = 30;
   const Pendulum L;
-  const CompositionStep<Pendulum, ThetaMap> S(L, ThetaMap::midpoint(), h, substeps(find_composition("triple-jump"), true));
-  V1 q(1.1), p(0.2);
-  BOOST_TEST_REQUIRE(!integrate(S, 0.0, q, p, p, steps, [](auto&&...) {}).failed);
-  const double err = std::fmax(std::fabs(q[0] - y0), std::fabs(p[0] - y1));
-  BOOST_TEST_MESSAGE("symplectic DIRK (triple-jump weights) vs composed midpoint steps, 30 steps: " << err);
-  BOOST_TEST(err <= 1e-13);
+  for (const std::vector<double>& b : std::vector<std::vector<double>>{
+           TripleJump4::gamma(), {0.3, 0.7}, {0.25, 0.5, -0.1, 0.35}}) {
+    const auto [y0, y1] = dirk_pendulum(b, h, steps, 1.1, 0.2);
+    const CompositionStep<Pendulum, ThetaMap> S(L, ThetaMap::midpoint(), h, substeps(dirk_scheme(b), true));
+    V1 q(1.1), p(0.2);
+    BOOST_TEST_REQUIRE(!integrate(S, 0.0, q, p, p, steps, [](auto&&...) {}).failed);
+    const double err = std::fmax(std::fabs(q[0] - y0), std::fabs(p[0] - y1));
+    BOOST_TEST_MESSAGE("symplectic DIRK (" << b.size() << " stages) vs composed midpoint steps, 30 steps: " << err);
+    BOOST_TEST(err <= 1e-13);
+  }
+  // the reversed 2-stage weights are another method: the comparison above can fail
+  const auto [r0, r1] = dirk_pendulum({0.7, 0.3}, h, steps, 1.1, 0.2);
+  const auto [y0, y1] = dirk_pendulum({0.3, 0.7}, h, steps, 1.1, 0.2);
+  BOOST_TEST(std::fmax(std::fabs(r0 - y0), std::fabs(r1 - y1)) > 1e-8);
+  // the orders dirk_scheme states, and the weights it refuses
+  BOOST_TEST(dirk_scheme(TripleJump4::gamma()).order == 4);
+  BOOST_TEST(dirk_scheme({0.3, 0.7}).order == 2);
+  BOOST_TEST(!dirk_scheme({0.3, 0.7}).symmetric);
+  BOOST_CHECK_THROW(dirk_scheme({0.3, 0.6}), std::invalid_argument);
+  BOOST_CHECK_THROW(dirk_scheme({1.0, 0.0}), std::invalid_argument);
+  BOOST_CHECK_THROW(dirk_scheme({}), std::invalid_argument);
 }
 
 BOOST_AUTO_TEST_CASE(failures_name_the_substep) {
