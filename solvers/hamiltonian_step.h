@@ -24,6 +24,14 @@
 // is the trapezoidal rule, which is NOT symplectic for a non-quadratic H; it is kept as
 // the counter-example that shows the symplecticity check can fail.
 //
+// Eq. 5.1 is stated for any discretization map on T*Q, R^{TT*Q}; symplecticity
+// (Prop. 5.1) needs it to be a cotangent lift. OnCotangentBundle<M> marks a map M on
+// R^{2n} as such a map given directly on T*Q (points z = (q, p), velocities
+// (qdot, pdot)): the step then inverts it, (z, zdot) = M^{-1}(z0, z1), instead of the
+// cotangent lift of a map on Q. With the theta map of R^{2n} that is the theta method
+// z1 - z0 = h X_H(z0 + theta (z1 - z0)), symplectic only at theta = 1/2 (where it is the
+// cotangent lift of the midpoint map, the implicit midpoint rule).
+//
 // Unknowns are the increments (dq, dp) = (q1 - q0, p1 - p0), of size O(h). The
 // symplecticity of the computed map is measured by differentiating through the solve:
 // with F(y, x) = 0 the step equation in the initial point y = (q0, p0) and the
@@ -34,6 +42,8 @@
 
 #include <Eigen/LU>
 #include <stdexcept>
+#include <string>
+#include <type_traits>
 
 #include "core/map_operations.h"
 #include "mechanics/hamiltonian.h"
@@ -42,6 +52,18 @@
 namespace dvm {
 
 enum class VectorFieldSample { base_point, trapezoidal };
+
+// A discretization map M on T*Q = R^{2n} used as R^{TT*Q} in Eq. 5.1 (not lifted).
+template <class M>
+struct OnCotangentBundle {
+  M map;
+  std::string name() const { return map.name() + " on T*Q"; }
+  bool symmetric() const { return map.symmetric(); }
+};
+template <class M>
+struct is_on_cotangent_bundle : std::false_type {};
+template <class M>
+struct is_on_cotangent_bundle<OnCotangentBundle<M>> : std::true_type {};
 
 template <class Ham, class Map>
 class HamiltonianStep {
@@ -68,18 +90,31 @@ class HamiltonianStep {
   // with (q, p; qdot, pdot) = (R_d^{T*})^{-1}(q0, p0; q1, p1).
   template <class T>
   Vec<T, 2 * N> residual(const Vec<T, N>& q0, const Vec<T, N>& p0, const Vec<T, N>& dq, const Vec<T, N>& dp) const {
-    // (q, qdot) = R_d^{-1}(q0, q0 + dq) without forming q1 - q0.
-    const TangentPoint<T, N> t = inverse_increment(R_, q0, dq);
-    Mat<T, 2 * N, 2 * N> J;
-    map_with_jacobian(R_, t.x, t.v, J);
-    // (pdot, p) = DR^T (-p0, p1), split as DR^T (-p0, p0) + DR^T (0, dp) so that maps
-    // whose x-columns of DR sum to zero (all theta maps) give pdot = dp exactly.
-    const Vec<T, 2 * N> a = J.transpose() * stack(Vec<T, N>(-p0), p0) +
-                            J.transpose() * stack(Vec<T, N>(Vec<T, N>::Constant(constant<T>(0.0))), dp);
-    const Vec<T, N> pdot = a.template head<N>(), p = a.template tail<N>();
+    Vec<T, N> q, qdot, p, pdot;
+    if constexpr (is_on_cotangent_bundle<Map>::value) {
+      // (z, zdot) = R^{-1}(z0, z0 + dz) of the map given on T*Q
+      const TangentPoint<T, 2 * N> z = inverse_increment(R_.map, stack(q0, p0), stack(dq, dp));
+      q = z.x.template head<N>();
+      p = z.x.template tail<N>();
+      qdot = z.v.template head<N>();
+      pdot = z.v.template tail<N>();
+    } else {
+      // (q, qdot) = R_d^{-1}(q0, q0 + dq) without forming q1 - q0.
+      const TangentPoint<T, N> t = inverse_increment(R_, q0, dq);
+      Mat<T, 2 * N, 2 * N> J;
+      map_with_jacobian(R_, t.x, t.v, J);
+      // (pdot, p) = DR^T (-p0, p1), split as DR^T (-p0, p0) + DR^T (0, dp) so that maps
+      // whose x-columns of DR sum to zero (all theta maps) give pdot = dp exactly.
+      const Vec<T, 2 * N> a = J.transpose() * stack(Vec<T, N>(-p0), p0) +
+                              J.transpose() * stack(Vec<T, N>(Vec<T, N>::Constant(constant<T>(0.0))), dp);
+      q = t.x;
+      qdot = t.v;
+      pdot = a.template head<N>();
+      p = a.template tail<N>();
+    }
     Vec<T, N> fq, fp;  // h X_H sampled as chosen
     if (sample_ == VectorFieldSample::base_point) {
-      hamiltonian_vector_field(H_, t.x, p, fq, fp);
+      hamiltonian_vector_field(H_, q, p, fq, fp);
     } else {
       Vec<T, N> a0, b0, a1, b1;
       hamiltonian_vector_field(H_, q0, p0, a0, b0);
@@ -87,7 +122,7 @@ class HamiltonianStep {
       fq = 0.5 * (a0 + a1);
       fp = 0.5 * (b0 + b1);
     }
-    return stack(Vec<T, N>(t.v - h_ * fq), Vec<T, N>(pdot - h_ * fp));
+    return stack(Vec<T, N>(qdot - h_ * fq), Vec<T, N>(pdot - h_ * fp));
   }
 
   struct Residual {

@@ -258,6 +258,41 @@ BOOST_AUTO_TEST_CASE(hamiltonian_steps_are_symplectic_to_round_off) {
   BOOST_TEST(d >= 1e-5);
 }
 
+BOOST_AUTO_TEST_CASE(maps_given_directly_on_the_cotangent_bundle) {
+  // Eq. 5.1 with a discretization map on T*Q that is not a cotangent lift: the theta map
+  // of R^2 = T*R, i.e. the theta method z1 - z0 = h X_H(z0 + theta (z1 - z0)). Its step
+  // solves that equation (checked by evaluating X_H directly); at theta = 1/2 it is the
+  // implicit midpoint rule, equal to the cotangent lift of the midpoint map; at 0.3 it is
+  // not symplectic (Prop. 5.1 needs a cotangent lift), while the cotangent lift of the
+  // same theta map is (above).
+  const double h = 0.1;
+  const std::vector<std::pair<V1, V1>> pts1 = {{V1(0.3), V1(0.5)}, {V1(2.0), V1(0.0)}, {V1(-1.2), V1(1.4)}};
+  const PendulumH P(Pendulum(1.0, 1.0, 1.0));
+  using Direct = HamiltonianStep<PendulumH, OnCotangentBundle<ThetaMap>>;
+  double worst = 0.0, mid = 0.0;
+  for (const auto& [q0, p0] : pts1) {
+    const Direct D(P, OnCotangentBundle<ThetaMap>{ThetaMap(0.3)}, h);
+    V1 dq = V1::Zero(), dp = V1::Zero();
+    BOOST_REQUIRE(D.step(q0, p0, dq, dp).converged);
+    V1 fq, fp;
+    hamiltonian_vector_field(P, V1(q0 + 0.3 * dq), V1(p0 + 0.3 * dp), fq, fp);
+    worst = std::fmax(worst, std::fmax(std::fabs(dq[0] - h * fq[0]), std::fabs(dp[0] - h * fp[0])));
+    const Direct M(P, OnCotangentBundle<ThetaMap>{ThetaMap::midpoint()}, h);
+    const HamiltonianStep<PendulumH, ThetaMap> C(P, ThetaMap::midpoint(), h);
+    V1 a = V1::Zero(), b = V1::Zero(), c = V1::Zero(), d = V1::Zero();
+    BOOST_REQUIRE(M.step(q0, p0, a, b).converged);
+    BOOST_REQUIRE(C.step(q0, p0, c, d).converged);
+    mid = std::fmax(mid, std::fmax(std::fabs(a[0] - c[0]), std::fabs(b[0] - d[0])));
+  }
+  BOOST_TEST(worst <= 1e-15);
+  BOOST_TEST(mid <= 1e-15);
+  const double d_theta = max_defect(Direct(P, OnCotangentBundle<ThetaMap>{ThetaMap(0.3)}, h), pts1);
+  const double d_mid = max_defect(Direct(P, OnCotangentBundle<ThetaMap>{ThetaMap::midpoint()}, h), pts1);
+  BOOST_TEST_MESSAGE("theta method on T*Q: symplectic defect " << d_theta << " at theta 0.3, " << d_mid << " at 1/2");
+  BOOST_TEST(d_theta >= 1e-3);
+  BOOST_TEST(d_mid <= 1e-13);
+}
+
 BOOST_AUTO_TEST_CASE(trapezoidal_averaging_is_not_symplectic) {
   // The same midpoint map with X_H averaged over the end points: the trapezoidal rule.
   // Its defect is O(h^3) for a non-quadratic H; at h = 0.1 it is far above round-off.
