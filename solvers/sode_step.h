@@ -140,20 +140,13 @@ class NewmarkMap {
 
   template <class T, int N2>
   PointPair<T, N2> operator()(const Vec<T, N2>& X, const Vec<T, N2>& W) const {
-    static_assert(N2 != Eigen::Dynamic && N2 % 2 == 0, "a point of TQ has 2N coordinates");
-    constexpr int N = N2 / 2;
-    const double c = shift();
-    PointPair<T, N2> r;
-    for (int i = 0; i < N; ++i) {
-      r.q0[i] = X[i] - 0.5 * W[i] + c * W[N + i];
-      r.q1[i] = X[i] + 0.5 * W[i] + c * W[N + i];
-      r.q0[N + i] = X[N + i] - gamma_ * W[N + i];
-      r.q1[N + i] = X[N + i] + (1.0 - gamma_) * W[N + i];
-    }
-    return r;
+    const PointPair<T, N2> d = displacement(X, W);
+    return {Vec<T, N2>(X + d.q0), Vec<T, N2>(X + d.q1)};
   }
+  // R(X, W) - (X, X)
   template <class T, int N2>
   PointPair<T, N2> displacement(const Vec<T, N2>&, const Vec<T, N2>& W) const {
+    static_assert(N2 != Eigen::Dynamic && N2 % 2 == 0, "a point of TQ has 2N coordinates");
     constexpr int N = N2 / 2;
     const double c = shift();
     PointPair<T, N2> r;
