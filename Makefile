@@ -1,5 +1,6 @@
 # Thin wrapper: install what is missing (Debian packages), configure, build, run.
-#   make run    build and run the default scene (examples/scenes/pendulum.toml)
+#   make        build the dvm program (build/, g++)
+#   make run    build it and run the default scene (examples/scenes/pendulum.toml)
 #   make test   build the test tree (build-test/, clang++-14) and run the whole test suite
 #   make bench  build and run the benchmark programs
 #   make charts build the benchmark suite, regenerate examples/charts (CSV, PNG, SVG)
@@ -77,13 +78,15 @@ endef
 deps:
 	$(call install_missing,$(PKGS))
 
-# `make build` (and so run and test) leaves out the three benchmark programs no test
-# runs; `make bench` builds them.
+# `make` (`make build`, and so `make run`) builds the dvm program in build/, nothing
+# else: the test suites build in their own tree (`make test`), the benchmark programs
+# with `make bench` and `make charts`.
+.DEFAULT_GOAL := build
 configure = cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DDVM_BUILD_BENCH=$(1)
 
 build: deps
 	$(call configure,OFF)
-	cmake --build $(BUILD) -j $(JOBS)
+	cmake --build $(BUILD) -j $(JOBS) --target dvm
 
 run: build
 	./$(BUILD)/examples/dvm run examples/scenes/pendulum.toml
@@ -97,9 +100,11 @@ test: test-deps
 	cmake --build $(TEST_BUILD) -j $(JOBS)
 	cd $(TEST_BUILD) && ctest --output-on-failure -j $(JOBS)
 
+# bench_chain is built too and run by hand (examples/bench/README.md)
+BENCH_PROGRAMS := bench_midpoint_step bench_written_lagrangian bench_ratios bench_galerkin_kepler bench_chain
 bench: deps
 	$(call configure,ON)
-	cmake --build $(BUILD) -j $(JOBS)
+	cmake --build $(BUILD) -j $(JOBS) --target $(BENCH_PROGRAMS)
 	./$(BUILD)/examples/bench_midpoint_step
 	./$(BUILD)/examples/bench_written_lagrangian
 	./$(BUILD)/examples/bench_ratios
