@@ -191,6 +191,30 @@ Vec<T, S::dim> legendre_inverse_sweeps(const S& L, const Vec<T, S::dim>& q, cons
   return v;
 }
 
+// v = FL^{-1}(q, p) for any scalar, with the regularity check at (values(q), v): v in
+// doubles (closed form or Newton), then the sweeps above.
+template <class S, class T>
+Vec<T, S::dim> legendre_inverse_regular(const S& L, const Vec<T, S::dim>& q, const Vec<T, S::dim>& p) {
+  constexpr int N = S::dim;
+  const Vec<double, N> q0 = values(q), p0 = values(p);
+  // v0 = FL^{-1}(q0, p0), and the regularity check at (q0, v0) on the Hessian and
+  // inverse the Jet sweeps use anyway: one Hessian and one inverse per evaluation
+  // (legendre_inverse_checked forms three Hessians and two LU inverses). A Newton
+  // inverse that fails on a singular Hessian is reported as legendre_inverse_checked
+  // reports it, naming the point where it started.
+  Vec<double, N> v0;
+  try {
+    v0 = legendre_inverse(L, q0, p0);
+  } catch (const DegenerateLagrangianError&) {
+    require_regular(L, q0, Vec<double, N>(Vec<double, N>::Zero()));
+    throw;
+  }
+  const Mat<double, N, N> W = velocity_hessian(L, q0, v0);
+  const Mat<double, N, N> Winv = W.inverse();
+  require_regular(L, q0, v0, W, Winv);
+  return legendre_inverse_sweeps(L, q, p, v0, Winv);
+}
+
 // The Hamiltonian H(q, p) = <p, v> - L(q, v), v = FL^{-1}(q, p), of a regular Lagrangian.
 template <class S>
 struct LegendreHamiltonian {
@@ -202,27 +226,9 @@ struct LegendreHamiltonian {
 
   template <class T>
   T operator()(const Vec<T, dim>& q, const Vec<T, dim>& p) const {
-    constexpr int N = dim;
-    const Vec<double, N> q0 = values(q), p0 = values(p);
-    // v0 = FL^{-1}(q0, p0), and the regularity check at (q0, v0), where H is
-    // evaluated, on the Hessian and inverse the Jet sweeps use anyway: one Hessian
-    // and one inverse per evaluation (legendre_inverse_checked forms three Hessians
-    // and two LU inverses). A Newton inverse that fails on a
-    // singular Hessian is reported as legendre_inverse_checked reports it, naming the
-    // point where it started.
-    Vec<double, N> v0;
-    try {
-      v0 = legendre_inverse(lagrangian, q0, p0);
-    } catch (const DegenerateLagrangianError&) {
-      require_regular(lagrangian, q0, Vec<double, N>(Vec<double, N>::Zero()));
-      throw;
-    }
-    const Mat<double, N, N> W = velocity_hessian(lagrangian, q0, v0);
-    const Mat<double, N, N> Winv = W.inverse();
-    require_regular(lagrangian, q0, v0, W, Winv);
-    const Vec<T, N> v = legendre_inverse_sweeps(lagrangian, q, p, v0, Winv);
+    const Vec<T, dim> v = legendre_inverse_regular(lagrangian, q, p);
     T pv = constant<T>(0.0);
-    for (int i = 0; i < N; ++i) pv = pv + p[i] * v[i];
+    for (int i = 0; i < dim; ++i) pv = pv + p[i] * v[i];
     return pv - lagrangian(q, v);
   }
 };

@@ -100,12 +100,7 @@ class LegendreLiftedMap {
   // v = FL^{-1}(q, p), with the regularity check at the solution
   template <class T>
   Vec<T, n> velocity(const Vec<T, n>& q, const Vec<T, n>& p) const {
-    const Vec<double, n> qv = values(q), pv = values(p);
-    const Vec<double, n> v0 = legendre_inverse(L_, qv, pv);
-    const Mat<double, n, n> W = velocity_hessian(L_, qv, v0);
-    const Mat<double, n, n> Winv = W.inverse();
-    require_regular(L_, qv, v0, W, Winv);
-    return legendre_inverse_sweeps(L_, q, p, v0, Winv);
+    return legendre_inverse_regular(L_, q, p);
   }
 
   S L_;
