@@ -64,6 +64,9 @@ template <class Map>
 ManifoldTangent<typename Map::Manifold, double> newton_manifold_inverse_values(
     const Map& map, const typename Map::Manifold::template Point<double>& q0,
     const typename Map::Manifold::template Point<double>& q1);
+template <class Map, class P>
+ManifoldTangent<typename Map::Manifold, typename P::Scalar> newton_manifold_inverse(const Map& map, const P& q0,
+                                                                                    const P& q1);
 
 // Discretization maps on S^2 from the exponential or the projection retraction.
 class SphereMap {
@@ -93,11 +96,7 @@ class SphereMap {
   template <class T>
   ManifoldTangent<Sphere, T> inverse(const Vec<T, 3>& q0, const Vec<T, 3>& q1) const {
     if (closed_form_inverse()) return inverse_relative(q0, Sphere::relative(q0, q1));
-    if constexpr (!is_jet_v<T>) {
-      return newton_manifold_inverse_values(*this, q0, q1);
-    } else {
-      throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
-    }
+    return newton_manifold_inverse(*this, q0, q1);
   }
 
   // R_d^{-1}(q0, q0 + d) from q0 and the difference d = q1 - q0, given accurately
@@ -106,7 +105,8 @@ class SphereMap {
   template <class T>
   ManifoldTangent<Sphere, T> inverse_relative(const Vec<T, 3>& q0, const Vec<T, 3>& d) const {
     using std::sqrt;
-    if (!closed_form_inverse()) throw MapDomainError(name_ + ": the relative inverse needs theta in {0, 1/2, 1}");
+    if (!closed_form_inverse())
+      return newton_manifold_inverse(*this, q0, Vec<T, 3>(q0[0] + d[0], q0[1] + d[1], q0[2] + d[2]));
     const T a = detail::dot(q0, d);  // q0.q1 - 1
     const Vec<T, 3> q1(q0[0] + d[0], q0[1] + d[1], q0[2] + d[2]);
     if (theta_ == 0.0 || theta_ == 1.0) {
@@ -194,11 +194,7 @@ class SO3Map {
   template <class T>
   ManifoldTangent<SO3, T> inverse(const Mat<T, 3, 3>& q0, const Mat<T, 3, 3>& q1) const {
     if (closed_form_inverse()) return inverse_relative(q0, SO3::relative(q0, q1));
-    if constexpr (!is_jet_v<T>) {
-      return newton_manifold_inverse_values(*this, q0, q1);
-    } else {
-      throw MapDomainError(name_ + ": differentiated inverse needs theta in {0, 1/2, 1}");
-    }
+    return newton_manifold_inverse(*this, q0, q1);
   }
 
   // R_d^{-1}(q0, q0 W) from q0 and the relative rotation W = q0^T q1, given
@@ -206,7 +202,7 @@ class SO3Map {
   template <class T>
   ManifoldTangent<SO3, T> inverse_relative(const Mat<T, 3, 3>& q0, const Mat<T, 3, 3>& W) const {
     using std::sqrt;
-    if (!closed_form_inverse()) throw MapDomainError(name_ + ": the relative inverse needs theta in {0, 1/2, 1}");
+    if (!closed_form_inverse()) return newton_manifold_inverse(*this, q0, Mat<T, 3, 3>(SO3::mul(q0, W)));
     if (kind_ == RetractionKind::exp) {
       const Vec<T, 3> w = SO3::log(W);
       return {SO3::mul(q0, SO3::exp(Vec<T, 3>(theta_ * w))), w};
@@ -291,6 +287,29 @@ ManifoldTangent<typename Map::Manifold, double> newton_manifold_inverse_values(
   const Vec<double, M::dim> a = Vec<double, M::dim>::Zero(), b = M::chart_inverse(q0, q1);
   const TangentPoint<double, M::dim> t = dvm::inverse(local, a, b);
   return local.point_and_velocity(t.x, t.v);
+}
+
+// R_d^{-1}(q0, q1) for any scalar T, by Newton's method in the chart centred at the
+// value of q0; derivatives by the implicit function theorem on the map's local
+// representation (dvm::inverse), so that discrete Lagrangians of maps without a
+// closed-form inverse can be differentiated. The chart coordinates of q1 are formed
+// from the stored point, so v carries an absolute error of order eps (relative
+// eps/|v|), where the closed forms take the relative position without cancellation.
+template <class Map, class P>
+ManifoldTangent<typename Map::Manifold, typename P::Scalar> newton_manifold_inverse(const Map& map, const P& q0,
+                                                                                    const P& q1) {
+  using M = typename Map::Manifold;
+  using T = typename P::Scalar;
+  if constexpr (!is_jet_v<T>) {
+    return newton_manifold_inverse_values(map, q0, q1);
+  } else {
+    typename M::template Point<double> c = M::sample_point();
+    for (Eigen::Index i = 0; i < c.size(); ++i) c(i) = value(q0(i));
+    const LocalRepresentation<MapView<Map>> local(MapView<Map>{&map}, c);
+    const Vec<T, M::dim> a = M::chart_inverse(c, q0), b = M::chart_inverse(c, q1);
+    const TangentPoint<T, M::dim> t = dvm::inverse(local, a, b);
+    return local.point_and_velocity(t.x, t.v);
+  }
 }
 
 // A generic point of M for checks.

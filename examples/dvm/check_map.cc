@@ -68,8 +68,7 @@ int check_map_command(const std::string& name, double theta, int dim, double tol
   if (!(theta >= 0.0 && theta <= 1.0))
     throw InputError("check-map: --theta " + std::to_string(theta) + " is outside [0, 1]");
   if (!e.takes_theta && theta != e.theta)
-    throw InputError("check-map: --theta applies only to the maps that take a theta (theta, retraction-theta), not \"" +
-                     e.name + "\"");
+    throw InputError("check-map: --theta applies only to " + theta_map_names() + ", not \"" + e.name + "\"");
   if (e.space != Space::euclidean) {
     if (dim > 0)
       throw InputError("check-map: --dim applies only to maps on R^n; \"" + e.name + "\" lives on " +

@@ -439,8 +439,7 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
   }
   if (const toml::node* th = in.get("theta")) {
     if (!me.map || !me.map->takes_theta)
-      throw InputError(r.where(th, "integrator.theta") + ": theta applies only to map = \"theta\" or "
-                                                         "\"retraction-theta\", not \"" +
+      throw InputError(r.where(th, "integrator.theta") + ": theta applies only to " + theta_map_names() + ", not \"" +
                        (me.map ? me.map->name : std::string("none")) + "\"");
     me.theta = r.number(*th, "integrator.theta");
   }

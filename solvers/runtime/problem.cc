@@ -127,8 +127,7 @@ void validate(const Problem& pr, const Method& me) {
     if (!(me.theta >= 0.0 && me.theta <= 1.0))
       throw InputError("integrator.theta: got " + fmt(me.theta) + ", expected a number in [0, 1]");
     if (!m.takes_theta && me.theta != m.theta)
-      throw InputError("integrator.theta: theta applies only to map = \"theta\" or \"retraction-theta\", not \"" +
-                       m.name + "\"");
+      throw InputError("integrator.theta: theta applies only to " + theta_map_names() + ", not \"" + m.name + "\"");
     if (m.family == MapFamily::retraction_theta && !caps.retraction_maps)
       throw InputError("integrator.map: " + name + " runs the theta-family maps (explicit-euler, adjoint-euler, "
                        "midpoint, theta), got \"" + m.name + "\"" + note);

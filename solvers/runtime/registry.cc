@@ -96,6 +96,11 @@ const std::vector<MapEntry>& map_registry() {
        "fixed-first-point form on S^2"},
       {"sphere-projection-fixed", "(x, (x + v)/|x + v|)", Space::sphere, F::sphere, R::projection, 0.0, false, true,
        "fixed-first-point projection map; inverse (x0, x1/(x0.x1) - x0) needs x0.x1 > 0"},
+      {"sphere-exp-theta", "(exp_x(-theta v), exp_x((1 - theta) v))", Space::sphere, F::sphere, R::exp, 0.5, true,
+       false, "Prop. 2.3 with any theta; Newton's method in a chart except at theta in {0, 1/2, 1}"},
+      {"sphere-projection-theta", "((x - theta v)/|x - theta v|, (x + (1 - theta) v)/|x + (1 - theta) v|)",
+       Space::sphere, F::sphere, R::projection, 0.5, true, false,
+       "Prop. 2.3 with any theta; Newton's method in a chart except at theta in {0, 1/2, 1}"},
       {"so3-exp", "(R exp(-w/2), R exp(w/2))", Space::rotation, F::rotation, R::exp, 0.5, false, true,
        "group exponential midpoint on SO(3)"},
       {"so3-cayley", "(R cay(-w/2), R cay(w/2))", Space::rotation, F::rotation, R::cayley, 0.5, false, true,
@@ -104,8 +109,19 @@ const std::vector<MapEntry>& map_registry() {
        "fixed-first-point form on SO(3)"},
       {"so3-cayley-fixed", "(R, R cay(w))", Space::rotation, F::rotation, R::cayley, 0.0, false, true,
        "fixed-first-point Cayley map; undefined for relative rotations by pi"},
+      {"so3-exp-theta", "(R exp(-theta w), R exp((1 - theta) w))", Space::rotation, F::rotation, R::exp, 0.5, true, true,
+       "Prop. 2.3 with any theta; inverse w = log(R0^T R1), R = R0 exp(theta w)"},
+      {"so3-cayley-theta", "(R cay(-theta w), R cay((1 - theta) w))", Space::rotation, F::rotation, R::cayley, 0.5,
+       true, false, "Prop. 2.3 with any theta; Newton's method in a chart except at theta in {0, 1/2, 1}"},
   };
   return list;
+}
+
+std::string theta_map_names() {
+  std::string out;
+  for (const MapEntry& m : map_registry())
+    if (m.takes_theta) out += (out.empty() ? "map = \"" : ", \"") + m.name + "\"";
+  return out;
 }
 
 const MapEntry& find_map_entry(const std::string& name, const std::string& where) {

@@ -81,6 +81,8 @@ struct MapEntry {
   int order(double th) const { return symmetric(th) ? 2 : 1; }
 };
 const std::vector<MapEntry>& map_registry();
+// The maps that take integrator.theta, for messages: map = "theta", "retraction-theta", ...
+std::string theta_map_names();
 // Throws InputError ("<where>: unknown map ...; expected one of: ...").
 const MapEntry& find_map_entry(const std::string& name, const std::string& where);
 

@@ -207,6 +207,16 @@ BOOST_AUTO_TEST_CASE(maps_and_check_map) {
   const Output d = dvm({"check-map", "sphere-exp", "--dim", "3"});
   BOOST_TEST(d.status == 2);
   BOOST_TEST(d.err.find("--dim") != std::string::npos, d.err);
+  // the maps of S^2 and SO(3) that take any theta (Prop. 2.3): their axioms hold at
+  // theta = 0.3, where the sphere and Cayley maps are inverted by Newton's method
+  for (const char* name : {"sphere-exp-theta", "sphere-projection-theta", "so3-exp-theta", "so3-cayley-theta"}) {
+    const Output c = dvm({"check-map", name, "--theta", "0.3"});
+    BOOST_TEST_CONTEXT(name << "\n" << c.out << c.err) {
+      BOOST_TEST(c.status == 0);
+      BOOST_TEST(c.out.find("\"passed\": true") != std::string::npos);
+      BOOST_TEST(json_number(c.out, "cotangent_symplectic") <= 1e-13);
+    }
+  }
   for (const char* cmd : {"run", "maps", "check-map"}) {
     const Output h = dvm({cmd, "--help"});
     BOOST_TEST(h.status == 0);
@@ -905,4 +915,47 @@ BOOST_AUTO_TEST_CASE(boundary_value_problem_on_the_sphere) {
   const Output bad = dvm({"run", bvp, "--set", "problem.q_final=[0.0, 0.6, -0.9]"});
   BOOST_TEST(bad.status == 2);
   BOOST_TEST(bad.err.find("not a unit vector") != std::string::npos, bad.err);
+}
+
+BOOST_AUTO_TEST_CASE(theta_maps_on_curved_spaces) {
+  // integrator.theta on S^2 and SO(3): at theta = 1/2 and 0 the -theta maps are the
+  // midpoint and fixed-first-point maps (the same closed forms: identical results); at
+  // theta = 0.3 the run uses the Newton inverse and differs from both.
+  struct Case {
+    std::string scene, theta_map, midpoint, fixed;
+  };
+  for (const Case& c : {Case{"spherical-pendulum.toml", "sphere-exp-theta", "sphere-exp", "sphere-exp-fixed"},
+                        Case{"heavy-top.toml", "so3-cayley-theta", "so3-cayley", "so3-cayley-fixed"}}) {
+    auto final_q = [&](const std::string& map, const std::string& theta) {
+      std::vector<std::string> args = {"run", std::string(DVM_SCENES) + "/" + c.scene, "--set",
+                                       "integrator.map=\"" + map + "\"", "--set", "integrator.step=0.01", "--set",
+                                       "integrator.t_end=2.0", "--json",
+                                       "--quiet", "--csv", "/dev/null"};
+      if (!theta.empty()) {
+        args.push_back("--set");
+        args.push_back("integrator.theta=" + theta);
+      }
+      const Output o = dvm(args);
+      BOOST_TEST(o.status == 0, map << " theta " << theta << ": " << o.err);
+      return json_array(o.out, "q_final");
+    };
+    const auto mid = final_q(c.midpoint, ""), fixed = final_q(c.fixed, "");
+    BOOST_TEST(final_q(c.theta_map, "0.5") == mid, c.theta_map);
+    BOOST_TEST(final_q(c.theta_map, "0") == fixed, c.theta_map);
+    const auto other = final_q(c.theta_map, "0.3");
+    BOOST_REQUIRE_EQUAL(other.size(), mid.size());
+    double d_mid = 0, d_fixed = 0;
+    for (std::size_t i = 0; i < mid.size(); ++i) {
+      d_mid = std::fmax(d_mid, std::fabs(other[i] - mid[i]));
+      d_fixed = std::fmax(d_fixed, std::fabs(other[i] - fixed[i]));
+    }
+    BOOST_TEST(d_mid > 1e-6);
+    BOOST_TEST(d_fixed > 1e-6);
+    // a theta for a map that takes none names the maps that do
+    const Output r = dvm({"run", std::string(DVM_SCENES) + "/" + c.scene, "--set",
+                          "integrator.map=\"" + c.midpoint + "\"", "--set", "integrator.theta=0.3", "--quiet"});
+    BOOST_TEST(r.status == 2);
+    BOOST_TEST(r.err.find("integrator.theta") != std::string::npos, r.err);
+    BOOST_TEST(r.err.find(c.theta_map) != std::string::npos, r.err);
+  }
 }

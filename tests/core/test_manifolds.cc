@@ -1,6 +1,7 @@
 // S^2 and SO(3): retractions, discretization maps, closed-form inverses and domains,
 // every identity of the R^n checks on each map's local representation, and the
-// tangent lifts of the paper's Ex. 3.5 (S^2) and Ex. 3.6 (SO(3), Cayley) in closed form.
+// tangent lifts of the paper's Ex. 3.5 (S^2) and Ex. 3.6 (SO(3), Cayley) in closed
+// form, and the differentiable inverse of the maps of any theta (Prop. 2.3).
 #define BOOST_TEST_MODULE core_manifolds
 #include <boost/test/unit_test.hpp>
 
@@ -117,6 +118,84 @@ BOOST_AUTO_TEST_CASE(projection_map_closed_form_inverse_and_domain) {
   const Mat<double, 3, 3> Rpi = R * SO3::exp(Vec<double, 3>(M_PI, 0.0, 0.0));
   BOOST_CHECK_THROW(cay.inverse(R, Rpi), MapDomainError);
   BOOST_CHECK_THROW(SO3Map(RetractionKind::cayley, 0.5, "c").inverse(R, Rpi), MapDomainError);
+}
+
+namespace {
+
+// Largest difference between two nested Jets, over the value and every derivative part.
+template <class T>
+double jet_difference(const T& a, const T& b) {
+  if constexpr (is_jet_v<T>) {
+    double m = jet_difference(a.a, b.a);
+    for (int i = 0; i < a.v.size(); ++i) m = std::fmax(m, jet_difference(a.v[i], b.v[i]));
+    return m;
+  } else {
+    return std::fabs(a - b);
+  }
+}
+template <class P>
+double jet_difference_all(const P& a, const P& b) {
+  double m = 0;
+  for (Eigen::Index i = 0; i < a.size(); ++i) m = std::fmax(m, jet_difference(a(i), b(i)));
+  return m;
+}
+
+// q0 = chart(c0, eta) and q1 = chart(c1, xi) as nested Jets in (eta, xi): every first
+// and second derivative of whatever is computed from them.
+template <class M>
+auto seeded_pair(const typename M::template Point<double>& c0, const typename M::template Point<double>& c1) {
+  constexpr int n = 2 * M::dim;
+  using J = ceres::Jet<double, n>;
+  using JJ = ceres::Jet<J, n>;
+  Vec<JJ, M::dim> eta, xi;
+  for (int i = 0; i < M::dim; ++i) {
+    eta[i] = JJ(J(0.0, i), i);
+    xi[i] = JJ(J(0.0, M::dim + i), M::dim + i);
+  }
+  return std::make_pair(M::chart(c0, eta), M::chart(c1, xi));
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(inverse_for_any_theta_has_exact_second_derivatives) {
+  // Prop. 2.3 allows any theta in [0, 1]. Where no closed-form inverse exists, the
+  // inverse is Newton's method in a chart and its derivatives come from the implicit
+  // function theorem. Then R_d(R_d^{-1}(q0, q1)) = (q0, q1) holds in every first and
+  // second derivative with respect to q0 and q1, which is what the discrete
+  // Euler-Lagrange equations differentiate.
+  const Vec<double, 3> x0 = base_point<Sphere>();
+  const Vec<double, 3> x1 = Sphere::exp(x0, Sphere::tangent(x0, Vec<double, 2>(0.3, -0.2)));
+  for (auto kind : {RetractionKind::exp, RetractionKind::projection})
+    for (double theta : {0.3, 0.8}) {
+      const SphereMap m(kind, theta, "sphere-" + to_string(kind));
+      BOOST_TEST(!m.closed_form_inverse());
+      const auto q = seeded_pair<Sphere>(x0, x1);
+      const auto t = m.inverse(q.first, q.second);
+      const auto r = m(t.x, t.v);
+      BOOST_TEST(jet_difference_all(r.q0, q.first) <= 1e-12, m.name() << " theta " << theta);
+      BOOST_TEST(jet_difference_all(r.q1, q.second) <= 1e-12, m.name() << " theta " << theta);
+      BOOST_TEST(std::fabs(value(detail::dot(t.x, t.x)) - 1.0) <= 1e-15);
+      BOOST_TEST(std::fabs(value(detail::dot(t.x, t.v))) <= 1e-15);
+      // the relative form (q0 and the difference q1 - q0) is the same map
+      const auto u = m.inverse_relative(q.first, Sphere::relative(q.first, q.second));
+      BOOST_TEST(jet_difference_all(u.x, t.x) <= 1e-14);
+      BOOST_TEST(jet_difference_all(u.v, t.v) <= 1e-14);
+    }
+  const Mat<double, 3, 3> R0 = base_point<SO3>(), R1 = R0 * SO3::exp(Vec<double, 3>(0.2, 0.1, -0.3));
+  const auto q = seeded_pair<SO3>(R0, R1);
+  const SO3Map cay(RetractionKind::cayley, 0.3, "so3-cayley");
+  BOOST_TEST(!cay.closed_form_inverse());
+  const auto t = cay.inverse(q.first, q.second);
+  const auto r = cay(t.x, t.v);
+  BOOST_TEST(jet_difference_all(r.q0, q.first) <= 1e-12);
+  BOOST_TEST(jet_difference_all(r.q1, q.second) <= 1e-12);
+  // The exponential map has a closed-form inverse for every theta (w = log(q0^T q1),
+  // x = q0 exp(theta w)): the Newton path reproduces it with both derivatives.
+  const SO3Map ex(RetractionKind::exp, 0.3, "so3-exp");
+  const auto closed = ex.inverse(q.first, q.second);
+  const auto newton = newton_manifold_inverse(ex, q.first, q.second);
+  BOOST_TEST(jet_difference_all(closed.x, newton.x) <= 1e-12);
+  BOOST_TEST(jet_difference_all(closed.v, newton.v) <= 1e-12);
 }
 
 BOOST_AUTO_TEST_CASE(sphere_midpoint_closed_form) {
@@ -238,3 +317,4 @@ BOOST_AUTO_TEST_CASE(tangent_lift_of_the_cayley_map_is_the_papers_ex_3_6) {
   }
   BOOST_TEST(worst <= 1e-14);
 }
+

@@ -116,7 +116,10 @@ BOOST_AUTO_TEST_CASE(orders_of_the_sphere_maps) {
   const std::vector<Case> cases = {{SphereMap(RetractionKind::exp, 0.5, "sphere-exp"), 2.0},
                                    {SphereMap(RetractionKind::projection, 0.5, "sphere-projection"), 2.0},
                                    {SphereMap(RetractionKind::exp, 0.0, "sphere-exp-fixed"), 1.0},
-                                   {SphereMap(RetractionKind::projection, 0.0, "sphere-projection-fixed"), 1.0}};
+                                   {SphereMap(RetractionKind::projection, 0.0, "sphere-projection-fixed"), 1.0},
+                                   // Prop. 2.3 with theta outside {0, 1/2, 1}: Newton inverse in a chart
+                                   {SphereMap(RetractionKind::exp, 0.3, "sphere-exp-theta"), 1.0},
+                                   {SphereMap(RetractionKind::projection, 0.7, "sphere-projection-theta"), 1.0}};
   for (const auto& c : cases) {
     std::vector<double> errs;
     for (double h : kSteps) {
@@ -147,7 +150,9 @@ BOOST_AUTO_TEST_CASE(orders_of_the_so3_maps) {
   const std::vector<Case> cases = {{SO3Map(RetractionKind::exp, 0.5, "so3-exp"), 2.0},
                                    {SO3Map(RetractionKind::cayley, 0.5, "so3-cayley"), 2.0},
                                    {SO3Map(RetractionKind::exp, 0.0, "so3-exp-fixed"), 1.0},
-                                   {SO3Map(RetractionKind::cayley, 0.0, "so3-cayley-fixed"), 1.0}};
+                                   {SO3Map(RetractionKind::cayley, 0.0, "so3-cayley-fixed"), 1.0},
+                                   {SO3Map(RetractionKind::exp, 0.3, "so3-exp-theta"), 1.0},
+                                   {SO3Map(RetractionKind::cayley, 0.3, "so3-cayley-theta"), 1.0}};
   for (const auto& c : cases) {
     std::vector<double> errs;
     for (double h : kStepsSO3) {
@@ -355,6 +360,14 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
                              hs, x0, p0, xr, vr);
     BOOST_TEST_MESSAGE("sphere-projection-fixed, triple-jump: measured order " << o);
     BOOST_TEST(std::fabs(o - 4.0) <= 0.3, o);
+    // and so does a map of any theta: with its adjoint (theta = 0.7) the Stormer-Verlet
+    // pair is symmetric, of order 2
+    for (const auto& [scheme, order] : {std::make_pair("stormer-verlet", 2.0), std::make_pair("triple-jump", 4.0)}) {
+      const double ot =
+          measure(L, SphereMap(RetractionKind::exp, 0.3, "sphere-exp-theta"), scheme, hs, x0, p0, xr, vr);
+      BOOST_TEST_MESSAGE("sphere-exp-theta (theta = 0.3), " << scheme << ": measured order " << ot);
+      BOOST_TEST(std::fabs(ot - order) <= 0.3, scheme << ": " << ot);
+    }
   }
   {
     const HeavyTop top(V3(1.0, 2.0, 3.0), 1.0, 1.0, V3(0.1, -0.2, 0.5));
