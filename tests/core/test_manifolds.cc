@@ -1,7 +1,7 @@
 // S^2 and SO(3): retractions, discretization maps, closed-form inverses and domains,
 // every identity of the R^n checks on each map's local representation, and the
-// tangent lifts of the paper's Ex. 3.5 (S^2) and Ex. 3.6 (SO(3), Cayley) in closed
-// form, and the differentiable inverse of the maps of any theta (Prop. 2.3).
+// tangent and cotangent lifts of the paper's Ex. 3.5 (S^2) and Ex. 3.6 (SO(3), Cayley)
+// in closed form, and the differentiable inverse of the maps of any theta (Prop. 2.3).
 #define BOOST_TEST_MODULE core_manifolds
 #include <boost/test/unit_test.hpp>
 
@@ -318,3 +318,108 @@ BOOST_AUTO_TEST_CASE(tangent_lift_of_the_cayley_map_is_the_papers_ex_3_6) {
   BOOST_TEST(worst <= 1e-14);
 }
 
+namespace {
+
+// The maps of Ex. 3.5 and 3.6 written in the embedding, as the paper computes their
+// lifts: R^3 x R^3 -> R^3 x R^3, (x, xi) -> (x, cos|xi| x + sin|xi| xi/|xi|), and
+// R^9 x R^9 -> R^9 x R^9, (A, X) -> (A, A cay(A^T X)) with cay(Y) = (I - Y/2)^{-1} (I + Y/2)
+// for any 3 x 3 matrix Y (matrices stored column-major). The generic R^n cotangent lift
+// (core/map_operations.h) applies to them unchanged.
+struct EmbeddedSphereExp {
+  static constexpr bool provides_inverse = false;
+  std::string name() const { return "embedded sphere exp"; }
+  template <class T, int N>
+  PointPair<T, N> operator()(const Vec<T, N>& x, const Vec<T, N>& xi) const {
+    return {x, Sphere::exp(x, xi)};
+  }
+};
+struct EmbeddedCayley {
+  static constexpr bool provides_inverse = false;
+  std::string name() const { return "embedded cayley"; }
+  template <class T, int N>
+  PointPair<T, N> operator()(const Vec<T, N>& a, const Vec<T, N>& x) const {
+    Mat<T, 3, 3> A, X, L, R;
+    for (int i = 0; i < 9; ++i) {
+      A(i) = a[i];
+      X(i) = x[i];
+    }
+    const Mat<T, 3, 3> Y = A.transpose() * X;
+    for (int i = 0; i < 9; ++i) {
+      L(i) = (i % 4 == 0 ? T(1.0) : T(0.0)) - 0.5 * Y(i);
+      R(i) = (i % 4 == 0 ? T(1.0) : T(0.0)) + 0.5 * Y(i);
+    }
+    Mat<T, 3, 3> C;  // cay(Y) = L^{-1} R, column by column
+    for (int j = 0; j < 3; ++j) C.col(j) = solve_dense<T, 3, 3>(L, Vec<T, 3>(R.col(j)));
+    const Mat<T, 3, 3> B = A * C;
+    Vec<T, N> b;
+    for (int i = 0; i < 9; ++i) b[i] = B(i);
+    return {a, b};
+  }
+};
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(cotangent_lifts_are_the_papers_ex_3_5_and_3_6) {
+  // The paper's cotangent lifts, from DR = [[I, 0], [M, N]] and its inverse
+  // [[I, 0], [-N^{-1} M, N^{-1}]]:
+  //   R_d^{T*}(q, p, qdot, pdot) = (q, -pdot + p N^{-1} M; R^2(q, qdot), p N^{-1})
+  // (p a row covector), with M = cos|xi| I and N as in the tangent-lift test above on
+  // S^2 (Ex. 3.5), and M Adot = Adot cay(Y) + A dcay(Y)[Adot^T X],
+  // N Xdot = A dcay(Y)[A^T Xdot], Y = A^T X on SO(3) (Ex. 3.6), here at X = qdot. The
+  // generic path is dvm::cotangent_lift of the maps written in the embedding.
+  using M3 = Mat<double, 3, 3>;
+  using V3 = Vec<double, 3>;
+  std::mt19937 rng(37);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  double worst_sphere = 0.0, worst_cayley = 0.0;
+  for (int k = 0; k < 12; ++k) {
+    const V3 x = V3(U(rng), U(rng), U(rng)).normalized();
+    const V3 xi = Sphere::tangent(x, Vec<double, 2>(2.0 * U(rng), 2.0 * U(rng)));
+    const V3 p(U(rng), U(rng), U(rng)), pdot(U(rng), U(rng), U(rng));
+    const double n = xi.norm(), c = std::cos(n), s = std::sin(n);
+    M3 N;
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        N(i, j) = -s * x[i] * xi[j] / n + c * xi[i] * xi[j] / (n * n) +
+                  s * ((i == j ? n * n : 0.0) - xi[i] * xi[j]) / (n * n * n);
+    const V3 pNinv = N.transpose().lu().solve(p);  // the row p N^{-1}, as a column
+    const auto r = cotangent_lift(EmbeddedSphereExp{}, x, p, xi, pdot);
+    worst_sphere = std::fmax(worst_sphere, max_abs(V3(r.q0 - x)));
+    worst_sphere = std::fmax(worst_sphere, max_abs(V3(r.p0 - (-pdot + c * pNinv))));
+    worst_sphere = std::fmax(worst_sphere, max_abs(V3(r.q1 - (c * x + s * xi / n))));
+    worst_sphere = std::fmax(worst_sphere, max_abs(V3(r.p1 - pNinv)));
+  }
+  const M3 I = M3::Identity();
+  auto cay = [&](const M3& Y) { return M3((I - Y / 2).inverse() * (I + Y / 2)); };
+  auto dcay = [&](const M3& Y, const M3& Z) { return M3((I - Y / 2).inverse() * (Z / 2) * (I + cay(Y))); };
+  using V9 = Vec<double, 9>;
+  using M9 = Mat<double, 9, 9>;
+  auto flat = [](const M3& a) { return V9(Eigen::Map<const V9>(a.data())); };
+  for (int k = 0; k < 12; ++k) {
+    const M3 A = SO3::exp(V3(2 * U(rng), 2 * U(rng), 2 * U(rng)));
+    const M3 X = A * SO3::hat(V3(2 * U(rng), 2 * U(rng), 2 * U(rng)));
+    const M3 Y = A.transpose() * X;
+    M9 Mb, Nb;  // the blocks, column by column from the closed forms
+    for (int e = 0; e < 9; ++e) {
+      M3 E = M3::Zero();
+      E(e) = 1.0;
+      Mb.col(e) = flat(E * cay(Y) + A * dcay(Y, E.transpose() * X));
+      Nb.col(e) = flat(A * dcay(Y, A.transpose() * E));
+    }
+    V9 p, pdot;
+    for (int i = 0; i < 9; ++i) {
+      p[i] = U(rng);
+      pdot[i] = U(rng);
+    }
+    const V9 pNinv = Nb.transpose().lu().solve(p);
+    const V9 p0 = -pdot + Mb.transpose() * pNinv;  // the row p N^{-1} M - pdot
+    const auto r = cotangent_lift(EmbeddedCayley{}, flat(A), p, flat(X), pdot);
+    worst_cayley = std::fmax(worst_cayley, max_abs(V9(r.q0 - flat(A))));
+    worst_cayley = std::fmax(worst_cayley, max_abs(V9(r.p0 - p0)));
+    worst_cayley = std::fmax(worst_cayley, max_abs(V9(r.q1 - flat(A * cay(Y)))));
+    worst_cayley = std::fmax(worst_cayley, max_abs(V9(r.p1 - pNinv)));
+  }
+  BOOST_TEST_MESSAGE("Ex. 3.5 cotangent lift vs generic: " << worst_sphere << "; Ex. 3.6: " << worst_cayley);
+  BOOST_TEST(worst_sphere <= 1e-13);
+  BOOST_TEST(worst_cayley <= 1e-13);
+}
