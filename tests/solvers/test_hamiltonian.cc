@@ -1,6 +1,7 @@
 // Hamiltonians, the Legendre transform with its regularity check, and the Hamiltonian
 // step of Eq. 5.1: closed-form special cases, measured symplecticity (and a method
-// that must fail the measurement), discrete Noether for Kepler.
+// that must fail the measurement), discrete Noether for Kepler, and the partitioned
+// Runge-Kutta methods composed from theta-map steps (Sec. 6.2).
 #define BOOST_TEST_MODULE hamiltonian
 #include <boost/test/unit_test.hpp>
 
@@ -8,6 +9,7 @@
 #include "mechanics/systems.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
+#include "solvers/partitioned_dirk.h"
 #include "solvers/position_momentum_step.h"
 
 using namespace dvm;
@@ -411,4 +413,126 @@ BOOST_AUTO_TEST_CASE(lagrangian_position_momentum_steps_are_symplectic_too) {
   d = std::fmax(d, lagrangian_step_defect(K, retr, 0.05, V2(0.9, 0.6), V2(-0.5, 0.7)));
   BOOST_TEST_MESSAGE("largest defect of the Lagrangian steps: " << d);
   BOOST_TEST(d <= 1e-13);
+}
+
+namespace {
+
+// `steps` steps of the partitioned Runge-Kutta method (a, a^, b) on H = NonSeparable,
+// solved as such: stage by stage (both tableaux are lower triangular), each stage's
+// (K_i, L_i) = (dH/dp, -dH/dq)(Q_i, P_i) by fixed-point iteration to a repeated
+// iterate, with Q_i = q0 + h sum_j a_ij K_j and P_i = p0 + h sum_j a^_ij L_j.
+std::pair<double, double> prk_non_separable(const PartitionedDirk& m, double h, int steps, double q, double p) {
+  const auto a = m.tableau(false), ah = m.tableau(true);
+  const std::size_t s = m.weight.size();
+  for (int n = 0; n < steps; ++n) {
+    std::vector<double> K(s), L(s);
+    for (std::size_t i = 0; i < s; ++i) {
+      double Q0 = q, P0 = p;
+      for (std::size_t j = 0; j < i; ++j) {
+        Q0 += h * a[i][j] * K[j];
+        P0 += h * ah[i][j] * L[j];
+      }
+      double k = 0.0, l = 0.0;
+      for (int it = 0; it < 500; ++it) {
+        const double Q = Q0 + h * a[i][i] * k, P = P0 + h * ah[i][i] * l;
+        const double nk = P * (1.0 + Q * Q), nl = -(P * P * Q + Q * Q * Q - Q);
+        const bool done = nk == k && nl == l;
+        k = nk;
+        l = nl;
+        if (done) break;
+      }
+      K[i] = k;
+      L[i] = l;
+    }
+    for (std::size_t i = 0; i < s; ++i) {
+      q += h * m.weight[i] * K[i];
+      p += h * m.weight[i] * L[i];
+    }
+  }
+  return {q, p};
+}
+
+std::pair<double, double> composed_non_separable(const PartitionedDirk& m, double h, int steps, double q, double p) {
+  const auto S = partitioned_dirk_step(NonSeparable(), m, h);
+  V1 Q(q), P(p);
+  BOOST_TEST_REQUIRE(!integrate(S, 0.0, Q, P, P, steps, [](auto&&...) {}).failed);
+  return {Q[0], P[0]};
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(theta_map_compositions_are_symplectic_partitioned_runge_kutta_methods) {
+  // Sec. 6.2: a pair of diagonally implicit tableaux with common weights b,
+  // a_ij = a^_ij = b_j below the diagonal and a_ii + a^_ii = b_i on it (the symplectic
+  // pairs) is the composition of Hamiltonian steps of the theta maps theta_i = a_ii/b_i
+  // with sizes b_i h. Compared on a non-separable H over 30 steps, for pairs whose q and
+  // p tableaux differ (theta != 1/2), weights that are not palindromes, a negative
+  // weight, and the explicit ends theta = 0 and 1.
+  const double h = 0.1;
+  const int steps = 30;
+  const std::vector<double> tj = TripleJump4::gamma();
+  struct Case {
+    std::vector<double> b, theta;
+  };
+  for (const Case& c : std::vector<Case>{{tj, {0.3, 0.5, 0.7}},
+                                         {{0.3, 0.7}, {0.0, 1.0}},
+                                         {{0.25, 0.5, -0.1, 0.35}, {0.2, 0.9, 0.5, 0.4}}}) {
+    std::vector<double> diag;
+    for (std::size_t i = 0; i < c.b.size(); ++i) diag.push_back(c.theta[i] * c.b[i]);
+    const PartitionedDirk m = partitioned_dirk(c.b, diag);
+    const auto [y0, y1] = prk_non_separable(m, h, steps, 0.8, 0.3);
+    const auto [z0, z1] = composed_non_separable(m, h, steps, 0.8, 0.3);
+    const double err = std::fmax(std::fabs(y0 - z0), std::fabs(y1 - z1));
+    BOOST_TEST_MESSAGE("partitioned DIRK (" << c.b.size() << " stages) vs composed theta-map steps: " << err);
+    BOOST_TEST(err <= 1e-13);
+  }
+  // exchanging the two tableaux is another method: the comparison above can fail
+  const PartitionedDirk m = partitioned_dirk({0.3, 0.7}, {0.0, 0.7});
+  const PartitionedDirk swapped = partitioned_dirk({0.3, 0.7}, {0.3, 0.0});
+  const auto [y0, y1] = prk_non_separable(m, h, steps, 0.8, 0.3);
+  const auto [z0, z1] = composed_non_separable(swapped, h, steps, 0.8, 0.3);
+  BOOST_TEST(std::fmax(std::fabs(y0 - z0), std::fabs(y1 - z1)) > 1e-6);
+  // the symplecticity conditions b_i a^_ij + b_j a_ji = b_i b_j hold for every pair built
+  const PartitionedDirk w = partitioned_dirk({0.25, 0.5, -0.1, 0.35}, {0.05, 0.45, -0.05, 0.14});
+  const auto a = w.tableau(false), ah = w.tableau(true);
+  for (std::size_t i = 0; i < 4; ++i)
+    for (std::size_t j = 0; j < 4; ++j)
+      BOOST_TEST(std::fabs(w.weight[i] * ah[i][j] + w.weight[j] * a[j][i] - w.weight[i] * w.weight[j]) <= 1e-16);
+  // what partitioned_dirk states and refuses
+  BOOST_TEST(partitioned_dirk(tj, {0.3 * tj[0], 0.5 * tj[1], 0.7 * tj[2]}).symmetric);
+  BOOST_TEST(partitioned_dirk(tj, {0.3 * tj[0], 0.5 * tj[1], 0.7 * tj[2]}).order == 2);
+  BOOST_TEST(partitioned_dirk(tj, {0.5 * tj[0], 0.5 * tj[1], 0.5 * tj[2]}).order == 4);  // the DIRK
+  BOOST_TEST(partitioned_dirk({0.3, 0.7}, {0.0, 0.7}).order == 1);
+  BOOST_TEST(partitioned_dirk({0.5, 0.5}, {0.0, 0.5}).order == 2);  // symplectic Euler and its adjoint
+  BOOST_CHECK_THROW(partitioned_dirk({0.3, 0.7}, {0.0}), std::invalid_argument);
+  BOOST_CHECK_THROW(partitioned_dirk({0.3, 0.7}, {0.4, 0.0}), std::invalid_argument);  // theta_1 > 1
+  BOOST_CHECK_THROW(partitioned_dirk({0.3, 0.6}, {0.1, 0.1}), std::invalid_argument);
+}
+
+BOOST_AUTO_TEST_CASE(orders_of_partitioned_dirk_methods) {
+  // Measured orders on the non-separable H to t = 1 against a run with h/32: first order
+  // when sum (theta_i - 1/2) b_i^2 != 0, second when it vanishes, and the symmetric pair
+  // on the triple-jump weights.
+  const std::vector<double> tj = TripleJump4::gamma();
+  struct Case {
+    std::vector<double> b, theta;
+  };
+  for (const Case& c : std::vector<Case>{{{0.3, 0.7}, {0.0, 1.0}},
+                                         {{0.5, 0.5}, {0.0, 1.0}},
+                                         {{0.3, 0.7}, {0.2, 0.5 + 0.3 * 0.3 * 0.3 / (0.7 * 0.7)}},
+                                         {tj, {0.3, 0.5, 0.7}}}) {
+    std::vector<double> diag;
+    for (std::size_t i = 0; i < c.b.size(); ++i) diag.push_back(c.theta[i] * c.b[i]);
+    const PartitionedDirk m = partitioned_dirk(c.b, diag);
+    const auto ref = composed_non_separable(m, 1.0 / 2560, 2560, 0.8, 0.3);
+    std::vector<double> errs;
+    for (int n : {20, 40, 80}) {
+      const auto y = composed_non_separable(m, 1.0 / n, n, 0.8, 0.3);
+      errs.push_back(std::fmax(std::fabs(y.first - ref.first), std::fabs(y.second - ref.second)));
+    }
+    const double o1 = std::log2(errs[0] / errs[1]), o2 = std::log2(errs[1] / errs[2]);
+    BOOST_TEST_MESSAGE("partitioned DIRK, " << c.b.size() << " stages, stated order " << m.order
+                                            << ": measured " << o1 << ", " << o2);
+    BOOST_TEST(std::fabs(o2 - m.order) <= 0.15, o2);
+  }
 }
