@@ -1,9 +1,12 @@
 // `dvm check-map`: the identity checks of core/map_checks.h on a map of the registry.
+#include <cmath>
 #include <iostream>
+#include <variant>
 
 #include "core/manifold_checks.h"
 #include "core/map_checks.h"
 #include "examples/dvm/commands.h"
+#include "examples/dvm/scene.h"
 #include "solvers/runtime/json.h"
 #include "solvers/runtime/registry.h"
 
@@ -35,19 +38,27 @@ int report_manifold(const Map& map, double tolerance) {
   return print_report(r, Map::Manifold::name, map.theta(), tolerance, ok);
 }
 
+// The maps on R^n run as ThetaMap or WrittenMap (retraction-theta is the written
+// retraction x + v, as in the runtime: solvers/runtime/kernels.h).
 template <int N>
-int report_rn(const MapEntry& e, double theta, double tolerance) {
-  auto report = [&](const auto& map) {
-    const MapCheckReport r = check_map<N>(map);
-    return print_report(r, "R^n", theta, tolerance, report_passes(r, tolerance));
-  };
-  switch (e.family) {
-    case MapFamily::theta: return report(ThetaMap(theta, e.name));
-    case MapFamily::retraction_theta: return report(RetractionMap<EuclideanRetraction>({}, theta));
-    case MapFamily::sphere:
-    case MapFamily::rotation: break;
+int report_rn(const std::variant<ThetaMap, WrittenMap>& map, double theta, double tolerance) {
+  return std::visit(
+      [&](const auto& m) {
+        const MapCheckReport r = check_map<N>(m);
+        return print_report(r, "R^n", theta, tolerance, report_passes(r, tolerance));
+      },
+      map);
+}
+
+int report_rn_dim(const std::variant<ThetaMap, WrittenMap>& map, int dim, double theta, double tolerance) {
+  switch (dim > 0 ? dim : 2) {
+    case 1: return report_rn<1>(map, theta, tolerance);
+    case 2: return report_rn<2>(map, theta, tolerance);
+    case 3: return report_rn<3>(map, theta, tolerance);
+    case 4: return report_rn<4>(map, theta, tolerance);
+    default: break;
   }
-  throw InputError("check-map: map \"" + e.name + "\" does not live on R^n");
+  throw InputError("check-map: --dim " + std::to_string(dim) + " is not supported; expected 1, 2, 3 or 4");
 }
 
 RetractionKind kind_of(const MapEntry& e) {
@@ -76,14 +87,21 @@ int check_map_command(const std::string& name, double theta, int dim, double tol
     if (e.family == MapFamily::sphere) return report_manifold(SphereMap(kind_of(e), theta, e.name), tolerance);
     return report_manifold(SO3Map(kind_of(e), theta, e.name), tolerance);
   }
-  switch (dim > 0 ? dim : 2) {
-    case 1: return report_rn<1>(e, theta, tolerance);
-    case 2: return report_rn<2>(e, theta, tolerance);
-    case 3: return report_rn<3>(e, theta, tolerance);
-    case 4: return report_rn<4>(e, theta, tolerance);
-    default: break;
-  }
-  throw InputError("check-map: --dim " + std::to_string(dim) + " is not supported; expected 1, 2, 3 or 4");
+  if (e.family == MapFamily::theta) return report_rn_dim(ThetaMap(theta, e.name), dim, theta, tolerance);
+  if (e.family == MapFamily::retraction_theta)
+    return report_rn_dim(WrittenMap::retraction("retraction-theta(euclidean)", "x + v", theta), dim, theta, tolerance);
+  throw InputError("check-map: map \"written\" is read from a scene: dvm check-map --scene FILE");
+}
+
+int check_scene_map_command(const std::string& path, const std::vector<std::string>& overrides, int dim,
+                            double tolerance) {
+  // the scene's map (load_scene refuses a written map that breaks Def. 2.2, exit 2)
+  const Scene s = load_scene(path, overrides);
+  const Method& me = s.method;
+  if (!me.map) throw InputError("check-map: " + path + " names no map (integrator.map)");
+  if (me.map->family == MapFamily::written)
+    return report_rn_dim(*me.written_map, dim, me.written_map->is_retraction() ? me.theta : NAN, tolerance);
+  return check_map_command(me.map->name, me.theta, dim, tolerance);
 }
 
 }  // namespace dvm::cli

@@ -28,6 +28,9 @@ int run_scene(const Scene& scene, const RunOptions& options);
 // Prints the identity residuals of a map as JSON; returns 0 if every identity holds
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.
 int check_map_command(const std::string& name, double theta, int dim, double tolerance);
+// `dvm check-map --scene FILE`: the map the scene runs (a written one from its [map]).
+int check_scene_map_command(const std::string& path, const std::vector<std::string>& overrides, int dim,
+                            double tolerance);
 
 // Lists the composition methods (order, stages, symmetry, stability threshold) and the
 // Galerkin methods as a table or JSON; returns 0.

@@ -121,9 +121,13 @@ const char* kRunHelp =
     "                               with its own map on TQ, Sec. 4.1, not integrator.map)\n"
     "    gamma = 0.5, beta = 0.25   numbers, form newmark only\n"
     "    composition = \"none\"       string (see 'dvm methods'): @COMPOSITIONS@,\n"
-    "                               or \"triple-jump:<even order>\"; the basic method's step\n"
-    "                               composed, in every form and on S^2/SO(3) too; one that\n"
-    "                               is not symmetric enters as Phi_{h/2} o Phi*_{h/2}\n"
+    "                               or \"triple-jump:<even order>\", or \"dirk\"; the basic\n"
+    "                               method's step composed, in every form and on S^2/SO(3)\n"
+    "                               too; one that is not symmetric enters as\n"
+    "                               Phi_{h/2} o Phi*_{h/2}\n"
+    "    weights = [b1, b2, ...]    numbers, composition dirk only (required there): substeps\n"
+    "                               of sizes b_i h, nonzero, summing to 1; with the midpoint\n"
+    "                               map the symplectic DIRK of weights b (Sec. 6.2)\n"
     "    method = \"map\"             string: \"map\" (the map's own step) | \"galerkin\"\n"
     "                               (Galerkin discrete Lagrangians of order 2 stages;\n"
     "                               the systems with galerkin \"yes\" in the table below,\n"
@@ -136,6 +140,13 @@ const char* kRunHelp =
     "                               (a boundary-value problem: 100)\n"
     "    tolerance = 2e-15          number, relative residual tolerance of each step's\n"
     "                               solve (initial-value problems)\n"
+    "  [map]       integrator.map = \"written\" only: a discretization map on R^n written\n"
+    "              in x and v, applied to each coordinate; checked against Def. 2.2\n"
+    "    q0 = \"EXPR\", q1 = \"EXPR\"   strings, R_d(x, v) = (q0, q1), e.g. \"x - v/2\", \"x + v/2\"\n"
+    "    or retraction = \"EXPR\"     string, R(x, v): R_d = (R(x, -theta v), R(x, (1 - theta) v))\n"
+    "                               with integrator.theta (Prop. 2.3)\n"
+    "    name = \"written\"           string, the map's name in reports\n"
+    "    params = { c = 0.1, ... }  numbers, names the expressions use\n"
     "  [problem]\n"
     "    kind = \"initial-value\"     string: \"initial-value\" | \"boundary-value\"\n"
     "                               (boundary-value: [initial] q only, no integrator steps\n"
@@ -192,6 +203,7 @@ const char* kMethodsHelp =
 
 const char* kCheckHelp =
     "usage: dvm check-map NAME [--theta T] [--dim N] [--tolerance TOL]\n"
+    "       dvm check-map --scene FILE [--set section.key=value]... [--dim N] [--tolerance TOL]\n"
     "\n"
     "Prints, as JSON, the largest residual over random sample points of each identity:\n"
     "zero_section (R_d(x,0) = (x,x)), tangent_identity (T R^2 - T R^1 = Id),\n"
@@ -203,9 +215,14 @@ const char* kCheckHelp =
     "closed_form_vs_newton for the closed-form inverse. N is 1 to 4 (default 2, R^n only), T in [0, 1]\n"
     "(default 0.5), TOL defaults to 1e-12. Exit status 0 when every identity holds\n"
     "and the symmetry claim matches, 1 otherwise, 2 for bad input.\n"
+    "--scene checks the map a scene runs; with map = \"written\" the map of its [map]\n"
+    "section, which is refused with exit 2 when it breaks Def. 2.2 (the message gives\n"
+    "the residual). A written map acts on each coordinate alike, so N only sizes the\n"
+    "sample points.\n"
     "\n"
     "example:\n"
-    "  dvm check-map theta --theta 0.3 --dim 3\n";
+    "  dvm check-map theta --theta 0.3 --dim 3\n"
+    "  dvm check-map --scene examples/scenes/pendulum_written_map.toml\n";
 
 const char* kSystemsHelp =
     "usage: dvm systems [--json]\n"
@@ -416,6 +433,7 @@ int cmd_systems(const std::vector<std::string>& args) {
         forms += (k ? ", " : "") + Json::string(dvm::to_string(sy.caps.forms[k]));
       j.raw("forms", forms + "]")
           .boolean("retraction_maps", sy.caps.retraction_maps)
+          .boolean("written_maps", sy.caps.written_maps)
           .boolean("composition", sy.caps.composition)
           .boolean("galerkin", sy.caps.galerkin)
           .boolean("boundary_value", sy.caps.boundary_value);
@@ -515,7 +533,8 @@ int cmd_version(const std::vector<std::string>& args) {
 }
 
 int cmd_check_map(const std::vector<std::string>& args) {
-  std::string name;
+  std::string name, scene;
+  std::vector<std::string> overrides;
   double theta = -1.0, tol = 1e-12;  // theta < 0, dim 0: not given
   int dim = 0;
   for (std::size_t i = 0; i < args.size(); ++i) {
@@ -536,6 +555,10 @@ int cmd_check_map(const std::vector<std::string>& args) {
     } else if (a == "--tolerance") {
       tol = parse_number("--tolerance", value("--tolerance"), kCheckHelp);
       if (!(tol > 0)) usage_error("--tolerance: expected a positive number", kCheckHelp);
+    } else if (a == "--scene") {
+      scene = value("--scene");
+    } else if (a == "--set") {
+      overrides.push_back(value("--set"));
     } else if (!a.empty() && a[0] == '-') {
       usage_error("unknown option " + a, kCheckHelp);
     } else if (name.empty()) {
@@ -544,7 +567,13 @@ int cmd_check_map(const std::vector<std::string>& args) {
       usage_error("more than one map name given", kCheckHelp);
     }
   }
-  if (name.empty()) usage_error("check-map needs a map name (see 'dvm maps')", kCheckHelp);
+  if (!scene.empty()) {
+    if (!name.empty()) usage_error("give a map name or --scene, not both", kCheckHelp);
+    if (theta >= 0.0) usage_error("--theta: with --scene, the scene's integrator.theta is the map's (use --set)", kCheckHelp);
+    return check_scene_map_command(scene, overrides, dim, tol);
+  }
+  if (!overrides.empty()) usage_error("--set applies only with --scene", kCheckHelp);
+  if (name.empty()) usage_error("check-map needs a map name (see 'dvm maps') or --scene FILE", kCheckHelp);
   return check_map_command(name, theta, dim, tol);
 }
 

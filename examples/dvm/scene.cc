@@ -385,12 +385,58 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
                      ", expected a whole number from 2 to 100000000");
 }
 
+// [map]: the discretization map written in the scene (map = "written"), component by
+// component in x and v: q0 and q1, or a retraction with integrator.theta. Checked
+// against Def. 2.2 here (mechanics/written_map.h), so a map that breaks it is refused
+// with exit 2 and the residual.
+void read_written_map(const Reader& r, const toml::table& root, Method& me) {
+  const toml::node* sec = root.get("map");
+  const bool written = me.map && me.map->family == MapFamily::written;
+  if (!sec) {
+    if (written) throw InputError(r.path() + ": missing section [map] (map = \"written\": q0 and q1, or retraction)");
+    return;
+  }
+  const toml::table& m = r.section(root, "map", true);
+  r.only_keys(m, "map", {"q0", "q1", "retraction", "name", "params"});
+  if (!written)
+    throw InputError(r.where(sec, "map") + ": the section [map] belongs to integrator.map = \"written\", not \"" +
+                     (me.map ? me.map->name : std::string("none")) + "\"");
+  WrittenMap::Params params;
+  if (const toml::node* ps = m.get("params")) {
+    if (!ps->is_table()) throw InputError(r.where(ps, "map.params") + ": expected a table of numbers");
+    for (const auto& [k, v] : *ps->as_table()) params.push_back({std::string(k.str()), r.number(v, "map.params." + std::string(k.str()))});
+  }
+  std::string name = "written";
+  if (const toml::node* n = m.get("name")) name = r.string(*n, "map.name");
+  const toml::node* q0 = m.get("q0");
+  const toml::node* q1 = m.get("q1");
+  const toml::node* rt = m.get("retraction");
+  if (rt && (q0 || q1))
+    throw InputError(r.where(rt, "map.retraction") + ": give either map.retraction or map.q0 and map.q1, not both");
+  if (!rt && !(q0 && q1))
+    throw InputError(r.path() + ": missing key '" + std::string(q0 ? "map.q1" : q1 ? "map.q0" : "map.q0") +
+                     "' (a written map is q0 and q1 in x and v, or a retraction)");
+  const toml::node* at = rt ? rt : q0;
+  try {
+    me.written_map = std::make_shared<const WrittenMap>(
+        rt ? WrittenMap::retraction(name, r.string(*rt, "map.retraction"), me.theta, params)
+           : WrittenMap::points(name, r.string(*q0, "map.q0"), r.string(*q1, "map.q1"), params));
+  } catch (const std::invalid_argument& e) {
+    // the message starts with the key it is about: q0, q1 or retraction
+    const std::string what = e.what();
+    const toml::node* n = what.rfind("q1", 0) == 0 ? q1 : at;
+    const std::string key = rt ? "map.retraction" : n == q1 ? "map.q1" : "map.q0";
+    throw InputError(r.where(n, key) + ": " + what);
+  }
+}
+
 // [integrator]: the method's keys whose presence matters (a key that applies only to
 // another choice is refused where it is written); the rules between values are
 // validate()'s.
 void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method& me) {
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
-                                  "composition", "form", "gamma", "beta", "method", "stages", "quadrature"});
+                                  "composition", "weights", "form", "gamma", "beta", "method", "stages",
+                                  "quadrature"});
   if (const toml::node* f = in.get("form")) me.form = find_form(r.string(*f, "integrator.form"), r.where(f, "integrator.form"));
   for (const char* key : {"gamma", "beta"}) {
     const toml::node* n = in.get(key);
@@ -444,6 +490,12 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     me.theta = r.number(*th, "integrator.theta");
   }
   if (const toml::node* co = in.get("composition")) me.composition = r.string(*co, "integrator.composition");
+  if (const toml::node* w = in.get("weights")) {
+    if (me.composition != "dirk")
+      throw InputError(r.where(w, "integrator.weights") + ": weights apply only to composition = \"dirk\", not \"" +
+                       echo(me.composition) + "\"");
+    me.weights = r.vector(*w, "integrator.weights");
+  }
   const toml::node* h = in.get("step");
   if (!h) throw InputError(r.path() + ": missing key 'integrator.step'");
   pr.step = r.number(*h, "integrator.step");
@@ -665,8 +717,10 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   pr.origin = path;
   for (const auto& [k, v] : root) {
     const std::string name(k.str());
-    if (name != "system" && name != "initial" && name != "integrator" && name != "output" && name != "problem")
-      throw InputError(r.where(&v, name) + ": unknown section; expected system, initial, integrator, output, problem");
+    if (name != "system" && name != "initial" && name != "integrator" && name != "output" && name != "problem" &&
+        name != "map")
+      throw InputError(r.where(&v, name) +
+                       ": unknown section; expected system, initial, integrator, map, output, problem");
   }
 
   // [system]
@@ -734,8 +788,9 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     }
   }
 
-  // [integrator]
+  // [integrator], and [map] for map = "written"
   read_integrator(r, r.section(root, "integrator", true), pr, me);
+  read_written_map(r, root, me);
 
   // [output]
   const toml::table& out = r.section(root, "output", false);

@@ -82,6 +82,7 @@ Method reference_method(const Problem& pr, const Method& me, int& order, std::st
   ref.map = &find_map_entry(map, "converge");
   ref.theta = ref.map->theta;
   ref.composition = "kahan-li8";
+  ref.weights.clear();
   order = 8;
   name = std::string(map) + ", composition kahan-li8 (order 8)";
   return ref;

@@ -19,7 +19,8 @@
 //   boundary value    BoundaryValueProblem<S, Map>        SphereBoundaryValueProblem
 //
 // Maps are resolved from their registry entry into a value of the space's map type(s):
-// on R^n std::variant<ThetaMap, RetractionMap<EuclideanRetraction>>, visited once.
+// on R^n std::variant<ThetaMap, WrittenMap>, visited once (retraction-theta is the
+// written retraction x + v: the generic path, one type with the scene's written maps).
 #pragma once
 
 #include <chrono>
@@ -45,15 +46,18 @@
 namespace dvm::kernels {
 
 // ---- maps from registry entries ------------------------------------------------------
-using RnMap = std::variant<ThetaMap, RetractionMap<EuclideanRetraction>>;
+using RnMap = std::variant<ThetaMap, WrittenMap>;
 
 inline RnMap rn_map(const Method& m) {
   const MapEntry& e = *m.map;
   switch (e.family) {
     case MapFamily::theta:
       return ThetaMap(m.theta, e.name);
-    case MapFamily::retraction_theta:
-      return RetractionMap<EuclideanRetraction>({}, m.theta);
+    case MapFamily::retraction_theta:  // Prop. 2.3 from R_x(v) = x + v, by the generic path
+      return WrittenMap::retraction("retraction-theta(euclidean)", "x + v", m.theta);
+    case MapFamily::written:
+      if (!m.written_map) break;
+      return *m.written_map;
     case MapFamily::sphere:
     case MapFamily::rotation:
       break;
@@ -64,9 +68,7 @@ inline RnMap rn_map(const Method& m) {
 // The adjoint of a theta-family map is the same family at 1 - theta (Prop. 2.4), so the
 // adjoint stages of a composition reuse the basic method's step type.
 inline ThetaMap same_type_adjoint(const ThetaMap& R) { return R.adjoint(); }
-inline RetractionMap<EuclideanRetraction> same_type_adjoint(const RetractionMap<EuclideanRetraction>& R) {
-  return RetractionMap<EuclideanRetraction>({}, 1.0 - R.theta());
-}
+inline WrittenMap same_type_adjoint(const WrittenMap& R) { return R.adjoint(); }
 
 // ---- the loop around any stepper -----------------------------------------------------
 // A system view V provides
@@ -191,7 +193,7 @@ std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h
   if (me.composition == "none") return stepper_run(view, make(h, false), q0, p0, v0, base, steps);
   using Step = decltype(make(h, false));
   ComposedStep<Step> step(
-      h, substeps(find_composition(me.composition), symmetric), [&](double hk) { return make(hk, false); },
+      h, substeps(me.scheme(), symmetric), [&](double hk) { return make(hk, false); },
       [&](double hk) { return make(hk, true); });
   return stepper_run(view, std::move(step), q0, p0, v0, base, steps);
 }

@@ -238,7 +238,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
     using Stage = decltype(make(h, false));
     if (me.composition == "none") return stepper_run(view, make(h, false), q, p, v0, base, pr.steps);
     ComposedPointStep<Stage> step(
-        h, substeps(find_composition(me.composition), R.symmetric()), [&](double hk) { return make(hk, false); },
+        h, substeps(me.scheme(), R.symmetric()), [&](double hk) { return make(hk, false); },
         [&](double hk) { return make(hk, true); });
     return stepper_run(view, std::move(step), q, p, v0, base, pr.steps);
   };

@@ -20,14 +20,24 @@ StepOptions Method::step_options() const {
 bool Method::basic_symmetric() const {
   if (galerkin) return true;
   if (form == Form::newmark) return newmark_gamma == 0.5;
+  if (map && map->family == MapFamily::written) return written_map && written_map->symmetric();
   return map && map->symmetric(theta);
 }
 
 int Method::order() const {
   if (galerkin) return 2 * stages;
-  if (composition != "none") return find_composition(composition).order;
+  if (composition != "none") return scheme().order;
   if (form == Form::newmark) return newmark_gamma == 0.5 ? 2 : 1;
+  if (map && map->family == MapFamily::written) return written_map ? written_map->order() : 0;
   return map ? map->order(theta) : 0;
+}
+
+CompositionScheme Method::scheme() const {
+  if (composition == "dirk") {
+    if (weights.empty()) throw std::invalid_argument("\"dirk\" needs its weights: integrator.weights = [b1, b2, ...]");
+    return dirk_scheme(weights);
+  }
+  return find_composition(composition);
 }
 
 std::string Method::map_label() const {
@@ -38,6 +48,21 @@ std::string Method::map_label() const {
   return map->name;
 }
 
+namespace {
+std::string fmt(double x);
+// The shortest of 15, 16 or 17 significant digits that reads back as x: 0.3, not
+// 0.29999999999999999.
+std::string shortest(double x) {
+  for (int digits : {15, 16}) {
+    std::ostringstream out;
+    out.precision(digits);
+    out << x;
+    if (std::stod(out.str()) == x) return out.str();
+  }
+  return fmt(x);
+}
+}  // namespace
+
 std::string Method::label() const {
   std::string s;
   if (galerkin)
@@ -45,8 +70,19 @@ std::string Method::label() const {
         std::to_string(2 * stages) + ")";
   else
     s = map_label();
+  if (!galerkin && form != Form::newmark && map && map->family == MapFamily::written && written_map) {
+    s += " " + written_map->name() + " (";
+    s += written_map->is_retraction() ? "retraction " + written_map->text(0) + ", theta " + shortest(theta)
+                                      : "q0 = " + written_map->text(0) + ", q1 = " + written_map->text(1);
+    s += ")";
+  }
   if (form != Form::lagrangian && !galerkin) s += ", " + std::string(to_string(form)) + " form";
   if (composition != "none") s += ", composition " + composition;
+  if (!weights.empty()) {
+    s += " (";
+    for (std::size_t i = 0; i < weights.size(); ++i) s += (i ? ", " : "") + shortest(weights[i]);
+    s += ")";
+  }
   return s;
 }
 
@@ -128,17 +164,31 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError("integrator.theta: got " + fmt(me.theta) + ", expected a number in [0, 1]");
     if (!m.takes_theta && me.theta != m.theta)
       throw InputError("integrator.theta: theta applies only to " + theta_map_names() + ", not \"" + m.name + "\"");
-    if (m.family == MapFamily::retraction_theta && !caps.retraction_maps)
+    if ((m.family == MapFamily::retraction_theta || m.family == MapFamily::written) && !caps.retraction_maps)
       throw InputError("integrator.map: " + name + " runs the theta-family maps (explicit-euler, adjoint-euler, "
                        "midpoint, theta), got \"" + m.name + "\"" + note);
+    if (m.family == MapFamily::written && !caps.written_maps)
+      throw InputError("integrator.map: " + name + " runs on the run-time-sized steps, which take the theta-family maps; "
+                       "map = \"written\" runs on the built-in systems of fixed size" + note);
+    if (m.family == MapFamily::written && !me.written_map)
+      throw InputError("integrator.map: map = \"written\" needs the scene's [map] section (q0 and q1, or retraction)");
+    if (m.family == MapFamily::written && !me.written_map->is_retraction() && me.theta != m.theta)
+      throw InputError("integrator.theta: theta applies to a written retraction, not to a map written as q0 and q1");
+    if (m.family == MapFamily::written && me.written_map->is_retraction() && me.theta != me.written_map->theta())
+      throw InputError("integrator.theta: " + fmt(me.theta) + " is not the written retraction's theta " +
+                       fmt(me.written_map->theta()));
   }
 
   // [integrator] composition
+  if (!me.weights.empty() && me.composition != "dirk")
+    throw InputError("integrator.weights: weights apply only to composition = \"dirk\", not \"" + me.composition +
+                     "\"");
   if (me.composition != "none") {
     try {
-      find_composition(me.composition);
+      me.scheme();
     } catch (const std::invalid_argument& e) {
-      throw InputError(std::string("integrator.composition: ") + e.what());
+      const bool weights = me.composition == "dirk";
+      throw InputError(std::string(weights ? "integrator.weights: " : "integrator.composition: ") + e.what());
     }
     if (!caps.composition) throw InputError("integrator.composition: " + name + " takes no composition" + note);
   }

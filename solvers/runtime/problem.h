@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "mechanics/written_map.h"
 #include "solvers/newton.h"
 #include "solvers/runtime/registry.h"
 
@@ -58,8 +59,12 @@ struct Method {
   Form form = Form::lagrangian;
   const MapEntry* map = nullptr;  // none: newmark, galerkin without a map
   double theta = 0.5;             // the map's theta (set from the entry when it takes none)
-  // The composition ("none": the basic method's own step).
+  // map = "written": the map the scene writes (mechanics/written_map.h).
+  std::shared_ptr<const WrittenMap> written_map;
+  // The composition ("none": the basic method's own step); "dirk" takes its weights
+  // from `weights` (the symplectic DIRK of those weights with the midpoint map).
   std::string composition = "none";
+  std::vector<double> weights;
   bool galerkin = false;
   int stages = 2;
   QuadratureKind quadrature = QuadratureKind::gauss;
@@ -74,6 +79,9 @@ struct Method {
   bool basic_symmetric() const;
   // The order the method is built to have.
   int order() const;
+  // The composition's coefficients (find_composition, or dirk_scheme of `weights`);
+  // throws std::invalid_argument for an unknown name or weights it refuses.
+  CompositionScheme scheme() const;
   // "midpoint", "galerkin gauss s=4 (order 8)", "newmark", ...
   std::string map_label() const;
   std::string label() const;

@@ -45,8 +45,9 @@ SystemCapabilities run_time_sized() {
           true,
           true,
           false,
-          "the SODE and Newmark forms, boundary-value problems and solver = \"tiny\" are built for the fixed-size "
-          "systems",
+          "the SODE and Newmark forms, boundary-value problems, solver = \"tiny\" and written maps are built for "
+          "the fixed-size systems",
+          false,
           false};
 }
 
@@ -88,6 +89,9 @@ const std::vector<MapEntry>& map_registry() {
       {"retraction-theta", "R_d(x, v) = (R_x(-theta v), R_x((1 - theta) v)), R_x(v) = x + v", Space::euclidean,
        F::retraction_theta, R::none, 0.5, true, false,
        "Prop. 2.3 from the flat retraction; inverted by Newton's method (the generic path)"},
+      {"written", "the scene's [map]: q0 = \"...\", q1 = \"...\" in x and v, or retraction = \"R(x, v)\"",
+       Space::euclidean, F::written, R::none, 0.5, true, false,
+       "applied to each coordinate; checked against Def. 2.2 when read; inverted by Newton's method"},
       {"sphere-exp", "(exp_x(-v/2), exp_x(v/2)), exp_x(v) = cos|v| x + sin|v| v/|v|", Space::sphere, F::sphere, R::exp,
        0.5, false, true, "midpoint form on S^2 (Eq. 2.3)"},
       {"sphere-projection", "((x - v/2)/|x - v/2|, (x + v/2)/|x + v/2|)", Space::sphere, F::sphere, R::projection, 0.5,
@@ -224,6 +228,7 @@ const std::vector<SystemEntry>& system_registry() {
        {{Form::lagrangian}, false, true, false, false,
         "the chain's step solves its tridiagonal equations by its own Newton iteration, for the theta-family maps in "
         "the lagrangian form only",
+        false,
         false},
        factories::chain,
        "params.n"},

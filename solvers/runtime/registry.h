@@ -64,6 +64,7 @@ enum class MapFamily {
   retraction_theta,  // R^n: RetractionMap<EuclideanRetraction>(theta), Newton inverse (generic path)
   sphere,            // S^2: SphereMap(retraction, theta)
   rotation,          // SO(3): SO3Map(retraction, theta)
+  written,           // R^n: WrittenMap from the scene's [map] section, Newton inverse (generic path)
 };
 enum class MapRetraction { none, exp, projection, cayley };
 
@@ -116,6 +117,7 @@ struct SystemCapabilities {
   bool boundary_value = false;     // [problem] kind = "boundary-value" (lagrangian form)
   std::string note;                // why something is missing, for messages and listings
   bool tiny_solver = true;         // solver = "tiny" (ceres::TinySolver) for its map-based steps
+  bool written_maps = true;        // map = "written" (the fixed-size steps on R^n)
 };
 
 using RunFactory = std::unique_ptr<Run> (*)(const Problem&, const Method&);

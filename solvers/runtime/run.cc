@@ -30,6 +30,7 @@ RunReport base_report(const Problem& pr, const Method& me, const std::string& sy
   r.map = me.map_label();
   r.method = me.galerkin ? "galerkin" : "map";
   r.composition = me.composition;
+  r.weights = me.weights;
   r.solver = to_string(me.solver);
   r.form = to_string(me.form);
   r.method_label = me.label();
@@ -107,6 +108,7 @@ std::string report_json(const RunReport& r) {
   j.str("status", r.failed ? "failed" : "ok").str("system", r.system);
   if (!r.manifold.empty()) j.str("manifold", r.manifold);
   j.str("map", r.map).str("method", r.method).str("composition", r.composition).str("solver", r.solver);
+  if (!r.weights.empty()) j.arr("weights", r.weights);
   j.str("form", r.form).str("problem", r.boundary_value ? "boundary-value" : "initial-value");
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
   if (!r.boundary_value) j.num("steps_requested", static_cast<double>(r.steps_requested));

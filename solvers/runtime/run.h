@@ -44,6 +44,7 @@ struct RunReport {
   std::string map;           // the map's name; "none" for galerkin, "newmark" for newmark
   std::string method;        // "map" or "galerkin"
   std::string composition;   // "none" or the composition's name
+  std::vector<double> weights;  // composition "dirk": its weights
   std::string solver;        // "newton" or "tiny"
   std::string form;
   std::string method_label;  // for the text table

@@ -70,7 +70,7 @@ std::string integrator(const std::string& keys) {
 struct SystemCaps {
   std::string name, space;
   std::set<std::string> forms;
-  bool retraction = false, composition = false, galerkin = false, boundary_value = false;
+  bool retraction = false, composition = false, galerkin = false, boundary_value = false, written_maps = false;
 };
 
 bool json_bool(const std::string& json, const std::string& key, std::size_t from) {
@@ -92,6 +92,7 @@ std::vector<SystemCaps> registry_systems() {
     for (const char* f : {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"})
       if (o.out.substr(f0, f1 - f0).find(std::string("\"") + f + "\"") != std::string::npos) c.forms.insert(f);
     c.retraction = json_bool(o.out, "retraction_maps", at);
+    c.written_maps = json_bool(o.out, "written_maps", at);
     c.composition = json_bool(o.out, "composition", at);
     c.galerkin = json_bool(o.out, "galerkin", at);
     c.boundary_value = json_bool(o.out, "boundary_value", at);
@@ -103,7 +104,7 @@ std::vector<SystemCaps> registry_systems() {
   w.name = "lagrangian";
   w.space = "R^n";
   w.forms = {"lagrangian", "hamiltonian"};
-  w.retraction = w.composition = w.galerkin = true;
+  w.retraction = w.composition = w.galerkin = true;  // written maps: no (run-time-sized steps)
   out.push_back(w);
   return out;
 }
@@ -159,6 +160,10 @@ void check(const std::string& what, const std::string& text, bool supported, con
   }
 }
 
+// map = "written": the midpoint map written in the scene (its [map] section follows the
+// [integrator] keys)
+const char* kWrittenMidpoint = "[map]\nq0 = \"x - v/2\"\nq1 = \"x + v/2\"\n";
+
 const char* kCompositions[] = {"none", "stormer-verlet", "mclachlan4", "kahan-li8", "triple-jump:6"};
 const char* kForms[] = {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"};
 
@@ -195,9 +200,11 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
             std::string keys = "form = \"" + f + "\"\n";
             if (!map.empty()) keys += "map = \"" + map + "\"\n";
             if (c != "none") keys += "composition = \"" + c + "\"\n";
+            if (map == "written") keys += kWrittenMidpoint;
             const bool map_ok = f == "newmark" || !map.empty();
             const bool supported = sys.forms.count(f) && map_ok && (c == "none" || sys.composition) &&
-                                   (map != "retraction-theta" || sys.retraction);
+                                   (map != "retraction-theta" || sys.retraction) &&
+                                   (map != "written" || (sys.retraction && sys.written_maps));
             std::map<std::string, std::string> expect = {{"form", f}, {"composition", c}, {"method", "map"}};
             if (f == "newmark")
               expect["map"] = "newmark";
@@ -243,10 +250,11 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
           const std::string f = form;
           const std::string text = sys_section + "[initial]\n" + q0 + "\n[problem]\nkind = \"boundary-value\"\n" +
                                    "q_final = " + qf + "\nsteps = 3\n[integrator]\nstep = 0.001\nmap = \"" + map +
-                                   "\"\nform = \"" + f + "\"\n";
+                                   "\"\nform = \"" + f + "\"\n" + (map == "written" ? kWrittenMidpoint : "");
           check(sys.name + " boundary-value map=" + map + " form=" + f, text,
-                sys.boundary_value && f == "lagrangian" && (map != "retraction-theta" || sys.retraction), {},
-                {{"problem", "boundary-value"}});
+                sys.boundary_value && f == "lagrangian" && (map != "retraction-theta" || sys.retraction) &&
+                    (map != "written" || sys.written_maps),
+                {}, {{"problem", "boundary-value"}});
         }
     }
   }
