@@ -89,7 +89,7 @@ int check_map_command(const std::string& name, double theta, int dim, double tol
   }
   if (e.family == MapFamily::theta) return report_rn_dim(ThetaMap(theta, e.name), dim, theta, tolerance);
   if (e.family == MapFamily::retraction_theta)
-    return report_rn_dim(WrittenMap::retraction("retraction-theta(euclidean)", "x + v", theta), dim, theta, tolerance);
+    return report_rn_dim(WrittenMap::flat_retraction("retraction-theta(euclidean)", theta), dim, theta, tolerance);
   throw InputError("check-map: map \"written\" is read from a scene: dvm check-map --scene FILE");
 }
 

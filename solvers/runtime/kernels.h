@@ -54,7 +54,7 @@ inline RnMap rn_map(const Method& m) {
     case MapFamily::theta:
       return ThetaMap(m.theta, e.name);
     case MapFamily::retraction_theta:  // Prop. 2.3 from R_x(v) = x + v, by the generic path
-      return WrittenMap::retraction("retraction-theta(euclidean)", "x + v", m.theta);
+      return WrittenMap::flat_retraction("retraction-theta(euclidean)", m.theta);
     case MapFamily::written:
       if (!m.written_map) break;
       return *m.written_map;
