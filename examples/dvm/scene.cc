@@ -417,6 +417,12 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
     throw InputError(r.path() + ": missing key '" + std::string(q0 ? "map.q1" : q1 ? "map.q0" : "map.q0") +
                      "' (a written map is q0 and q1 in x and v, or a retraction)");
   const toml::node* at = rt ? rt : q0;
+  // theta belongs to the retraction form; written with q0 and q1 it would do nothing
+  const toml::node* integ = root.get("integrator");
+  const toml::node* th = integ && integ->is_table() ? integ->as_table()->get("theta") : nullptr;
+  if (th && !rt)
+    throw InputError(r.where(th, "integrator.theta") +
+                     ": theta applies to a written retraction (map.retraction), not to a map written as q0 and q1");
   try {
     me.written_map = std::make_shared<const WrittenMap>(
         rt ? WrittenMap::retraction(name, r.string(*rt, "map.retraction"), me.theta, params)

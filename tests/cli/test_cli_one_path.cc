@@ -181,6 +181,7 @@ BOOST_AUTO_TEST_CASE(written_maps_run_every_form_and_are_checked) {
       {"map.q1", {"map.q1=\"x + v/2 + y\""}},    // an unknown name
       {"map.retraction", {"map.retraction=\"x + v\""}},  // both forms at once
       {"integrator.theta", {"integrator.theta=0.3"}},    // theta of a q0/q1 map
+      {"integrator.theta", {"integrator.theta=0.5"}},    // even the default: it would do nothing
   };
   for (const auto& [key, sets] : broken) {
     std::vector<std::string> args = {"run", path, "--quiet"};
