@@ -303,7 +303,7 @@ ManifoldTangent<typename Map::Manifold, typename P::Scalar> newton_manifold_inve
   if constexpr (!is_jet_v<T>) {
     return newton_manifold_inverse_values(map, q0, q1);
   } else {
-    typename M::template Point<double> c = M::sample_point();
+    typename M::template Point<double> c;
     for (Eigen::Index i = 0; i < c.size(); ++i) c(i) = value(q0(i));
     const LocalRepresentation<MapView<Map>> local(MapView<Map>{&map}, c);
     const Vec<T, M::dim> a = M::chart_inverse(c, q0), b = M::chart_inverse(c, q1);

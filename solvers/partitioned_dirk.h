@@ -91,6 +91,8 @@ ComposedStep<HamiltonianStep<Ham, ThetaMap>> partitioned_dirk_step(const Ham& H,
                                                                    StepOptions options = {}) {
   std::vector<Substep> subs;
   for (double b : m.weight) subs.push_back({b, false});
+  // ComposedStep builds the steps of its substeps in order, all plain here, so the
+  // counter walks the stages
   std::size_t stage = 0;
   auto make = [&](double hk) {
     return HamiltonianStep<Ham, ThetaMap>(H, ThetaMap(m.theta.at(stage++)), hk, options);

@@ -139,9 +139,9 @@ inline ThetaMap dynamic_theta_map(const Method& me) {
     case MapFamily::retraction_theta:
       return ThetaMap(me.theta, e.name);
     case MapFamily::written:
-      throw InputError("integrator.map: a written map runs on systems of fixed size (the built-in systems on R^n but "
-                       "nbody and chain, and written systems of up to 6 coordinates); the run-time-sized steps take "
-                       "the theta-family maps");
+      // (validate refuses it first: SystemCapabilities::written_maps)
+      throw InputError("integrator.map: the run-time-sized steps take the theta-family maps; map = \"written\" runs "
+                       "on the built-in systems of fixed size");
     case MapFamily::sphere:
     case MapFamily::rotation:
       break;
