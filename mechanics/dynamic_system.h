@@ -701,6 +701,8 @@ class TapeDerivatives {
 
 inline const WrittenSystem& checked_written(const std::shared_ptr<const WrittenSystem>& s) {
   if (!s || s->dim() < 1) throw std::invalid_argument("a written system needs at least one coordinate");
+  if (s->space != WrittenSystem::Space::euclidean)
+    throw std::invalid_argument(s->name + ": a Lagrangian written on S^2 or SO(3) runs on its manifold's steps");
   if (s->lagrangian.empty()) throw std::invalid_argument(s->name + ": the written system has no Lagrangian");
   return *s;
 }
@@ -779,6 +781,8 @@ class WrittenDynamicHamiltonian {
   // names, constants and folding: the same tape up to the block index).
   static std::shared_ptr<const Expression> reparse(const std::shared_ptr<const WrittenSystem>& s) {
     if (!s || s->dim() < 1) throw std::invalid_argument("a written system needs at least one coordinate");
+    if (s->space != WrittenSystem::Space::euclidean)
+      throw std::invalid_argument(s->name + ": a Hamiltonian written on S^2 or SO(3) runs on its manifold's steps");
     if (s->hamiltonian.empty())
       throw std::invalid_argument(s->name + ": the Hamiltonian form needs a written Hamiltonian H(q, p)");
     ExpressionSymbols sym;

@@ -1,12 +1,17 @@
 // A mechanical system written as text: coordinates, a Lagrangian L(q, v), and
 // optionally an energy E(q, v, p) to monitor and a Hamiltonian H(q, p).
 //
-// Naming convention. With coordinates = ["theta", "phi"]:
+// Naming convention on R^n. With coordinates = ["theta", "phi"]:
 //   theta, phi             the coordinates q
 //   theta_dot, phi_dot     the velocities v = dq/dt
 //   p_theta, p_phi         the momenta p = dL/dv (energy and Hamiltonian only)
-// plus the parameters (constants with values), the constant pi and the functions of
-// mechanics/expression.h.
+// On S^2 the three coordinates are the components of the embedded unit vector
+// (default names x, y, z; velocities x_dot, ..., the stored covector p_x, ...). On
+// SO(3) the names are fixed: R11 ... R33 the entries of the rotation matrix (row,
+// column), w1 w2 w3 the body angular velocity, pi1 pi2 pi3 the body angular momentum
+// (mechanics/written_manifold.h).
+// Every expression may also use the parameters (constants with values), the constant
+// pi and the functions of mechanics/expression.h.
 //
 // WrittenLagrangian<N> is a Lagrangian in the sense of mechanics/lagrangian.h, with
 // the dimension fixed at compile time; the text is parsed once into a WrittenSystem
@@ -26,19 +31,35 @@
 namespace dvm {
 
 struct WrittenSystem {
+  // Where the point lives: R^n (any number of coordinates), S^2 (the embedded unit
+  // vector, three coordinates), SO(3) (the rotation matrix; no coordinate names).
+  enum class Space { euclidean, sphere, rotation };
+  Space space = Space::euclidean;
   std::string name = "lagrangian";
   std::vector<std::string> coordinates;
   std::vector<std::pair<std::string, double>> params;
   Expression lagrangian;   // in q (block 0) and v (block 1)
   Expression energy;       // optional: q, v, p (blocks 0, 1, 2)
   Expression hamiltonian;  // optional: q (block 0) and p (block 2)
-  int dim() const { return static_cast<int>(coordinates.size()); }
+  // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
+  int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
 
   // Which expression a text is for (decides the names it may use).
   enum class Kind { lagrangian, energy, hamiltonian };
 
   ExpressionSymbols symbols(Kind kind) const {
     ExpressionSymbols s;
+    if (space == Space::rotation) {
+      // R stored column-major (Eigen's order): Rij at index 3 (j - 1) + (i - 1)
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) s.variables.push_back({rotation_entry(i, j), 0, 3 * j + i});
+      for (int i = 0; i < 3; ++i) {
+        if (kind != Kind::hamiltonian) s.variables.push_back({"w" + std::to_string(i + 1), 1, i});
+        if (kind != Kind::lagrangian) s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
+      }
+      s.constants = params;
+      return s;
+    }
     for (int i = 0; i < dim(); ++i) {
       const std::string& c = coordinates[static_cast<std::size_t>(i)];
       s.variables.push_back({c, 0, i});
@@ -67,7 +88,20 @@ struct WrittenSystem {
         if (n == f.name) throw std::invalid_argument(std::string(what) + " name '" + n + "' is a function name");
       if (!seen.insert(n).second) throw std::invalid_argument("the name '" + n + "' is used twice");
     };
-    if (coordinates.empty()) throw std::invalid_argument("at least one coordinate is needed");
+    if (space == Space::rotation) {
+      if (!coordinates.empty())
+        throw std::invalid_argument("on SO(3) the names are fixed (R11 ... R33, w1 w2 w3, pi1 pi2 pi3); no coordinates");
+      for (int j = 0; j < 3; ++j)
+        for (int i = 0; i < 3; ++i) claim(rotation_entry(i, j), "matrix entry");
+      for (int i = 1; i <= 3; ++i) {
+        claim("w" + std::to_string(i), "angular velocity");
+        claim("pi" + std::to_string(i), "angular momentum");
+      }
+    }
+    if (space == Space::sphere && coordinates.size() != 3)
+      throw std::invalid_argument("on S^2 the coordinates are the 3 components of the embedded unit vector, got " +
+                                  std::to_string(coordinates.size()) + " names");
+    if (space != Space::rotation && coordinates.empty()) throw std::invalid_argument("at least one coordinate is needed");
     for (const auto& c : coordinates) {
       claim(c, "coordinate");
       claim(c + "_dot", "velocity");
@@ -75,6 +109,9 @@ struct WrittenSystem {
     }
     for (const auto& p : params) claim(p.first, "parameter");
   }
+
+  // "R11" ... "R33": the entry in row i, column j (0-based arguments).
+  static std::string rotation_entry(int i, int j) { return "R" + std::to_string(i + 1) + std::to_string(j + 1); }
 };
 
 template <int N>
@@ -84,6 +121,8 @@ struct WrittenLagrangian {
 
   explicit WrittenLagrangian(std::shared_ptr<const WrittenSystem> s) : system(std::move(s)) {
     if (!system || system->dim() != N) throw std::invalid_argument("WrittenLagrangian: dimension mismatch");
+    if (system->space != WrittenSystem::Space::euclidean)
+      throw std::invalid_argument("WrittenLagrangian: the system is written on S^2 or SO(3) (mechanics/written_manifold.h)");
   }
   std::string name() const { return system->name; }
 

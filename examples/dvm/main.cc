@@ -88,11 +88,17 @@ const char* kRunHelp =
     "    or a Lagrangian written in the scene:\n"
     "    lagrangian = \"EXPR\"        string, L in the coordinates and their velocities\n"
     "                               x_dot, y_dot, e.g. \"m/2*(x_dot^2 + y_dot^2) - k/2*(x^2 + y^2)\"\n"
-    "    coordinates = [\"x\", ...]   strings, the coordinate names (required with lagrangian)\n"
+    "    coordinates = [\"x\", ...]   strings, the coordinate names (required on R^n)\n"
+    "    space = \"R^n\"              string, \"R^n\" (default), \"S^2\" or \"SO(3)\". S^2: the\n"
+    "                               3 coordinates are the embedded unit vector (default\n"
+    "                               x, y, z), p_x.. the stored covector. SO(3): fixed\n"
+    "                               names R11 .. R33 (the matrix), w1 w2 w3 (the body\n"
+    "                               angular velocity), pi1 pi2 pi3 (its momentum)\n"
     "    params = { m = 1.0, ... }  numbers, any names the expressions use\n"
     "    energy = \"EXPR\"            string, optional; may use x, x_dot, p_x\n"
     "                               (default E = <p, v> - L)\n"
     "    hamiltonian = \"EXPR\"       string, optional; in x and p_x, checked against L\n"
+    "                               (on S^2 and SO(3) the hamiltonian form needs it)\n"
     "    name = \"...\"               string, optional; the system's name in reports\n"
     "                               Expressions: + - * / ^ (or **), parentheses, numbers,\n"
     "                               pi, and sin cos tan asin acos atan exp log sqrt cbrt\n"
@@ -309,7 +315,7 @@ std::string run_help() {
     h += line;
   };
   for (const auto& e : dvm::system_registry()) row(e);
-  row(dvm::written_system_entry());
+  for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation}) row(dvm::written_system_entry(sp));
   return h;
 }
 

@@ -93,19 +93,38 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     if (!v || v->empty()) throw InputError(key_where(path, *n, "system.name") + ": expected a non-empty string");
     w->name = *v;
   }
+  Space space = Space::euclidean;
+  const toml::node* sp = sys.get("space");
+  if (sp) {
+    const auto v = sp->value<std::string>();
+    if (!sp->is_string() || !(*v == "R^n" || *v == "S^2" || *v == "SO(3)"))
+      throw InputError(key_where(path, *sp, "system.space") + ": expected \"R^n\", \"S^2\" or \"SO(3)\"" +
+                       (sp->is_string() ? ", got \"" + *v + "\"" : ""));
+    space = *v == "S^2" ? Space::sphere : *v == "SO(3)" ? Space::rotation : Space::euclidean;
+  }
+  w->space = space == Space::sphere     ? WrittenSystem::Space::sphere
+             : space == Space::rotation ? WrittenSystem::Space::rotation
+                                        : WrittenSystem::Space::euclidean;
   const toml::node* c = sys.get("coordinates");
-  if (!c)
+  if (c && space == Space::rotation)
+    throw InputError(key_where(path, *c, "system.coordinates") +
+                     ": on SO(3) the names are fixed: R11 ... R33 (the rotation matrix), w1 w2 w3 (the body angular "
+                     "velocity), pi1 pi2 pi3 (the body angular momentum)");
+  if (!c && space == Space::euclidean)
     throw InputError(path + ": missing key 'system.coordinates' (the names of the coordinates, e.g. "
                             "coordinates = [\"theta\"]; velocities are then named theta_dot)");
-  const toml::array* ca = c->as_array();
-  if (!ca || ca->empty())
-    throw InputError(key_where(path, *c, "system.coordinates") + ": expected a non-empty array of names");
-  for (std::size_t i = 0; i < ca->size(); ++i) {
-    const auto v = ca->get(i)->value<std::string>();
-    if (!ca->get(i)->is_string())
-      throw InputError(key_where(path, *ca->get(i), "system.coordinates[" + std::to_string(i) + "]") +
-                       ": expected a name (a string)");
-    w->coordinates.push_back(*v);
+  if (!c && space == Space::sphere) w->coordinates = {"x", "y", "z"};
+  if (c) {
+    const toml::array* ca = c->as_array();
+    if (!ca || ca->empty())
+      throw InputError(key_where(path, *c, "system.coordinates") + ": expected a non-empty array of names");
+    for (std::size_t i = 0; i < ca->size(); ++i) {
+      const auto v = ca->get(i)->value<std::string>();
+      if (!ca->get(i)->is_string())
+        throw InputError(key_where(path, *ca->get(i), "system.coordinates[" + std::to_string(i) + "]") +
+                         ": expected a name (a string)");
+      w->coordinates.push_back(*v);
+    }
   }
   if (const toml::node* params = sys.get("params")) {
     if (!params->is_table()) throw InputError(key_where(path, *params, "system.params") + ": expected a table of numbers");
@@ -121,7 +140,8 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   try {
     w->check_names();
   } catch (const std::invalid_argument& e) {
-    throw InputError(key_where(path, *c, "system.coordinates") + ": " + e.what());
+    const toml::node* at = c ? c : sys.get("params") ? sys.get("params") : sys.get("lagrangian");
+    throw InputError(key_where(path, *at, c ? "system.coordinates" : "system.params") + ": " + e.what());
   }
   auto parse = [&](const char* key, WrittenSystem::Kind kind, Expression& out, bool required) {
     const toml::node* n = sys.get(key);
@@ -143,7 +163,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   const toml::node* L = sys.get("lagrangian");
   pr.written_where = key_where(path, *L, "system.lagrangian");
   if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
-  pr.system = &written_system_entry();
+  pr.system = &written_system_entry(space);
   pr.dim = w->dim();
   pr.written = std::move(w);
 }

@@ -2,7 +2,8 @@
 //
 //   [system]
 //   name = "double pendulum"                     # optional, shown in the output
-//   coordinates = ["a", "b"]
+//   space = "R^n"                                # optional: "R^n", "S^2" or "SO(3)"
+//   coordinates = ["a", "b"]                     # S^2: three (default x, y, z); SO(3): none
 //   lagrangian = "... a, b, a_dot, b_dot, parameters ..."
 //   params = { m1 = 1.0, ... }                   # any names, all numbers
 //   energy = "..."                               # optional: q, q_dot and p_q names

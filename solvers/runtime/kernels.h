@@ -23,6 +23,7 @@
 // written retraction x + v: the generic path, one type with the scene's written maps).
 #pragma once
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -203,7 +204,8 @@ std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h
 // (S^2): solve(qa, qb, K, options) -> nodes q_k, p_k. The nodes are written through the
 // recorder as a run's rows (its room checked before the solve); the report gives the
 // ends, the energy's spread, and on a manifold the distance from it and (spread = true)
-// the spread of the conserved momentum along the solution.
+// the spread of the vertical angular momentum J3 (the view's last invariant) along the
+// solution.
 template <class View, class Solver>
 class BoundaryValueRun final : public Run {
  public:
@@ -241,10 +243,11 @@ class BoundaryValueRun final : public Run {
       EK = E;
       emin = std::fmin(emin, E);
       emax = std::fmax(emax, E);
-      if (spread_) {
+      if (spread_) {  // J3, the last of the view's invariants
         view_.invariants(res.q[k], res.p[k], inv);
-        jmin = std::fmin(jmin, inv[0]);
-        jmax = std::fmax(jmax, inv[0]);
+        const double J = inv[std::max(0, view_.invariant_count() - 1)];
+        jmin = std::fmin(jmin, J);
+        jmax = std::fmax(jmax, J);
       }
       if (defect >= 0.0) defect = std::fmax(defect, view_.point_defect(res.q[k]));
       if (rec && rec->wants(static_cast<std::int64_t>(k), steps_)) {

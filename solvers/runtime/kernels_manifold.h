@@ -11,12 +11,14 @@
 
 #include <algorithm>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <type_traits>
 #include <vector>
 
 #include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/manifold_systems.h"
+#include "mechanics/written_manifold.h"
 #include "solvers/manifold_boundary_value.h"
 #include "solvers/manifold_composition.h"
 #include "solvers/manifold_galerkin_step.h"
@@ -90,12 +92,14 @@ std::vector<std::string> point_columns(const SphericalChain<K>&) {
     for (const char* c : {"x", "y", "z"}) out.push_back(c + std::to_string(i));
   return out;
 }
-inline const char* momentum_prefix(const SphericalPendulum&) { return "p"; }
-inline const char* momentum_prefix(const RigidBody&) { return "pi"; }
-inline const char* momentum_prefix(const HeavyTop&) { return "pi"; }
-template <int K>
-const char* momentum_prefix(const SphericalChain<K>&) {
-  return "p";
+// The stored covector's columns: p0, p1, ... (pi0, ... on SO(3)).
+template <class S>
+std::vector<std::string> covector_columns(const S&) {
+  const char* prefix = std::is_same_v<typename S::Manifold, SO3> ? "pi" : "p";
+  std::vector<std::string> out;
+  for (int i = 0; i < S::Manifold::template Tangent<double>::RowsAtCompileTime; ++i)
+    out.push_back(prefix + std::to_string(i));
+  return out;
 }
 inline std::vector<std::string> momentum_columns(const SphericalPendulum&) { return {"J3"}; }
 inline std::vector<std::string> momentum_columns(const RigidBody&) { return {"m0", "m1", "m2"}; }
@@ -108,6 +112,70 @@ std::vector<std::string> momentum_columns(const SphericalChain<K>&) {
 template <class S>
 std::string momentum_name(const S&) {
   return std::is_same_v<S, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
+}
+template <class S>
+std::vector<InvariantReport> momentum_reports(const S& L, const double* I0) {
+  InvariantReport r;
+  r.name = momentum_name(L);
+  for (int i = 0; i < static_cast<int>(momentum_columns(L).size()); ++i) r.initial.push_back(I0[i]);
+  r.legacy_key = momentum_name(L);
+  r.array = true;
+  std::replace(r.name.begin(), r.name.end(), '_', ' ');
+  return {r};
+}
+
+// Written systems (mechanics/written_manifold.h): columns named after the text's
+// names, and J_k for each axis whose rotations leave L unchanged.
+template <class M>
+std::vector<std::string> point_columns(const WrittenManifoldLagrangian<M>& L) {
+  if constexpr (std::is_same_v<M, SO3>)
+    return {"qw", "qx", "qy", "qz"};
+  else
+    return L.system->coordinates;
+}
+template <class M>
+std::vector<std::string> covector_columns(const WrittenManifoldLagrangian<M>& L) {
+  std::vector<std::string> out;
+  for (int i = 0; i < 3; ++i)
+    out.push_back(std::is_same_v<M, SO3> ? "pi" + std::to_string(i + 1)
+                                         : "p_" + L.system->coordinates[static_cast<std::size_t>(i)]);
+  return out;
+}
+template <class M>
+std::vector<double> momentum_map(const WrittenManifoldLagrangian<M>& L, const typename M::template Point<double>& x,
+                                 const V3& p) {
+  return L.momenta(x, p);
+}
+template <class M>
+std::vector<std::string> momentum_columns(const WrittenManifoldLagrangian<M>& L) {
+  std::vector<std::string> out;
+  for (int k = 0; k < 3; ++k)
+    if (L.symmetric_axes[static_cast<std::size_t>(k)]) out.push_back("J" + std::to_string(k + 1));
+  return out;
+}
+template <class M>
+std::vector<InvariantReport> momentum_reports(const WrittenManifoldLagrangian<M>& L, const double* I0) {
+  std::vector<InvariantReport> out;
+  int i = 0;
+  for (int k = 0; k < 3; ++k)
+    if (L.symmetric_axes[static_cast<std::size_t>(k)]) {
+      InvariantReport r;
+      r.name = std::string(std::is_same_v<M, SO3> ? "spatial " : "") + "angular momentum about e" +
+               std::to_string(k + 1);
+      r.initial = {I0[i++]};
+      out.push_back(r);
+    }
+  return out;
+}
+template <class M>
+double monitored_energy(const WrittenManifoldLagrangian<M>& L, const typename M::template Point<double>& x,
+                        const V3& p) {
+  return L.energy_at(x, manifold_legendre_inverse(L, x, p), p);
+}
+template <class S>
+double monitored_energy(const S& L, const typename S::Manifold::template Point<double>& x,
+                        const typename S::Manifold::template Tangent<double>& p) {
+  return manifold_energy(L, x, manifold_legendre_inverse(L, x, p));
 }
 
 // ---- the view -------------------------------------------------------------------------
@@ -122,7 +190,7 @@ struct ManifoldView {
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
     for (const auto& n : point_columns(L)) c.push_back(n);
-    for (int i = 0; i < C; ++i) c.push_back(momentum_prefix(L) + std::to_string(i));
+    for (const auto& n : covector_columns(L)) c.push_back(n);
     c.push_back("energy");
     for (const auto& n : momentum_columns(L)) c.push_back(n);
     return c;
@@ -136,23 +204,13 @@ struct ManifoldView {
     row[k++] = E;
     for (double x : momentum_map(L, q, p)) row[k++] = x;
   }
-  double energy(const Point& q, const Covector& p) const {
-    return manifold_energy(L, q, manifold_legendre_inverse(L, q, p));
-  }
+  double energy(const Point& q, const Covector& p) const { return monitored_energy(L, q, p); }
   int invariant_count() const { return static_cast<int>(momentum_columns(L).size()); }
   void invariants(const Point& q, const Covector& p, double* out) const {
     int k = 0;
     for (double x : momentum_map(L, q, p)) out[k++] = x;
   }
-  std::vector<InvariantReport> invariant_reports(const double* I0) const {
-    InvariantReport r;
-    r.name = momentum_name(L);
-    for (int i = 0; i < invariant_count(); ++i) r.initial.push_back(I0[i]);
-    r.legacy_key = momentum_name(L);
-    r.array = true;
-    std::replace(r.name.begin(), r.name.end(), '_', ' ');
-    return {r};
-  }
+  std::vector<InvariantReport> invariant_reports(const double* I0) const { return momentum_reports(L, I0); }
   double point_defect(const Point& q) const { return Mf::point_defect(q); }
   void finish_report(RunReport& r, const Point& q, const Covector& p) const {
     r.q_final = stored(q);
@@ -163,6 +221,23 @@ struct ManifoldView {
   bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
 };
 
+// Whether J3 is among the conserved momenta (the spread a boundary-value run reports).
+template <class S>
+bool vertical_symmetry(const S&) {
+  return true;
+}
+template <class M>
+bool vertical_symmetry(const WrittenManifoldLagrangian<M>& L) {
+  return L.symmetric_axes[2];
+}
+
+template <class S>
+struct is_written : std::false_type {};
+template <class M>
+struct is_written<WrittenManifoldLagrangian<M>> : std::true_type {};
+
+// The initial state (q, p, v0); refuses a Lagrangian that is degenerate there and a
+// written Hamiltonian that disagrees with the Legendre transform of L.
 template <class S, class Map>
 void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifold::template Point<double>& q,
                             typename Map::Manifold::template Tangent<double>& p,
@@ -174,12 +249,32 @@ void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifol
     q = SO3::from_quaternion(Vec<double, 4>(pr.q[0], pr.q[1], pr.q[2], pr.q[3]));
   else
     q = Eigen::Map<const Point>(pr.q.data());
+  const std::string where = pr.written ? pr.written_where : pr.origin + ": system";
   if (pr.momentum_given) {
     p = Eigen::Map<const Covector>(pr.p.data());
-    v0 = manifold_legendre_inverse(L, q, p);
+    try {
+      v0 = manifold_legendre_inverse(L, q, p);
+    } catch (const DegenerateLagrangianError& e) {
+      throw InputError(where + ": the Lagrangian is degenerate at the initial state: " + e.what());
+    }
   } else {
     v0 = Eigen::Map<const Covector>(pr.v.data());
     p = manifold_legendre(L, q, v0);
+  }
+  if constexpr (is_written<S>::value) {
+    // a Lagrangian written in the scene: its velocity Hessian where the run starts, and
+    // the written Hamiltonian against the Legendre transform of L there
+    require_regular_hessian<Mf::dim>(manifold_velocity_hessian(L, q, v0), where);
+    if (L.has_hamiltonian()) {
+      const double H = hamiltonian_of(L)(q, p), E = manifold_energy(L, q, v0);
+      if (!(std::fabs(H - E) <= 1e-9 * std::fmax(1.0, std::fabs(E)))) {
+        std::ostringstream m;
+        m.precision(17);
+        m << pr.hamiltonian_where << ": system.hamiltonian does not match the Legendre transform of the Lagrangian "
+          << "at the initial state: H(x, p) = " << H << " but E_L(x, v) = <p, v> - L = " << E;
+        throw InputError(m.str());
+      }
+    }
   }
 }
 
@@ -210,7 +305,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   using Point = typename View::Point;
   using Covector = typename View::Covector;
   const View view{L};
-  RunReport base = base_report(pr, me, pr.system->name);
+  RunReport base = base_report(pr, me, L.name());
   base.manifold = Mf::name;
   const StepOptions opt = me.step_options();
   const double h = pr.step;
@@ -219,7 +314,8 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
     if constexpr (BoundaryValue)
       return std::make_unique<BoundaryValueRun<View, SphereBoundaryValueProblem<S, Map>>>(
           view, SphereBoundaryValueProblem<S, Map>(L, R, h), Point(pr.q[0], pr.q[1], pr.q[2]),
-          Point(pr.q_final[0], pr.q_final[1], pr.q_final[2]), pr.steps, h, me.max_iterations, base, true);
+          Point(pr.q_final[0], pr.q_final[1], pr.q_final[2]), pr.steps, h, me.max_iterations, base,
+          vertical_symmetry(L));
     else
       throw InputError("problem.kind: unsupported");  // refused by validate()
   }

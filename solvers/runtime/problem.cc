@@ -106,8 +106,8 @@ std::string form_list(const std::vector<Form>& forms) {
 
 void require_boundary_value(const SystemEntry& sys) {
   if (!sys.caps.boundary_value)
-    throw InputError("problem.kind: boundary-value problems run on the fixed-size R^n systems and the spherical "
-                     "pendulum only, not on " + sys.name + (sys.caps.note.empty() ? "" : " (" + sys.caps.note + ")"));
+    throw InputError("problem.kind: boundary-value problems run on the fixed-size R^n systems, the spherical "
+                     "pendulum and Lagrangians written on S^2 only, not on " + sys.name + (sys.caps.note.empty() ? "" : " (" + sys.caps.note + ")"));
 }
 
 void validate(const Problem& pr, const Method& me) {
@@ -129,10 +129,25 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError("problem.steps: got " + std::to_string(pr.steps) + ", expected a whole number from 2 to 100000000");
   }
 
+  // [system] written on a space: the entry of that space
+  if (pr.written) {
+    const Space space = pr.written->space == WrittenSystem::Space::sphere     ? Space::sphere
+                        : pr.written->space == WrittenSystem::Space::rotation ? Space::rotation
+                                                                              : Space::euclidean;
+    if (&sys != &written_system_entry(space))
+      throw InputError(std::string("system.space: the written system lives on ") + to_string(space) +
+                       " but the problem names the system entry \"" + name + "\" on " + to_string(sys.space));
+  }
+
   // [integrator] form
   if (std::find(caps.forms.begin(), caps.forms.end(), me.form) == caps.forms.end())
     throw InputError("integrator.form: " + name + " runs the " + form_list(caps.forms) + " form" +
                      (caps.forms.size() > 1 ? "s" : "") + " only, got \"" + to_string(me.form) + "\"" + note);
+  if (me.form == Form::hamiltonian && pr.written && sys.space != Space::euclidean && pr.written->hamiltonian.empty())
+    throw InputError(std::string("integrator.form: on ") + to_string(sys.space) +
+                     " the hamiltonian form runs the Hamiltonian written in the scene (system.hamiltonian, in " +
+                     (sys.space == Space::sphere ? "the coordinates and their momenta p_<name>" : "R11 ... R33 and pi1 pi2 pi3") +
+                     "); this scene writes none");
 
   // [integrator] method = "galerkin"
   if (me.galerkin) {

@@ -285,10 +285,27 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
   throw InputError(where + ": unknown system \"" + echo(name) + "\"; expected one of: " + join(names));
 }
 
-const SystemEntry& written_system_entry() {
-  static const SystemEntry entry = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
-                                    factories::written, "the coordinates"};
-  return entry;
+const SystemEntry& written_system_entry(Space space) {
+  static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
+                                 factories::written, "the coordinates"};
+  // On S^2 and SO(3) a written Lagrangian runs the steps of the built-in systems there;
+  // its Hamiltonian form needs the written H (validate checks that it is given).
+  static const SystemEntry sphere = {
+      "lagrangian", "written in the scene in x, x_dot (the embedded unit vector)", Space::sphere, 3, {},
+      {{Form::lagrangian, Form::hamiltonian}, true, true, true, true,
+       "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)", true, false},
+      factories::written_sphere, ""};
+  static const SystemEntry rotation = {
+      "lagrangian", "written in the scene in R, w (the body angular velocity)", Space::rotation, 3, {},
+      {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
+       "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2", true, false},
+      factories::written_rotation, ""};
+  switch (space) {
+    case Space::euclidean: return rn;
+    case Space::sphere: return sphere;
+    case Space::rotation: return rotation;
+  }
+  return rn;
 }
 
 }  // namespace dvm

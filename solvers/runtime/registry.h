@@ -139,7 +139,8 @@ struct SystemEntry {
 const std::vector<SystemEntry>& system_registry();
 // Throws InputError ("<where>: unknown system ...; expected one of: ...").
 const SystemEntry& find_system_entry(const std::string& name, const std::string& where);
-// The entry of Lagrangians written in a scene (name "lagrangian", not listed as built-in).
-const SystemEntry& written_system_entry();
+// The entry of Lagrangians written in a scene on R^n, S^2 or SO(3) (name "lagrangian",
+// not listed as built-in).
+const SystemEntry& written_system_entry(Space space = Space::euclidean);
 
 }  // namespace dvm

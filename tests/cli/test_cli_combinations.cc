@@ -1,7 +1,7 @@
 // Every combination the registries can name, through `dvm run`: for each system of
-// `dvm systems` (and a written one), each map of its space (and none), each form,
-// compositions of each kind, each Galerkin method, and boundary values, a run of three
-// steps must either
+// `dvm systems` (and the written ones on R^n, S^2 and SO(3)), each map of its space
+// (and none), each form, compositions of each kind, each Galerkin method, and boundary
+// values, a run of three steps must either
 //   - exit 0 with the method it asked for (the JSON's map, form, composition and
 //     method are the ones requested) and a plausible result (finite, and within 1e-2
 //     of the plain midpoint run of the same system), or
@@ -49,6 +49,13 @@ const std::map<std::string, std::string>& heads() {
        "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + "
        "2*cos(a) + cos(b)\"\nhamiltonian = \"(p_a^2 + 2*p_b^2 - 2*p_a*p_b*cos(a - b))/(2*(1 + sin(a - b)^2)) - "
        "2*cos(a) - cos(b)\"\n[initial]\nq = [0.5, 0.3]\nv = [0.0, 0.0]\n"},
+      {"lagrangian on S^2",
+       "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
+       "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
+      {"lagrangian on SO(3)",
+       "[system]\nspace = \"SO(3)\"\nlagrangian = \"(w1^2 + w2^2 + w3^2/2)/2 - R33\"\n"
+       "hamiltonian = \"(pi1^2 + pi2^2 + 2*pi3^2)/2 + R33\"\n[initial]\n"
+       "rotation = [0.9689124217106447, 0.24740395925452294, 0.0, 0.0]\nomega = [0.0, 0.3, 5.0]\n"},
       {"spherical-pendulum",
        "[system]\nbuiltin = \"spherical-pendulum\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
       {"spherical-chain",
@@ -106,6 +113,14 @@ std::vector<SystemCaps> registry_systems() {
   w.forms = {"lagrangian", "hamiltonian"};
   w.retraction = w.composition = w.galerkin = true;  // written maps: no (run-time-sized steps)
   out.push_back(w);
+  // written on S^2 and SO(3): the capabilities of the spherical pendulum and the top
+  for (const char* space : {"S^2", "SO(3)"}) {
+    SystemCaps c = w;
+    c.space = space;
+    c.name = "lagrangian on " + c.space;
+    c.boundary_value = c.space == "S^2";
+    out.push_back(c);
+  }
   return out;
 }
 

@@ -337,6 +337,109 @@ BOOST_AUTO_TEST_CASE(written_systems_name_their_columns) {
   BOOST_TEST(first_line(csv2) == "t,q0,q1,p0,p1,energy");
 }
 
+// Lagrangians written on S^2 and SO(3) run the built-ins' steps from the scene: the
+// shipped scenes reproduce the built-in pendulum and top (every method is compared in
+// tests/solvers/test_written_manifold.cc), name their columns, report J3, and every
+// key that does not fit the space is refused with exit 2, naming it.
+BOOST_AUTO_TEST_CASE(lagrangians_written_on_curved_spaces) {
+  struct Twin {
+    const char* written;
+    const char* builtin;
+    const char* header;
+  };
+  for (const Twin& t : {Twin{"spherical_pendulum_written.toml", "spherical-pendulum.toml", "t,x,y,z,p_x,p_y,p_z,energy,J3"},
+                        Twin{"heavy_top_written.toml", "heavy-top.toml", "t,qw,qx,qy,qz,pi1,pi2,pi3,energy,J3"}}) {
+    BOOST_TEST_CONTEXT(t.written) {
+      const std::string csv = temp_dir() + "/written_manifold.csv";
+      for (const char* form : {"lagrangian", "hamiltonian"}) {
+        const std::vector<std::string> sets = {"--set", "integrator.t_end=0.5", "--set",
+                                               std::string("integrator.form=\"") + form + "\""};
+        std::vector<std::string> a = {"run", scene(t.written), "--json", "--quiet", "--csv", csv};
+        std::vector<std::string> b = {"run", scene(t.builtin), "--json", "--quiet", "--csv", csv};
+        a.insert(a.end(), sets.begin(), sets.end());
+        b.insert(b.end(), sets.begin(), sets.end());
+        const Output w = dvm(a);
+        BOOST_TEST(w.status == 0, w.err);
+        BOOST_TEST(first_line(csv) == t.header);
+        const Output o = dvm(b);
+        BOOST_TEST(o.status == 0, o.err);
+        const auto qw = json_array(w.out, "q_final"), qb = json_array(o.out, "q_final");
+        BOOST_TEST_REQUIRE(qw.size() == qb.size());
+        for (std::size_t i = 0; i < qw.size(); ++i) BOOST_TEST(std::fabs(qw[i] - qb[i]) <= 1e-13, form);
+        const bool reports_j3 = w.out.find("\"angular momentum about e3\"") != std::string::npos ||
+                                w.out.find("\"spatial angular momentum about e3\"") != std::string::npos;
+        BOOST_TEST(reports_j3, w.out);
+      }
+    }
+  }
+  // the coordinates of S^2 named in the scene name the columns
+  const Output named = dvm({"run", scene("spherical_pendulum_written.toml"), "--quiet", "--csv",
+                            temp_dir() + "/abc.csv", "--set", "integrator.t_end=0.1", "--set",
+                            "system.coordinates=[\"a\", \"b\", \"c\"]", "--set",
+                            "system.lagrangian=\"0.5*(a_dot^2 + b_dot^2 + c_dot^2) - g*c\"", "--set",
+                            "system.hamiltonian=\"0.5*(p_a^2 + p_b^2 + p_c^2) + g*c\""});
+  BOOST_TEST(named.status == 0, named.err);
+  BOOST_TEST(first_line(temp_dir() + "/abc.csv") == "t,a,b,c,p_a,p_b,p_c,energy,J3");
+
+  struct Refused {
+    const char* scene;
+    std::vector<std::string> sets;
+    const char* key;
+    const char* says;
+  };
+  const char* sp = "spherical_pendulum_written.toml";
+  const char* top = "heavy_top_written.toml";
+  for (const Refused& r : std::vector<Refused>{
+           {sp, {"system.space=\"S3\""}, "system.space", "expected \"R^n\", \"S^2\" or \"SO(3)\""},
+           {sp, {"system.coordinates=[\"x\", \"y\"]"}, "system.coordinates", "3 components"},
+           {top, {"system.coordinates=[\"a\"]"}, "system.coordinates", "names are fixed"},
+           {top, {"system.params.w1=2.0"}, "system.params", "used twice"},
+           {sp, {"system.lagrangian=\"0.5*(x_dot^2 + y_dot^2 + w_dot^2)\""}, "system.lagrangian", "unknown name 'w_dot'"},
+           {top, {"system.lagrangian=\"0.5*(w1^2 + w2^2 + w3^2) - z\""}, "system.lagrangian", "unknown name 'z'"},
+           {sp, {"system.hamiltonian=\"(p_x^2 + p_y^2 + p_z^2) + m*g*l*z\""}, "system.hamiltonian",
+            "does not match the Legendre transform"},
+           // z_dot^2 alone: the velocity Hessian has rank 1 on the tangent plane
+           {sp, {"system.lagrangian=\"z_dot^2 - z\""}, "system.lagrangian", "degenerate"},
+           {sp, {"integrator.form=\"sode1\""}, "integrator.form", "lagrangian and hamiltonian"},
+           {top, {"integrator.form=\"newmark\""}, "integrator.form", "lagrangian and hamiltonian"},
+           {sp, {"integrator.map=\"midpoint\""}, "integrator.map", "lives on R^n"},
+           {top, {"integrator.map=\"sphere-exp\""}, "integrator.map", "lives on S^2"},
+           {sp, {"integrator.map=\"written\"", "map.q0=\"x - v/2\"", "map.q1=\"x + v/2\""}, "integrator.map",
+            "lives on R^n"},
+           {top, {"problem.kind=\"boundary-value\"", "problem.q_final=[1.0, 0.0, 0.0, 0.0]"}, "problem.kind",
+            "boundary-value"},
+           {top, {"integrator.form=\"hamiltonian\"", "system.hamiltonian=\"\""}, "system.hamiltonian", ""},
+       }) {
+    std::vector<std::string> args = {"run", scene(r.scene), "--quiet", "--csv", temp_dir() + "/refused.csv"};
+    for (const std::string& k : r.sets) {
+      args.push_back("--set");
+      args.push_back(k);
+    }
+    const Output o = dvm(args);
+    BOOST_TEST_CONTEXT(r.scene << " " << r.sets[0]) {
+      BOOST_TEST(o.status == 2, o.err);
+      BOOST_TEST(o.err.find(r.key) != std::string::npos, o.err);
+      BOOST_TEST(o.err.find(r.says) != std::string::npos, o.err);
+    }
+  }
+  // without a written H, the hamiltonian form is refused naming integrator.form
+  const std::string no_h = write_scene(
+      "top_no_h.toml", "[system]\nspace = \"SO(3)\"\nlagrangian = \"(w1^2 + 2*w2^2 + 3*w3^2)/2\"\n[initial]\n"
+                       "rotation = [1.0, 0.0, 0.0, 0.0]\nomega = [0.1, 1.0, 0.2]\n[integrator]\nmap = \"so3-cayley\"\n"
+                       "step = 0.01\nsteps = 10\nform = \"hamiltonian\"\n");
+  const Output nh = dvm({"run", no_h, "--quiet"});
+  BOOST_TEST(nh.status == 2, nh.err);
+  BOOST_TEST(nh.err.find("key 'integrator.form': on SO(3) the hamiltonian form runs the Hamiltonian written") !=
+                 std::string::npos,
+             nh.err);
+  // the free body written without H: the lagrangian form conserves all three J_k
+  const Output fb = dvm({"run", no_h, "--json", "--quiet", "--set", "integrator.form=\"lagrangian\""});
+  BOOST_TEST(fb.status == 0, fb.err);
+  for (const char* k : {"spatial angular momentum about e1", "spatial angular momentum about e2",
+                        "spatial angular momentum about e3"})
+    BOOST_TEST(fb.out.find(std::string("\"") + k + "\"") != std::string::npos, k << "\n" << fb.out);
+}
+
 // Sizes known only at run time run through the run-time-sized kernels: a written chain
 // of 12 coordinates (its total momentum conserved to round-off: the potential depends
 // on differences only) and an N-body scene of 8 bodies.

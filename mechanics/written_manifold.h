@@ -1,0 +1,201 @@
+// Lagrangians and Hamiltonians written in a scene on S^2 and SO(3): a WrittenSystem
+// (mechanics/written_lagrangian.h) whose space is the sphere or the rotation group,
+// evaluated as a system of mechanics/manifold_systems.h, so every step, map,
+// composition and Galerkin method built for the spherical pendulum, the rigid body
+// and the heavy top runs it unchanged.
+//
+//   S^2    L(x, v): x the embedded unit vector, v = dx/dt tangent at x (v.x = 0); the
+//          text names their components after the coordinates (default x, y, z and
+//          x_dot, y_dot, z_dot). H(x, p) takes the stored covector p (a tangent
+//          3-vector acting by v -> p.v) as p_x, p_y, p_z.
+//   SO(3)  L(R, w): R11 ... R33 the entries of the rotation matrix, w1 w2 w3 the body
+//          angular velocity (dR/dt = R hat(w)); H(R, pi) with pi1 pi2 pi3 the body
+//          angular momentum.
+//
+// The text is evaluated for every scalar type the steps use (nested Jets included):
+// each evaluation reads the stored point and vector in place.
+//
+// Symmetries. A rotation Q about a coordinate axis e_k acts on S^2 by (x, v) ->
+// (Q x, Q v) and on SO(3) by left multiplication (R, w) -> (Q R, w). Where L is
+// invariant, Noether's theorem conserves J_k = (x cross p)_k on S^2 and the spatial
+// angular momentum component J_k = (R pi)_k on SO(3). rotation_symmetries() finds the
+// axes numerically: L at a few fixed sample states against L at their rotated images,
+// equal to 1e-10 relative. Those J_k are reported as invariants; the built-in systems
+// report the same quantities (vertical for the pendulum and the top, all three for the
+// free body).
+#pragma once
+
+#include <array>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "mechanics/manifold_systems.h"
+#include "mechanics/written_lagrangian.h"
+
+namespace dvm {
+
+namespace written_manifold_detail {
+
+template <class M>
+constexpr WrittenSystem::Space space_of() {
+  static_assert(std::is_same_v<M, Sphere> || std::is_same_v<M, SO3>, "written systems live on R^n, S^2 or SO(3)");
+  return std::is_same_v<M, Sphere> ? WrittenSystem::Space::sphere : WrittenSystem::Space::rotation;
+}
+
+template <class M>
+const std::shared_ptr<const WrittenSystem>& checked(const std::shared_ptr<const WrittenSystem>& s) {
+  if (!s || s->lagrangian.empty()) throw std::invalid_argument("a written system needs a Lagrangian");
+  if (s->space != space_of<M>())
+    throw std::invalid_argument(s->name + ": the written system does not live on " + std::string(M::name));
+  return s;
+}
+
+// The rotation by angle a about the coordinate axis k.
+inline Mat<double, 3, 3> axis_rotation(int k, double a) {
+  Vec<double, 3> w = Vec<double, 3>::Zero();
+  w[k] = a;
+  return SO3::exp(w);
+}
+
+}  // namespace written_manifold_detail
+
+template <class M>
+struct WrittenManifoldLagrangian {
+  using Manifold = M;
+  static constexpr int dim = M::dim;
+  template <class T>
+  using P = typename M::template Point<T>;
+  template <class T>
+  using V = typename M::template Tangent<T>;
+
+  std::shared_ptr<const WrittenSystem> system;
+  std::array<bool, 3> symmetric_axes{};  // L is invariant under rotations about e_k
+
+  explicit WrittenManifoldLagrangian(std::shared_ptr<const WrittenSystem> s)
+      : system(written_manifold_detail::checked<M>(s)) {
+    symmetric_axes = rotation_symmetries();
+  }
+  std::string name() const { return system->name; }
+
+  // (one overload per space: the scalar is deduced from the argument types)
+  template <class T>
+  T operator()(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+    static_assert(std::is_same_v<M, Sphere>, "a point of S^2 is a 3-vector");
+    return system->lagrangian(x.data(), v.data());
+  }
+  template <class T>
+  T operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
+    static_assert(std::is_same_v<M, SO3>, "a point of SO(3) is a 3x3 matrix");
+    return system->lagrangian(R.data(), w.data());
+  }
+
+  // The monitored energy: the written one if given, else E_L = <dL/dv, v> - L.
+  double energy_at(const P<double>& x, const V<double>& v, const V<double>& p) const {
+    if (!system->energy.empty()) return system->energy(x.data(), v.data(), p.data());
+    return manifold_energy(*this, x, v);
+  }
+  bool has_hamiltonian() const { return !system->hamiltonian.empty(); }
+
+  // J_k for each symmetric axis k, in order.
+  std::vector<double> momenta(const P<double>& x, const V<double>& p) const {
+    Vec<double, 3> J;
+    if constexpr (std::is_same_v<M, Sphere>)
+      J = x.cross(p);
+    else
+      J = x * p;
+    std::vector<double> out;
+    for (int k = 0; k < 3; ++k)
+      if (symmetric_axes[static_cast<std::size_t>(k)]) out.push_back(J[k]);
+    return out;
+  }
+
+  // Which rotations about e1, e2, e3 leave L unchanged (see the header comment).
+  std::array<bool, 3> rotation_symmetries() const {
+    using written_manifold_detail::axis_rotation;
+    // fixed sample states, not aligned with any axis
+    const Vec<double, 3> dirs[3] = {{0.48, -0.6, 0.64}, {-0.36, 0.8, 0.48}, {0.8, 0.36, -0.48}};
+    const Vec<double, 3> vels[3] = {{0.7, -0.2, 0.5}, {-0.3, 0.9, 0.4}, {0.2, 0.6, -1.1}};
+    std::array<bool, 3> out{};
+    for (int k = 0; k < 3; ++k) {
+      bool invariant = true;
+      int compared = 0;
+      for (int s = 0; s < 3 && invariant; ++s)
+        for (double a : {0.7, 2.3}) {
+          const Mat<double, 3, 3> Q = axis_rotation(k, a);
+          double L0, L1;
+          if constexpr (std::is_same_v<M, Sphere>) {
+            const Vec<double, 3> x = dirs[s].normalized();
+            const Vec<double, 3> v = vels[s] - vels[s].dot(x) * x;
+            L0 = (*this)(x, v);
+            L1 = (*this)(Vec<double, 3>(Q * x), Vec<double, 3>(Q * v));
+          } else {
+            const Mat<double, 3, 3> R = SO3::exp(Vec<double, 3>(1.3 * dirs[s]));
+            L0 = (*this)(R, vels[s]);
+            L1 = (*this)(Mat<double, 3, 3>(Q * R), vels[s]);
+          }
+          if (!std::isfinite(L0) && !std::isfinite(L1)) continue;  // outside L's domain here
+          ++compared;
+          if (!(std::fabs(L1 - L0) <= 1e-10 * std::fmax(1.0, std::fabs(L0)))) {
+            invariant = false;
+            break;
+          }
+        }
+      out[static_cast<std::size_t>(k)] = invariant && compared > 0;
+    }
+    return out;
+  }
+};
+
+template <class M>
+struct WrittenManifoldHamiltonian {
+  using Manifold = M;
+  std::shared_ptr<const WrittenSystem> system;
+  std::string name() const { return system->name; }
+  template <class T>
+  T operator()(const Vec<T, 3>& x, const Vec<T, 3>& p) const {
+    static_assert(std::is_same_v<M, Sphere>, "a point of S^2 is a 3-vector");
+    return system->hamiltonian(x.data(), static_cast<const T*>(nullptr), p.data());
+  }
+  template <class T>
+  T operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& pi) const {
+    static_assert(std::is_same_v<M, SO3>, "a point of SO(3) is a 3x3 matrix");
+    return system->hamiltonian(R.data(), static_cast<const T*>(nullptr), pi.data());
+  }
+};
+
+// The written Hamiltonian (the Hamiltonian form takes only written-out Hamiltonians on
+// curved spaces: mechanics/manifold_hamiltonian.h). Throws when the scene gives none.
+template <class M>
+WrittenManifoldHamiltonian<M> hamiltonian_of(const WrittenManifoldLagrangian<M>& L) {
+  if (!L.has_hamiltonian())
+    throw std::invalid_argument(L.name() + ": the Hamiltonian form on " + std::string(M::name) +
+                                " needs the Hamiltonian written in the scene (system.hamiltonian)");
+  return {L.system};
+}
+
+// The velocity Hessian d2L/dnu2 in the coordinates of T_x M (nested Jets), for the
+// check that the Legendre transform is invertible at a state.
+template <class S>
+Mat<double, S::Manifold::dim, S::Manifold::dim> manifold_velocity_hessian(
+    const S& L, const typename S::Manifold::template Point<double>& x,
+    const typename S::Manifold::template Tangent<double>& v) {
+  using M = typename S::Manifold;
+  constexpr int n = M::dim;
+  using D = ceres::Jet<double, n>;
+  using DD = ceres::Jet<D, n>;
+  const Vec<double, n> nu = M::tangent_coordinates(x, v);
+  Vec<DD, n> nud;
+  for (int i = 0; i < n; ++i) nud[i] = seed<D, n>(seed<double, n>(nu[i], i), i);
+  typename M::template Point<DD> xdd;
+  for (int i = 0; i < x.size(); ++i) xdd(i) = DD(D(x(i)));
+  const DD l = L(xdd, M::tangent(x, nud));
+  Mat<double, n, n> H;
+  for (int i = 0; i < n; ++i) H.row(i) = l.v[i].v.transpose();
+  return H;
+}
+
+}  // namespace dvm

@@ -1,0 +1,263 @@
+// Lagrangians written on S^2 and SO(3) (mechanics/written_manifold.h) against the
+// built-in spherical pendulum and heavy top: the same numbers with every map, form,
+// composition, Galerkin method and boundary-value problem the built-ins run, through
+// the runtime API (solvers/runtime/run.h), so the test compiles no kernel of its own.
+#define BOOST_TEST_MODULE written_manifold
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mechanics/manifold_hamiltonian.h"
+#include "mechanics/written_manifold.h"
+#include "solvers/runtime/problem.h"
+#include "solvers/runtime/run.h"
+
+using namespace dvm;
+
+namespace {
+
+std::shared_ptr<WrittenSystem> written(WrittenSystem::Space space, const std::string& L, const std::string& H,
+                                       std::vector<std::pair<std::string, double>> params) {
+  auto w = std::make_shared<WrittenSystem>();
+  w->space = space;
+  w->name = "written";
+  if (space == WrittenSystem::Space::sphere) w->coordinates = {"x", "y", "z"};
+  w->params = std::move(params);
+  w->check_names();
+  w->lagrangian = Expression::parse(L, w->symbols(WrittenSystem::Kind::lagrangian));
+  if (!H.empty()) w->hamiltonian = Expression::parse(H, w->symbols(WrittenSystem::Kind::hamiltonian));
+  return w;
+}
+
+const char* kPendulumL = "0.5*m*l^2*(x_dot^2 + y_dot^2 + z_dot^2) - m*g*l*z";
+const char* kPendulumH = "(p_x^2 + p_y^2 + p_z^2)/(2*m*l^2) + m*g*l*z";
+const char* kTopL = "0.5*(I1*w1^2 + I2*w2^2 + I3*w3^2) - m*g*(R31*chi1 + R32*chi2 + R33*chi3)";
+const char* kTopH = "pi1^2/(2*I1) + pi2^2/(2*I2) + pi3^2/(2*I3) + m*g*(R31*chi1 + R32*chi2 + R33*chi3)";
+
+std::shared_ptr<WrittenSystem> pendulum(double m, double l, double g) {
+  return written(WrittenSystem::Space::sphere, kPendulumL, kPendulumH, {{"m", m}, {"l", l}, {"g", g}});
+}
+std::shared_ptr<WrittenSystem> top(const Vec<double, 3>& I, double m, double g, const Vec<double, 3>& chi) {
+  return written(WrittenSystem::Space::rotation, kTopL, kTopH,
+                 {{"I1", I[0]}, {"I2", I[1]}, {"I3", I[2]}, {"m", m}, {"g", g}, {"chi1", chi[0]}, {"chi2", chi[1]},
+                  {"chi3", chi[2]}});
+}
+
+double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
+  if (a.size() != b.size() || a.empty()) return INFINITY;
+  double d = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+  return d;
+}
+
+// The built-in and the written problem with the same state and grid.
+struct Pair {
+  Problem builtin, text;
+};
+
+Pair pendulum_pair(bool boundary_value) {
+  Pair s;
+  s.builtin.system = &find_system_entry("spherical-pendulum", "test");
+  s.builtin.params = {{"m", 1.3}, {"l", 0.8}, {"g", 9.81}};
+  s.builtin.dim = 3;
+  s.builtin.q = {0.6, 0.0, -0.8};
+  if (boundary_value) {
+    s.builtin.boundary_value = true;
+    s.builtin.q_final = {0.0, 0.6, -0.8};
+    s.builtin.steps = 8;
+    s.builtin.step = 0.1;
+  } else {
+    s.builtin.v = {0.0, 1.5, 0.0};
+    s.builtin.steps = 6;
+    s.builtin.step = 0.01;
+  }
+  s.text = s.builtin;
+  s.text.system = &written_system_entry(Space::sphere);
+  s.text.written = pendulum(1.3, 0.8, 9.81);
+  s.text.params.clear();
+  return s;
+}
+
+Pair top_pair() {
+  Pair s;
+  s.builtin.system = &find_system_entry("heavy-top", "test");
+  s.builtin.params = {{"I1", 1.0}, {"I2", 1.4}, {"I3", 0.5}, {"m", 1.0}, {"g", 1.0},
+                      {"chi1", 0.1}, {"chi2", -0.2}, {"chi3", 1.0}};
+  s.builtin.dim = 3;
+  s.builtin.q = {0.9689124217106447, 0.24740395925452294, 0.0, 0.0};
+  s.builtin.v = {0.1, 0.3, 5.0};
+  s.builtin.steps = 4;
+  s.builtin.step = 0.01;
+  s.text = s.builtin;
+  s.text.system = &written_system_entry(Space::rotation);
+  s.text.written = top(Vec<double, 3>(1.0, 1.4, 0.5), 1.0, 1.0, Vec<double, 3>(0.1, -0.2, 1.0));
+  s.text.params.clear();
+  return s;
+}
+
+RunReport run(const Problem& pr, const Method& me) { return make_run(pr, me)->execute(nullptr); }
+
+// Runs both problems with `me` and checks that they agree to round-off.
+int compare(const Pair& s, const Method& me, const std::string& what) {
+  const RunReport a = run(s.builtin, me), b = run(s.text, me);
+  BOOST_TEST_CONTEXT(what << " (" << me.label() << ")") {
+    BOOST_TEST(!a.failed, a.message);
+    BOOST_TEST(!b.failed, b.message);
+    BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-13);
+    BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-12);
+    BOOST_TEST(std::fabs(a.energy_final - b.energy_final) <= 1e-12 * std::fmax(1.0, std::fabs(a.energy_final)));
+    if (s.builtin.boundary_value) {
+      BOOST_TEST(max_diff(a.p_initial, b.p_initial) <= 1e-12);
+      // the spread of J3 along the solution (its discrete conservation)
+      BOOST_TEST(a.momentum_spread >= 0.0);
+      BOOST_TEST(b.momentum_spread >= 0.0);
+      BOOST_TEST(b.momentum_spread <= 1e-12);
+      return 1;
+    }
+    // the invariant the built-in reports (J3) is the one found in the written L
+    BOOST_TEST_REQUIRE(a.invariants.size() == 1u);
+    BOOST_TEST_REQUIRE(b.invariants.size() == 1u);
+    BOOST_TEST(max_diff(a.invariants[0].initial, b.invariants[0].initial) <= 1e-13);
+  }
+  return 1;
+}
+
+// Every map of the space (theta maps also at theta = 0.3), both forms, every
+// composition; every Galerkin method.
+int every_method(const Pair& s, Space space) {
+  int n = 0;
+  std::vector<std::string> compositions = {"none"};
+  for (const CompositionScheme& c : composition_schemes()) compositions.push_back(c.name);
+  for (const MapEntry& e : map_registry()) {
+    if (e.space != space) continue;
+    std::vector<double> thetas = {e.theta};
+    if (e.takes_theta) thetas.push_back(0.3);
+    for (double th : thetas)
+      for (Form f : {Form::lagrangian, Form::hamiltonian})
+        for (const std::string& c : compositions) {
+          // the non-closed-form theta maps (Newton inverse) under the long compositions
+          // cost seconds each; their step is the same, one composition covers them
+          if (th == 0.3 && !e.closed_inverse && c != "none" && c != "triple-jump") continue;
+          Method me;
+          me.form = f;
+          me.map = &e;
+          me.theta = th;
+          me.composition = c;
+          n += compare(s, me, e.name);
+        }
+  }
+  Method dirk;
+  dirk.map = &find_map_entry(space == Space::sphere ? "sphere-exp" : "so3-cayley", "test");
+  dirk.composition = "dirk";
+  dirk.weights = {0.3, 0.4, 0.3};
+  n += compare(s, dirk, "dirk");
+  for (const GalerkinEntry& g : galerkin_registry()) {
+    Method me;
+    me.galerkin = true;
+    me.stages = g.stages;
+    me.quadrature = g.quadrature;
+    n += compare(s, me, "galerkin");
+  }
+  return n;
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(written_lagrangians_evaluate_like_the_builtin_ones) {
+  const SphericalPendulum sp(1.3, 0.8, 9.81);
+  const WrittenManifoldLagrangian<Sphere> wp(pendulum(1.3, 0.8, 9.81));
+  const HeavyTop ht(Vec<double, 3>(1.0, 1.4, 0.5), 1.0, 1.0, Vec<double, 3>(0.1, -0.2, 1.0));
+  const WrittenManifoldLagrangian<SO3> wt(top(Vec<double, 3>(1.0, 1.4, 0.5), 1.0, 1.0, Vec<double, 3>(0.1, -0.2, 1.0)));
+  for (int k = 0; k < 5; ++k) {
+    const Vec<double, 3> x = Vec<double, 3>(0.3 + k, -0.5, 0.2 * k - 0.4).normalized();
+    const Vec<double, 3> u(0.7, 1.1 - k, 0.4);
+    const Vec<double, 3> v = u - u.dot(x) * x;
+    BOOST_TEST(std::fabs(sp(x, v) - wp(x, v)) <= 1e-13);
+    BOOST_TEST((manifold_legendre(sp, x, v) - manifold_legendre(wp, x, v)).norm() <= 1e-13);
+    const Vec<double, 3> p = manifold_legendre(sp, x, v);
+    BOOST_TEST(std::fabs(hamiltonian_of(sp)(x, p) - hamiltonian_of(wp)(x, p)) <= 1e-13);
+    const Mat<double, 3, 3> R = SO3::exp(Vec<double, 3>(0.4 * k, -0.3, 1.0));
+    BOOST_TEST(std::fabs(ht(R, u) - wt(R, u)) <= 1e-13);
+    BOOST_TEST(std::fabs(hamiltonian_of(ht)(R, u) - hamiltonian_of(wt)(R, u)) <= 1e-13);
+  }
+  // the velocity Hessian in tangent coordinates: m l^2 I on S^2, diag(I) on SO(3)
+  const Vec<double, 3> x(0.6, 0.0, -0.8), v(0.0, 1.5, 0.0);
+  BOOST_TEST((manifold_velocity_hessian(wp, x, v) - 1.3 * 0.64 * Mat<double, 2, 2>::Identity()).norm() <= 1e-13);
+  BOOST_TEST((manifold_velocity_hessian(wt, Mat<double, 3, 3>::Identity(), v) -
+              Mat<double, 3, 3>(Vec<double, 3>(1.0, 1.4, 0.5).asDiagonal()))
+                 .norm() <= 1e-13);
+}
+
+BOOST_AUTO_TEST_CASE(rotation_symmetries_are_found_in_the_text) {
+  using A = std::array<bool, 3>;
+  const auto S = WrittenSystem::Space::sphere;
+  const auto R = WrittenSystem::Space::rotation;
+  // gravity along e3: rotations about the vertical only
+  BOOST_TEST((WrittenManifoldLagrangian<Sphere>(pendulum(1.0, 1.0, 1.0)).symmetric_axes == A{false, false, true}));
+  // no potential: every rotation
+  BOOST_TEST((WrittenManifoldLagrangian<Sphere>(pendulum(1.0, 1.0, 0.0)).symmetric_axes == A{true, true, true}));
+  // gravity along e1
+  BOOST_TEST((WrittenManifoldLagrangian<Sphere>(written(S, "(x_dot^2 + y_dot^2 + z_dot^2)/2 - x", "", {}))
+                  .symmetric_axes == A{true, false, false}));
+  // a potential x y breaks every rotation about a coordinate axis
+  BOOST_TEST((WrittenManifoldLagrangian<Sphere>(written(S, "(x_dot^2 + y_dot^2 + z_dot^2)/2 - x*y", "", {}))
+                  .symmetric_axes == A{false, false, false}));
+  // the free rigid body: all three; the heavy top: the vertical
+  BOOST_TEST((WrittenManifoldLagrangian<SO3>(written(R, "(w1^2 + 2*w2^2 + 3*w3^2)/2", "", {})).symmetric_axes ==
+              A{true, true, true}));
+  BOOST_TEST((WrittenManifoldLagrangian<SO3>(top(Vec<double, 3>(1, 1, 0.5), 1.0, 1.0, Vec<double, 3>(0.1, 0.0, 1.0)))
+                  .symmetric_axes == A{false, false, true}));
+  // a potential in the first column of R (the body e1 axis seen in space) with
+  // weights along e2: rotations about e2 only
+  BOOST_TEST((WrittenManifoldLagrangian<SO3>(written(R, "(w1^2 + w2^2 + w3^2)/2 - R21", "", {})).symmetric_axes ==
+              A{false, true, false}));
+}
+
+BOOST_AUTO_TEST_CASE(written_spherical_pendulum_matches_the_builtin_with_every_method) {
+  int n = every_method(pendulum_pair(false), Space::sphere);
+  // boundary values: every map of S^2 (the lagrangian form)
+  const Pair bv = pendulum_pair(true);
+  for (const MapEntry& e : map_registry()) {
+    if (e.space != Space::sphere) continue;
+    Method me;
+    me.map = &e;
+    me.theta = e.theta;
+    n += compare(bv, me, "boundary value, " + e.name);
+  }
+  BOOST_TEST_MESSAGE("spherical pendulum, built-in against written: " << n << " methods");
+  BOOST_TEST(n >= 60);
+}
+
+BOOST_AUTO_TEST_CASE(written_heavy_top_matches_the_builtin_with_every_method) {
+  const int n = every_method(top_pair(), Space::rotation);
+  BOOST_TEST_MESSAGE("heavy top, built-in against written: " << n << " methods");
+  BOOST_TEST(n >= 60);
+}
+
+BOOST_AUTO_TEST_CASE(validate_refuses_what_the_written_system_cannot_run) {
+  Pair s = top_pair();
+  Method me;
+  me.map = &find_map_entry("so3-exp", "test");
+  // the Hamiltonian form on SO(3) needs the written H
+  auto no_h = std::make_shared<WrittenSystem>(*s.text.written);
+  no_h->hamiltonian = Expression();
+  s.text.written = no_h;
+  me.form = Form::hamiltonian;
+  BOOST_CHECK_EXCEPTION(validate(s.text, me), InputError, [](const InputError& e) {
+    return std::string(e.what()).rfind("integrator.form: on SO(3) the hamiltonian form", 0) == 0;
+  });
+  // a system written on SO(3) named as one on R^n
+  me.form = Form::lagrangian;
+  s.text.system = &written_system_entry(Space::euclidean);
+  BOOST_CHECK_EXCEPTION(validate(s.text, me), InputError, [](const InputError& e) {
+    return std::string(e.what()).rfind("system.space:", 0) == 0;
+  });
+  // boundary values on SO(3)
+  Pair b = pendulum_pair(true);
+  b.text.system = &written_system_entry(Space::rotation);
+  b.text.written = top_pair().text.written;
+  BOOST_CHECK_THROW(validate(b.text, me), InputError);
+}
