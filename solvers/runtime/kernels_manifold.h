@@ -11,6 +11,7 @@
 
 #include <algorithm>
 #include <memory>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <type_traits>
@@ -50,6 +51,89 @@ inline SO3Map so3_map(const Method& m) {
   if (m.map->family != MapFamily::rotation)
     throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on SO(3)");
   return SO3Map(retraction_kind(*m.map), m.theta, m.map->name);
+}
+
+// ---- built-in or written: one set of steps per space ---------------------------------
+// A Lagrangian on S^2 or SO(3) that is either a built-in system or one written in the
+// scene. The kernels are instantiated once for both (the steps, maps, compositions,
+// Galerkin stage counts and Hamiltonian steps of a space are most of the build); the
+// price is one predictable branch per evaluation of L or H, within the noise of the
+// per-step timings (solvers/README.md).
+template <class Builtin>
+struct BuiltinOrWritten {
+  using Manifold = typename Builtin::Manifold;
+  static constexpr int dim = Manifold::dim;
+  using Written = WrittenManifoldLagrangian<Manifold>;
+  std::optional<Builtin> builtin;
+  std::optional<Written> written;
+
+  std::string name() const { return written ? written->name() : builtin->name(); }
+  // The built-in branch is the expected one and stays inlined; the written one is a
+  // call (its tape interpreter is large).
+  template <class T>
+  [[gnu::always_inline]] T operator()(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+    if (__builtin_expect(written.has_value(), 0)) return call_written(*written, x, v);
+    return (*builtin)(x, v);
+  }
+  template <class T>
+  [[gnu::always_inline]] T operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
+    if (__builtin_expect(written.has_value(), 0)) return call_written(*written, R, w);
+    return (*builtin)(R, w);
+  }
+
+ private:
+  template <class X, class W>
+  [[gnu::noinline]] static typename W::Scalar call_written(const Written& L, const X& x, const W& v) {
+    return L(x, v);
+  }
+};
+
+template <class Builtin>
+struct BuiltinOrWrittenHamiltonian {
+  using Manifold = typename Builtin::Manifold;
+  std::optional<decltype(hamiltonian_of(std::declval<const Builtin&>()))> builtin;
+  std::optional<WrittenManifoldHamiltonian<Manifold>> written;
+  std::string name() const { return written ? written->name() : builtin->name(); }
+  template <class T>
+  [[gnu::always_inline]] T operator()(const Vec<T, 3>& x, const Vec<T, 3>& p) const {
+    if (__builtin_expect(written.has_value(), 0)) return call_written(*written, x, p);
+    return (*builtin)(x, p);
+  }
+  template <class T>
+  [[gnu::always_inline]] T operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& pi) const {
+    if (__builtin_expect(written.has_value(), 0)) return call_written(*written, R, pi);
+    return (*builtin)(R, pi);
+  }
+
+ private:
+  template <class X, class W>
+  [[gnu::noinline]] static typename W::Scalar call_written(const WrittenManifoldHamiltonian<Manifold>& H, const X& x,
+                                                           const W& p) {
+    return H(x, p);
+  }
+};
+
+template <class Builtin>
+BuiltinOrWrittenHamiltonian<Builtin> hamiltonian_of(const BuiltinOrWritten<Builtin>& L) {
+  BuiltinOrWrittenHamiltonian<Builtin> H;
+  if (L.written)
+    H.written = hamiltonian_of(*L.written);
+  else
+    H.builtin = hamiltonian_of(*L.builtin);
+  return H;
+}
+
+template <class Builtin>
+BuiltinOrWritten<Builtin> as_builtin(const Builtin& b) {
+  BuiltinOrWritten<Builtin> L;
+  L.builtin = b;
+  return L;
+}
+template <class Builtin>
+BuiltinOrWritten<Builtin> as_written(const WrittenManifoldLagrangian<typename Builtin::Manifold>& w) {
+  BuiltinOrWritten<Builtin> L;
+  L.written = w;
+  return L;
 }
 
 // ---- per system: stored coordinates, momentum maps, columns ----------------------------
@@ -298,14 +382,19 @@ std::unique_ptr<Run> manifold_galerkin_run(const View& view, const S& L, const M
 
 // Which parts of the method are built for this system (the rest was refused by
 // validate() and is not instantiated): the Hamiltonian form, Galerkin, boundary values.
-template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue>
-std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& pr, const Method& me) {
-  using View = ManifoldView<S, Map>;
+// The steps integrate L; the run reports as `Shown` (its name, columns, energy and
+// momentum maps): a system that is a special case of another one (the free rigid body
+// is the heavy top with m g = 0, to the bit) runs the other's steps, instantiated once.
+template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue, class Shown = S>
+std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& pr, const Method& me,
+                                       const Shown& shown) {
+  static_assert(std::is_same_v<typename Shown::Manifold, typename S::Manifold>, "shown on another manifold");
+  using View = ManifoldView<Shown, Map>;
   using Mf = typename Map::Manifold;
   using Point = typename View::Point;
   using Covector = typename View::Covector;
-  const View view{L};
-  RunReport base = base_report(pr, me, L.name());
+  const View view{shown};
+  RunReport base = base_report(pr, me, shown.name());
   base.manifold = Mf::name;
   const StepOptions opt = me.step_options();
   const double h = pr.step;
@@ -321,7 +410,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   }
   Point q;
   Covector p, v0;
-  manifold_initial_state<S, Map>(pr, L, q, p, v0);
+  manifold_initial_state<Shown, Map>(pr, shown, q, p, v0);
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
   if (me.galerkin) {
@@ -351,6 +440,11 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
   return composed(
       [&](double hk, bool adj) { return ManifoldStep<S, Map>(L, adj ? adjoint_map(R) : R, hk, opt); });
+}
+
+template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue>
+std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& pr, const Method& me) {
+  return make_manifold_run<S, Map, Hamiltonian, Galerkin, BoundaryValue, S>(L, R, pr, me, L);
 }
 
 }  // namespace dvm::kernels

@@ -1,35 +1,30 @@
-// Run kernels of the systems on S^2 and (S^2)^n: the spherical pendulum and the chain
-// of spherical pendulums (solvers/runtime/kernels_manifold.h).
+// Run kernels of the systems on S^2: the spherical pendulum and Lagrangians written on
+// S^2, through one set of steps (BuiltinOrWritten, solvers/runtime/kernels_manifold.h).
 #include "solvers/runtime/factories.h"
 #include "solvers/runtime/kernels_manifold.h"
 
 namespace dvm::factories {
 
+namespace {
+using Sys = kernels::BuiltinOrWritten<SphericalPendulum>;
+
+SphereMap sphere_map_of(const Method& me) {
+  // (Galerkin takes no map: the map's type is only a template argument there)
+  return me.map ? kernels::sphere_map(me) : SphereMap(RetractionKind::exp, 0.5, "sphere-exp");
+}
+}  // namespace
+
 std::unique_ptr<Run> spherical_pendulum(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
   const SphericalPendulum L(P.at("m"), P.at("l"), P.at("g"));
-  const SphereMap R = me.map ? kernels::sphere_map(me) : SphereMap(RetractionKind::exp, 0.5, "sphere-exp");
-  return kernels::make_manifold_run<SphericalPendulum, SphereMap, true, true, true>(L, R, pr, me);
+  return kernels::make_manifold_run<Sys, SphereMap, true, true, true, SphericalPendulum>(
+      kernels::as_builtin(L), sphere_map_of(me), pr, me, L);
 }
 
-std::unique_ptr<Run> spherical_chain(const Problem& pr, const Method& me) {
-  const auto& P = pr.params;
-  const int n = static_cast<int>(P.at("n"));
-  const SphereMap f = kernels::sphere_map(me);
-  auto run = [&](auto k) {
-    constexpr int K = decltype(k)::value;
-    const SphericalChain<K> L(Vec<double, K>::Constant(P.at("m")), Vec<double, K>::Constant(P.at("l")), P.at("g"));
-    return kernels::make_manifold_run<SphericalChain<K>, SpherePowerMap<K>, false, false, false>(
-        L, SpherePowerMap<K>(f), pr, me);
-  };
-  switch (n) {
-    case 1: return run(std::integral_constant<int, 1>{});
-    case 2: return run(std::integral_constant<int, 2>{});
-    case 3: return run(std::integral_constant<int, 3>{});
-    case 4: return run(std::integral_constant<int, 4>{});
-    default: break;
-  }
-  throw InputError("system.params.n: the spherical chain takes 1 to 4 links");
+std::unique_ptr<Run> written_sphere(const Problem& pr, const Method& me) {
+  const WrittenManifoldLagrangian<Sphere> L(pr.written);
+  return kernels::make_manifold_run<Sys, SphereMap, true, true, true, WrittenManifoldLagrangian<Sphere>>(
+      kernels::as_written<SphericalPendulum>(L), sphere_map_of(me), pr, me, L);
 }
 
 }  // namespace dvm::factories

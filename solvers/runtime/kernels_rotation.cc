@@ -1,0 +1,43 @@
+// Run kernels of the systems on SO(3): the heavy top, the free rigid body and
+// Lagrangians written on SO(3), through one set of steps (BuiltinOrWritten<HeavyTop>,
+// solvers/runtime/kernels_manifold.h). The free rigid body is the heavy top with
+// m g = 0: its Lagrangian and Hamiltonian are the top's minus a zero term, the same
+// numbers to the bit; the run is reported as the rigid body's (its columns, energy and
+// spatial angular momentum).
+#include "solvers/runtime/factories.h"
+#include "solvers/runtime/kernels_manifold.h"
+
+namespace dvm::factories {
+
+namespace {
+using Sys = kernels::BuiltinOrWritten<HeavyTop>;
+
+SO3Map rotation_map(const Method& me) {
+  // (Galerkin takes no map: the map's type is only a template argument there)
+  return me.map ? kernels::so3_map(me) : SO3Map(RetractionKind::exp, 0.5, "so3-exp");
+}
+}  // namespace
+
+std::unique_ptr<Run> heavy_top(const Problem& pr, const Method& me) {
+  const auto& P = pr.params;
+  const HeavyTop L(kernels::V3(P.at("I1"), P.at("I2"), P.at("I3")), P.at("m"), P.at("g"),
+                   kernels::V3(P.at("chi1"), P.at("chi2"), P.at("chi3")));
+  return kernels::make_manifold_run<Sys, SO3Map, true, true, false, HeavyTop>(kernels::as_builtin(L),
+                                                                              rotation_map(me), pr, me, L);
+}
+
+std::unique_ptr<Run> rigid_body(const Problem& pr, const Method& me) {
+  const auto& P = pr.params;
+  const RigidBody body(kernels::V3(P.at("I1"), P.at("I2"), P.at("I3")));  // checks the moments
+  const HeavyTop top(body.inertia, 1.0, 0.0, kernels::V3::Zero());
+  return kernels::make_manifold_run<Sys, SO3Map, true, true, false, RigidBody>(kernels::as_builtin(top),
+                                                                               rotation_map(me), pr, me, body);
+}
+
+std::unique_ptr<Run> written_rotation(const Problem& pr, const Method& me) {
+  const WrittenManifoldLagrangian<SO3> L(pr.written);
+  return kernels::make_manifold_run<Sys, SO3Map, true, true, false, WrittenManifoldLagrangian<SO3>>(
+      kernels::as_written<HeavyTop>(L), rotation_map(me), pr, me, L);
+}
+
+}  // namespace dvm::factories
