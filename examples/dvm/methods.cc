@@ -89,11 +89,15 @@ int methods_command(bool json) {
       "\nthreshold(SV): largest stable h*omega on q'' = -omega^2 q with map = \"explicit-euler\" (or\n"
       "\"adjoint-euler\"), whose symmetric basic method is Stormer-Verlet; found from |trace| < 2 of\n"
       "the one-step matrix. midpoint: with map = \"midpoint\" every composition is stable for all\n"
-      "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n",
+      "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n"
+      "composition = \"dirk\" with integrator.weights = [b1, ..., bs] (summing to 1) is the symplectic\n"
+      "DIRK of those weights as a composition of steps of b_i h (paper Sec. 6.2): order 2, 3 when\n"
+      "the cubes of the weights sum to 0, 4 when the weights are also symmetric.\n",
       RecursiveTripleJump::max_order);
   std::printf(
       "\nGalerkin discrete Lagrangians: [integrator] method = \"galerkin\", stages = s, quadrature = q\n"
-      "(curves of degree s through the step's end points; R^n systems, lagrangian form)\n");
+      "(curves of degree s through the step's end points; every system but the chains, lagrangian\n"
+      "form; on S^2 and SO(3) in the chart centred at each step's first point)\n");
   std::printf("%-10s %-6s %-6s %-5s %-9s %s\n", "quadrature", "stages", "points", "order", "symmetric", "source");
   for (const GalerkinEntry& g : galerkin_registry())
     std::printf("%-10s %-6d %-6d %-5d %-9s %s\n", to_string(g.quadrature), g.stages, g.points, g.order, "yes",

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "mechanics/written_lagrangian.h"
+#include "solvers/runtime/run.h"  // shortest: 0.3, not 0.29999999999999999
 
 namespace dvm {
 
@@ -48,20 +49,6 @@ std::string Method::map_label() const {
   return map->name;
 }
 
-namespace {
-std::string fmt(double x);
-// The shortest of 15, 16 or 17 significant digits that reads back as x: 0.3, not
-// 0.29999999999999999.
-std::string shortest(double x) {
-  for (int digits : {15, 16}) {
-    std::ostringstream out;
-    out.precision(digits);
-    out << x;
-    if (std::stod(out.str()) == x) return out.str();
-  }
-  return fmt(x);
-}
-}  // namespace
 
 std::string Method::label() const {
   std::string s;
