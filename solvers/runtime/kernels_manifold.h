@@ -42,12 +42,15 @@ inline RetractionKind retraction_kind(const MapEntry& e) {
   }
   throw InputError("integrator.map: map \"" + e.name + "\" is not built from a retraction of S^2 or SO(3)");
 }
+// (Galerkin takes no map: the default map's type is only a template argument there.)
 inline SphereMap sphere_map(const Method& m) {
+  if (!m.map) return SphereMap(RetractionKind::exp, 0.5, "sphere-exp");
   if (m.map->family != MapFamily::sphere)
     throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on S^2");
   return SphereMap(retraction_kind(*m.map), m.theta, m.map->name);
 }
 inline SO3Map so3_map(const Method& m) {
+  if (!m.map) return SO3Map(RetractionKind::exp, 0.5, "so3-exp");
   if (m.map->family != MapFamily::rotation)
     throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on SO(3)");
   return SO3Map(retraction_kind(*m.map), m.theta, m.map->name);

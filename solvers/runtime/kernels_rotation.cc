@@ -11,11 +11,6 @@ namespace dvm::factories {
 
 namespace {
 using Sys = kernels::BuiltinOrWritten<HeavyTop>;
-
-SO3Map rotation_map(const Method& me) {
-  // (Galerkin takes no map: the map's type is only a template argument there)
-  return me.map ? kernels::so3_map(me) : SO3Map(RetractionKind::exp, 0.5, "so3-exp");
-}
 }  // namespace
 
 std::unique_ptr<Run> heavy_top(const Problem& pr, const Method& me) {
@@ -23,7 +18,7 @@ std::unique_ptr<Run> heavy_top(const Problem& pr, const Method& me) {
   const HeavyTop L(kernels::V3(P.at("I1"), P.at("I2"), P.at("I3")), P.at("m"), P.at("g"),
                    kernels::V3(P.at("chi1"), P.at("chi2"), P.at("chi3")));
   return kernels::make_manifold_run<Sys, SO3Map, true, true, false, HeavyTop>(kernels::as_builtin(L),
-                                                                              rotation_map(me), pr, me, L);
+                                                                              kernels::so3_map(me), pr, me, L);
 }
 
 std::unique_ptr<Run> rigid_body(const Problem& pr, const Method& me) {
@@ -31,13 +26,13 @@ std::unique_ptr<Run> rigid_body(const Problem& pr, const Method& me) {
   const RigidBody body(kernels::V3(P.at("I1"), P.at("I2"), P.at("I3")));  // checks the moments
   const HeavyTop top(body.inertia, 1.0, 0.0, kernels::V3::Zero());
   return kernels::make_manifold_run<Sys, SO3Map, true, true, false, RigidBody>(kernels::as_builtin(top),
-                                                                               rotation_map(me), pr, me, body);
+                                                                               kernels::so3_map(me), pr, me, body);
 }
 
 std::unique_ptr<Run> written_rotation(const Problem& pr, const Method& me) {
   const WrittenManifoldLagrangian<SO3> L(pr.written);
   return kernels::make_manifold_run<Sys, SO3Map, true, true, false, WrittenManifoldLagrangian<SO3>>(
-      kernels::as_written<HeavyTop>(L), rotation_map(me), pr, me, L);
+      kernels::as_written<HeavyTop>(L), kernels::so3_map(me), pr, me, L);
 }
 
 }  // namespace dvm::factories

@@ -7,24 +7,19 @@ namespace dvm::factories {
 
 namespace {
 using Sys = kernels::BuiltinOrWritten<SphericalPendulum>;
-
-SphereMap sphere_map_of(const Method& me) {
-  // (Galerkin takes no map: the map's type is only a template argument there)
-  return me.map ? kernels::sphere_map(me) : SphereMap(RetractionKind::exp, 0.5, "sphere-exp");
-}
 }  // namespace
 
 std::unique_ptr<Run> spherical_pendulum(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
   const SphericalPendulum L(P.at("m"), P.at("l"), P.at("g"));
   return kernels::make_manifold_run<Sys, SphereMap, true, true, true, SphericalPendulum>(
-      kernels::as_builtin(L), sphere_map_of(me), pr, me, L);
+      kernels::as_builtin(L), kernels::sphere_map(me), pr, me, L);
 }
 
 std::unique_ptr<Run> written_sphere(const Problem& pr, const Method& me) {
   const WrittenManifoldLagrangian<Sphere> L(pr.written);
   return kernels::make_manifold_run<Sys, SphereMap, true, true, true, WrittenManifoldLagrangian<Sphere>>(
-      kernels::as_written<SphericalPendulum>(L), sphere_map_of(me), pr, me, L);
+      kernels::as_written<SphericalPendulum>(L), kernels::sphere_map(me), pr, me, L);
 }
 
 }  // namespace dvm::factories
