@@ -60,8 +60,9 @@ inline SO3Map so3_map(const Method& m) {
 // A Lagrangian on S^2 or SO(3) that is either a built-in system or one written in the
 // scene. The kernels are instantiated once for both (the steps, maps, compositions,
 // Galerkin stage counts and Hamiltonian steps of a space are most of the build); the
-// price is one predictable branch per evaluation of L or H, within the noise of the
-// per-step timings (solvers/README.md).
+// price is one predictable branch per evaluation of L or H, and GCC inlining the Jet
+// arithmetic differently: per step from 0.83 to 1.16 times the per-system build
+// (solvers/README.md).
 template <class Builtin>
 struct BuiltinOrWritten {
   using Manifold = typename Builtin::Manifold;
