@@ -115,6 +115,40 @@ double manifold_energy(const S& L, const typename S::Manifold::template Point<do
   return M::covector_to_local(x, p).dot(M::tangent_coordinates(x, v)) - L(x, v);
 }
 
+// dL/dnu (the chart momentum) and d2L/dnu2 at x and the tangent coordinates nu, by
+// nested Jets: the gradient by the outer Jet, the Hessian by the inner one.
+template <class S>
+void manifold_velocity_derivatives(const S& L, const typename S::Manifold::template Point<double>& x,
+                                   const Vec<double, S::Manifold::dim>& nu, Vec<double, S::Manifold::dim>& grad,
+                                   Mat<double, S::Manifold::dim, S::Manifold::dim>& H) {
+  using M = typename S::Manifold;
+  constexpr int n = M::dim;
+  using D = ceres::Jet<double, n>;
+  using DD = ceres::Jet<D, n>;
+  Vec<DD, n> nud;
+  for (int i = 0; i < n; ++i) nud[i] = seed<D, n>(seed<double, n>(nu[i], i), i);
+  typename M::template Point<DD> xdd;
+  for (int i = 0; i < x.size(); ++i) xdd(i) = DD(D(x(i)));
+  const DD l = L(xdd, M::tangent(x, nud));
+  for (int i = 0; i < n; ++i) {
+    grad[i] = l.v[i].a;
+    H.row(i) = l.v[i].v.transpose();
+  }
+}
+
+// d2L/dnu2 at (x, v): the velocity Hessian in the coordinates of T_x M, whose
+// regularity makes the Legendre transform invertible there.
+template <class S>
+Mat<double, S::Manifold::dim, S::Manifold::dim> manifold_velocity_hessian(
+    const S& L, const typename S::Manifold::template Point<double>& x,
+    const typename S::Manifold::template Tangent<double>& v) {
+  constexpr int n = S::Manifold::dim;
+  Vec<double, n> grad;
+  Mat<double, n, n> H;
+  manifold_velocity_derivatives(L, x, Vec<double, n>(S::Manifold::tangent_coordinates(x, v)), grad, H);
+  return H;
+}
+
 // The velocity with momentum p at x (Newton's method in local coordinates).
 template <class S>
 typename S::Manifold::template Tangent<double> manifold_legendre_inverse(
@@ -122,26 +156,14 @@ typename S::Manifold::template Tangent<double> manifold_legendre_inverse(
     const typename S::Manifold::template Tangent<double>& p) {
   using M = typename S::Manifold;
   constexpr int n = M::dim;
-  using D = ceres::Jet<double, n>;
   const Vec<double, n> target = M::covector_to_local(x, p);
   Vec<double, n> nu = Vec<double, n>::Zero();
-  typename M::template Point<D> xd;
-  for (int i = 0; i < x.size(); ++i) xd(i) = D(x(i));
   const double scale = std::fmax(1e-300, max_abs(target));
   for (int it = 0; it < 50; ++it) {
-    // gradient in nu by an outer Jet, Hessian by the inner one
-    using DD = ceres::Jet<D, n>;
-    Vec<DD, n> nud;
-    for (int i = 0; i < n; ++i) nud[i] = seed<D, n>(seed<double, n>(nu[i], i), i);
-    typename M::template Point<DD> xdd;
-    for (int i = 0; i < x.size(); ++i) xdd(i) = DD(D(x(i)));
-    const DD l = L(xdd, M::tangent(x, nud));
     Vec<double, n> r;
     Mat<double, n, n> H;
-    for (int i = 0; i < n; ++i) {
-      r[i] = l.v[i].a - target[i];
-      H.row(i) = l.v[i].v.transpose();
-    }
+    manifold_velocity_derivatives(L, x, nu, r, H);
+    r -= target;
     if (max_abs(r) <= 1e-14 * scale) break;
     Vec<double, n> dnu;
     try {

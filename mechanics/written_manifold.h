@@ -177,25 +177,4 @@ WrittenManifoldHamiltonian<M> hamiltonian_of(const WrittenManifoldLagrangian<M>&
   return {L.system};
 }
 
-// The velocity Hessian d2L/dnu2 in the coordinates of T_x M (nested Jets), for the
-// check that the Legendre transform is invertible at a state.
-template <class S>
-Mat<double, S::Manifold::dim, S::Manifold::dim> manifold_velocity_hessian(
-    const S& L, const typename S::Manifold::template Point<double>& x,
-    const typename S::Manifold::template Tangent<double>& v) {
-  using M = typename S::Manifold;
-  constexpr int n = M::dim;
-  using D = ceres::Jet<double, n>;
-  using DD = ceres::Jet<D, n>;
-  const Vec<double, n> nu = M::tangent_coordinates(x, v);
-  Vec<DD, n> nud;
-  for (int i = 0; i < n; ++i) nud[i] = seed<D, n>(seed<double, n>(nu[i], i), i);
-  typename M::template Point<DD> xdd;
-  for (int i = 0; i < x.size(); ++i) xdd(i) = DD(D(x(i)));
-  const DD l = L(xdd, M::tangent(x, nud));
-  Mat<double, n, n> H;
-  for (int i = 0; i < n; ++i) H.row(i) = l.v[i].v.transpose();
-  return H;
-}
-
 }  // namespace dvm

@@ -57,19 +57,18 @@ inline SO3Map so3_map(const Method& m) {
 }
 
 // ---- built-in or written: one set of steps per space ---------------------------------
-// A Lagrangian on S^2 or SO(3) that is either a built-in system or one written in the
-// scene. The kernels are instantiated once for both (the steps, maps, compositions,
-// Galerkin stage counts and Hamiltonian steps of a space are most of the build); the
-// price is one predictable branch per evaluation of L or H, and GCC inlining the Jet
-// arithmetic differently: per step from 0.83 to 1.16 times the per-system build
-// (solvers/README.md).
-template <class Builtin>
-struct BuiltinOrWritten {
-  using Manifold = typename Builtin::Manifold;
+// A Lagrangian (or Hamiltonian) on S^2 or SO(3) that is either a built-in B or one
+// written in the scene, W. The kernels are instantiated once for both (the steps,
+// maps, compositions, Galerkin stage counts and Hamiltonian steps of a space are most
+// of the build); the price is one predictable branch per evaluation of L or H, and GCC
+// inlining the Jet arithmetic differently: per step from 0.83 to 1.16 times the
+// per-system build (solvers/README.md).
+template <class B, class W>
+struct BuiltinOr {
+  using Manifold = typename B::Manifold;
   static constexpr int dim = Manifold::dim;
-  using Written = WrittenManifoldLagrangian<Manifold>;
-  std::optional<Builtin> builtin;
-  std::optional<Written> written;
+  std::optional<B> builtin;
+  std::optional<W> written;
 
   std::string name() const { return written ? written->name() : builtin->name(); }
   // The built-in branch is the expected one and stays inlined; the written one is a
@@ -86,36 +85,17 @@ struct BuiltinOrWritten {
   }
 
  private:
-  template <class X, class W>
-  [[gnu::noinline]] static typename W::Scalar call_written(const Written& L, const X& x, const W& v) {
-    return L(x, v);
+  template <class X, class V>
+  [[gnu::noinline]] static typename V::Scalar call_written(const W& f, const X& x, const V& v) {
+    return f(x, v);
   }
 };
 
 template <class Builtin>
-struct BuiltinOrWrittenHamiltonian {
-  using Manifold = typename Builtin::Manifold;
-  std::optional<decltype(hamiltonian_of(std::declval<const Builtin&>()))> builtin;
-  std::optional<WrittenManifoldHamiltonian<Manifold>> written;
-  std::string name() const { return written ? written->name() : builtin->name(); }
-  template <class T>
-  [[gnu::always_inline]] T operator()(const Vec<T, 3>& x, const Vec<T, 3>& p) const {
-    if (__builtin_expect(written.has_value(), 0)) return call_written(*written, x, p);
-    return (*builtin)(x, p);
-  }
-  template <class T>
-  [[gnu::always_inline]] T operator()(const Mat<T, 3, 3>& R, const Vec<T, 3>& pi) const {
-    if (__builtin_expect(written.has_value(), 0)) return call_written(*written, R, pi);
-    return (*builtin)(R, pi);
-  }
-
- private:
-  template <class X, class W>
-  [[gnu::noinline]] static typename W::Scalar call_written(const WrittenManifoldHamiltonian<Manifold>& H, const X& x,
-                                                           const W& p) {
-    return H(x, p);
-  }
-};
+using BuiltinOrWritten = BuiltinOr<Builtin, WrittenManifoldLagrangian<typename Builtin::Manifold>>;
+template <class Builtin>
+using BuiltinOrWrittenHamiltonian = BuiltinOr<decltype(hamiltonian_of(std::declval<const Builtin&>())),
+                                              WrittenManifoldHamiltonian<typename Builtin::Manifold>>;
 
 template <class Builtin>
 BuiltinOrWrittenHamiltonian<Builtin> hamiltonian_of(const BuiltinOrWritten<Builtin>& L) {
