@@ -24,6 +24,7 @@
 #include <string>
 
 #include "core/scalar.h"
+#include "mechanics/structure.h"
 
 namespace dvm {
 
@@ -133,6 +134,7 @@ struct FPUChain {
 template <int N>
 struct FixedChain {
   static constexpr int dim = N;
+  static constexpr Structure structure = Structure::separable;
   FPUChain chain;
   explicit FixedChain(FPUChain c) : chain(std::move(c)) {
     if (chain.n != N) throw std::invalid_argument("FixedChain: n does not match the compile-time size");

@@ -438,6 +438,7 @@ class FixedAsDynamic {
 // subtracted from (i, j) and (j, i). L_qv = 0, L_vv = diag(m_i I_3), v_i = p_i / m_i.
 class NBodyDynamic {
  public:
+  static constexpr Structure structure = Structure::separable;
   double G = 1.0;
   std::vector<double> mass;
 

@@ -15,6 +15,7 @@
 #include <string>
 
 #include "core/scalar.h"
+#include "mechanics/structure.h"
 
 namespace dvm {
 
@@ -28,6 +29,7 @@ inline void require_positive(const char* system, const char* name, double value)
 
 struct HarmonicOscillator {
   static constexpr int dim = 1;
+  static constexpr Structure structure = Structure::separable;
   double omega = 1.0;
 
   explicit HarmonicOscillator(double omega_ = 1.0) : omega(omega_) {
@@ -57,6 +59,7 @@ struct HarmonicOscillator {
 
 struct Pendulum {
   static constexpr int dim = 1;
+  static constexpr Structure structure = Structure::separable;
   double m = 1.0, l = 1.0, g = 1.0;
 
   Pendulum(double m_ = 1.0, double l_ = 1.0, double g_ = 1.0) : m(m_), l(l_), g(g_) {
@@ -82,6 +85,7 @@ struct Pendulum {
 
 struct Kepler {
   static constexpr int dim = 2;
+  static constexpr Structure structure = Structure::separable;
   double mu = 1.0;
 
   explicit Kepler(double mu_ = 1.0) : mu(mu_) { detail::require_positive("kepler", "mu", mu); }

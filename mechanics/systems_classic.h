@@ -51,6 +51,7 @@ namespace dvm {
 
 struct DoublePendulum {
   static constexpr int dim = 2;
+  static constexpr Structure structure = Structure::mechanical;
   double m1 = 1.0, m2 = 1.0, l1 = 1.0, l2 = 1.0, g = 1.0;
 
   DoublePendulum(double m1_ = 1, double m2_ = 1, double l1_ = 1, double l2_ = 1, double g_ = 1)
@@ -92,6 +93,7 @@ struct DoublePendulum {
 
 struct HenonHeiles {
   static constexpr int dim = 2;
+  static constexpr Structure structure = Structure::separable;
   double lambda = 1.0;
   explicit HenonHeiles(double lambda_ = 1.0) : lambda(lambda_) {
     if (!std::isfinite(lambda)) throw std::invalid_argument("henon-heiles: parameter lambda must be finite");
@@ -118,6 +120,7 @@ struct HenonHeiles {
 struct FermiPastaUlam {
   static constexpr int m = 3;
   static constexpr int dim = 2 * m;
+  static constexpr Structure structure = Structure::separable;
   double omega = 50.0;
   explicit FermiPastaUlam(double omega_ = 50.0) : omega(omega_) {
     detail::require_positive("fpu", "omega", omega);
@@ -236,6 +239,7 @@ inline double elliptic_f(double phi, double k) {
 
 struct Duffing {
   static constexpr int dim = 1;
+  static constexpr Structure structure = Structure::separable;
   double alpha = 1.0, beta = 1.0;
   Duffing(double alpha_ = 1.0, double beta_ = 1.0) : alpha(alpha_), beta(beta_) {
     if (!std::isfinite(alpha) || !std::isfinite(beta))
@@ -282,6 +286,7 @@ struct Duffing {
 
 struct ChargedParticle {
   static constexpr int dim = 2;
+  static constexpr Structure structure = Structure::general;
   double m = 1.0, c = 1.0, B = 1.0, k = 0.0;
   ChargedParticle(double m_ = 1, double c_ = 1, double B_ = 1, double k_ = 0) : m(m_), c(c_), B(B_), k(k_) {
     detail::require_positive("charged-particle", "m", m);
@@ -335,6 +340,7 @@ template <int B>
 struct NBody {
   static constexpr int bodies = B;
   static constexpr int dim = 3 * B;
+  static constexpr Structure structure = Structure::separable;
   double G = 1.0;
   std::array<double, B> mass{};
 

@@ -102,6 +102,13 @@ struct is_point_stepper : std::false_type {};
 template <class S>
 struct is_point_stepper<S, std::void_t<typename S::Point, typename S::M>> : std::true_type {};
 
+// Whether a step on R^n reads the starting guess in dq (an explicit step does not:
+// `static constexpr bool takes_guess = false`, and the loop keeps no previous increments).
+template <class S, class = void>
+struct takes_guess : std::true_type {};
+template <class S>
+struct takes_guess<S, std::void_t<decltype(S::takes_guess)>> : std::bool_constant<S::takes_guess> {};
+
 template <class S, bool = is_point_stepper<S>::value>
 class LoopState;
 
@@ -115,10 +122,12 @@ class LoopState<S, false> {
   LoopState(const Point& q, const Covector& p, const Covector& v0, double h)
       : Q_(q), P_(p), dq_(h * v0), dq_prev_(dq_), dq_prev2_(dq_), dp_(Covector::Zero(q.rows())) {}
   StepSummary step(const S& stepper, std::int64_t k) {
-    if (k >= 2)
-      dq_ = 2.0 * dq_prev_ - dq_prev2_;
-    else if (k == 1)
-      dq_ = dq_prev_;
+    if constexpr (takes_guess<S>::value) {
+      if (k >= 2)
+        dq_ = 2.0 * dq_prev_ - dq_prev2_;
+      else if (k == 1)
+        dq_ = dq_prev_;
+    }
     return stepper.step(Q_.sum, P_.sum, dq_, dp_);
   }
   // (an expression: no temporary vector, no allocation for dynamic sizes)
@@ -126,8 +135,10 @@ class LoopState<S, false> {
   void commit() {
     Q_.add(dq_);
     P_.add(dp_);
-    dq_prev2_ = dq_prev_;
-    dq_prev_ = dq_;
+    if constexpr (takes_guess<S>::value) {
+      dq_prev2_ = dq_prev_;
+      dq_prev_ = dq_;
+    }
   }
   const Point& q() const { return Q_.sum; }
   const Covector& p() const { return P_.sum; }

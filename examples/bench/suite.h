@@ -45,6 +45,7 @@
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 #include "solvers/sode_step.h"
+#include "solvers/splitting_step.h"
 
 namespace dvm::bench {
 
@@ -141,19 +142,37 @@ Outcome<System::dim> run_step(const Step& S, const Problem<System>& P, std::int6
   return {q, p, !r.failed};
 }
 
-// The position-momentum step of a theta map, alone.
+// The explicit Euler maps (theta 0 or 1), alone or composed, on a separable system: the
+// kicks and drifts `dvm run` steps them by (solvers/splitting_step.h); null otherwise.
+template <class System>
+RunFn<System> dvm_splitting(ThetaMap R, const std::vector<Substep>& sub) {
+  if constexpr (is_separable_v<System>) {
+    if (R.theta() == 0.0 || R.theta() == 1.0)
+      return [R, sub](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
+        const ExplicitSplittingStep<System> S(P.sys, R.theta(), h, sub, P.q0);
+        return run_step(S, P, steps, track);
+      };
+  }
+  return nullptr;
+}
+
+// The position-momentum step of a theta map, alone (explicit where dvm run's is).
 template <class System>
 RunFn<System> dvm_map(ThetaMap R) {
+  if (RunFn<System> f = dvm_splitting<System>(R, single_substep())) return f;
   return [R](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
     const PositionMomentumStep<System, ThetaMap> S(P.sys, R, h);
     return run_step(S, P, steps, track);
   };
 }
 
-// A composition of a theta map (route 1).
+// A composition of a theta map (route 1; explicit where dvm run's is, unless `generic`:
+// then by Newton's method on each substep's equation, as with use_structure = false).
 template <class System>
-RunFn<System> dvm_composition(ThetaMap R, const std::string& scheme) {
+RunFn<System> dvm_composition(ThetaMap R, const std::string& scheme, bool generic = false) {
   const std::vector<Substep> sub = substeps(find_composition(scheme), R.symmetric());
+  if (!generic)
+    if (RunFn<System> f = dvm_splitting<System>(R, sub)) return f;
   return [R, sub](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
     const CompositionStep<System, ThetaMap> S(P.sys, R, h, sub);
     return run_step(S, P, steps, track);

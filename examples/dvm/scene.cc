@@ -442,7 +442,7 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
 void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method& me) {
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
                                   "composition", "weights", "form", "gamma", "beta", "method", "stages",
-                                  "quadrature"});
+                                  "quadrature", "use_structure"});
   if (const toml::node* f = in.get("form")) me.form = find_form(r.string(*f, "integrator.form"), r.where(f, "integrator.form"));
   for (const char* key : {"gamma", "beta"}) {
     const toml::node* n = in.get(key);
@@ -551,6 +551,12 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
                        "tolerance on the discrete Euler-Lagrange residuals (1e-14 of their scale); integrator.tolerance "
                        "applies to the steps of initial-value problems");
     me.tolerance = r.number(*tol, "integrator.tolerance");
+  }
+  if (const toml::node* us = in.get("use_structure")) {
+    if (!us->is_boolean())
+      throw InputError(r.where(us, "integrator.use_structure") + ": got " + Reader::describe(*us) +
+                       ", expected true or false");
+    me.use_structure = us->as_boolean()->get();
   }
   // a boundary-value problem is one large solve: 100 iterations unless the scene says
   if (pr.boundary_value && !in.get("max_iterations")) me.max_iterations = 100;

@@ -10,6 +10,8 @@
 //
 //   form / method     R^n (fixed size)                    S^2, (S^2)^n, SO(3)
 //   lagrangian        PositionMomentumStep<S, Map>        ManifoldStep<S, Map>
+//     explicit Euler maps on a separable S (Method::use_structure):
+//                     ExplicitSplittingStep<S>, composition included (kicks and drifts)
 //   hamiltonian       HamiltonianStep<LegendreH<S>, Map>  ManifoldHamiltonianStep<H, Map>
 //   sode1 / sode2     SodeStep<S, tangent lift of Map>    (refused)
 //   newmark           NewmarkStep<S>                      (refused)
@@ -43,6 +45,7 @@
 #include "solvers/composition.h"
 #include "solvers/integrate.h"
 #include "solvers/runtime/run.h"
+#include "solvers/splitting_step.h"
 
 namespace dvm::kernels {
 
@@ -197,6 +200,43 @@ std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h
       h, substeps(me.scheme(), symmetric), [&](double hk) { return make(hk, false); },
       [&](double hk) { return make(hk, true); });
   return stepper_run(view, std::move(step), q0, p0, v0, base, steps);
+}
+
+// The substeps of the method's composition ({{1, false}} for none).
+inline std::vector<Substep> method_substeps(const Method& me, bool map_symmetric) {
+  return me.composition == "none" ? single_substep() : substeps(me.scheme(), map_symmetric);
+}
+
+// The structure of S into the report: its declaration, checked at points around the
+// initial state (a declaration the Lagrangian does not satisfy is refused), or, for a
+// system that declares none, the class read off the Lagrangian at those points.
+template <class S, class V>
+void report_structure(RunReport& r, const S& L, const V& q, const V& v0, const Problem& pr) {
+  if constexpr (has_declared_structure<S>::value) {
+    try {
+      check_structure(L, q, v0);
+    } catch (const StructureError& e) {
+      throw InputError(pr.origin + ": system: " + e.what());
+    }
+    r.structure = structure_name(declared_structure<S>::value);
+    r.structure_source = "declared";
+  } else {
+    Structure s = Structure::general;
+    try {
+      s = sampled_structure(L, q, v0);
+    } catch (const std::exception&) {
+      // a sample outside the Lagrangian's domain: nothing read off, "general"
+    }
+    r.structure = structure_name(s);
+    r.structure_source = "sampled";
+  }
+  r.step_path = "generic";
+}
+
+// Whether the method is an explicit Euler map (theta 0 or 1, composed or not) that a
+// separable system steps by kicks and drifts (Method::use_structure).
+inline bool splitting_applies(const Method& me, const ThetaMap& R) {
+  return me.use_structure && me.solver == SolverKind::newton && (R.theta() == 0.0 || R.theta() == 1.0);
 }
 
 // ---- boundary-value problems: one solve of every interior node -------------------------

@@ -3,7 +3,9 @@
 // of coordinates. One instantiation per system type, none per size:
 //
 //   form / method   step (solvers/dynamic_step.h, solvers/dynamic_galerkin_step.h)
-//   lagrangian      DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
+//   lagrangian      ExplicitSplittingStep<Sys> for theta 0 or 1 on a separable Sys (n
+//                   bodies), composition included;
+//                   DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
 //                   with the flat retraction R_x(v) = x + v is the theta map itself,
 //                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
 //                   in closed form)
@@ -193,6 +195,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     }
   }
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
+  report_structure(base, L, q, v0, pr);
 
   if (me.galerkin)
     return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
@@ -208,6 +211,13 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     return run_with(LegendreDynamicHamiltonian<Sys>(L));
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
+  if constexpr (is_separable_v<Sys>)
+    if (splitting_applies(me, R)) {
+      // an explicit Euler map on a separable system: kicks and drifts, no solve
+      base.step_path = "explicit-splitting";
+      return stepper_run(view, ExplicitSplittingStep<Sys>(L, R.theta(), h, method_substeps(me, R.symmetric()), q), q, p,
+                         v0, base, pr.steps);
+    }
   auto make = [&](double hk, bool adj) { return DynamicThetaStep<Sys>(L, adj ? R.adjoint() : R, hk, opt); };
   return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
 }

@@ -70,6 +70,13 @@ struct Method {
   QuadratureKind quadrature = QuadratureKind::gauss;
   double newmark_gamma = 0.5, newmark_beta = 0.25;
   SolverKind solver = SolverKind::newton;
+  // Use the system's structure where it allows cheaper steps that solve the same
+  // equations (mechanics/structure.h): an explicit Euler map (theta 0 or 1, composed or
+  // not) on a separable system steps by kicks and drifts, with no solve
+  // (solvers/splitting_step.h). false: every step by the generic path (Newton's method
+  // or TinySolver on the step equation), e.g. to compare the two. solver = "tiny"
+  // asks for the generic path too.
+  bool use_structure = true;
   int max_iterations = 25;
   double tolerance = 2e-15;
 

@@ -48,6 +48,11 @@ struct RunReport {
   std::string solver;        // "newton" or "tiny"
   std::string form;
   std::string method_label;  // for the text table
+  // R^n, fixed size: the system's structure ("separable", "mechanical", "general"),
+  // whether the system declares it ("declared", checked at startup) or it was read off
+  // the Lagrangian at sample points ("sampled"), and how each step is taken:
+  // "explicit-splitting" (kicks and drifts, no solve) or "generic". Empty: not reported.
+  std::string structure, structure_source, step_path;
   bool boundary_value = false;
   double step = 0.0;
   std::int64_t steps = 0, steps_requested = 0;

@@ -1,0 +1,219 @@
+// Explicit steps of the two Euler maps on a separable Lagrangian, alone or composed.
+//
+// For L(q, v) = v^T M v / 2 - V(q) with constant M (mechanics/structure.h) and the theta
+// map R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), the discrete
+// Lagrangian of Sec. 5.3 is
+//   L_d(q0, q1) = (q1 - q0)^T M (q1 - q0) / (2h) - h V((1 - theta) q0 + theta q1).
+// With F = -grad V = dL/dq, the discrete Legendre equations p0 = -D1 L_d(q0, q1),
+// p1 = D2 L_d(q0, q1) are explicit at the two ends of the family:
+//   theta = 0 (explicit Euler, R_d(x, v) = (x, x + v)):
+//     p0 = M dq/h - h F(q0)   =>  kick  p1 = p0 + h F(q0),  then drift  q1 = q0 + h M^{-1} p1;
+//   theta = 1 (its adjoint, R_d(x, v) = (x - v, x)):
+//     p0 = M dq/h             =>  drift q1 = q0 + h M^{-1} p0,  then kick  p1 = p0 + h F(q1).
+// These are the two symplectic Euler methods. A composition (paper Sec. 6; the substeps
+// of solvers/composition_methods.h, an adjoint substep being the other end of the
+// family by Prop. 2.4) is then a sequence of kicks and drifts; two kicks in a row act
+// at the same point and are one kick with the summed coefficient (one force), two
+// drifts likewise. Stormer-Verlet, Phi_{h/2} o Phi^*_{h/2} of either Euler map, is
+// drift-kick-drift or kick-drift-kick with one force per step.
+//
+// First same as last: when a step ends with a kick and the next starts with one, the
+// force at the end of a step is the force at the start of the next. The integrate loop
+// adds the increments with compensated sums, so the point it passes in may differ
+// from q0 + dq of the previous step in the last bit; the force is reused when the two
+// agree to 4 units of round-off in the max norm of q (the kick then differs from one
+// at the loop's point by round-off), and evaluated afresh otherwise.
+//
+// The step solves the same equations as PositionMomentumStep<S, ThetaMap> and its
+// compositions (ComposedStep), without Newton's method or derivatives of L_d; the
+// two agree to round-off (tests/solvers/test_splitting.cc). It has the contract of
+// `integrate` (N, step_size(), step(q, p, dq, dp)).
+#pragma once
+
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <Eigen/Cholesky>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/structure.h"
+#include "solvers/composition_methods.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+template <class S>
+class ExplicitSplittingStep {
+  static_assert(is_separable_v<S>, "explicit splitting steps need a system that declares a separable structure");
+
+ public:
+  static constexpr int N = state_size<S>::value;  // S::dim, or Eigen::Dynamic for a run-time-sized system
+  using V = Vec<double, N>;
+  static constexpr bool takes_guess = false;  // explicit: the integrate loop keeps no guess
+
+  // theta: 0 or 1, the basic map; substeps: its composition ({{1, false}} for none).
+  // q_ref: a point where L is defined (where M is read off when S has no closed-form
+  // velocity; M is constant).
+  ExplicitSplittingStep(S L, double theta, double h, const std::vector<Substep>& substeps, const V& q_ref)
+      : L_(std::move(L)), h_(h), n_(system_dim(L_)) {
+    if (!(theta == 0.0 || theta == 1.0))
+      throw std::invalid_argument("explicit splitting steps exist for theta = 0 and theta = 1 only");
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
+    if (substeps.empty()) throw std::invalid_argument("a composition needs at least one substep");
+    if (q_ref.size() != n_) throw std::invalid_argument("explicit splitting step: q_ref has the wrong size");
+    for (const Substep& s : substeps) {
+      if (!(s.weight != 0.0) || !std::isfinite(s.weight))
+        throw std::invalid_argument("composition substeps must have nonzero finite weights");
+      const double th = s.adjoint ? 1.0 - theta : theta;
+      const double c = s.weight * h;
+      if (th == 0.0) {
+        push(true, c);
+        push(false, c);
+      } else {
+        push(false, c);
+        push(true, c);
+      }
+    }
+    fsal_ = ops_.front().kick && ops_.back().kick;
+    q_ = force_ = dLdv_ = zero_ = vel_ = p_ = V::Zero(n_);
+    end_q_ = V::Constant(n_, std::numeric_limits<double>::quiet_NaN());
+    if constexpr (!closed_velocity) {
+      // M from its columns dL/dv(q_ref, e_j) (dL/dv is linear in v), factored once
+      Mat<double, N, N> M = Mat<double, N, N>::Zero(n_, n_);
+      V e = zero_, a = zero_, b = zero_;
+      for (Eigen::Index j = 0; j < n_; ++j) {
+        e.setZero();
+        e[j] = 1.0;
+        gradient_of(L_, q_ref, e, a, b);
+        M.col(j) = b;
+      }
+      llt_.compute(M);
+      if (llt_.info() != Eigen::Success || !M.allFinite())
+        throw std::invalid_argument(L_.name() + ": the mass matrix is not positive definite");
+    }
+  }
+
+  double step_size() const { return h_; }
+  // The number of force evaluations of a step (before first-same-as-last reuse).
+  int forces_per_step() const {
+    int n = 0;
+    for (const Op& o : ops_) n += o.kick;
+    return n;
+  }
+  bool first_same_as_last() const { return fsal_; }
+
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    if constexpr (N == Eigen::Dynamic) {
+      run_ops(q0, p0, dq, dp, q_, p_, vel_, force_, dLdv_);
+    } else {
+      // fixed size: the intermediate vectors live in registers, not in the object
+      V q, p, v, F = force_, dLdv;
+      run_ops(q0, p0, dq, dp, q, p, v, F, dLdv);
+      if (fsal_) force_ = F;
+    }
+    StepSummary s;
+    s.converged = true;
+    s.iterations = 0;
+    s.residual = 0.0;
+    s.scale = 1.0;
+    return s;
+  }
+
+ private:
+  static constexpr bool closed_velocity = N == Eigen::Dynamic ? has_dynamic_velocity<S>::value : has_velocity<S>::value;
+  struct Op {
+    bool kick;  // kick: p += c F(q); drift: q += c M^{-1} p
+    double c;
+  };
+  void push(bool kick, double c) {
+    if (!ops_.empty() && ops_.back().kick == kick)
+      ops_.back().c += c;
+    else
+      ops_.push_back({kick, c});
+  }
+  // The kicks and drifts from (q0, p0), the increments into dq, dp; q, p, v, F, dLdv are
+  // workspace (F holds the previous step's last force on entry).
+  void run_ops(const V& q0, const V& p0, V& dq, V& dp, V& q, V& p, V& v, V& F, V& dLdv) const {
+    if (ops_.size() == 3) {
+      // Stormer-Verlet, written out (the general loop below keeps F and dp in memory
+      // across its branches; straight-line code keeps them in registers)
+      const double a = ops_[0].c, b = ops_[1].c, c = ops_[2].c;
+      if (fsal_) {  // kick, drift, kick
+        if (!(have_force_ && reusable(q0))) force_at(q0, F, dLdv);
+        dp.noalias() = a * F;
+        p.noalias() = p0 + dp;
+        velocity(q0, p, v);
+        dq.noalias() = b * v;
+        q.noalias() = q0 + dq;
+        force_at(q, F, dLdv);
+        dp.noalias() += c * F;
+        end_q_ = q;
+      } else {  // drift, kick, drift
+        velocity(q0, p0, v);
+        dq.noalias() = a * v;
+        q.noalias() = q0 + dq;
+        force_at(q, F, dLdv);
+        dp.noalias() = b * F;
+        p.noalias() = p0 + dp;
+        velocity(q0, p, v);
+        dq.noalias() += c * v;
+      }
+      return;
+    }
+    dq.setZero();
+    dp.setZero();
+    for (std::size_t k = 0; k < ops_.size(); ++k) {
+      const Op& o = ops_[k];
+      if (o.kick) {
+        if (k == 0) {
+          // first same as last: F is the force at the previous step's end
+          if (!(fsal_ && have_force_ && reusable(q0))) force_at(q0, F, dLdv);
+        } else {
+          q.noalias() = q0 + dq;
+          force_at(q, F, dLdv);
+        }
+        dp.noalias() += o.c * F;
+      } else {
+        p.noalias() = p0 + dp;
+        velocity(q0, p, v);
+        dq.noalias() += o.c * v;
+      }
+    }
+    if (fsal_) end_q_.noalias() = q0 + dq;  // where F was taken (ops_ merged: the last kick follows a drift)
+  }
+  // v = M^{-1} p: the system's closed form (separable: the same at every q), or the
+  // factored M
+  void velocity(const V& q, const V& p, V& v) const {
+    if constexpr (!closed_velocity)
+      v = llt_.solve(p);
+    else if constexpr (N == Eigen::Dynamic)
+      L_.velocity(q, p, v);
+    else
+      v = L_.velocity(q, p);
+  }
+  void force_at(const V& q, V& F, V& dLdv) const {
+    gradient_of(L_, q, zero_, F, dLdv);
+    have_force_ = true;
+  }
+  bool reusable(const V& q0) const {
+    const double tol = 4.0 * std::numeric_limits<double>::epsilon() * max_abs(q0);
+    return max_abs(q0 - end_q_) <= tol;
+  }
+
+  S L_;
+  double h_;
+  Eigen::Index n_;
+  std::vector<Op> ops_;
+  bool fsal_ = false;
+  Eigen::LLT<Mat<double, N, N>> llt_;
+  // workspace, and the last force with, when the step ends with a kick, the point of
+  // the step's end
+  mutable V q_, p_, vel_, force_, dLdv_, zero_, end_q_;
+  mutable bool have_force_ = false;
+};
+
+}  // namespace dvm

@@ -1,0 +1,354 @@
+// Structure (mechanics/structure.h) and the explicit steps it allows
+// (solvers/splitting_step.h):
+//   - every built-in system on R^n (n bodies of any number included) declares the class its Lagrangian has, and the
+//     sampled test finds exactly that class (double pendulum mechanical, charged
+//     particle general); mislabelled systems are refused, each by the identity it breaks;
+//   - the explicit steps of the Euler maps, alone and in every composition, give the
+//     states the generic Newton path gives, through the runtime (use_structure true and
+//     false), on every separable built-in;
+//   - first same as last: velocity Verlet costs one force per step;
+//   - a full (non-diagonal) mass matrix is solved with, not inverted entry by entry.
+#define BOOST_TEST_MODULE splitting
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "mechanics/systems_classic.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/composition.h"
+#include "solvers/integrate.h"
+#include "solvers/position_momentum_step.h"
+#include "solvers/runtime/problem.h"
+#include "solvers/runtime/run.h"
+#include "solvers/splitting_step.h"
+
+using namespace dvm;
+
+namespace {
+
+using V1 = Vec<double, 1>;
+using V2 = Vec<double, 2>;
+
+// ---- mislabelled systems -------------------------------------------------------------
+// declares separable, but its mass depends on q (it is mechanical)
+struct MassOnQ {
+  static constexpr int dim = 1;
+  static constexpr Structure structure = Structure::separable;
+  std::string name() const { return "mass-on-q"; }
+  template <class T>
+  T operator()(const Vec<T, 1>& q, const Vec<T, 1>& v) const {
+    return 0.5 * (1.0 + q[0] * q[0]) * v[0] * v[0] - 0.5 * q[0] * q[0];
+  }
+};
+// declares separable, but has a term linear in v (a magnetic-type coupling q v)
+struct LinearInV {
+  static constexpr int dim = 1;
+  static constexpr Structure structure = Structure::separable;
+  std::string name() const { return "linear-in-v"; }
+  template <class T>
+  T operator()(const Vec<T, 1>& q, const Vec<T, 1>& v) const {
+    return 0.5 * v[0] * v[0] + 0.3 * q[0] * v[0] - 0.5 * q[0] * q[0];
+  }
+};
+// the same, declared mechanical: still wrong (dL/dv(q, 0) = 0.3 q)
+struct LinearInVMechanical : LinearInV {
+  static constexpr Structure structure = Structure::mechanical;
+};
+// declares separable, quadratic in v with a constant but indefinite "mass"
+struct Indefinite {
+  static constexpr int dim = 2;
+  static constexpr Structure structure = Structure::separable;
+  std::string name() const { return "indefinite"; }
+  template <class T>
+  T operator()(const Vec<T, 2>& q, const Vec<T, 2>& v) const {
+    return 0.5 * (v[0] * v[0] - v[1] * v[1]) - 0.5 * (q[0] * q[0] + q[1] * q[1]);
+  }
+};
+// declares mechanical, kinetic energy quartic in v
+struct Quartic {
+  static constexpr int dim = 1;
+  static constexpr Structure structure = Structure::mechanical;
+  std::string name() const { return "quartic"; }
+  template <class T>
+  T operator()(const Vec<T, 1>& q, const Vec<T, 1>& v) const {
+    return 0.5 * v[0] * v[0] + 0.1 * v[0] * v[0] * v[0] * v[0] - 0.5 * q[0] * q[0];
+  }
+};
+
+template <class S>
+std::string refusal(const S& L, const Vec<double, S::dim>& q, const Vec<double, S::dim>& v) {
+  try {
+    check_structure(L, q, v);
+  } catch (const StructureError& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// ---- a separable system with a full mass matrix, and one that counts its forces --------
+// L = v^T M v / 2 - (|q|^2/2 + q0^4/4), M = [[2, 0.5], [0.5, 1]]
+struct FullMass {
+  static constexpr int dim = 2;
+  static constexpr Structure structure = Structure::separable;
+  std::shared_ptr<int> forces = std::make_shared<int>(0);
+  std::string name() const { return "full-mass"; }
+  template <class T>
+  T operator()(const Vec<T, 2>& q, const Vec<T, 2>& v) const {
+    return 0.5 * (2.0 * v[0] * v[0] + v[0] * v[1] + v[1] * v[1]) -
+           (0.5 * (q[0] * q[0] + q[1] * q[1]) + 0.25 * q[0] * q[0] * q[0] * q[0]);
+  }
+  template <class T>
+  void gradient(const Vec<T, 2>& q, const Vec<T, 2>& v, Vec<T, 2>& dLdq, Vec<T, 2>& dLdv) const {
+    ++*forces;
+    dLdq[0] = -q[0] - q[0] * q[0] * q[0];
+    dLdq[1] = -q[1];
+    dLdv[0] = 2.0 * v[0] + 0.5 * v[1];
+    dLdv[1] = 0.5 * v[0] + v[1];
+  }
+};
+
+// ---- the runtime: built-in problems with use_structure on and off ------------------------
+Problem builtin(const std::string& name, std::vector<double> q, std::vector<double> v) {
+  Problem pr;
+  pr.system = &find_system_entry(name, "test");
+  for (const ParamEntry& e : pr.system->params) pr.params[e.name] = e.default_value;
+  pr.dim = static_cast<int>(q.size());
+  pr.q = std::move(q);
+  pr.v = std::move(v);
+  pr.step = 0.01;
+  pr.steps = 300;
+  return pr;
+}
+
+std::vector<Problem> separable_problems() {
+  std::vector<Problem> out;
+  out.push_back(builtin("harmonic", {1.0}, {0.5}));
+  out.push_back(builtin("pendulum", {2.0}, {0.0}));
+  out.push_back(builtin("kepler", {0.4, 0.0}, {0.0, 2.0}));
+  out.push_back(builtin("henon-heiles", {0.1, -0.2}, {0.3, 0.2}));
+  out.push_back(builtin("duffing", {1.0}, {0.0}));
+  Problem fpu = builtin("fpu", {0.2, 0.2 + 1.0 / 50, 0.0, 0.0, 0.0, 0.0}, {0, 0, 0, 0, 0, 0});
+  fpu.step = 0.002;  // omega = 50
+  out.push_back(fpu);
+  Problem nb = builtin("nbody", {1, 0, 0, -1, 0, 0, 0, 0.5, 0.1}, {0, 0.5, 0, 0, -0.5, 0.1, 0.2, 0, 0});
+  nb.masses = {1.0, 1.0, 0.1};
+  out.push_back(nb);
+  return out;
+}
+
+double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
+  if (a.size() != b.size() || a.empty()) return INFINITY;
+  double d = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+  return d;
+}
+double max_abs(const std::vector<double>& a) {
+  double d = 0.0;
+  for (double x : a) d = std::fmax(d, std::fabs(x));
+  return d;
+}
+
+RunReport run(const Problem& pr, const Method& me) { return make_run(pr, me)->execute(nullptr); }
+
+std::shared_ptr<WrittenSystem> written(std::vector<std::string> coordinates, const std::string& L,
+                                       std::vector<std::pair<std::string, double>> params = {}) {
+  auto w = std::make_shared<WrittenSystem>();
+  w->coordinates = std::move(coordinates);
+  w->params = std::move(params);
+  w->check_names();
+  w->lagrangian = Expression::parse(L, w->symbols(WrittenSystem::Kind::lagrangian));
+  return w;
+}
+
+Problem written_problem(const std::shared_ptr<WrittenSystem>& w, std::vector<double> q, std::vector<double> v) {
+  Problem pr;
+  pr.system = &written_system_entry();
+  pr.written = w;
+  pr.dim = static_cast<int>(q.size());
+  pr.q = std::move(q);
+  pr.v = std::move(v);
+  pr.step = 0.01;
+  pr.steps = 10;
+  return pr;
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(builtin_declarations_match_their_lagrangians) {
+  // the sampled class of each built-in equals its declaration, and the check passes
+  auto expect = [](const auto& L, const auto& q, const auto& v, Structure s) {
+    using S = std::decay_t<decltype(L)>;
+    BOOST_TEST_CONTEXT(L.name()) {
+      BOOST_TEST((declared_structure<S>::value == s));
+      BOOST_TEST((sampled_structure(L, q, v) == s));
+      BOOST_TEST(refusal(L, q, v).empty());
+    }
+  };
+  expect(HarmonicOscillator(2.0), V1(1.0), V1(0.5), Structure::separable);
+  expect(Pendulum(1.3, 0.7, 9.81), V1(2.0), V1(0.0), Structure::separable);
+  expect(Kepler(), V2(0.4, 0.0), V2(0.0, 2.0), Structure::separable);
+  expect(HenonHeiles(), V2(0.1, -0.2), V2(0.3, 0.2), Structure::separable);
+  expect(Duffing(1.0, 2.0), V1(1.0), V1(0.0), Structure::separable);
+  expect(FermiPastaUlam(), Vec<double, 6>::Constant(0.1), Vec<double, 6>::Zero(), Structure::separable);
+  expect(NBody<2>(1.0, {1.0, 0.5}), (Vec<double, 6>() << 1, 0, 0, -1, 0, 0).finished(),
+         (Vec<double, 6>() << 0, 0.5, 0, 0, -0.5, 0).finished(), Structure::separable);
+  expect(DoublePendulum(), V2(0.5, 1.0), V2(0.1, -0.3), Structure::mechanical);
+  expect(ChargedParticle(), V2(1.0, 0.2), V2(0.0, 1.0), Structure::general);
+}
+
+BOOST_AUTO_TEST_CASE(mislabelled_systems_are_refused) {
+  // each refusal names the system, its declaration and the identity that fails
+  const std::string a = refusal(MassOnQ{}, V1(0.7), V1(0.2));
+  BOOST_TEST(a.find("mass-on-q: declared separable") != std::string::npos, a);
+  BOOST_TEST(a.find("M the same at every q") != std::string::npos, a);
+  const std::string b = refusal(LinearInV{}, V1(0.7), V1(0.2));
+  BOOST_TEST(b.find("declared separable") != std::string::npos, b);
+  BOOST_TEST(b.find("dL/dv(q, 0) = 0") != std::string::npos, b);
+  const std::string c = refusal(LinearInVMechanical{}, V1(0.7), V1(0.2));
+  BOOST_TEST(c.find("declared mechanical") != std::string::npos, c);
+  BOOST_TEST(c.find("dL/dv(q, 0) = 0") != std::string::npos, c);
+  const std::string d = refusal(Indefinite{}, V2(0.7, 0.1), V2(0.2, 0.0));
+  BOOST_TEST(d.find("M positive definite") != std::string::npos, d);
+  const std::string e = refusal(Quartic{}, V1(0.7), V1(0.2));
+  BOOST_TEST(e.find("declared mechanical") != std::string::npos, e);
+  BOOST_TEST(e.find("p linear in v") != std::string::npos, e);
+  // and what the samples find instead
+  BOOST_TEST((sampled_structure(MassOnQ{}, V1(0.7), V1(0.2)) == Structure::mechanical));
+  BOOST_TEST((sampled_structure(LinearInV{}, V1(0.7), V1(0.2)) == Structure::general));
+  BOOST_TEST((sampled_structure(Quartic{}, V1(0.7), V1(0.2)) == Structure::general));
+  // the explicit step will not take an indefinite mass matrix either
+  BOOST_CHECK_THROW(ExplicitSplittingStep<Indefinite>(Indefinite{}, 0.0, 0.1, single_substep(), V2(0.7, 0.1)),
+                    std::invalid_argument);
+  BOOST_CHECK_THROW(ExplicitSplittingStep<FullMass>(FullMass{}, 0.5, 0.1, single_substep(), V2(0.7, 0.1)),
+                    std::invalid_argument);
+}
+
+BOOST_AUTO_TEST_CASE(explicit_steps_equal_the_generic_path_on_every_separable_builtin) {
+  std::vector<std::string> compositions = {"none", "triple-jump:6", "dirk"};
+  for (const CompositionScheme& c : composition_schemes()) compositions.push_back(c.name);
+  int n = 0;
+  for (const Problem& pr : separable_problems())
+    for (const char* map : {"explicit-euler", "adjoint-euler"})
+      for (const std::string& c : compositions) {
+        Method me;
+        me.map = &find_map_entry(map, "test");
+        me.theta = me.map->theta;
+        me.composition = c;
+        if (c == "dirk") me.weights = {0.3, 0.4, 0.3};
+        Method generic = me;
+        generic.use_structure = false;
+        const RunReport a = run(pr, me), b = run(pr, generic);
+        BOOST_TEST_CONTEXT(pr.system->name << ", " << map << ", " << c) {
+          BOOST_TEST(!a.failed);
+          BOOST_TEST(!b.failed);
+          BOOST_TEST(a.step_path == "explicit-splitting");
+          BOOST_TEST(b.step_path == "generic");
+          BOOST_TEST(a.solver_iterations == 0);
+          BOOST_TEST(b.solver_iterations > 0);
+          BOOST_TEST(a.structure == "separable");
+          BOOST_TEST(a.structure_source == "declared");
+          // Newton stops at a relative residual of 2e-15 per substep: the two paths
+          // agree to that over the run
+          BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+          BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+          BOOST_TEST(std::fabs(a.max_abs_energy_error - b.max_abs_energy_error) <=
+                     1e-9 * std::fmax(1.0, std::fabs(a.energy_initial)));
+        }
+        ++n;
+      }
+  BOOST_TEST(n == 7 * 2 * static_cast<int>(compositions.size()));
+}
+
+BOOST_AUTO_TEST_CASE(implicit_maps_and_tiny_take_the_generic_path) {
+  const Problem pr = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
+  Method mid;
+  mid.map = &find_map_entry("midpoint", "test");
+  BOOST_TEST(run(pr, mid).step_path == "generic");
+  Method tiny;
+  tiny.map = &find_map_entry("explicit-euler", "test");
+  tiny.theta = 0.0;
+  tiny.solver = SolverKind::tiny;
+  BOOST_TEST(run(pr, tiny).step_path == "generic");
+  Method ham = tiny;
+  ham.solver = SolverKind::newton;
+  ham.form = Form::hamiltonian;
+  BOOST_TEST(run(pr, ham).step_path == "generic");
+}
+
+BOOST_AUTO_TEST_CASE(structure_is_reported_for_every_system_on_rn) {
+  Method me;
+  me.map = &find_map_entry("midpoint", "test");
+  const RunReport dp = run(builtin("double-pendulum", {0.5, 1.0}, {0.1, -0.3}), me);
+  BOOST_TEST(dp.structure == "mechanical");
+  BOOST_TEST(dp.structure_source == "declared");
+  const RunReport cp = run(builtin("charged-particle", {1.0, 0.2}, {0.0, 1.0}), me);
+  BOOST_TEST(cp.structure == "general");
+  BOOST_TEST(cp.structure_source == "declared");
+  // written Lagrangians: read off at sample points
+  const RunReport ws = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 - x^2*y"), {0.3, 0.1}, {0.0, 0.2}), me);
+  BOOST_TEST(ws.structure == "separable");
+  BOOST_TEST(ws.structure_source == "sampled");
+  BOOST_TEST(ws.step_path == "generic");
+  const RunReport wm = run(
+      written_problem(written({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a) + cos(b)"),
+                      {0.5, 1.0}, {0.1, -0.3}),
+      me);
+  BOOST_TEST(wm.structure == "mechanical");
+  const RunReport wg = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 + (x*y_dot - y*x_dot)/2"),
+                                           {1.0, 0.2}, {0.0, 1.0}),
+                           me);
+  BOOST_TEST(wg.structure == "general");
+  // the JSON carries the three fields
+  const std::string j = report_json(dp);
+  BOOST_TEST(j.find("\"structure\": \"mechanical\"") != std::string::npos, j);
+  BOOST_TEST(j.find("\"structure_source\": \"declared\"") != std::string::npos, j);
+  BOOST_TEST(j.find("\"step_path\": \"generic\"") != std::string::npos, j);
+}
+
+BOOST_AUTO_TEST_CASE(velocity_verlet_takes_one_force_per_step) {
+  // adjoint Euler composed (Phi_{h/2} o Phi*_{h/2}): kick, drift, kick; the last kick's
+  // force is the next step's first
+  FullMass L;
+  const V2 q0(0.7, -0.2), p0(0.1, 0.3);
+  for (double theta : {1.0, 0.0}) {
+    const ExplicitSplittingStep<FullMass> S(L, theta, 0.01, substeps(find_composition("stormer-verlet"), false), q0);
+    BOOST_TEST(S.forces_per_step() == (theta == 1.0 ? 2 : 1));
+    BOOST_TEST(S.first_same_as_last() == (theta == 1.0));
+    *L.forces = 0;
+    V2 q = q0, p = p0;
+    const V2 v0 = V2::Zero();
+    const RunSummary r = integrate(S, 0.0, q, p, v0, 100, [](auto&&...) {});
+    BOOST_TEST(!r.failed);
+    // one force per step, plus the first step's first kick (kick-drift-kick), plus the
+    // mass matrix read off at construction (dL/dv at e_1, e_2: before the reset)
+    BOOST_TEST(*L.forces == (theta == 1.0 ? 101 : 100));
+  }
+}
+
+BOOST_AUTO_TEST_CASE(a_full_mass_matrix_gives_the_generic_steps) {
+  // the solve with M = [[2, 0.5], [0.5, 1]] against Newton on the same discrete Lagrangian
+  const FullMass L;
+  const V2 q0(0.7, -0.2), p0(0.1, 0.3);
+  for (double theta : {0.0, 1.0})
+    for (const char* c : {"none", "stormer-verlet", "kahan-li8"}) {
+      const std::vector<Substep> sub = std::string(c) == "none" ? single_substep()
+                                                                : substeps(find_composition(c), false);
+      const ThetaMap R(theta);
+      const ExplicitSplittingStep<FullMass> fast(L, theta, 0.05, sub, q0);
+      const ComposedStep<PositionMomentumStep<FullMass, ThetaMap>> slow(
+          0.05, sub, [&](double hk) { return PositionMomentumStep<FullMass, ThetaMap>(L, R, hk); },
+          [&](double hk) { return PositionMomentumStep<FullMass, ThetaMap>(L, R.adjoint(), hk); });
+      V2 qa = q0, pa = p0, qb = q0, pb = p0;
+      const V2 v0 = V2(0.0, 0.3);
+      integrate(fast, 0.0, qa, pa, v0, 200, [](auto&&...) {});
+      const RunSummary r = integrate(slow, 0.0, qb, pb, v0, 200, [](auto&&...) {});
+      BOOST_TEST_CONTEXT("theta " << theta << ", " << c) {
+        BOOST_TEST(!r.failed);
+        BOOST_TEST((qa - qb).cwiseAbs().maxCoeff() <= 1e-12);
+        BOOST_TEST((pa - pb).cwiseAbs().maxCoeff() <= 1e-12);
+      }
+    }
+}
