@@ -534,6 +534,51 @@ std::vector<std::string> readme_row(const std::string& readme, const std::string
 // The READMEs' tables of systems, maps and composition methods
 // agree with the registries the program dispatches from: every entry has its row, with
 // the order (and for the maps on R^n, the symmetry) the registry states.
+// The structure of the system is reported, and integrator.use_structure switches the
+// explicit kicks and drifts of a separable system off (the same states, to round-off).
+BOOST_AUTO_TEST_CASE(structure_is_reported_and_use_structure_switches_it) {
+  const std::vector<std::string> sv = {"--set", "integrator.map=\"explicit-euler\"", "--set",
+                                       "integrator.composition=\"stormer-verlet\"", "--set", "integrator.t_end=10",
+                                       "--csv", "/dev/null", "--json"};
+  std::vector<std::string> a = {"run", scene("kepler.toml")};
+  a.insert(a.end(), sv.begin(), sv.end());
+  const Output fast = dvm(a);
+  BOOST_TEST(fast.status == 0, fast.err);
+  BOOST_TEST(json_string(fast.out, "structure") == "separable", fast.out);
+  BOOST_TEST(json_string(fast.out, "structure_source") == "declared", fast.out);
+  BOOST_TEST(json_string(fast.out, "step_path") == "explicit-splitting", fast.out);
+  BOOST_TEST(json_number(fast.out, "solver_iterations") == 0.0, fast.out);
+  a.insert(a.end(), {"--set", "integrator.use_structure=false"});
+  const Output slow = dvm(a);
+  BOOST_TEST(slow.status == 0, slow.err);
+  BOOST_TEST(json_string(slow.out, "step_path") == "generic", slow.out);
+  BOOST_TEST(json_number(slow.out, "solver_iterations") > 0.0, slow.out);
+  const std::vector<double> qa = json_array(fast.out, "q_final"), qb = json_array(slow.out, "q_final");
+  BOOST_REQUIRE(qa.size() == 2u);
+  BOOST_REQUIRE(qb.size() == 2u);
+  BOOST_TEST(std::fabs(qa[0] - qb[0]) + std::fabs(qa[1] - qb[1]) <= 1e-12);
+  // the text summary says it too
+  const Output table = dvm({"run", scene("kepler.toml"), "--set", "integrator.map=\"adjoint-euler\"", "--set",
+                            "integrator.t_end=1", "--csv", "/dev/null"});
+  BOOST_TEST(table.out.find("structure separable (declared); steps explicit") != std::string::npos, table.out);
+  // a value that is not a boolean is refused, naming the key
+  const Output bad = dvm({"run", scene("kepler.toml"), "--set", "integrator.use_structure=1", "--csv", "/dev/null"});
+  BOOST_TEST(bad.status == 2);
+  BOOST_TEST(bad.err.find("integrator.use_structure") != std::string::npos, bad.err);
+  BOOST_TEST(bad.err.find("expected true or false") != std::string::npos, bad.err);
+  // a mechanical system; n bodies (run-time size) take the explicit steps too
+  const Output dp = dvm({"run", scene("double_pendulum.toml"), "--set", "integrator.t_end=1", "--csv", "/dev/null",
+                         "--json"});
+  BOOST_TEST(dp.status == 0, dp.err);
+  BOOST_TEST(json_string(dp.out, "structure") == "mechanical", dp.out);
+  const Output nb = dvm({"run", scene("figure_eight.toml"), "--set", "integrator.map=\"explicit-euler\"", "--set",
+                         "integrator.composition=\"kahan-li8\"", "--set", "integrator.t_end=1", "--csv", "/dev/null",
+                         "--json"});
+  BOOST_TEST(nb.status == 0, nb.err);
+  BOOST_TEST(json_string(nb.out, "structure") == "separable", nb.out);
+  BOOST_TEST(json_string(nb.out, "step_path") == "explicit-splitting", nb.out);
+}
+
 BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
   // the systems and the maps on R^n in README.md, the maps on S^2 and SO(3) in
   // core/README.md, the compositions in solvers/README.md
