@@ -24,6 +24,7 @@ int run_scene(const Scene& s, const RunOptions& o) {
   out.npy_source = output_source(s.path, o.npy, "--npy", "output.npy");
   out.inputs = {s.path};
   out.every = s.every;
+  out.monitor_every = s.monitor_every;
   out.progress = !o.quiet;
   // rows on standard output: the summary moves to standard error
   const bool rows_on_stdout = descriptor_path(out.csv) == 1 || descriptor_path(out.npy) == 1;

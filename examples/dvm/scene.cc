@@ -807,7 +807,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
 
   // [output]
   const toml::table& out = r.section(root, "output", false);
-  r.only_keys(out, "output", {"csv", "every", "npy"});
+  r.only_keys(out, "output", {"csv", "every", "npy", "monitor_every"});
   if (const toml::node* c = out.get("npy")) {
     s.npy = r.string(*c, "output.npy");
     if (s.npy.empty()) throw InputError(r.where(c, "output.npy") + ": expected a file name, got an empty string");
@@ -817,6 +817,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     if (s.csv.empty()) throw InputError(r.where(c, "output.csv") + ": expected a file name, got an empty string");
   }
   if (const toml::node* e = out.get("every")) s.every = r.integer(*e, "output.every", 1);
+  if (const toml::node* e = out.get("monitor_every")) s.monitor_every = r.integer(*e, "output.monitor_every", 1);
 
   // every rule between values, with the position of the key it names
   try {

@@ -35,6 +35,7 @@ struct Scene {
   Method method;
   std::string csv, npy;  // [output] csv, npy (empty: none)
   std::int64_t every = 1;
+  std::int64_t monitor_every = 1;  // [output] monitor_every
 };
 
 // The largest scene file dvm reads (16 MiB); a larger one is bad input.

@@ -112,11 +112,11 @@ class StepperRun final : public Run {
   RunReport execute(Recorder* rec) override {
     RunReport r = base_;
     const double h = stepper_.step_size();
-    std::vector<double> row(static_cast<std::size_t>(view_.row_size()));
+    std::vector<double> row_values(static_cast<std::size_t>(view_.row_size()));
     if (rec) {
       rec->open(view_.columns(), output_rows(steps_, rec->every()));
-      view_.fill_row(row.data(), 0.0, q0_, p0_, E0_);
-      rec->row(row.data());
+      view_.fill_row(row_values.data(), 0.0, q0_, p0_, E0_);
+      rec->row(row_values.data());
     }
     const int n_inv = view_.invariant_count();
     double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
@@ -124,8 +124,9 @@ class StepperRun final : public Run {
     double max_energy_error = 0.0, E = E0_, defect = view_.point_defect(q0_);
     Point q = q0_;
     Covector p = p0_;
-    const auto start = std::chrono::steady_clock::now();
-    auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
+    const std::int64_t monitor_every = rec ? std::max<std::int64_t>(1, rec->spec().monitor_every) : 1;
+    std::int64_t monitored = 0;  // the last step whose energy and invariants were evaluated
+    auto monitor = [&](std::int64_t k, const Point& qk, const Covector& pk) {
       E = view_.energy(qk, pk);
       max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0_));
       if (n_inv > 0) {
@@ -133,15 +134,29 @@ class StepperRun final : public Run {
         for (int i = 0; i < n_inv; ++i) Ierr[i] = std::fmax(Ierr[i], std::fabs(Ik[i] - I0[i]));
       }
       if (defect >= 0.0) defect = std::fmax(defect, view_.point_defect(qk));
+      monitored = k;
+    };
+    const auto start = std::chrono::steady_clock::now();
+    auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
+      const bool row = rec && rec->writes_rows() && rec->wants(k, steps_);
+      if (monitor_every == 1 || row || k % monitor_every == 0 || k == steps_) monitor(k, qk, pk);
       if (rec) {
-        if (rec->wants(k, steps_)) {
-          view_.fill_row(row.data(), t, qk, pk, E);
-          rec->row(row.data());
+        if (row) {
+          view_.fill_row(row_values.data(), t, qk, pk, E);
+          rec->row(row_values.data());
         }
         rec->progress(k, steps_, h);
       }
     };
     r.loop = integrate(stepper_, 0.0, q, p, v0_, steps_, observer);
+    if (monitored != r.loop.steps_done) {
+      // a failed run stopped between monitored steps: its last state, where it can be evaluated
+      try {
+        monitor(r.loop.steps_done, q, p);
+      } catch (const std::domain_error&) {
+      }
+    }
+    r.monitor_every = monitor_every;
     r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     r.failed = r.loop.failed;
     r.steps = r.loop.steps_done;

@@ -66,9 +66,11 @@ inline void dynamic_invariant_values(const WrittenDynamic& L, const Eigen::Vecto
   for (int i = 0; i < L.dim() && k < kMaxInvariantValues; ++i)
     if (L.cyclic(i)) out[k++] = p[i];
 }
+// n bodies: v = M^{-1} p in closed form, so <dL/dv, v> = <p, v> and E = <p, v> - L(q, v)
+// without the gradient (whose pair loop costs as much as L's)
 inline double dynamic_energy(const NBodyDynamic& L, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
-                             const Eigen::VectorXd&) {
-  return energy(L, q, v);
+                             const Eigen::VectorXd& p) {
+  return p.dot(v) - L.value(q, v);
 }
 inline double dynamic_energy(const WrittenDynamic& L, const Eigen::VectorXd& q, const Eigen::VectorXd& v,
                              const Eigen::VectorXd& p) {
@@ -82,6 +84,7 @@ struct DynamicView {
   Sys L;
   std::vector<std::string> names;  // coordinate names of the columns (empty: q0.., p0..)
   Vec<double, 2> sigma0 = Vec<double, 2>::Zero();  // the scale of d2L/dv2 at the initial state
+  bool constant_hessian = false;  // d2L/dv2 is the same everywhere (sigma0 is then not computed)
   int n() const { return L.dim(); }
 
   // d2L/dv2 at (q, v)
@@ -124,8 +127,8 @@ struct DynamicView {
   // what the Legendre transform looks like where a solve stopped (mechanics/hamiltonian.h)
   void diagnose(std::string& message, const Point& q, const Covector& p) const {
     try {
-      message += "; " + legendre_scale_diagnosis(matrix_hessian_scale(velocity_hessian(q, legendre_inverse(L, q, p))),
-                                                 sigma0);
+      const Vec<double, 2> s = matrix_hessian_scale(velocity_hessian(q, legendre_inverse(L, q, p)));
+      message += "; " + legendre_scale_diagnosis(s, constant_hessian ? s : sigma0);
     } catch (const std::domain_error& e) {
       message += std::string("; at the last completed state the Legendre transform cannot be inverted: ") + e.what();
     }
@@ -164,10 +167,20 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   const int n = L.dim();
   const std::string where = pr.written ? pr.written_where : pr.origin;
 
-  // the initial state, with the velocity Hessian checked where it is used
+  // the initial state, with the velocity Hessian checked where it is used; a declared
+  // separable system has d2L/dv2 = M, constant and positive definite (checked at sample
+  // points by report_structure below), so no n x n matrix is formed and factored for it
+  // (n bodies: 3n x 3n)
+  constexpr bool constant_hessian = is_separable_v<Sys>;
+  view.constant_hessian = constant_hessian;
   const V q = Eigen::Map<const V>(pr.q.data(), n);
   V p(n), v0(n);
-  auto check = [&](const V& v) { require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where); };
+  auto check = [&](const V& v) {
+    if constexpr (!constant_hessian)
+      require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where);
+    else
+      (void)v;
+  };
   if (pr.momentum_given) {
     p = Eigen::Map<const V>(pr.p.data(), n);
     check(V::Zero(n));
@@ -181,7 +194,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     p = legendre(L, q, v0);
   }
   check(v0);
-  view.sigma0 = matrix_hessian_scale(view.velocity_hessian(q, v0));
+  if constexpr (!constant_hessian) view.sigma0 = matrix_hessian_scale(view.velocity_hessian(q, v0));
   if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
     if (hamiltonian) {
       const double H = L.hamiltonian(q, p), E = energy(L, q, v0);

@@ -23,6 +23,11 @@ struct OutputSpec {
   std::string csv_source, npy_source;   // what gave each path, for messages
   std::vector<std::string> inputs;      // files the run reads (the scene): never written over
   std::int64_t every = 1;
+  // The energy, the invariants and the distance from the manifold are evaluated every
+  // monitor_every steps, at every row written and at the last step, and the report's
+  // maxima are over those steps. 1: every step. A larger value saves their cost where
+  // it matters (n bodies: the energy costs as much as a force).
+  std::int64_t monitor_every = 1;
   bool progress = false;                // progress on stderr when it is a terminal
 };
 
@@ -37,6 +42,8 @@ class Recorder {
   // file, an output naming one of the inputs, a .npy that cannot be rewound (a pipe).
   void open(const std::vector<std::string>& columns, double rows);
   bool wants(std::int64_t k, std::int64_t last) const { return k % spec_.every == 0 || k == last; }
+  // Whether rows go anywhere (a CSV or a .npy file).
+  bool writes_rows() const { return !spec_.csv.empty() || !spec_.npy.empty(); }
   void row(const double* values);
   // Renames the files onto their paths (complete) or onto PATH.partial; returns false
   // after printing any write error to stderr. `kept` lists the .partial files.

@@ -131,7 +131,7 @@ std::string report_json(const RunReport& r) {
   if (r.momentum_spread >= 0.0) j.num("vertical_angular_momentum_spread", r.momentum_spread);
   if (r.boundary_value) j.num("max_del_residual", r.max_del_residual).num("residual_scale", r.residual_scale);
   j.num("wall_seconds", r.wall_seconds).num("solver_iterations", static_cast<double>(r.solver_iterations));
-  if (!r.boundary_value) j.num("max_step_iterations", r.max_step_iterations);
+  if (!r.boundary_value) j.num("max_step_iterations", r.max_step_iterations).num("monitor_every", static_cast<double>(r.monitor_every));
   if (r.stages > 0) j.num("stages", r.stages).str("quadrature", r.quadrature).num("order", r.order);
   if (r.newmark) j.num("gamma", r.gamma).num("beta", r.beta);
   if (!r.invariants.empty()) {

@@ -66,6 +66,7 @@ struct RunReport {
   double max_point_defect = -1.0;  // manifolds only (< 0: not reported)
   std::vector<InvariantReport> invariants;
   double wall_seconds = 0.0;
+  std::int64_t monitor_every = 1;  // initial-value runs: the steps between evaluations of the energy
   std::int64_t solver_iterations = 0;
   int max_step_iterations = 0;
   // galerkin

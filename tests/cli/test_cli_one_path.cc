@@ -579,6 +579,37 @@ BOOST_AUTO_TEST_CASE(structure_is_reported_and_use_structure_switches_it) {
   BOOST_TEST(json_string(nb.out, "step_path") == "explicit-splitting", nb.out);
 }
 
+// [output] monitor_every: the energy and invariants are evaluated every N steps, at
+// every row and at the last step; the maxima are over those steps, the final values exact.
+BOOST_AUTO_TEST_CASE(monitor_every_evaluates_the_summary_less_often) {
+  // a scene without output files: only the monitored steps are evaluated
+  const std::string plain = write_scene("kepler_plain.toml", "[system]\nbuiltin = \"kepler\"\n[initial]\nq = [0.4, 0.0]\n"
+                                        "p = [0.0, 2.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.005\nt_end = 10.0\n");
+  const Output every = dvm({"run", plain, "--json"});
+  const Output sparse = dvm({"run", plain, "--set", "output.monitor_every=7", "--json"});
+  BOOST_TEST(every.status == 0, every.err);
+  BOOST_TEST(sparse.status == 0, sparse.err);
+  BOOST_TEST(json_number(every.out, "monitor_every") == 1.0);
+  BOOST_TEST(json_number(sparse.out, "monitor_every") == 7.0);
+  // the same run: the last step is monitored in both, the maximum is over fewer steps
+  BOOST_TEST(json_number(sparse.out, "energy_final") == json_number(every.out, "energy_final"));
+  BOOST_TEST(json_number(sparse.out, "max_abs_energy_error") <= json_number(every.out, "max_abs_energy_error"));
+  BOOST_TEST(json_number(sparse.out, "max_abs_energy_error") > 0.0);
+  // rows are still written with their energy
+  const std::string csv = "kepler_monitor.csv";
+  const Output rows = dvm({"run", plain, "--set", "output.monitor_every=1000", "--csv", csv});
+  BOOST_TEST(rows.status == 0, rows.err);
+  std::ifstream f(csv);
+  std::string line;
+  int n = 0;
+  while (std::getline(f, line)) ++n;
+  BOOST_TEST(n == 2002);  // header, t = 0 and 2000 steps
+  std::remove(csv.c_str());
+  const Output bad = dvm({"run", plain, "--set", "output.monitor_every=0"});
+  BOOST_TEST(bad.status == 2);
+  BOOST_TEST(bad.err.find("output.monitor_every") != std::string::npos, bad.err);
+}
+
 BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
   // the systems and the maps on R^n in README.md, the maps on S^2 and SO(3) in
   // core/README.md, the compositions in solvers/README.md
