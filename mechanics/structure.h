@@ -76,7 +76,7 @@ struct StructureError : std::invalid_argument {
 // otherwise which one failed, with its residual against its scale.
 struct StructureTest {
   bool holds = true;
-  std::string failed;  // e.g. "dL/dv(q, v) = M v"
+  std::string failed;  // e.g. "dL/dv(q, 0) = 0"
   double residual = 0.0, scale = 0.0;
   void check(const char* identity, double r, double s) {
     if (!holds) return;

@@ -254,6 +254,18 @@ inline bool splitting_applies(const Method& me, const ThetaMap& R) {
   return me.use_structure && me.solver == SolverKind::newton && (R.theta() == 0.0 || R.theta() == 1.0);
 }
 
+// An explicit Euler map (theta 0 or 1), alone or composed, on a separable system: kicks
+// and drifts, no solve (Map is ThetaMap; a template parameter so that a call inside a
+// generic lambda names this only for separable systems).
+template <class View, class S, class Map>
+std::unique_ptr<Run> splitting_run(const View& view, const S& L, const Map& R, const Method& me, double h,
+                                   const typename View::Point& q, const typename View::Covector& p,
+                                   const typename View::Covector& v0, RunReport base, std::int64_t steps) {
+  base.step_path = "explicit-splitting";
+  return stepper_run(view, ExplicitSplittingStep<S>(L, R.theta(), h, method_substeps(me, R.symmetric()), q), q, p, v0,
+                     base, steps);
+}
+
 // ---- boundary-value problems: one solve of every interior node -------------------------
 // Solver is BoundaryValueProblem<S, Map> (R^n) or SphereBoundaryValueProblem<S, Map>
 // (S^2): solve(qa, qb, K, options) -> nodes q_k, p_k. The nodes are written through the

@@ -225,12 +225,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
   if constexpr (is_separable_v<Sys>)
-    if (splitting_applies(me, R)) {
-      // an explicit Euler map on a separable system: kicks and drifts, no solve
-      base.step_path = "explicit-splitting";
-      return stepper_run(view, ExplicitSplittingStep<Sys>(L, R.theta(), h, method_substeps(me, R.symmetric()), q), q, p,
-                         v0, base, pr.steps);
-    }
+    if (splitting_applies(me, R)) return splitting_run(view, L, R, me, h, q, p, v0, base, pr.steps);
   auto make = [&](double hk, bool adj) { return DynamicThetaStep<Sys>(L, adj ? R.adjoint() : R, hk, opt); };
   return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
 }

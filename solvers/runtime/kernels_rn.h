@@ -236,18 +236,6 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
   }
 }
 
-// An explicit Euler map (theta 0 or 1), alone or composed, on a separable system: kicks
-// and drifts, no solve (Map is ThetaMap; a template parameter so that the call site
-// names this only for separable systems).
-template <class S, class Map>
-std::unique_ptr<Run> splitting_run(const RnView<S>& view, const S& L, const Map& R, const Method& me, double h,
-                                   const Vec<double, S::dim>& q, const Vec<double, S::dim>& p,
-                                   const Vec<double, S::dim>& v0, RunReport base, std::int64_t steps) {
-  base.step_path = "explicit-splitting";
-  return stepper_run(view, ExplicitSplittingStep<S>(L, R.theta(), h, method_substeps(me, R.symmetric()), q), q, p, v0,
-                     base, steps);
-}
-
 // ---- the factory ---------------------------------------------------------------------
 // Which parts of the method table are built for a system type (what validate() refuses
 // for the system is not instantiated): the forms other than lagrangian and
@@ -316,7 +304,7 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
           case Form::lagrangian: {
             if constexpr (is_separable_v<S> && std::is_same_v<Map, ThetaMap>)
               if (splitting_applies(me, R))
-                return splitting_run<S, Map>(view, L, R, me, h, q, p, v0, base, pr.steps);
+                return splitting_run<RnView<S>, S, Map>(view, L, R, me, h, q, p, v0, base, pr.steps);
             auto make = [&](double hk, bool adj) {
               return PositionMomentumStep<S, Map>(L, adj ? same_type_adjoint(R) : R, hk, opt);
             };
