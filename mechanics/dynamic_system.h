@@ -57,11 +57,17 @@
 //                        (Expression::gradient), the Hessian by forward over reverse: the
 //                        reverse gradient evaluated in ceres::Jet<double, K>, seeded in K
 //                        of the 2n input directions per pass, ceil(2n/K) passes
-//                        (K = 2, 4 or 8: the smallest >= 2n, else 8). A tape longer than
-//                        Expression::kMaxTape (reverse mode refuses it) is differentiated
-//                        forward: the gradient in chunks of 8 directions, the Hessian by
+//                        (K = 2, 4 or 8: the smallest >= 2n, else 8). Forced forward
+//                        (WrittenDerivatives::forward_over_forward, for checking): the
+//                        gradient in chunks of 8 directions, the Hessian by
 //                        Jet<Jet<double, 8>, 8> over pairs of chunks (about (2n/8)^2 / 2
 //                        passes).
+//                        Its structure is read off the text (Expression::split_velocity):
+//                        when L = v^T M v / 2 + U(q) with M constant and positive definite
+//                        (separable()), the inverse Legendre map is v = M^{-1} p in closed
+//                        form (M diagonal: a division; else a Cholesky factor) and
+//                        WrittenSeparable views it as a declared separable system, whose
+//                        force is the reverse gradient of U's tape alone.
 //                        Measured (g++ -O2, one core of an AMD EPYC, one full Hessian, the
 //                        same chunk width K both ways, best of three runs):
 //                                                     forward/reverse  forward/forward
@@ -70,8 +76,8 @@
 //                          double pendulum, n = 2, K = 4   373 ns          783 ns
 //                          FPU, n = 6, K = 8              1635 ns        13736 ns
 //                        (K = 6 would give 1537 ns for n = 6, K = 4 2106 ns.) Forward over
-//                        reverse wins at every size measured, so it is the default when the
-//                        tape allows it (WrittenDerivatives::automatic).
+//                        reverse wins at every size measured, so it is the default
+//                        (WrittenDerivatives::automatic).
 //   WrittenDynamicHamiltonian  the Hamiltonian H(q, p) written in a scene, the same way
 //                        (its text is parsed a second time with p as the second block, so
 //                        that reverse mode, which differentiates blocks 0 and 1, applies).
@@ -81,6 +87,7 @@
 //                        and a degenerate L throws DegenerateLagrangianError.
 #pragma once
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
 #include <algorithm>
 #include <array>
@@ -97,6 +104,7 @@
 #include "core/scalar.h"
 #include "mechanics/lagrangian.h"
 #include "mechanics/nbody_momenta.h"
+#include "mechanics/structure.h"
 #include "mechanics/systems.h"
 #include "mechanics/written_lagrangian.h"
 
@@ -126,6 +134,15 @@ template <class S>
 struct has_dynamic_velocity<S, std::void_t<decltype(std::declval<const S&>().velocity(
                                    std::declval<const DynIn&>(), std::declval<const DynIn&>(),
                                    std::declval<DynOut>()))>> : std::true_type {};
+
+// Whether a run-time-sized Lagrangian may have a closed-form inverse Legendre map known
+// only at run time: bool closed_velocity(q, p, v) const, true when it wrote v.
+template <class S, class = void>
+struct has_runtime_velocity : std::false_type {};
+template <class S>
+struct has_runtime_velocity<S, std::void_t<decltype(bool(std::declval<const S&>().closed_velocity(
+                                   std::declval<const DynIn&>(), std::declval<const DynIn&>(),
+                                   std::declval<DynOut>())))>> : std::true_type {};
 
 namespace dynamic_detail {
 
@@ -288,6 +305,8 @@ void legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, Le
   if constexpr (has_dynamic_velocity<Sys>::value) {
     L.velocity(q, p, v);
   } else {
+    if constexpr (has_runtime_velocity<Sys>::value)
+      if (L.closed_velocity(q, p, v)) return;
     const double scale = std::fmax(1e-300, max_abs(p));
     for (int it = 0; it < 50; ++it) {
       L.hessian(q, v, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
@@ -532,9 +551,9 @@ class NBodyDynamic {
 // ---------------------------------------------------------------------------------
 // Written expressions (mechanics/expression.h) differentiated in doubles for any n.
 
-// How a written tape is differentiated: automatic = reverse mode where the tape allows
-// it (Expression::kMaxTape), forward otherwise; the other two force one way (a tape too
-// long for reverse mode is refused with std::invalid_argument).
+// How a written tape is differentiated: automatic = reverse mode (forward over reverse
+// for the Hessian), which wins at every size measured; the other two force one way
+// (forward over forward is kept to check reverse mode against).
 enum class WrittenDerivatives { automatic, forward_over_reverse, forward_over_forward };
 
 namespace dynamic_detail {
@@ -546,12 +565,7 @@ class TapeDerivatives {
   static constexpr int kForwardChunk = 8;
 
   TapeDerivatives(std::shared_ptr<const Expression> e, int n, WrittenDerivatives mode) : e_(std::move(e)), n_(n) {
-    const bool fits = static_cast<int>(e_->tape().size()) <= Expression::kMaxTape;
-    if (mode == WrittenDerivatives::forward_over_reverse && !fits)
-      throw std::invalid_argument("the expression's tape has " + std::to_string(e_->tape().size()) +
-                                  " instructions; reverse mode takes at most " +
-                                  std::to_string(Expression::kMaxTape));
-    reverse_ = fits && mode != WrittenDerivatives::forward_over_forward;
+    reverse_ = mode != WrittenDerivatives::forward_over_forward;
     const std::size_t m = static_cast<std::size_t>(2 * n);
     if (reverse_) {
       chunk_ = 2 * n <= 2 ? 2 : (2 * n <= 4 ? 4 : 8);
@@ -710,6 +724,62 @@ inline const WrittenSystem& checked_written(const std::shared_ptr<const WrittenS
 
 }  // namespace dynamic_detail
 
+// What the text of a written Lagrangian says about its structure, and for a separable
+// one (v^T M v / 2 + U(q), M constant) its two parts and M.
+struct WrittenParts {
+  VelocitySplit split;
+  Expression kinetic, potential;  // when split.constant_mass: L = kinetic + potential
+  bool separable = false;         // constant_mass and M positive definite
+  Eigen::VectorXd mass_diagonal;  // M when split.diagonal
+  Eigen::MatrixXd mass;           // M otherwise, with its Cholesky factor
+  Eigen::LLT<Eigen::MatrixXd> mass_factor;
+  std::vector<bool> cyclic;       // coordinates L does not depend on
+
+  // A full M is formed from n gradients of the kinetic tape and factored; beyond this
+  // size (a dense factor of 8 n^2 bytes) such a system takes the generic path.
+  static constexpr int kMaxDenseMass = 2000;
+
+  explicit WrittenParts(const WrittenSystem& w) {
+    const int n = w.dim();
+    cyclic.assign(static_cast<std::size_t>(n), true);
+    for (const auto& in : w.lagrangian.tape())
+      if (in.op == Expression::Op::Var && in.block == 0) cyclic[static_cast<std::size_t>(in.index)] = false;
+    split = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), &kinetic,
+                                       &potential);
+    if (!split.constant_mass || split.kinetic_terms == 0) return;
+    const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
+    Eigen::VectorXd e(n), g0(n), g1(n);
+    auto mass_times = [&](const Eigen::VectorXd& v, Eigen::VectorXd& out) {  // M v = dT/dv
+      g0.setZero();
+      out.setZero(n);
+      kinetic.gradient(zero.data(), v.data(), g0.data(), out.data());
+    };
+    if (split.diagonal) {
+      mass_times(Eigen::VectorXd::Ones(n), mass_diagonal);
+      separable = (mass_diagonal.array() > 0.0).all() && mass_diagonal.allFinite();
+      return;
+    }
+    if (n > kMaxDenseMass) return;
+    Eigen::MatrixXd M(n, n);
+    for (int j = 0; j < n; ++j) {
+      e.setZero();
+      e[j] = 1.0;
+      mass_times(e, g1);
+      M.col(j) = g1;
+    }
+    mass_factor.compute(M);
+    separable = M.allFinite() && mass_factor.info() == Eigen::Success;
+    mass = std::move(M);
+  }
+  // v = M^{-1} p (separable only)
+  void velocity(const DynIn& p, DynOut v) const {
+    if (split.diagonal)
+      v = p.cwiseQuotient(mass_diagonal);
+    else
+      v = mass_factor.solve(p);
+  }
+};
+
 // A written Lagrangian (written_lagrangian.h) of any dimension.
 class WrittenDynamic {
  public:
@@ -718,8 +788,19 @@ class WrittenDynamic {
       : system_(std::move(s)),
         tape_(std::shared_ptr<const Expression>(system_, &dynamic_detail::checked_written(system_).lagrangian),
               dynamic_detail::checked_written(system_).dim(), mode),
+        parts_(std::make_shared<const WrittenParts>(*system_)),
         Lq_(system_->dim()),
         Lv_(system_->dim()) {}
+
+  // The structure read off the text, and for a separable L its parts.
+  const WrittenParts& parts() const { return *parts_; }
+  bool separable() const { return parts_->separable; }
+  // v = M^{-1} p when L is separable (returns false otherwise: Newton's method then).
+  bool closed_velocity(const DynIn&, const DynIn& p, DynOut v) const {
+    if (!parts_->separable) return false;
+    parts_->velocity(p, v);
+    return true;
+  }
 
   int dim() const { return system_->dim(); }
   std::string name() const { return system_->name; }
@@ -747,12 +828,43 @@ class WrittenDynamic {
     return system_->hamiltonian(q.data(), static_cast<const double*>(nullptr), p.data());
   }
   // A coordinate that L does not depend on is cyclic: its momentum is conserved.
-  bool cyclic(int i) const { return !system_->lagrangian.uses(0, i); }
+  bool cyclic(int i) const { return parts_->cyclic[static_cast<std::size_t>(i)]; }
 
  private:
   std::shared_ptr<const WrittenSystem> system_;
   dynamic_detail::TapeDerivatives tape_;
+  std::shared_ptr<const WrittenParts> parts_;
   mutable Eigen::VectorXd Lq_, Lv_;
+};
+
+// A written Lagrangian whose text is separable (WrittenDynamic::separable()), seen as a
+// system that declares it (mechanics/structure.h), for the explicit steps of
+// solvers/splitting_step.h: dL/dq is the reverse gradient of the potential's tape only,
+// dL/dv = M v, v = M^{-1} p.
+class WrittenSeparable {
+ public:
+  static constexpr Structure structure = Structure::separable;
+  explicit WrittenSeparable(const WrittenDynamic& L) : L_(L), parts_(&L.parts()) {
+    if (!L.separable()) throw std::invalid_argument(L.name() + ": the written Lagrangian is not separable");
+  }
+  int dim() const { return L_.dim(); }
+  std::string name() const { return L_.name(); }
+  double value(const DynIn& q, const DynIn& v) const { return L_.value(q, v); }
+  void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
+    Lq.setZero();
+    parts_->potential.gradient(q.data(), v.data(), Lq.data(), Lv.data());  // U has no v: Lv untouched
+    if (parts_->split.diagonal)
+      Lv = v.cwiseProduct(parts_->mass_diagonal);
+    else if (v.isZero(0.0))  // the force alone (the explicit steps ask at v = 0)
+      Lv.setZero();
+    else
+      Lv.noalias() = parts_->mass * v;
+  }
+  void velocity(const DynIn&, const DynIn& p, DynOut v) const { parts_->velocity(p, v); }
+
+ private:
+  WrittenDynamic L_;  // holds the parts alive
+  const WrittenParts* parts_;
 };
 
 // The Hamiltonian H(q, p) written in a scene (system.hamiltonian), for the Hamiltonian
@@ -786,13 +898,11 @@ class WrittenDynamicHamiltonian {
       throw std::invalid_argument(s->name + ": a Hamiltonian written on S^2 or SO(3) runs on its manifold's steps");
     if (s->hamiltonian.empty())
       throw std::invalid_argument(s->name + ": the Hamiltonian form needs a written Hamiltonian H(q, p)");
-    ExpressionSymbols sym;
-    for (int i = 0; i < s->dim(); ++i) {
-      const std::string& c = s->coordinates[static_cast<std::size_t>(i)];
-      sym.variables.push_back({c, 0, i});
-      sym.variables.push_back({"p_" + c, 1, i});
-    }
-    sym.constants = s->params;
+    ExpressionSymbols sym = s->symbols(WrittenSystem::Kind::hamiltonian);  // q: block 0, p: block 2
+    for (auto& v : sym.variables)
+      if (v.block == 2) v.block = 1;
+    for (auto& a : sym.arrays)
+      if (a.block == 2) a.block = 1;
     return std::make_shared<const Expression>(Expression::parse(s->hamiltonian.text(), sym));
   }
 

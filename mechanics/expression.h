@@ -17,6 +17,20 @@
 // argument), atan2(y, x), pow(x, y). The constant pi. (No min/max: a Lagrangian must
 // be smooth for its derivatives to mean anything; abs is there for |x| away from 0.)
 //
+// Many coordinates. A name may stand for an array (of variables, or of constants: a
+// parameter given as a list); its entries are name[index], numbered from 1:
+//   primary := ... | name '[' expr ']' | 'sum' '(' name ',' expr ',' expr ',' expr ')'
+// sum(i, a, b, body) is body_a + body_{a+1} + ... + body_b with the index name i bound
+// to each whole number from a to b in turn (0 when b < a); inside the body i is that
+// number, so q[i+1] - q[i], k[i] * i and a nested sum(j, i + 1, n, ...) all work. The
+// bounds and every index must come out as whole numbers from constants and the
+// indices of enclosing sums (checked as the text is read, with the offset). A sum is
+// unrolled when the text is read: the tape holds every term, so evaluation costs the
+// same as the text written out by hand, and the whole expression after unrolling is
+// limited to Expression::kMaxNodes operations. An index outside 1..size is refused,
+// unless the array says what lies beyond its ends: `fixed` (entries 0 and size + 1
+// are 0: walls at rest) or `periodic` (the index is taken modulo the size).
+//
 // Names are resolved at parse time: each is a variable (an index into one of up to
 // three input blocks, e.g. q, v and p) or a constant (a parameter value). Constant
 // sub-expressions are folded, and an operation with a constant operand becomes a
@@ -64,17 +78,53 @@ struct ExpressionSymbols {
     int block;  // 0, 1 or 2: which input array
     int index;  // position in that array
   };
+  // What name[0] and name[size + 1] are (beyond them every index is refused, but for
+  // periodic arrays, whose indices wrap around).
+  enum class Boundary { none, fixed, periodic };
+  // name[1] ... name[size]: entries offset ... offset + size - 1 of a block.
+  struct Array {
+    std::string name;
+    int block;
+    int offset;
+    int size;
+    Boundary boundary = Boundary::none;
+  };
+  struct ConstantArray {
+    std::string name;
+    std::vector<double> values;  // name[1] is values[0]
+  };
   std::vector<Variable> variables;
   std::vector<std::pair<std::string, double>> constants;  // parameters, in order
+  std::vector<Array> arrays;
+  std::vector<ConstantArray> constant_arrays;
 
   // Every known name, variables then constants, for "unknown name" messages.
   std::string known_names() const {
     std::string out;
-    for (const auto& v : variables) out += (out.empty() ? "" : ", ") + v.name;
-    for (const auto& c : constants) out += (out.empty() ? "" : ", ") + c.first;
-    out += (out.empty() ? "" : ", ") + std::string("pi");
+    auto add = [&](const std::string& n) { out += (out.empty() ? "" : ", ") + n; };
+    for (const auto& v : variables) add(v.name);
+    for (const auto& a : arrays) add(a.name + "[1.." + std::to_string(a.size) + "]");
+    for (const auto& c : constants) add(c.first);
+    for (const auto& c : constant_arrays) add(c.name + "[1.." + std::to_string(c.values.size()) + "]");
+    add("pi");
     return out;
   }
+};
+
+// How an expression in blocks 0 and 1 (q and v) depends on block 1, read off its
+// additive terms (Expression::split_velocity). A term is homogeneous of degree d in v
+// when it is built from v by sums of terms of equal degree, products (degrees add),
+// quotients by v-free terms and whole powers, with any function of the other variables
+// and the constants as coefficients. The terms are sorted as
+//   potential   free of v (degree 0)
+//   kinetic     of degree 2 and free of q: v^T M v / 2 with M constant
+//   mechanical  of degree 2 with coefficients that depend on q
+//   other       anything else (degree 1, 3, ..., or v inside a function)
+struct VelocitySplit {
+  bool quadratic = false;      // no `other` terms: L = v^T M(q) v / 2 + U(q)
+  bool constant_mass = false;  // quadratic with no `mechanical` terms: M constant
+  bool diagonal = false;       // constant_mass and every kinetic term uses one velocity
+  int kinetic_terms = 0, potential_terms = 0, mechanical_terms = 0, other_terms = 0;
 };
 
 class Expression {
@@ -84,6 +134,8 @@ class Expression {
   // Longest text and deepest nesting the parser accepts (see the header comment).
   static constexpr std::size_t kMaxText = std::size_t{1} << 20;
   static constexpr int kMaxNesting = 256;
+  // Most operations an expression may have once its sums are unrolled.
+  static constexpr std::size_t kMaxNodes = std::size_t{1} << 22;
 
   enum class Op : std::uint8_t {
     Const, Var,
@@ -125,10 +177,19 @@ class Expression {
   // every intermediate value, one backward sweep propagates adjoints: the cost is a
   // small multiple of one evaluation, independent of the number of variables, and
   // for Jets it keeps the scalar one nesting level shallower than forward mode.
-  // Tapes longer than kMaxTape are refused (returns false): use forward mode then.
-  static constexpr int kMaxTape = 256;
+  // Tapes of up to kStackTape instructions keep their intermediate values on the
+  // stack; longer ones in a buffer kept per thread and scalar type (grown, never
+  // shrunk), so a call allocates nothing once the buffer has its size. Returns true.
+  static constexpr int kStackTape = 256;
   template <class T>
   bool gradient(const T* b0, const T* b1, T* g0, T* g1) const;
+
+  // The terms of `text` (in q, block 0, and v, block 1) sorted by their degree in v
+  // (VelocitySplit). When the split is quadratic with a constant mass, `kinetic` and
+  // `potential` receive the sums of those terms (so that text = kinetic + potential),
+  // each a tape of its own. Throws ExpressionError as parse does.
+  static VelocitySplit split_velocity(const std::string& text, const ExpressionSymbols& symbols,
+                                      Expression* kinetic = nullptr, Expression* potential = nullptr);
 
   // One operation on scalars of any type: the same code folds constants (T = double)
   // and evaluates (any T).
@@ -271,11 +332,36 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
   using std::sqrt;
   static_assert(std::is_trivially_destructible_v<T>, "the expression arrays never run destructors");
   const int n = static_cast<int>(tape_.size());
-  if (n > kMaxTape) return false;
-  alignas(T) unsigned char raw_val[kMaxTape * sizeof(T)], raw_adj[kMaxTape * sizeof(T)];
-  T* val = std::launder(reinterpret_cast<T*>(raw_val));
-  T* adj = std::launder(reinterpret_cast<T*>(raw_adj));
-  std::int16_t arg_a[kMaxTape], arg_b[kMaxTape], stack[kMaxStack];
+  // Storage: on the stack for short tapes, else in a per-thread buffer (raw: each slot
+  // is constructed when written, as for the evaluation stack).
+  struct Slot {
+    alignas(T) unsigned char bytes[2 * sizeof(T)];
+    std::int32_t a, b;
+  };
+  Slot small[kStackTape];
+  Slot* slots = small;
+  if (n > kStackTape) {
+    thread_local std::vector<Slot> buffer;
+    if (buffer.size() < static_cast<std::size_t>(n)) buffer.resize(static_cast<std::size_t>(n));
+    slots = buffer.data();
+  }
+  std::int32_t stack[kMaxStack];
+  struct Values {  // val[i], adj[i], arg_a[i], arg_b[i] of instruction i
+    Slot* s;
+    T& operator[](int i) const { return *std::launder(reinterpret_cast<T*>(s[i].bytes)); }
+  };
+  struct Adjoints {
+    Slot* s;
+    T& operator[](int i) const { return *std::launder(reinterpret_cast<T*>(s[i].bytes + sizeof(T))); }
+  };
+  struct Args {
+    Slot* s;
+    bool second;
+    std::int32_t& operator[](int i) const { return second ? s[i].b : s[i].a; }
+  };
+  const Values val{slots};
+  const Adjoints adj{slots};
+  const Args arg_a{slots, false}, arg_b{slots, true};
   const T* blocks[2] = {b0, b1};
   T* grads[2] = {g0, g1};
   int top = -1;
@@ -295,7 +381,7 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
         new (&val[i]) T(unary(in.op, val[arg_a[i]], in));
         break;
     }
-    stack[++top] = static_cast<std::int16_t>(i);
+    stack[++top] = i;
     new (&adj[i]) T(constant<T>(0.0));
   }
   adj[n - 1] = constant<T>(1.0);
@@ -414,6 +500,8 @@ inline std::string function_names() {
   return out;
 }
 
+NodePtr simplify(NodePtr root);
+
 class Parser {
  public:
   Parser(const std::string& text, const ExpressionSymbols& symbols) : t_(text), sym_(symbols) {}
@@ -451,18 +539,21 @@ class Parser {
     return false;
   }
 
-  static NodePtr make(Expression::Op op, std::size_t pos) {
+  NodePtr make(Expression::Op op, std::size_t pos) {
+    if (++nodes_ > Expression::kMaxNodes)
+      fail(pos, "the expression has more than " + std::to_string(Expression::kMaxNodes) +
+                    " operations once its sums are unrolled; write a smaller system or fewer terms");
     auto n = std::make_unique<Node>();
     n->op = op;
     n->pos = pos;
     return n;
   }
-  static NodePtr make_const(double c, std::size_t pos) {
+  NodePtr make_const(double c, std::size_t pos) {
     NodePtr n = make(Expression::Op::Const, pos);
     n->c = c;
     return n;
   }
-  static NodePtr make2(Expression::Op op, std::size_t pos, NodePtr a, NodePtr b) {
+  NodePtr make2(Expression::Op op, std::size_t pos, NodePtr a, NodePtr b) {
     NodePtr n = make(op, pos);
     n->kids.push_back(std::move(a));
     n->kids.push_back(std::move(b));
@@ -576,7 +667,18 @@ class Parser {
       const std::string name = t_.substr(i_, j - i_);
       i_ = j;
       skip();
-      if (i_ < t_.size() && t_[i_] == '(') return call(name, at);
+      if (i_ < t_.size() && t_[i_] == '(') return name == "sum" ? sum(at) : call(name, at);
+      if (i_ < t_.size() && t_[i_] == '[') return element(name, at);
+      for (auto k = indices_.rbegin(); k != indices_.rend(); ++k)
+        if (k->first == name) return make_const(static_cast<double>(k->second), at);
+      for (const auto& a : sym_.arrays)
+        if (a.name == name)
+          fail(at, "'" + name + "' is an array of " + std::to_string(a.size) + " entries; write " + name +
+                       "[index], the index a whole number from 1 to " + std::to_string(a.size));
+      for (const auto& a : sym_.constant_arrays)
+        if (a.name == name)
+          fail(at, "'" + name + "' is a list of " + std::to_string(a.values.size()) + " numbers; write " + name +
+                       "[index], the index a whole number from 1 to " + std::to_string(a.values.size()));
       for (const auto& v : sym_.variables)
         if (v.name == name) {
           NodePtr n = make(Expression::Op::Var, at);
@@ -589,6 +691,10 @@ class Parser {
       if (name == "pi") return make_const(M_PI, at);
       for (const auto& f : functions())
         if (name == f.name) fail(i_, "expected '(' after the function name '" + name + "'");
+      if (name == "sum") fail(i_, "expected '(' after 'sum': sum(i, first, last, term)");
+      if (name == "t")
+        fail(at, "unknown name 't': time is not a variable of written systems yet (a Lagrangian that depends on "
+                 "time explicitly is not supported); known names: " + sym_.known_names());
       fail(at, "unknown name '" + name + "'; known names: " + sym_.known_names());
     }
     if (accept('(')) {
@@ -598,6 +704,119 @@ class Parser {
       return n;
     }
     fail(at, "expected a number, name or '(', got " + describe(at));
+  }
+
+  // An expression that must come out as a whole number (a sum's bound, an index): it
+  // may use constants and the indices of enclosing sums, nothing that varies.
+  long whole_number(const char* what) {
+    skip();
+    const std::size_t at = i_;
+    need_operand(what);
+    NodePtr n = simplify(expr());
+    if (!n->is_const())
+      fail(at, std::string("expected ") + what +
+                   " made of numbers, parameters and sum indices only (a whole number known before the run)");
+    const double x = n->c;
+    if (!(x == std::floor(x)) || std::fabs(x) > 1e9)
+      fail(at, std::string("expected ") + what + " to be a whole number, got " + std::to_string(x));
+    return static_cast<long>(x);
+  }
+
+  // sum(i, first, last, term): the term for i = first, ..., last, added left to right.
+  // The term's text is read once per value of i; with no values (last < first) it is
+  // read once with range checks off, so that its syntax is still checked.
+  NodePtr sum(std::size_t at) {
+    accept('(');
+    skip();
+    const std::size_t name_at = i_;
+    std::size_t j = i_;
+    while (j < t_.size() && (std::isalnum(static_cast<unsigned char>(t_[j])) || t_[j] == '_')) ++j;
+    if (j == i_ || std::isdigit(static_cast<unsigned char>(t_[i_])))
+      fail(i_, "expected the name of the index after 'sum(', got " + describe(i_));
+    const std::string index = t_.substr(i_, j - i_);
+    i_ = j;
+    if (known(index))
+      fail(name_at, "the index name '" + index + "' is already taken (a variable, parameter, function or enclosing "
+                    "index); choose another");
+    if (!accept(',')) fail(i_, "expected ',' after the index name in sum(" + index + ", first, last, term)");
+    const long first = whole_number("the first value of the index");
+    if (!accept(',')) fail(i_, "expected ',' after the first value in sum(" + index + ", first, last, term)");
+    const long last = whole_number("the last value of the index");
+    if (!accept(',')) fail(i_, "expected ',' after the last value in sum(" + index + ", first, last, term)");
+    need_operand("','");
+    const std::size_t body = i_;
+    NodePtr total;
+    const bool empty = last < first;
+    if (empty) ++dry_;
+    for (long k = first; empty ? k == first : k <= last; ++k) {
+      i_ = body;
+      indices_.emplace_back(index, k);
+      NodePtr term = expr();
+      indices_.pop_back();
+      total = total ? make2(Expression::Op::Add, at, std::move(total), std::move(term)) : std::move(term);
+    }
+    if (empty) {
+      --dry_;
+      total = make_const(0.0, at);
+    }
+    if (!accept(')')) fail(i_, "expected ')' to close sum(" + index + ", ...) opened at offset " + std::to_string(at) +
+                                   ", got " + describe(i_));
+    return total;
+  }
+
+  // name[index]: an entry of an array of variables or of constants.
+  NodePtr element(const std::string& name, std::size_t at) {
+    const ExpressionSymbols::Array* var = nullptr;
+    const ExpressionSymbols::ConstantArray* con = nullptr;
+    for (const auto& a : sym_.arrays)
+      if (a.name == name) var = &a;
+    for (const auto& a : sym_.constant_arrays)
+      if (a.name == name) con = &a;
+    if (!var && !con) {
+      if (known(name)) fail(at, "'" + name + "' is not an array: it takes no index");
+      fail(at, "unknown array '" + name + "'; known names: " + sym_.known_names());
+    }
+    accept('[');
+    const std::size_t index_at = i_;
+    const long k = whole_number("an index");
+    if (!accept(']')) fail(i_, "expected ']' to close the index of '" + name + "', got " + describe(i_));
+    const long size = var ? var->size : static_cast<long>(con->values.size());
+    using B = ExpressionSymbols::Boundary;
+    const B boundary = var ? var->boundary : B::none;
+    long e = k;
+    if (boundary == B::periodic) e = ((k - 1) % size + size) % size + 1;
+    if (e >= 1 && e <= size) {
+      if (con) return make_const(con->values[static_cast<std::size_t>(e - 1)], at);
+      NodePtr n = make(Expression::Op::Var, at);
+      n->block = var->block;
+      n->index = var->offset + static_cast<int>(e - 1);
+      return n;
+    }
+    if (boundary == B::fixed && (e == 0 || e == size + 1)) return make_const(0.0, at);
+    if (dry_ > 0) return make_const(0.0, at);  // inside an empty sum: never evaluated
+    std::string range = "1 to " + std::to_string(size);
+    if (boundary == B::fixed) range = "0 to " + std::to_string(size + 1) + " (0 and " + std::to_string(size + 1) +
+                                      " are the fixed ends)";
+    fail(index_at, "index " + std::to_string(k) + " of '" + name + "' is outside " + range +
+                       (boundary == B::none && var ? "; an array of coordinates may declare fixed or periodic ends" : ""));
+  }
+
+  // Whether a name already means something here.
+  bool known(const std::string& name) const {
+    if (name == "pi" || name == "sum" || name == "t") return true;
+    for (const auto& f : functions())
+      if (name == f.name) return true;
+    for (const auto& v : sym_.variables)
+      if (v.name == name) return true;
+    for (const auto& c : sym_.constants)
+      if (c.first == name) return true;
+    for (const auto& a : sym_.arrays)
+      if (a.name == name) return true;
+    for (const auto& a : sym_.constant_arrays)
+      if (a.name == name) return true;
+    for (const auto& k : indices_)
+      if (k.first == name) return true;
+    return false;
   }
 
   NodePtr call(const std::string& name, std::size_t at) {
@@ -626,6 +845,9 @@ class Parser {
   const ExpressionSymbols& sym_;
   std::size_t i_ = 0;
   int nesting_ = 0;
+  std::size_t nodes_ = 0;                           // made so far (Expression::kMaxNodes)
+  std::vector<std::pair<std::string, long>> indices_;  // the enclosing sums' indices and values
+  int dry_ = 0;                                     // > 0: inside a sum with no terms
 };
 
 // Constant folding and strength reduction of one node whose children are simplified.
@@ -774,6 +996,171 @@ inline Expression Expression::parse(const std::string& text, const ExpressionSym
     throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(e.depth_) +
                                  ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
   return e;
+}
+
+namespace expression_detail {
+
+// The nodes under `root` in post-order (children before parents), without recursion.
+inline std::vector<const Node*> post_order(const Node& root) {
+  std::vector<const Node*> out;
+  std::vector<std::pair<const Node*, bool>> work{{&root, false}};
+  while (!work.empty()) {
+    auto [n, expanded] = work.back();
+    work.pop_back();
+    if (expanded) {
+      out.push_back(n);
+      continue;
+    }
+    work.push_back({n, true});
+    for (auto k = n->kids.rbegin(); k != n->kids.rend(); ++k) work.push_back({k->get(), false});
+  }
+  return out;
+}
+
+// The degree in block 1 of the subtree at each node (VelocitySplit): -1 when it is not
+// homogeneous, with whether block 0 appears and which block-1 variable (-1: none,
+// -2: more than one).
+struct Degree {
+  int degree = 0;
+  bool uses_q = false;
+  int velocity = -1;
+};
+inline Degree term_degree(const Node& term) {
+  using O = Expression::Op;
+  std::vector<Degree> stack;
+  for (const Node* n : post_order(term)) {
+    Degree d;
+    const std::size_t k = n->kids.size();
+    std::vector<Degree> kids(stack.end() - static_cast<std::ptrdiff_t>(k), stack.end());
+    stack.resize(stack.size() - k);
+    for (const Degree& c : kids) {
+      d.uses_q = d.uses_q || c.uses_q;
+      if (c.velocity != -1) d.velocity = (d.velocity == -1 || d.velocity == c.velocity) ? c.velocity : -2;
+    }
+    auto all_zero = [&] {
+      for (const Degree& c : kids)
+        if (c.degree != 0) return false;
+      return true;
+    };
+    switch (n->op) {
+      case O::Const: d.degree = 0; break;
+      case O::Var:
+        d.degree = n->block == 1 ? 1 : 0;
+        d.uses_q = n->block == 0;
+        if (n->block == 1) d.velocity = n->index;
+        break;
+      case O::Neg: case O::MulC: case O::DivC: d.degree = kids[0].degree; break;
+      case O::Add: case O::Sub: d.degree = kids[0].degree == kids[1].degree ? kids[0].degree : -1; break;
+      case O::Mul: d.degree = kids[0].degree < 0 || kids[1].degree < 0 ? -1 : kids[0].degree + kids[1].degree; break;
+      case O::Div: d.degree = kids[1].degree == 0 ? kids[0].degree : -1; break;
+      case O::PowI:
+        d.degree = kids[0].degree == 0 ? 0 : kids[0].degree < 0 || n->index < 0 ? -1 : n->index * kids[0].degree;
+        break;
+      default: d.degree = all_zero() ? 0 : -1; break;  // x + c, c - x, c / x, functions, powers
+    }
+    stack.push_back(d);
+  }
+  return stack.back();
+}
+
+}  // namespace expression_detail
+
+inline VelocitySplit Expression::split_velocity(const std::string& text, const ExpressionSymbols& symbols,
+                                                Expression* kinetic, Expression* potential) {
+  using namespace expression_detail;
+  using O = Op;
+  Parser p(text, symbols);
+  NodePtr root = simplify(p.parse());
+  // the additive terms, each with the factor the sums, signs and constant factors
+  // above it give it (a work list: a flat sum is a tree as deep as it is long)
+  struct Term {
+    NodePtr* slot;
+    double scale;
+  };
+  std::vector<Term> terms, work{{&root, 1.0}};
+  double constant_term = 0.0;
+  while (!work.empty()) {
+    const Term t = work.back();
+    work.pop_back();
+    Node& n = **t.slot;
+    switch (n.op) {
+      case O::Add: work.push_back({&n.kids[1], t.scale}); work.push_back({&n.kids[0], t.scale}); break;
+      case O::Sub: work.push_back({&n.kids[1], -t.scale}); work.push_back({&n.kids[0], t.scale}); break;
+      case O::Neg: work.push_back({&n.kids[0], -t.scale}); break;
+      case O::MulC: work.push_back({&n.kids[0], t.scale * n.c}); break;
+      case O::DivC: work.push_back({&n.kids[0], t.scale / n.c}); break;
+      case O::AddC: constant_term += t.scale * n.c; work.push_back({&n.kids[0], t.scale}); break;
+      case O::RSubC: constant_term += t.scale * n.c; work.push_back({&n.kids[0], -t.scale}); break;
+      case O::Const: constant_term += t.scale * n.c; break;
+      default: terms.push_back(t); break;
+    }
+  }
+  VelocitySplit out;
+  std::vector<Term> kin, pot;
+  bool diagonal = true;
+  for (const Term& t : terms) {
+    const Degree d = term_degree(**t.slot);
+    if (d.degree == 0) {
+      ++out.potential_terms;
+      pot.push_back(t);
+    } else if (d.degree == 2 && !d.uses_q) {
+      ++out.kinetic_terms;
+      kin.push_back(t);
+      diagonal = diagonal && d.velocity >= 0;
+    } else if (d.degree == 2) {
+      ++out.mechanical_terms;
+    } else {
+      ++out.other_terms;
+    }
+  }
+  out.quadratic = out.other_terms == 0;
+  out.constant_mass = out.quadratic && out.mechanical_terms == 0;
+  out.diagonal = out.constant_mass && diagonal;
+  if (!out.constant_mass) return out;
+  // the two sums, as trees of their own (the terms moved out of `root`)
+  auto assemble = [&](std::vector<Term>& group, double c, const char* what, Expression* e) {
+    if (!e) return;
+    NodePtr sum;
+    auto node = [](O op, double k) {
+      auto n = std::make_unique<Node>();
+      n->op = op;
+      n->pos = 0;
+      n->c = k;
+      return n;
+    };
+    for (Term& t : group) {
+      NodePtr x = std::move(*t.slot);
+      if (t.scale != 1.0) {
+        NodePtr m = node(O::MulC, t.scale);
+        m->kids.push_back(std::move(x));
+        x = std::move(m);
+      }
+      if (!sum) {
+        sum = std::move(x);
+      } else {
+        NodePtr a = node(O::Add, 0.0);
+        a->kids.push_back(std::move(sum));
+        a->kids.push_back(std::move(x));
+        sum = std::move(a);
+      }
+    }
+    if (!sum) sum = node(O::Const, c);
+    else if (c != 0.0) {
+      NodePtr a = node(O::AddC, c);
+      a->kids.push_back(std::move(sum));
+      sum = std::move(a);
+    }
+    Expression r;
+    r.text_ = std::string(what) + " terms of: " + text;
+    r.depth_ = emit(*sum, r.tape_);
+    if (r.depth_ > kMaxStack)
+      throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(r.depth_) +
+                                   ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
+    *e = std::move(r);
+  };
+  assemble(kin, 0.0, "the kinetic", kinetic);
+  assemble(pot, constant_term, "the potential", potential);
+  return out;
 }
 
 }  // namespace dvm

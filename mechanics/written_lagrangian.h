@@ -13,6 +13,12 @@
 // Every expression may also use the parameters (constants with values), the constant
 // pi and the functions of mechanics/expression.h.
 //
+// Arrays, on R^n. A coordinate declared as an array, say q with 1000 entries, names
+// q[1] ... q[1000], velocities q_dot[i], momenta p_q[i] (the array's `ends` say what
+// q[0] and q[1001] are: refused, fixed at 0, or periodic); a parameter may be a list,
+// k[1] ... k[n]. Together with sum(i, first, last, term) (mechanics/expression.h) a
+// chain or a lattice of any size is a few lines of text.
+//
 // WrittenLagrangian<N> is a Lagrangian in the sense of mechanics/lagrangian.h, with
 // the dimension fixed at compile time; the text is parsed once into a WrittenSystem
 // (a tape per expression) and shared by every copy.
@@ -36,8 +42,14 @@ struct WrittenSystem {
   enum class Space { euclidean, sphere, rotation };
   Space space = Space::euclidean;
   std::string name = "lagrangian";
+  // One name per coordinate, in the order of the state: the declared names, with an
+  // array's entries named q[1], q[2], ... (these name the columns).
   std::vector<std::string> coordinates;
+  // The coordinates declared as arrays (block 0, offset into the state, size, ends);
+  // their entries are not single names of the expressions.
+  std::vector<ExpressionSymbols::Array> arrays;
   std::vector<std::pair<std::string, double>> params;
+  std::vector<ExpressionSymbols::ConstantArray> param_arrays;
   Expression lagrangian;   // in q (block 0) and v (block 1)
   Expression energy;       // optional: q, v, p (blocks 0, 1, 2)
   Expression hamiltonian;  // optional: q (block 0) and p (block 2)
@@ -46,6 +58,20 @@ struct WrittenSystem {
 
   // Which expression a text is for (decides the names it may use).
   enum class Kind { lagrangian, energy, hamiltonian };
+
+  // Appends the array `name` of `size` coordinates (q, v, p named name[i],
+  // name_dot[i], p_name[i]) to the state.
+  void add_array(const std::string& array, int size, ExpressionSymbols::Boundary ends) {
+    if (size < 1) throw std::invalid_argument("the array '" + array + "' needs at least one entry");
+    arrays.push_back({array, 0, static_cast<int>(coordinates.size()), size, ends});
+    for (int i = 1; i <= size; ++i) coordinates.push_back(array + "[" + std::to_string(i) + "]");
+  }
+  // The array whose entries include coordinate i, or null.
+  const ExpressionSymbols::Array* array_of(int i) const {
+    for (const auto& a : arrays)
+      if (i >= a.offset && i < a.offset + a.size) return &a;
+    return nullptr;
+  }
 
   ExpressionSymbols symbols(Kind kind) const {
     ExpressionSymbols s;
@@ -61,12 +87,19 @@ struct WrittenSystem {
       return s;
     }
     for (int i = 0; i < dim(); ++i) {
+      if (array_of(i)) continue;
       const std::string& c = coordinates[static_cast<std::size_t>(i)];
       s.variables.push_back({c, 0, i});
       if (kind != Kind::hamiltonian) s.variables.push_back({c + "_dot", 1, i});
       if (kind != Kind::lagrangian) s.variables.push_back({"p_" + c, 2, i});
     }
+    for (const auto& a : arrays) {
+      s.arrays.push_back({a.name, 0, a.offset, a.size, a.boundary});
+      if (kind != Kind::hamiltonian) s.arrays.push_back({a.name + "_dot", 1, a.offset, a.size, a.boundary});
+      if (kind != Kind::lagrangian) s.arrays.push_back({"p_" + a.name, 2, a.offset, a.size, a.boundary});
+    }
     s.constants = params;
+    s.constant_arrays = param_arrays;
     return s;
   }
 
@@ -102,12 +135,29 @@ struct WrittenSystem {
       throw std::invalid_argument("on S^2 the coordinates are the 3 components of the embedded unit vector, got " +
                                   std::to_string(coordinates.size()) + " names");
     if (space != Space::rotation && coordinates.empty()) throw std::invalid_argument("at least one coordinate is needed");
-    for (const auto& c : coordinates) {
+    if (space != Space::euclidean && !arrays.empty())
+      throw std::invalid_argument("arrays of coordinates are written on R^n only");
+    for (int i = 0; i < static_cast<int>(coordinates.size()); ++i) {
+      if (array_of(i)) continue;
+      const std::string& c = coordinates[static_cast<std::size_t>(i)];
       claim(c, "coordinate");
       claim(c + "_dot", "velocity");
       claim("p_" + c, "momentum");
     }
+    for (const auto& a : arrays) {
+      claim(a.name, "coordinate array");
+      claim(a.name + "_dot", "velocity array");
+      claim("p_" + a.name, "momentum array");
+    }
     for (const auto& p : params) claim(p.first, "parameter");
+    for (const auto& p : param_arrays) {
+      claim(p.name, "parameter list");
+      if (p.values.empty()) throw std::invalid_argument("the parameter list '" + p.name + "' is empty");
+    }
+    for (const char* r : {"sum", "t"})
+      if (seen.count(r))
+        throw std::invalid_argument(std::string("the name '") + r + "' is reserved (" +
+                                    (r[0] == 's' ? "sum(i, first, last, term)" : "time") + ")");
   }
 
   // "R11" ... "R33": the entry in row i, column j (0-based arguments).

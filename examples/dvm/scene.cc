@@ -16,6 +16,7 @@
 #include <toml++/toml.h>
 
 #include "examples/dvm/scene_written.h"
+#include "mechanics/written_lagrangian.h"
 #include "solvers/runtime/registry.h"
 
 namespace dvm::cli {
@@ -198,6 +199,40 @@ void apply_override(toml::table& root, const std::string& spec) {
 }
 
 
+// An initial vector of `dim` numbers: an array, or on R^n a string, an expression in
+// the index i = 1 ... dim and the system's parameters (lists included, for a written
+// system), evaluated at each i: "0.1*sin(pi*i/(n+1))".
+std::vector<double> initial_vector(const Reader& r, const std::string& path, const toml::node& n,
+                                   const std::string& key, const Problem& s, Space space) {
+  if (!n.is_string()) return r.vector(n, key);
+  if (space != Space::euclidean)
+    throw InputError(r.where(&n, key) + ": an expression in the index i is taken on R^n; on S^2 give the numbers");
+  ExpressionSymbols sym;
+  sym.variables.push_back({"i", 0, 0});
+  for (const auto& [name, value] : s.params) {
+    if (name == "i")
+      throw InputError(r.where(&n, key) + ": the parameter 'i' would hide the index i of the expression; rename it");
+    sym.constants.emplace_back(name, value);
+  }
+  if (s.written) sym.constant_arrays = s.written->param_arrays;
+  const std::string text = *n.value<std::string>();
+  Expression e;
+  try {
+    e = Expression::parse(text, sym);
+  } catch (const ExpressionError& err) {
+    throw InputError(string_location(path, n, err.offset) + ": in " + key + " (an expression in i = 1 ... " +
+                     std::to_string(s.dim) + " and the parameters): " + err.what());
+  }
+  std::vector<double> out(static_cast<std::size_t>(s.dim));
+  for (int i = 1; i <= s.dim; ++i) {
+    const double x = static_cast<double>(i);
+    out[static_cast<std::size_t>(i - 1)] = e(&x);
+    if (!std::isfinite(out[static_cast<std::size_t>(i - 1)]))
+      throw InputError(r.where(&n, key) + ": the expression is not finite at i = " + std::to_string(i));
+  }
+  return out;
+}
+
 // [initial] for systems on R^n and S^2: q and one of p, v, each of length dim (a
 // boundary-value problem takes q only). On S^2 each block of 3 is a unit vector and
 // p or v is tangent to it.
@@ -207,7 +242,7 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   r.only_keys(ini, "initial", {"q", "p", "v"});
   const toml::node* q = ini.get("q");
   if (!q) throw InputError(path + ": missing key 'initial.q'");
-  s.q = r.vector(*q, "initial.q");
+  s.q = initial_vector(r, path, *q, "initial.q", s, info.space);
   const std::string n_expected = std::to_string(dim);
   if (static_cast<int>(s.q.size()) != dim)
     throw InputError(r.where(q, "initial.q") + ": got " + std::to_string(s.q.size()) + " numbers, expected " +
@@ -222,7 +257,7 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   if (!p && !v) throw InputError(path + ": missing key 'initial.p' or 'initial.v'");
   const toml::node* pv = p ? p : v;
   const std::string pv_key = p ? "initial.p" : "initial.v";
-  (p ? s.p : s.v) = r.vector(*pv, pv_key);
+  (p ? s.p : s.v) = initial_vector(r, path, *pv, pv_key, s, info.space);
   s.momentum_given = p != nullptr;
   if (static_cast<int>((p ? s.p : s.v).size()) != dim)
     throw InputError(r.where(pv, pv_key) + ": got " + std::to_string((p ? s.p : s.v).size()) + " numbers, expected " +
@@ -738,13 +773,14 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   // [system]
   const toml::table& sys = r.section(root, "system", true);
   r.only_keys(sys, "system",
-              {"builtin", "params", "lagrangian", "coordinates", "energy", "hamiltonian", "name", "masses", "space"});
+              {"builtin", "params", "lagrangian", "coordinates", "energy", "hamiltonian", "name", "masses", "space",
+               "ends"});
   if (sys.get("lagrangian")) read_written_system(path, sys, pr);
   const toml::node* b = sys.get("builtin");
   if (!b && !pr.written)
     throw InputError(path + ": missing key 'system.builtin' (a built-in system name) or 'system.lagrangian'");
   if (!pr.written) {
-    for (const char* k : {"coordinates", "energy", "hamiltonian", "name", "space"})
+    for (const char* k : {"coordinates", "energy", "hamiltonian", "name", "space", "ends"})
       if (const toml::node* n = sys.get(k))
         throw InputError(r.where(n, std::string("system.") + k) + ": belongs to a written system (system.lagrangian)");
     pr.system = &find_system_entry(r.string(*b, "system.builtin"), r.where(b, "system.builtin"));

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <vector>
 
@@ -105,6 +106,51 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   w->space = space == Space::sphere     ? WrittenSystem::Space::sphere
              : space == Space::rotation ? WrittenSystem::Space::rotation
                                         : WrittenSystem::Space::euclidean;
+  // the parameters first: an array's size may name one
+  if (const toml::node* params = sys.get("params")) {
+    if (!params->is_table())
+      throw InputError(key_where(path, *params, "system.params") + ": expected a table of numbers or lists of numbers");
+    for (const auto& [k, v] : *params->as_table()) {
+      const std::string name(k.str());
+      if (const toml::array* list = v.as_array()) {
+        ExpressionSymbols::ConstantArray a{name, {}};
+        for (std::size_t i = 0; i < list->size(); ++i) {
+          const toml::node& e = *list->get(i);
+          const auto x = e.value<double>();
+          if (!e.is_number() || !x || !std::isfinite(*x))
+            throw InputError(key_where(path, e, "system.params." + name + "[" + std::to_string(i) + "]") +
+                             ": expected a finite number");
+          a.values.push_back(*x);
+        }
+        if (a.values.empty())
+          throw InputError(key_where(path, v, "system.params." + name) + ": expected a non-empty list of numbers");
+        w->param_arrays.push_back(std::move(a));
+        continue;
+      }
+      const auto x = v.value<double>();
+      if (!(v.is_number()) || !x || !std::isfinite(*x))
+        throw InputError(key_where(path, v, "system.params." + name) + ": expected a finite number or a list of numbers");
+      w->params.emplace_back(name, *x);
+      pr.params[name] = *x;
+    }
+  }
+  // what an array's index 0 and size + 1 mean
+  std::map<std::string, ExpressionSymbols::Boundary> ends;
+  const toml::node* ends_node = sys.get("ends");
+  if (ends_node) {
+    if (!ends_node->is_table())
+      throw InputError(key_where(path, *ends_node, "system.ends") +
+                       ": expected a table naming arrays of coordinates, e.g. ends = { q = \"fixed\" }");
+    for (const auto& [k, v] : *ends_node->as_table()) {
+      const std::string name(k.str());
+      const auto e = v.value<std::string>();
+      if (!v.is_string() || !(*e == "none" || *e == "fixed" || *e == "periodic"))
+        throw InputError(key_where(path, v, "system.ends." + name) + ": expected \"none\", \"fixed\" or \"periodic\"");
+      ends[name] = *e == "fixed" ? ExpressionSymbols::Boundary::fixed
+                   : *e == "periodic" ? ExpressionSymbols::Boundary::periodic
+                                     : ExpressionSymbols::Boundary::none;
+    }
+  }
   const toml::node* c = sys.get("coordinates");
   if (c && space == Space::rotation)
     throw InputError(key_where(path, *c, "system.coordinates") +
@@ -120,22 +166,47 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
       throw InputError(key_where(path, *c, "system.coordinates") + ": expected a non-empty array of names");
     for (std::size_t i = 0; i < ca->size(); ++i) {
       const auto v = ca->get(i)->value<std::string>();
+      const std::string key = "system.coordinates[" + std::to_string(i) + "]";
       if (!ca->get(i)->is_string())
-        throw InputError(key_where(path, *ca->get(i), "system.coordinates[" + std::to_string(i) + "]") +
-                         ": expected a name (a string)");
-      w->coordinates.push_back(*v);
+        throw InputError(key_where(path, *ca->get(i), key) + ": expected a name (a string)");
+      // "q[1000]" or "q[n]" (n a parameter): an array of coordinates
+      const std::size_t open = v->find('[');
+      if (open == std::string::npos) {
+        w->coordinates.push_back(*v);
+        continue;
+      }
+      if (space != Space::euclidean)
+        throw InputError(key_where(path, *ca->get(i), key) + ": arrays of coordinates are written on R^n only");
+      const std::string name = v->substr(0, open);
+      const bool closed = v->size() > open + 2 && v->back() == ']';
+      const std::string size_text = closed ? v->substr(open + 1, v->size() - open - 2) : "";
+      // the size: an expression in the (scalar) parameters
+      double size = -1.0;
+      if (closed) {
+        ExpressionSymbols sizes;
+        sizes.constants = w->params;
+        try {
+          const Expression e = Expression::parse(size_text, sizes);
+          if (e.tape().size() == 1 && e.tape()[0].op == Expression::Op::Const) size = e.tape()[0].c;
+        } catch (const ExpressionError& err) {
+          throw InputError(string_location(path, *ca->get(i), open + 1 + err.offset) + ": in " + key +
+                           ", the size of '" + v->substr(0, open) + "': " + err.what());
+        }
+      }
+      if (!closed || !(size >= 1.0 && size <= 1e7 && size == std::floor(size)))
+        throw InputError(key_where(path, *ca->get(i), key) + ": '" + *v +
+                         "' is not a coordinate array; expected name[size], the size a whole number from 1 to 10^7 "
+                         "made of numbers and parameters (e.g. \"q[n]\" with params = { n = 1000 }, or \"r[3*n]\")");
+      auto e = ends.find(name);
+      w->add_array(name, static_cast<int>(size), e == ends.end() ? ExpressionSymbols::Boundary::none : e->second);
     }
   }
-  if (const toml::node* params = sys.get("params")) {
-    if (!params->is_table()) throw InputError(key_where(path, *params, "system.params") + ": expected a table of numbers");
-    for (const auto& [k, v] : *params->as_table()) {
-      const std::string name(k.str());
-      const auto x = v.value<double>();
-      if (!(v.is_number()) || !x || !std::isfinite(*x))
-        throw InputError(key_where(path, v, "system.params." + name) + ": expected a finite number");
-      w->params.emplace_back(name, *x);
-      pr.params[name] = *x;
-    }
+  for (const auto& [name, b] : ends) {
+    bool found = false;
+    for (const auto& a : w->arrays) found = found || a.name == name;
+    if (!found)
+      throw InputError(key_where(path, *ends_node, "system.ends." + name) + ": '" + name +
+                       "' is not an array of coordinates (declare it as coordinates = [\"" + name + "[n]\"])");
   }
   try {
     w->check_names();

@@ -4,8 +4,10 @@
 //   name = "double pendulum"                     # optional, shown in the output
 //   space = "R^n"                                # optional: "R^n", "S^2" or "SO(3)"
 //   coordinates = ["a", "b"]                     # S^2: three (default x, y, z); SO(3): none
+//                                                # R^n: "q[n]" or "q[1000]" is an array q[1..n]
+//   ends = { q = "fixed" }                       # optional, per array: "none", "fixed", "periodic"
 //   lagrangian = "... a, b, a_dot, b_dot, parameters ..."
-//   params = { m1 = 1.0, ... }                   # any names, all numbers
+//   params = { m1 = 1.0, k = [1.0, 2.0], ... }   # any names: numbers, or lists (k[1], k[2])
 //   energy = "..."                               # optional: q, q_dot and p_q names
 //   hamiltonian = "..."                          # optional: q and p_q names
 //

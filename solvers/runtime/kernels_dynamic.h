@@ -3,8 +3,9 @@
 // of coordinates. One instantiation per system type, none per size:
 //
 //   form / method   step (solvers/dynamic_step.h, solvers/dynamic_galerkin_step.h)
-//   lagrangian      ExplicitSplittingStep<Sys> for theta 0 or 1 on a separable Sys (n
-//                   bodies), composition included;
+//   lagrangian      ExplicitSplittingStep for theta 0 or 1 on a separable system (n
+//                   bodies; a written Lagrangian whose text is separable, through
+//                   WrittenSeparable), composition included;
 //                   DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
 //                   with the flat retraction R_x(v) = x + v is the theta map itself,
 //                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
@@ -136,6 +137,44 @@ struct DynamicView {
   bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
 };
 
+// Whether a run-time-sized system is separable: declared (n bodies), or read off the
+// text of a written Lagrangian (WrittenDynamic::separable()).
+template <class Sys>
+bool dynamic_separable(const Sys& L) {
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+    return L.separable();
+  else
+    return (void)L, is_separable_v<Sys>;
+}
+
+// A written Lagrangian's structure, from its text (WrittenParts): separable when its
+// terms are v^T M v / 2 with M constant plus terms in q, and M is positive definite (its
+// factorisation); mechanical when the quadratic terms' coefficients depend on q and
+// the sample test of mechanics/structure.h finds M(q) symmetric positive definite
+// around the initial state; general otherwise.
+inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen::VectorXd& q,
+                             const Eigen::VectorXd& v0, const Problem&) {
+  const WrittenParts& w = L.parts();
+  Structure s = Structure::general;
+  if (w.separable) {
+    s = Structure::separable;
+  } else if (w.split.quadratic && !w.split.constant_mass) {
+    try {
+      if (test_structure(L, Structure::mechanical, q, v0).holds) s = Structure::mechanical;
+    } catch (const std::exception&) {
+      // a sample outside the Lagrangian's domain: "general"
+    }
+  }
+  r.structure = structure_name(s);
+  r.structure_source = "expression";
+  r.step_path = "generic";
+}
+
+// The dense steps of a run-time-sized system form n x n matrices (the Newton Jacobian,
+// the velocity Hessian); beyond this many coordinates they are refused rather than
+// left to run out of memory or time.
+constexpr int kMaxDenseDynamicDim = 4096;
+
 // The theta of the method's map as a ThetaMap (retraction-theta: the same map).
 inline ThetaMap dynamic_theta_map(const Method& me) {
   const MapEntry& e = *me.map;
@@ -171,15 +210,21 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   // separable system has d2L/dv2 = M, constant and positive definite (checked at sample
   // points by report_structure below), so no n x n matrix is formed and factored for it
   // (n bodies: 3n x 3n)
-  constexpr bool constant_hessian = is_separable_v<Sys>;
+  const bool constant_hessian = dynamic_separable(L);
   view.constant_hessian = constant_hessian;
   const V q = Eigen::Map<const V>(pr.q.data(), n);
   V p(n), v0(n);
+  auto dense_limit = [&](const char* what) {
+    if (n > kMaxDenseDynamicDim)
+      throw InputError(std::string("integrator: ") + what + " forms dense " + std::to_string(n) + " x " +
+                       std::to_string(n) + " matrices for this system, beyond the " +
+                       std::to_string(kMaxDenseDynamicDim) +
+                       " coordinates the run-time-sized dense steps take; on a separable system "
+                       "map = \"explicit-euler\" or \"adjoint-euler\", composed or not, steps without them");
+  };
+  if (!constant_hessian) dense_limit("checking the Legendre transform of a Lagrangian that is not separable");
   auto check = [&](const V& v) {
-    if constexpr (!constant_hessian)
-      require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where);
-    else
-      (void)v;
+    if (!constant_hessian) require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where);
   };
   if (pr.momentum_given) {
     p = Eigen::Map<const V>(pr.p.data(), n);
@@ -194,7 +239,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     p = legendre(L, q, v0);
   }
   check(v0);
-  if constexpr (!constant_hessian) view.sigma0 = matrix_hessian_scale(view.velocity_hessian(q, v0));
+  if (!constant_hessian) view.sigma0 = matrix_hessian_scale(view.velocity_hessian(q, v0));
   if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
     if (hamiltonian) {
       const double H = L.hamiltonian(q, p), E = energy(L, q, v0);
@@ -210,6 +255,16 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
   report_structure(base, L, q, v0, pr);
 
+  if (me.form == Form::lagrangian && !me.galerkin) {
+    const ThetaMap R = dynamic_theta_map(me);
+    if (splitting_applies(me, R)) {
+      if constexpr (is_separable_v<Sys>)
+        return splitting_run(view, L, R, me, h, q, p, v0, base, pr.steps);
+      if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+        if (L.separable()) return splitting_run(view, WrittenSeparable(L), R, me, h, q, p, v0, base, pr.steps);
+    }
+  }
+  dense_limit(me.galerkin ? "method = \"galerkin\"" : "this map and form");
   if (me.galerkin)
     return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
   const ThetaMap R = dynamic_theta_map(me);
@@ -224,8 +279,6 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     return run_with(LegendreDynamicHamiltonian<Sys>(L));
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
-  if constexpr (is_separable_v<Sys>)
-    if (splitting_applies(me, R)) return splitting_run(view, L, R, me, h, q, p, v0, base, pr.steps);
   auto make = [&](double hk, bool adj) { return DynamicThetaStep<Sys>(L, adj ? R.adjoint() : R, hk, opt); };
   return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
 }

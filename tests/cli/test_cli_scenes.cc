@@ -68,6 +68,8 @@ BOOST_AUTO_TEST_CASE(every_shipped_scene_runs_and_keeps_its_invariants) {
       {"charged_particle.toml", {}, 1e-13},  // quadratic energy: the midpoint rule keeps it
       {"figure_eight.toml", {"--set", "integrator.t_end=6.0"}, 1e-5},
       {"outer_solar_system.toml", {"--set", "integrator.t_end=20000.0"}, 1e-12},
+      {"nbody_written.toml", {"--set", "integrator.t_end=6.0"}, 1e-6},
+      {"fpu_chain_written.toml", {"--set", "integrator.t_end=100.0"}, 1e-10},
   };
   for (const auto& c : cases) {
     const Output o = run_json(c.scene, c.sets);
@@ -358,4 +360,105 @@ BOOST_AUTO_TEST_CASE(written_hamiltonian_drives_the_hamiltonian_form) {
   BOOST_TEST(wd.status == 0, wd.err);
   BOOST_TEST(max_diff(json_array(wc.out, "q_final"), json_array(wd.out, "q_final")) <= 1e-12);
   BOOST_TEST(max_diff(json_array(wc.out, "p_final"), json_array(wd.out, "p_final")) <= 1e-12);
+}
+
+// Written systems of many coordinates (arrays, lists, sums; mechanics/expression.h)
+// against the built-in ones, and the structure read off their text.
+BOOST_AUTO_TEST_CASE(written_arrays_and_sums_match_the_built_in_systems) {
+  // the written n-body Lagrangian (one array r[3n], a list of masses, a double sum) and
+  // the built-in figure eight, with the same explicit method
+  const std::vector<std::string> sv = {"--set", "integrator.map=adjoint-euler", "--set",
+                                       "integrator.composition=stormer-verlet", "--set", "integrator.t_end=6.0"};
+  const Output w = run_json("nbody_written.toml", sv);
+  const Output b = run_json("figure_eight.toml", sv);
+  BOOST_TEST(w.status == 0, w.err);
+  BOOST_TEST(json_string(w.out, "structure") == "separable");
+  BOOST_TEST(json_string(w.out, "structure_source") == "expression");
+  BOOST_TEST(json_string(w.out, "step_path") == "explicit-splitting");
+  BOOST_TEST(max_diff(json_array(w.out, "q_final"), json_array(b.out, "q_final")) <= 1e-13);
+  BOOST_TEST(max_diff(json_array(w.out, "p_final"), json_array(b.out, "p_final")) <= 1e-13);
+  // and with the implicit midpoint (the generic dense path of a written system)
+  const std::vector<std::string> mid = {"--set", "integrator.map=midpoint", "--set", "integrator.composition=none",
+                                        "--set", "integrator.t_end=1.0"};
+  const Output wm = run_json("nbody_written.toml", mid), bm = run_json("figure_eight.toml", mid);
+  BOOST_TEST(json_string(wm.out, "step_path") == "generic");
+  BOOST_TEST(max_diff(json_array(wm.out, "q_final"), json_array(bm.out, "q_final")) <= 1e-13);
+  // the written FPU chain against the built-in chain (walls, alpha = 0.25, beta = 1), at
+  // 8 and 1000 particles, the initial state an expression in i for both
+  for (const char* n : {"8", "1000"}) {
+    const std::vector<std::string> sets = {"--set", std::string("system.params.n=") + n,
+                                           "--set", "integrator.t_end=20.0",
+                                           "--set", "initial.q=\"0.3*sin(pi*i/(n + 1)) + 0.1*cos(2*i)\"",
+                                           "--set", "initial.p=\"0.05*i/n\""};
+    std::vector<std::string> chain = sets;
+    for (const char* k : {"system.params.alpha=0.25", "system.params.beta=1.0", "integrator.map=explicit-euler",
+                          "integrator.composition=stormer-verlet", "integrator.step=0.05"}) {
+      chain.push_back("--set");
+      chain.push_back(k);
+    }
+    const Output cw = run_json("fpu_chain_written.toml", sets), cb = run_json("chain.toml", chain);
+    BOOST_TEST_CONTEXT("n = " << n << "\n" << cw.err << cb.err) {
+      BOOST_TEST(cw.status == 0);
+      BOOST_TEST(cb.status == 0);
+      BOOST_TEST(json_array(cw.out, "q_final").size() == std::stoul(n));
+      BOOST_TEST(json_string(cw.out, "structure") == "separable");
+      BOOST_TEST(max_diff(json_array(cw.out, "q_final"), json_array(cb.out, "q_final")) <= 1e-13);
+      BOOST_TEST(max_diff(json_array(cw.out, "p_final"), json_array(cb.out, "p_final")) <= 1e-13);
+      BOOST_TEST(std::fabs(json_number(cw.out, "energy_initial") - json_number(cb.out, "energy_initial")) <= 1e-14);
+    }
+  }
+  // the structure of each shipped written scene on R^n, and of a charged particle written
+  // with its magnetic term (linear in v)
+  BOOST_TEST(json_string(run_json("pendulum_written.toml").out, "structure") == "separable");
+  BOOST_TEST(json_string(run_json("double_pendulum_written.toml", {"--set", "integrator.t_end=1.0"}).out,
+                         "structure") == "mechanical");
+  const std::string charged = write_scene(
+      "charged_written.toml",
+      "[system]\ncoordinates = [\"x\", \"y\"]\nparams = { m = 1.0, B = 4.0 }\n"
+      "lagrangian = \"m/2*(x_dot^2 + y_dot^2) + B/2*(x*y_dot - y*x_dot)\"\n"
+      "[initial]\nq = [1.0, 0.0]\nv = [0.0, 0.5]\n[integrator]\nmap = \"explicit-euler\"\nstep = 0.01\nsteps = 10\n");
+  const Output c = dvm({"run", charged, "--json"});
+  BOOST_TEST(c.status == 0, c.err);
+  BOOST_TEST(json_string(c.out, "structure") == "general");
+  BOOST_TEST(json_string(c.out, "structure_source") == "expression");
+  BOOST_TEST(json_string(c.out, "step_path") == "generic");
+}
+
+BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
+  const std::string base =
+      "[system]\ncoordinates = [\"q[n]\"]\nparams = { n = 4 }\n"
+      "lagrangian = \"sum(i, 1, n, q_dot[i]^2/2) - sum(i, 2, n, (q[i] - q[i-1])^2/2)\"\n"
+      "[initial]\nq = \"0.1*i\"\np = \"0\"\n[integrator]\nmap = \"explicit-euler\"\nstep = 0.01\nsteps = 10\n";
+  const std::string path = write_scene("array.toml", base);
+  BOOST_TEST(dvm({"run", path}).status == 0);
+  auto refused = [&](std::vector<std::string> sets, const std::string& says) {
+    std::vector<std::string> args = {"run", path};
+    for (const auto& s : sets) {
+      args.push_back("--set");
+      args.push_back(s);
+    }
+    const Output o = dvm(args);
+    BOOST_TEST_CONTEXT(sets.front()) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find(says) != std::string::npos, o.err);
+    }
+  };
+  refused({"system.coordinates=[\"q[m]\"]"}, "in system.coordinates[0], the size of 'q': unknown name 'm'");
+  refused({"system.coordinates=[\"q[0]\"]"}, "is not a coordinate array");
+  refused({"system.coordinates=[\"q[n/3]\"]"}, "is not a coordinate array");
+  refused({"system.ends={ q = \"walls\" }"}, "system.ends.q': expected \"none\", \"fixed\" or \"periodic\"");
+  refused({"system.ends={ x = \"fixed\" }"}, "'x' is not an array of coordinates");
+  refused({"system.lagrangian=\"q_dot[5]^2\""}, "index 5 of 'q_dot' is outside 1 to 4");
+  refused({"system.lagrangian=\"q_dot^2\""}, "'q_dot' is an array of 4 entries");
+  refused({"system.lagrangian=\"q_dot[1]^2 + t\""}, "time is not a variable of written systems yet");
+  refused({"system.params={ n = 4, k = [] }"}, "expected a non-empty list of numbers");
+  refused({"initial.q=\"1/(i - 2)\""}, "the expression is not finite at i = 2");
+  refused({"initial.q=\"x*i\""}, "in initial.q (an expression in i = 1 ... 4 and the parameters): unknown name 'x'");
+  refused({"system.params={ n = 4, i = 1 }", "system.lagrangian=\"sum(j, 1, n, q_dot[j]^2/2)\""},
+          "the parameter 'i' would hide the index i");
+  // a dense implicit step beyond the size the run-time-sized steps take
+  refused({"system.params={ n = 5000 }", "integrator.map=midpoint"}, "beyond the 4096 coordinates");
+  refused({"system.params={ n = 5000 }", "integrator.method=galerkin"}, "beyond the 4096 coordinates");
+  // ... while the explicit steps take it
+  BOOST_TEST(dvm({"run", path, "--set", "system.params={ n = 5000 }"}).status == 0);
 }

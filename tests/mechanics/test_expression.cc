@@ -335,13 +335,11 @@ BOOST_AUTO_TEST_CASE(fpu_oscillatory_energy_is_an_adiabatic_invariant) {
 }
 
 // Reverse mode on the tape against forward mode (Jets through operator()), for every
-// operation, also with Jet scalars (second derivatives), and the refusal of tapes
-// longer than Expression::kMaxTape (at the boundary: kMaxTape taken, kMaxTape + 1
-// refused).
+// operation, also with Jet scalars (second derivatives), and for tapes on both sides of
+// Expression::kStackTape (stack storage up to it, the per-thread buffer beyond).
 namespace {
-// dL/dq, dL/dv by Expression::gradient (reverse mode) only, never forward mode: returns
-// whether the tape was taken (false for tapes longer than Expression::kMaxTape). The
-// comparisons require true, so forward mode is never compared with itself.
+// dL/dq, dL/dv by Expression::gradient (reverse mode) only, never forward mode, so
+// forward mode is never compared with itself.
 template <class T>
 bool reverse_gradient(const WrittenLagrangian<2>& L, const Vec<T, 2>& q, const Vec<T, 2>& v, Vec<T, 2>& dLdq,
                       Vec<T, 2>& dLdv) {
@@ -358,7 +356,7 @@ BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operat
   };
   for (const auto& text : texts) {
     const WrittenLagrangian<2> L(written({"x", "y"}, {}, text));
-    BOOST_REQUIRE_MESSAGE(static_cast<int>(L.system->lagrangian.tape().size()) <= Expression::kMaxTape, text);
+    BOOST_REQUIRE_MESSAGE(static_cast<int>(L.system->lagrangian.tape().size()) <= Expression::kStackTape, text);
     for (const auto& [q, v] : {std::pair{Vec<double, 2>(0.7, 1.3), Vec<double, 2>(0.2, -0.4)},
                                std::pair{Vec<double, 2>(1.1, 0.6), Vec<double, 2>(-0.9, 0.5)}}) {
       Vec<double, 2> a1, b1, a2, b2;
@@ -381,35 +379,37 @@ BOOST_AUTO_TEST_CASE(reverse_mode_gradient_matches_forward_mode_for_every_operat
       }
     }
   }
-  // a tape longer than kMaxTape is refused
+  // a long tape (the per-thread buffer) against forward mode, with doubles and Jets
   std::string longer = "0";
   for (int i = 1; i <= 100; ++i) longer += " + sin(" + std::to_string(i) + "*x)*y_dot^2";
   const WrittenLagrangian<2> L(written({"x", "y"}, {}, longer));
-  BOOST_TEST(static_cast<int>(L.system->lagrangian.tape().size()) > Expression::kMaxTape);
+  BOOST_TEST(static_cast<int>(L.system->lagrangian.tape().size()) > 2 * Expression::kStackTape);
   const Vec<double, 2> q(0.3, 0.1), v(0.5, 0.7);
-  Vec<double, 2> a1, b1;
-  BOOST_TEST(!L.system->lagrangian.gradient(q.data(), v.data(), a1.data(), b1.data()));
-  // at the boundary: a tape of exactly kMaxTape instructions is taken (and right), one of
-  // kMaxTape + 1 refused. Heads of 3, 4 and 5 instructions and terms " + sin(x)" of 3
-  // (Var, Sin, Add) reach every length; the lengths are read from the tape.
+  {
+    Vec<double, 2> a1, b1, a2, b2;
+    BOOST_TEST(reverse_gradient(L, q, v, a1, b1));
+    lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{L}, q, v, a2, b2);
+    BOOST_TEST(max_abs(a1 - a2) <= 1e-13 * std::fmax(1.0, max_abs(a2)));
+    BOOST_TEST(max_abs(b1 - b2) <= 1e-13 * std::fmax(1.0, max_abs(b2)));
+  }
+  // at the boundary: tapes of exactly kStackTape and kStackTape + 1 instructions (the
+  // two storages) are both right. Heads of 3, 4 and 5 instructions and terms
+  // " + sin(x)" of 3 (Var, Sin, Add) reach every length; the lengths are read from the tape.
   int found = 0;
   for (const std::string head : {"x_dot*y", "-(x_dot*y)", "x_dot*y*x"})
-    for (int k = 0; k <= Expression::kMaxTape / 3; ++k) {
+    for (int k = 0; k <= Expression::kStackTape / 3; ++k) {
       std::string text = head;
       for (int i = 0; i < k; ++i) text += " + sin(x)";
       const WrittenLagrangian<2> B(written({"x", "y"}, {}, text));
       const int n = static_cast<int>(B.system->lagrangian.tape().size());
-      if (n != Expression::kMaxTape && n != Expression::kMaxTape + 1) continue;
-      found |= n == Expression::kMaxTape ? 1 : 2;
+      if (n != Expression::kStackTape && n != Expression::kStackTape + 1) continue;
+      found |= n == Expression::kStackTape ? 1 : 2;
       BOOST_TEST_CONTEXT("tape of " << n << " instructions: " << head << " + " << k << " x sin(x)") {
         Vec<double, 2> a2, b2, a3, b3;
-        const bool taken = reverse_gradient(B, q, v, a2, b2);
-        BOOST_TEST(taken == (n == Expression::kMaxTape));
-        if (taken) {
-          lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{B}, q, v, a3, b3);
-          BOOST_TEST(max_abs(a2 - a3) <= 1e-14 * std::fmax(1.0, max_abs(a3)));
-          BOOST_TEST(max_abs(b2 - b3) <= 1e-14 * std::fmax(1.0, max_abs(b3)));
-        }
+        BOOST_TEST(reverse_gradient(B, q, v, a2, b2));
+        lagrangian_gradient(GenericOnly<WrittenLagrangian<2>>{B}, q, v, a3, b3);
+        BOOST_TEST(max_abs(a2 - a3) <= 1e-14 * std::fmax(1.0, max_abs(a3)));
+        BOOST_TEST(max_abs(b2 - b3) <= 1e-14 * std::fmax(1.0, max_abs(b3)));
       }
     }
   BOOST_TEST(found == 3);  // both lengths were built
@@ -464,4 +464,196 @@ BOOST_AUTO_TEST_CASE(growing_inputs_are_parsed_or_refused_never_crash) {
   double expected = x;
   for (int i = 0; i < 200; ++i) expected = std::sin(expected);
   BOOST_TEST(eval1(chain, x) == expected);
+}
+
+// ---- many coordinates: arrays, lists, sums -------------------------------------------
+
+namespace {
+
+// A written system with one array of coordinates q[1..n] (ends as given) and the
+// parameters and lists given.
+std::shared_ptr<WrittenSystem> written_array(int n, ExpressionSymbols::Boundary ends,
+                                             std::vector<std::pair<std::string, double>> params,
+                                             std::vector<ExpressionSymbols::ConstantArray> lists, const std::string& L) {
+  auto s = std::make_shared<WrittenSystem>();
+  s->add_array("q", n, ends);
+  s->params = std::move(params);
+  s->param_arrays = std::move(lists);
+  s->check_names();
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  return s;
+}
+
+// The same Lagrangian written out by hand with one name per coordinate (c0, c1, ...).
+std::shared_ptr<WrittenSystem> written_out(int n, std::vector<std::pair<std::string, double>> params,
+                                           const std::string& L) {
+  std::vector<std::string> c;
+  for (int i = 0; i < n; ++i) c.push_back("c" + std::to_string(i));
+  return written(c, std::move(params), L);
+}
+
+// Value and reverse gradient of two written systems of n coordinates at a random point:
+// the largest difference, relative.
+double tape_difference(const WrittenSystem& a, const WrittenSystem& b, int n, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  std::vector<double> q(n), v(n), ga(n, 0.0), gb(n, 0.0), pa(n, 0.0), pb(n, 0.0);
+  for (int i = 0; i < n; ++i) q[i] = U(rng), v[i] = U(rng);
+  const double la = a.lagrangian(q.data(), v.data()), lb = b.lagrangian(q.data(), v.data());
+  a.lagrangian.gradient(q.data(), v.data(), ga.data(), pa.data());
+  b.lagrangian.gradient(q.data(), v.data(), gb.data(), pb.data());
+  double d = std::fabs(la - lb) / std::fmax(1.0, std::fabs(lb));
+  for (int i = 0; i < n; ++i)
+    d = std::fmax(d, std::fmax(std::fabs(ga[i] - gb[i]), std::fabs(pa[i] - pb[i])) /
+                         std::fmax(1.0, std::fmax(std::fabs(gb[i]), std::fabs(pb[i]))));
+  return d;
+}
+
+std::string c(int i) { return "c" + std::to_string(i); }
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(sums_over_arrays_unroll_to_the_text_written_out) {
+  using B = ExpressionSymbols::Boundary;
+  const int n = 7;
+  // an FPU chain between walls: bonds 1 .. n + 1, q[0] = q[n + 1] = 0
+  const auto fixed = written_array(n, B::fixed, {{"n", n}, {"k", 1.3}, {"b", 0.4}}, {},
+                                   "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, k/2*(q[i] - q[i-1])^2 + "
+                                   "b/4*(q[i] - q[i-1])^4)");
+  std::string kin, pot;
+  for (int i = 0; i < n; ++i) kin += (i ? " + " : "") + c(i) + "_dot^2/2";
+  for (int i = 0; i <= n; ++i) {
+    const std::string r = "(" + (i < n ? c(i) : std::string("0")) + " - " + (i > 0 ? c(i - 1) : std::string("0")) + ")";
+    pot += " - (k/2*" + r + "^2 + b/4*" + r + "^4)";
+  }
+  const auto by_hand = written_out(n, {{"k", 1.3}, {"b", 0.4}}, kin + pot);
+  BOOST_TEST(fixed->coordinates.size() == static_cast<std::size_t>(n));
+  BOOST_TEST(fixed->coordinates[2] == "q[3]");
+  BOOST_TEST(tape_difference(*fixed, *by_hand, n, 1) <= 1e-15);
+  // periodic ends: q[0] is q[n], a ring of n bonds; and a list of spring constants
+  const auto ring = written_array(n, B::periodic, {{"n", n}}, {{"k", {1, 2, 3, 4, 5, 6, 7}}},
+                                  "sum(i, 1, n, q_dot[i]^2/2 - k[i]/2*(q[i] - q[i-1])^2)");
+  std::string ring_text;
+  for (int i = 0; i < n; ++i)
+    ring_text += " + " + c(i) + "_dot^2/2 - " + std::to_string(i + 1) + "/2*(" + c(i) + " - " + c((i + n - 1) % n) + ")^2";
+  BOOST_TEST(tape_difference(*ring, *written_out(n, {}, "0" + ring_text), n, 2) <= 1e-15);
+  // pairs j > i (bounds from the enclosing index), indices computed, the index as a number
+  const auto pairs = written_array(4, B::none, {{"n", 4}}, {},
+                                   "sum(i, 1, n, i*q_dot[n + 1 - i]^2) - sum(i, 1, n - 1, sum(j, i + 1, n, "
+                                   "1/sqrt(1 + (q[i] - q[j])^2)))");
+  std::string pair_text;
+  for (int i = 1; i <= 4; ++i) pair_text += " + " + std::to_string(i) + "*" + c(4 - i) + "_dot^2";
+  for (int i = 1; i <= 3; ++i)
+    for (int j = i + 1; j <= 4; ++j) pair_text += " - 1/sqrt(1 + (" + c(i - 1) + " - " + c(j - 1) + ")^2)";
+  BOOST_TEST(tape_difference(*pairs, *written_out(4, {}, "0" + pair_text), 4, 3) <= 1e-15);
+  // an empty sum is 0, and its term is not range-checked (never evaluated)
+  const auto empty = written_array(2, B::none, {}, {}, "q_dot[1]^2 + sum(i, 3, 2, q[i + 100])");
+  BOOST_TEST(empty->lagrangian.tape().size() == written_out(2, {}, "c0_dot^2 + 0")->lagrangian.tape().size());
+  // a sum of 10^5 terms: the tape holds them all, a left-leaning sum (stack depth 2)
+  const auto big = written_array(100000, B::fixed, {{"n", 100000}}, {}, "sum(i, 1, n, q_dot[i]^2/2 - q[i]^2/2)");
+  BOOST_TEST(big->lagrangian.stack_depth() <= 3);
+  BOOST_TEST(big->lagrangian.tape().size() >= 500000u);
+}
+
+BOOST_AUTO_TEST_CASE(array_errors_say_where_and_what) {
+  ExpressionSymbols s;
+  s.arrays.push_back({"q", 0, 0, 5, ExpressionSymbols::Boundary::none});
+  s.arrays.push_back({"r", 0, 5, 3, ExpressionSymbols::Boundary::fixed});
+  s.variables.push_back({"x", 0, 8});
+  s.constants = {{"n", 5}, {"h", 0.5}};
+  s.constant_arrays.push_back({"k", {1.0, 2.0}});
+  auto fails = [&](const std::string& text, std::size_t offset, const std::string& says) {
+    BOOST_TEST_CONTEXT(text) {
+      try {
+        Expression::parse(text, s);
+        BOOST_ERROR("parsed, expected an error");
+      } catch (const ExpressionError& e) {
+        if (offset != std::string::npos) BOOST_TEST(e.offset == offset);
+        BOOST_TEST(std::string(e.what()).find(says) != std::string::npos, e.what());
+      }
+    }
+  };
+  fails("q[6]", 2, "index 6 of 'q' is outside 1 to 5");
+  fails("x + q[0]", 6, "may declare fixed or periodic ends");
+  fails("r[5]", 2, "outside 0 to 4 (0 and 4 are the fixed ends)");
+  fails("k[3]", 2, "index 3 of 'k' is outside 1 to 2");
+  fails("2*q", 2, "'q' is an array of 5 entries");
+  fails("k + 1", 0, "'k' is a list of 2 numbers");
+  fails("x[1]", 0, "'x' is not an array");
+  fails("q[h]", 2, "to be a whole number, got 0.5");
+  fails("q[x]", 2, "made of numbers, parameters and sum indices only");
+  fails("sum(x, 1, 2, x)", 4, "the index name 'x' is already taken");
+  fails("sum(i, 1, 2, sum(i, 1, 2, q[i]))", 17, "the index name 'i' is already taken");
+  fails("sum(i, 1, n q[i])", 12, "expected ',' after the last value");
+  fails("sum(i, 1, n, q[i]", 17, "expected ')' to close sum(i, ...)");
+  fails("sum(i, 1, n, q[i + 1])", 15, "index 6 of 'q'");  // reached at i = 5
+  fails("sum + 1", 4, "expected '(' after 'sum'");
+  fails("x*t", 2, "time is not a variable of written systems yet");
+  fails("sum(i, 1, 5000000, q[1])", std::string::npos, "more than 4194304 operations");
+  // a name declared twice as array and scalar, or a reserved name
+  auto bad_names = [](auto setup, const std::string& says) {
+    WrittenSystem w;
+    setup(w);
+    try {
+      w.check_names();
+      BOOST_ERROR("names accepted, expected: " << says);
+    } catch (const std::invalid_argument& e) {
+      BOOST_TEST(std::string(e.what()).find(says) != std::string::npos, e.what());
+    }
+  };
+  bad_names([](WrittenSystem& w) { w.add_array("q", 3, ExpressionSymbols::Boundary::none); w.coordinates.push_back("q"); },
+            "used twice");
+  bad_names([](WrittenSystem& w) { w.coordinates = {"t"}; }, "reserved (time)");
+  bad_names([](WrittenSystem& w) { w.coordinates = {"x"}; w.params = {{"sum", 1.0}}; }, "reserved (sum(");
+  bad_names([](WrittenSystem& w) { w.coordinates = {"x"}; w.param_arrays = {{"k", {}}}; }, "is empty");
+}
+
+BOOST_AUTO_TEST_CASE(the_velocity_split_sorts_terms_by_their_degree_in_v) {
+  ExpressionSymbols s;
+  s.arrays.push_back({"q", 0, 0, 3, ExpressionSymbols::Boundary::fixed});
+  s.arrays.push_back({"q_dot", 1, 0, 3, ExpressionSymbols::Boundary::fixed});
+  s.constants = {{"m", 2.0}};
+  struct Case {
+    std::string text;
+    bool quadratic, constant_mass, diagonal;
+  };
+  const std::vector<Case> cases = {
+      // separable, diagonal M: a chain, constants and signs anywhere in the sum
+      {"1 + sum(i, 1, 3, m/2*q_dot[i]^2) - 3 - sum(i, 1, 4, (q[i] - q[i-1])^4)", true, true, true},
+      {"-(-(q_dot[1]^2) + cos(q[2])) / 4 + q_dot[2]*q_dot[2]*m", true, true, true},
+      // separable with cross terms in v: M full
+      {"(q_dot[1] + q_dot[2])^2 + q_dot[3]^2 - q[1]^2", true, true, false},
+      {"m*q_dot[1]*q_dot[3] + sum(i, 1, 3, q_dot[i]^2) + exp(q[2])", true, true, false},
+      // mechanical: coefficients in q (the double pendulum's coupling)
+      {"q_dot[1]^2 + q_dot[2]^2 + q_dot[1]*q_dot[2]*cos(q[1] - q[2]) + cos(q[1])", true, false, false},
+      {"(1 + q[1]^2)*q_dot[1]^2/2 - q[1]^2", true, false, false},
+      // general: linear in v, quartic, v inside a function, inhomogeneous products
+      {"q_dot[1]^2 + q[2]*q_dot[1] - q[1]^2", false, false, false},
+      {"q_dot[1]^4 - q[1]^2", false, false, false},
+      {"cos(q_dot[1]) + q[1]", false, false, false},
+      {"(q_dot[1]^2 + q[1])*2*(q_dot[2] + 1)", false, false, false},
+      {"q_dot[1]^2/q_dot[2]", false, false, false},
+  };
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (const Case& k : cases) {
+    BOOST_TEST_CONTEXT(k.text) {
+      Expression kin, pot;
+      const VelocitySplit sp = Expression::split_velocity(k.text, s, &kin, &pot);
+      BOOST_TEST(sp.quadratic == k.quadratic);
+      BOOST_TEST(sp.constant_mass == k.constant_mass);
+      BOOST_TEST(sp.diagonal == k.diagonal);
+      if (!sp.constant_mass) continue;
+      // the two parts add up to the text, the kinetic one is free of q and the potential of v
+      const Expression whole = Expression::parse(k.text, s);
+      for (int t = 0; t < 4; ++t) {
+        double q[3], v[3], zero[3] = {0, 0, 0};
+        for (int i = 0; i < 3; ++i) q[i] = U(rng), v[i] = U(rng);
+        const double L = whole(q, v);
+        BOOST_TEST(std::fabs(kin(q, v) + pot(q, v) - L) <= 1e-14 * std::fmax(1.0, std::fabs(L)));
+        BOOST_TEST(kin(zero, v) == kin(q, v));
+        BOOST_TEST(pot(q, zero) == pot(q, v));
+      }
+    }
+  }
 }

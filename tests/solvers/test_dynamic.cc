@@ -308,26 +308,33 @@ BOOST_AUTO_TEST_CASE(written_dynamic_equals_the_builtin_systems_both_ways) {
   check(kPendulum2, written_double_pendulum(), 11);  // 4 directions: one pass of K = 4
   check(kKepler, written_kepler(), 21);
   check(FermiPastaUlam(7.0), written_fpu(), 31);  // 12 directions: two passes of K = 8
-  // a tape longer than reverse mode takes: forward automatically, reverse refused
+  // a tape longer than the stack storage of reverse mode: still reverse by default
   const auto chain = written_chain(50);
-  BOOST_TEST(chain->lagrangian.tape().size() > static_cast<std::size_t>(Expression::kMaxTape));
-  BOOST_TEST(!WrittenDynamic(chain).reverse_mode());
-  BOOST_CHECK_THROW(WrittenDynamic(chain, WrittenDerivatives::forward_over_reverse), std::invalid_argument);
+  BOOST_TEST(chain->lagrangian.tape().size() > static_cast<std::size_t>(Expression::kStackTape));
+  BOOST_TEST(WrittenDynamic(chain).reverse_mode());
+  BOOST_TEST(!WrittenDynamic(chain, WrittenDerivatives::forward_over_forward).reverse_mode());
 }
 
-BOOST_AUTO_TEST_CASE(long_tapes_are_differentiated_forward_correctly) {
-  // the 50-coordinate chain (forward over forward, 13 chunks of 8 directions) against
-  // its 12-coordinate sibling differentiated in reverse mode, at a state where the
-  // coordinates from 10 on are equal and at rest (the springs past the 12th carry no
-  // load, so the first 12 rows agree)
-  const WrittenDynamic L50(written_chain(50)), L12(written_chain(12));
+BOOST_AUTO_TEST_CASE(long_tapes_are_differentiated_correctly_both_ways) {
+  // the 50-coordinate chain (its tape longer than Expression::kStackTape: reverse mode
+  // keeps its values in the per-thread buffer) forced forward over forward (13 chunks of
+  // 8 directions) against its 12-coordinate sibling differentiated in reverse mode
+  // from the stack, at a state where the coordinates from 10 on are equal and at rest
+  // (the springs past the 12th carry no load, so the first 12 rows agree); and the
+  // long chain in reverse mode against forward
+  const WrittenDynamic L50(written_chain(50), WrittenDerivatives::forward_over_forward), L12(written_chain(12)),
+      R50(written_chain(50));
   BOOST_TEST(!L50.reverse_mode());
   BOOST_TEST(L12.reverse_mode());
+  BOOST_TEST(R50.reverse_mode());
+  BOOST_TEST(written_chain(12)->lagrangian.tape().size() <= static_cast<std::size_t>(Expression::kStackTape));
   VectorXd q = VectorXd::Zero(50), v = VectorXd::Zero(50);
   q.head(10) = random_vector(10, 0.5, 3);
   v.head(10) = random_vector(10, 0.5, 4);
   q.tail(40).setConstant(0.25);
   const Derivatives a = derivatives(L50, q, v);
+  const VectorXd q2 = random_vector(50, 0.5, 5), v2 = random_vector(50, 0.5, 6);
+  check_same(derivatives(R50, q2, v2), derivatives(L50, q2, v2), 1e-14);
   const Derivatives b = derivatives(L12, VectorXd(q.head(12)), VectorXd(v.head(12)));
   BOOST_TEST(std::fabs(a.value - b.value) <= 1e-14 * std::fabs(b.value));
   BOOST_TEST(rel_diff(a.Lq.head(12), b.Lq) <= 1e-14);
@@ -678,7 +685,7 @@ BOOST_AUTO_TEST_CASE(written_chains_of_10_and_50_coordinates) {
   }
   {
     const WrittenDynamic L(written_chain(50));
-    BOOST_TEST(!L.reverse_mode());  // forward over forward: the tape is too long for reverse mode
+    BOOST_TEST(L.reverse_mode());  // its tape is longer than the stack storage: the per-thread buffer
     check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 50, 200, 1e-3, true);
   }
 }

@@ -284,11 +284,11 @@ BOOST_AUTO_TEST_CASE(structure_is_reported_for_every_system_on_rn) {
   const RunReport cp = run(builtin("charged-particle", {1.0, 0.2}, {0.0, 1.0}), me);
   BOOST_TEST(cp.structure == "general");
   BOOST_TEST(cp.structure_source == "declared");
-  // written Lagrangians: read off at sample points
+  // written Lagrangians: read off their text (Expression::split_velocity)
   const RunReport ws = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 - x^2*y"), {0.3, 0.1}, {0.0, 0.2}), me);
   BOOST_TEST(ws.structure == "separable");
-  BOOST_TEST(ws.structure_source == "sampled");
-  BOOST_TEST(ws.step_path == "generic");
+  BOOST_TEST(ws.structure_source == "expression");
+  BOOST_TEST(ws.step_path == "generic");  // midpoint: implicit
   const RunReport wm = run(
       written_problem(written({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a) + cos(b)"),
                       {0.5, 1.0}, {0.1, -0.3}),
@@ -348,4 +348,112 @@ BOOST_AUTO_TEST_CASE(a_full_mass_matrix_gives_the_generic_steps) {
         BOOST_TEST((pa - pb).cwiseAbs().maxCoeff() <= 1e-12);
       }
     }
+}
+
+// Written Lagrangians whose text is separable (Expression::split_velocity) take the same
+// explicit steps as declared built-ins: the same states as the generic path of the
+// same text, and as the built-in twin with the same method.
+BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
+  struct Twin {
+    std::string name;
+    Problem written, builtin;
+    bool has_builtin;
+  };
+  std::vector<Twin> twins;
+  {
+    Problem b = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
+    twins.push_back({"kepler", written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)",
+                                                       {{"mu", b.params.at("mu")}}),
+                                               b.q, b.v),
+                     b, true});
+  }
+  {
+    Problem b = builtin("fpu", {0.2, 0.2 + 1.0 / 50, 0.0, 0.0, 0.0, 0.0}, {0, 0, 0, 0, 0, 0});
+    b.step = 0.002;
+    Problem w = written_problem(
+        written({"a", "b", "c", "d", "e", "f"},
+                "(a_dot^2 + b_dot^2 + c_dot^2 + d_dot^2 + e_dot^2 + f_dot^2)/2"
+                " - 0.25*w^2*((b - a)^2 + (d - c)^2 + (f - e)^2) - (a^4 + (c - b)^4 + (e - d)^4 + f^4)",
+                {{"w", b.params.at("omega")}}),
+        b.q, b.v);
+    w.step = 0.002;
+    twins.push_back({"fpu", w, b, true});
+  }
+  {
+    // the FPU chain of 8 particles between walls, written with an array and sums
+    Problem b = builtin("chain", {0.5, 0, 0, 0, 0, 0, 0, 0.1}, {0, 0, 0.3, 0, 0, 0, 0, 0});
+    b.params["alpha"] = 0.25;
+    b.params["beta"] = 1.0;
+    auto w = std::make_shared<WrittenSystem>();
+    w->add_array("q", 8, ExpressionSymbols::Boundary::fixed);
+    w->params = {{"n", 8}, {"m", 1.0}, {"k", 1.0}, {"alpha", 0.25}, {"beta", 1.0}};
+    w->check_names();
+    w->lagrangian = Expression::parse(
+        "sum(i, 1, n, m/2*q_dot[i]^2) - sum(i, 1, n + 1, k/2*(q[i] - q[i-1])^2 + alpha/3*(q[i] - q[i-1])^3 + "
+        "beta/4*(q[i] - q[i-1])^4)",
+        w->symbols(WrittenSystem::Kind::lagrangian));
+    twins.push_back({"chain", written_problem(w, b.q, b.v), b, true});
+  }
+  // a full constant mass matrix (a cross term in v): the Cholesky path
+  twins.push_back({"full mass",
+                   written_problem(written({"x", "y"}, "x_dot^2 + x_dot*y_dot/2 + y_dot^2/2 - x^2/2 - x^4/4 - y^2/2"),
+                                   {0.7, -0.2}, {0.1, 0.3}),
+                   Problem(), false});
+  for (Twin& t : twins)
+    if (t.has_builtin) {  // the same steps
+      t.written.step = t.builtin.step;
+      t.written.steps = t.builtin.steps;
+    }
+  std::vector<std::string> compositions = {"none", "dirk"};
+  for (const CompositionScheme& c : composition_schemes()) compositions.push_back(c.name);
+  for (const Twin& t : twins)
+    for (const char* map : {"explicit-euler", "adjoint-euler"})
+      for (const std::string& c : compositions) {
+        Method me;
+        me.map = &find_map_entry(map, "test");
+        me.theta = me.map->theta;
+        me.composition = c;
+        if (c == "dirk") me.weights = {0.3, 0.4, 0.3};
+        Method generic = me;
+        generic.use_structure = false;
+        const RunReport a = run(t.written, me), b = run(t.written, generic);
+        BOOST_TEST_CONTEXT(t.name << ", " << map << ", " << c) {
+          BOOST_TEST(!a.failed);
+          BOOST_TEST(a.step_path == "explicit-splitting");
+          BOOST_TEST(b.step_path == "generic");
+          BOOST_TEST(a.structure == "separable");
+          BOOST_TEST(a.structure_source == "expression");
+          BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+          BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+          if (t.has_builtin) {
+            const RunReport d = run(t.builtin, me);
+            BOOST_TEST(!d.failed);
+            BOOST_TEST(max_diff(a.q_final, d.q_final) <= 1e-11 * std::fmax(1.0, max_abs(d.q_final)));
+            BOOST_TEST(max_diff(a.p_final, d.p_final) <= 1e-11 * std::fmax(1.0, max_abs(d.p_final)));
+            BOOST_TEST(std::fabs(a.energy_initial - d.energy_initial) <= 1e-14 * std::fmax(1.0, std::fabs(d.energy_initial)));
+          }
+        }
+      }
+  // mechanical and general texts keep the generic path, and say what they are
+  Method ee;
+  ee.map = &find_map_entry("explicit-euler", "test");
+  ee.theta = ee.map->theta;
+  const RunReport m = run(
+      written_problem(written({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a) + cos(b)"),
+                      {0.5, 1.0}, {0.1, -0.3}),
+      ee);
+  BOOST_TEST(m.structure == "mechanical");
+  BOOST_TEST(m.structure_source == "expression");
+  BOOST_TEST(m.step_path == "generic");
+  const RunReport g = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 + (x*y_dot - y*x_dot)/2"),
+                                          {1.0, 0.2}, {0.0, 1.0}),
+                          ee);
+  BOOST_TEST(g.structure == "general");
+  BOOST_TEST(g.step_path == "generic");
+  // a quadratic form in v that is not positive definite is not separable (nor mechanical)
+  const RunReport ind = run(written_problem(written({"x", "y"}, "(x_dot^2 - y_dot^2)/2 - x^2 - y^4"), {0.3, 0.1},
+                                            {0.1, 0.2}),
+                            ee);
+  BOOST_TEST(ind.structure == "general");
+  BOOST_TEST(ind.step_path == "generic");
 }
