@@ -457,3 +457,78 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
   BOOST_TEST(ind.structure == "general");
   BOOST_TEST(ind.step_path == "generic");
 }
+
+// A written ring (an array with periodic ends) of 10, 100 and 1000 coordinates runs with
+// every map of R^n, both forms, the compositions and every Galerkin method, or is
+// refused by validate() naming a key. At 1000 coordinates the dense steps (implicit
+// maps, Galerkin, the Hamiltonian form by the Legendre transform) form 1000 x 1000
+// matrices and cost a second or more per step at -O1, so they take one step, with no
+// composition and the smallest Galerkin method; the explicit steps take everything.
+BOOST_AUTO_TEST_CASE(written_systems_of_10_100_and_1000_coordinates_run_every_method) {
+  for (int n : {10, 100, 1000}) {
+    auto w = std::make_shared<WrittenSystem>();
+    w->name = "ring";
+    w->add_array("q", n, ExpressionSymbols::Boundary::periodic);
+    w->params = {{"n", n}, {"k", 1.0}, {"beta", 0.5}};
+    w->check_names();
+    w->lagrangian = Expression::parse(
+        "sum(i, 1, n, q_dot[i]^2/2 - k/2*(q[i+1] - q[i])^2 - beta/4*(q[i+1] - q[i])^4)",
+        w->symbols(WrittenSystem::Kind::lagrangian));
+    std::vector<double> q(static_cast<std::size_t>(n)), v(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) {
+      q[static_cast<std::size_t>(i)] = 0.3 * std::sin(2 * M_PI * i / n) + 0.05 * std::cos(7.0 * i);
+      v[static_cast<std::size_t>(i)] = 0.1 * std::cos(3.0 * i);
+    }
+    Problem pr = written_problem(w, q, v);
+    pr.steps = n == 1000 ? 1 : 3;
+    const bool big = n == 1000;
+    std::vector<Method> methods;
+    for (const MapEntry& m : map_registry()) {
+      if (m.space != Space::euclidean || m.family == MapFamily::written) continue;
+      const bool explicit_map = m.name == "explicit-euler" || m.name == "adjoint-euler";
+      for (Form f : {Form::lagrangian, Form::hamiltonian})
+        for (const char* c : {"none", "stormer-verlet", "suzuki5", "kahan-li8"}) {
+          if (big && !(explicit_map && f == Form::lagrangian) && std::string(c) != "none") continue;
+          Method me;
+          me.map = &m;
+          me.theta = m.takes_theta ? 0.3 : m.theta;
+          me.form = f;
+          me.composition = c;
+          methods.push_back(me);
+        }
+    }
+    for (QuadratureKind qk : {QuadratureKind::gauss, QuadratureKind::lobatto})
+      for (int s = 1; s <= kGalerkinStagesMax; ++s) {
+        if (big && (s > 1 || qk != QuadratureKind::gauss)) continue;
+        Method me;
+        me.galerkin = true;
+        me.quadrature = qk;
+        me.stages = s;
+        methods.push_back(me);
+      }
+    int ran = 0, refused = 0, explicit_steps = 0;
+    for (const Method& me : methods) {
+      BOOST_TEST_CONTEXT("n = " << n << ": " << me.label()) {
+        try {
+          validate(pr, me);
+        } catch (const InputError& e) {
+          ++refused;
+          BOOST_TEST(std::string(e.what()).find("integrator.") != std::string::npos, e.what());
+          continue;
+        }
+        const RunReport r = run(pr, me);
+        ++ran;
+        explicit_steps += r.step_path == "explicit-splitting";
+        BOOST_TEST(!r.failed);
+        BOOST_TEST(r.structure == "separable");
+        BOOST_TEST(r.q_final.size() == static_cast<std::size_t>(n));
+        BOOST_TEST(std::isfinite(r.energy_final));
+        BOOST_TEST(std::fabs(r.energy_final - r.energy_initial) <= 1e-2 * std::fabs(r.energy_initial));
+      }
+    }
+    BOOST_TEST_MESSAGE("n = " << n << ": " << ran << " ran, " << refused << " refused, " << explicit_steps
+                              << " by kicks and drifts");
+    BOOST_TEST(ran > 0);
+    BOOST_TEST(explicit_steps == 8);  // two explicit maps x four compositions, lagrangian form
+  }
+}
