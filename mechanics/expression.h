@@ -712,7 +712,9 @@ class Parser {
     skip();
     const std::size_t at = i_;
     need_operand(what);
+    const std::size_t kept = nodes_;  // the nodes made here are gone once it is folded
     NodePtr n = simplify(expr());
+    nodes_ = kept;
     if (!n->is_const())
       fail(at, std::string("expected ") + what +
                    " made of numbers, parameters and sum indices only (a whole number known before the run)");
@@ -845,7 +847,7 @@ class Parser {
   const ExpressionSymbols& sym_;
   std::size_t i_ = 0;
   int nesting_ = 0;
-  std::size_t nodes_ = 0;                           // made so far (Expression::kMaxNodes)
+  std::size_t nodes_ = 0;                           // made so far, indices not counted (kMaxNodes)
   std::vector<std::pair<std::string, long>> indices_;  // the enclosing sums' indices and values
   int dry_ = 0;                                     // > 0: inside a sum with no terms
 };

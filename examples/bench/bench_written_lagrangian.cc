@@ -26,10 +26,12 @@
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
+#include "mechanics/chain.h"
 #include "mechanics/dynamic_system.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/splitting_step.h"
 
 using namespace dvm;
 
@@ -129,6 +131,101 @@ void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenS
   std::printf("  written / built-in autodiff = %.2f\n\n", c.ns_per_step / b.ns_per_step);
 }
 
+// ---- explicit steps on separable systems ------------------------------------------------
+// Stormer-Verlet by composition of the explicit Euler maps (solvers/splitting_step.h):
+// the built-in system's closed-form force against a written text's, whose structure is
+// read off its terms (WrittenSeparable: the reverse gradient of the potential's tape).
+
+// The built-in FPU chain (mechanics/chain.h) of run-time size as a declared separable
+// system: L_q = -grad V by its bond loop, L_v = m v, v = p / m.
+struct ChainSeparable {
+  static constexpr Structure structure = Structure::separable;
+  FPUChain C;
+  mutable Eigen::VectorXd g;
+  int dim() const { return C.n; }
+  std::string name() const { return "chain"; }
+  void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
+    C.gradient(q, g);
+    Lq = -g;
+    Lv = C.m * v;
+  }
+  void velocity(const DynIn&, const DynIn& p, DynOut v) const { v = p / C.m; }
+};
+
+template <class S, class V>
+Result measure_explicit(const S& L, const V& q0, const V& p0, double h, std::int64_t steps, int repeats) {
+  const ExplicitSplittingStep<S> step(L, 0.0, h, substeps(find_composition("stormer-verlet"), false), q0);
+  Result best;
+  for (int r = 0; r < repeats; ++r) {
+    V q = q0, p = p0;
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunSummary run = integrate(step, 0.0, q, p, V(V::Zero(q0.size())), steps, [](auto&&...) {});
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                      static_cast<double>(steps);
+    if (run.failed) std::exit(3);
+    if (ns < best.ns_per_step) {
+      best.ns_per_step = ns;
+      best.state.assign(q.data(), q.data() + q.size());
+      best.state.insert(best.state.end(), p.data(), p.data() + p.size());
+    }
+  }
+  return best;
+}
+
+double state_diff(const Result& a, const Result& b) {
+  double m = 0;
+  for (std::size_t i = 0; i < a.state.size(); ++i) m = std::fmax(m, std::fabs(a.state[i] - b.state[i]));
+  return m;
+}
+
+void explicit_kepler(std::int64_t steps, int repeats) {
+  const auto text = written({"x", "y"}, {{"mu", 1.0}}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)");
+  const WrittenDynamic W(text);
+  const Vec<double, 2> q0(0.4, 0.0), p0(0.0, 2.0);
+  const Result a = measure_explicit(Kepler(1.0), q0, p0, 0.005, steps, repeats);
+  const Result b = measure_explicit(WrittenSeparable(W), Eigen::VectorXd(q0), Eigen::VectorXd(p0), 0.005, steps, repeats);
+  std::printf("Kepler, e = 0.6, Stormer-Verlet by composition (kicks and drifts), h = 0.005, %lld steps, best of %d\n",
+              static_cast<long long>(steps), repeats);
+  std::printf("  %-28s %10s %8s %14s\n", "Lagrangian", "ns/step", "ratio", "|state diff|");
+  std::printf("  %-28s %10.1f %8.2f %14s\n", "built-in (closed forms)", a.ns_per_step, 1.0, "-");
+  std::printf("  %-28s %10.1f %8.2f %14.3e\n\n", "written, run-time sized", b.ns_per_step, b.ns_per_step / a.ns_per_step,
+              state_diff(a, b));
+}
+
+void explicit_chain(int repeats) {
+  std::printf("FPU chain between walls (k = 1, alpha = 0.25, beta = 1), Stormer-Verlet by composition, h = 0.05, "
+              "best of %d\n  L = sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + "
+              "(q[i] - q[i-1])^3/12 + (q[i] - q[i-1])^4/4)\n",
+              repeats);
+  std::printf("  %8s %8s %14s %14s %8s %14s %14s\n", "n", "steps", "built-in ns", "written ns", "ratio",
+              "written ns/n", "|state diff|");
+  double per_particle_1000 = 0.0;
+  for (int n : {1000, 10000, 100000}) {
+    auto w = std::make_shared<WrittenSystem>();
+    w->name = "written chain";
+    w->add_array("q", n, ExpressionSymbols::Boundary::fixed);
+    w->params = {{"n", n}};
+    w->check_names();
+    w->lagrangian = Expression::parse(
+        "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^3/12 + "
+        "(q[i] - q[i-1])^4/4)",
+        w->symbols(WrittenSystem::Kind::lagrangian));
+    const WrittenDynamic W(w);
+    Eigen::VectorXd q0(n), p0 = Eigen::VectorXd::Zero(n);
+    for (int i = 0; i < n; ++i) q0[i] = std::sin(M_PI * (i + 1) / (n + 1));
+    const std::int64_t steps = 2000000 / n;
+    const Result a = measure_explicit(ChainSeparable{FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), {}}, q0, p0, 0.05, steps,
+                                      repeats);
+    const Result b = measure_explicit(WrittenSeparable(W), q0, p0, 0.05, steps, repeats);
+    const double per = b.ns_per_step / n;
+    if (n == 1000) per_particle_1000 = per;
+    std::printf("  %8d %8lld %14.0f %14.0f %8.2f %14.2f %14.3e\n", n, static_cast<long long>(steps), a.ns_per_step,
+                b.ns_per_step, b.ns_per_step / a.ns_per_step, per, state_diff(a, b));
+    if (n == 100000)
+      std::printf("  written ns per particle, n = 10^5 against n = 1000: %.2f (1 is linear)\n\n", per / per_particle_1000);
+  }
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -160,5 +257,7 @@ int main(int argc, char** argv) {
                   "(m1 + m2)/2*l1^2*a_dot^2 + m2/2*l2^2*b_dot^2 + m2*l1*l2*a_dot*b_dot*cos(a - b)"
                   " + (m1 + m2)*g*l1*cos(a) + m2*g*l2*cos(b)"),
           Vec<double, 2>(0.5, 0.3), Vec<double, 2>(0.0, 0.0), 0.01, steps, repeats);
+  explicit_kepler(5 * steps, repeats);
+  explicit_chain(repeats);
   return 0;
 }
