@@ -742,8 +742,9 @@ struct WrittenParts {
   explicit WrittenParts(const WrittenSystem& w) {
     const int n = w.dim();
     cyclic.assign(static_cast<std::size_t>(n), true);
-    for (const auto& in : w.lagrangian.tape())
-      if (in.op == Expression::Op::Var && in.block == 0) cyclic[static_cast<std::size_t>(in.index)] = false;
+    w.lagrangian.for_each_variable([&](int block, int index) {
+      if (block == 0) cyclic[static_cast<std::size_t>(index)] = false;
+    });
     split = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), &kinetic,
                                        &potential);
     if (!split.constant_mass || split.kinetic_terms == 0) return;

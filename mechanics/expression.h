@@ -56,6 +56,7 @@
 #include <map>
 #include <memory>
 #include <new>
+#include <tuple>
 #include <stdexcept>
 #include <string>
 #include <type_traits>
@@ -135,7 +136,7 @@ class Expression {
   static constexpr std::size_t kMaxText = std::size_t{1} << 20;
   static constexpr int kMaxNesting = 256;
   // Most operations an expression may have once its sums are unrolled.
-  static constexpr std::size_t kMaxNodes = std::size_t{1} << 22;
+  static constexpr std::size_t kMaxNodes = std::size_t{1} << 20;
 
   enum class Op : std::uint8_t {
     Const, Var,
@@ -144,6 +145,7 @@ class Expression {
     PowI, PowC, Pow,                  // x^n (integer n), x^c, x^y
     Sin, Cos, Tan, Asin, Acos, Atan, Exp, Log, Sqrt, Cbrt, Abs, Sinh, Cosh, Tanh,
     Atan2,
+    Block,  // pushes the sum of the terms of blocks_[index] (array-at-a-time, see Block)
   };
   struct Instr {
     Op op;
@@ -155,7 +157,24 @@ class Expression {
   Expression() = default;
 
   // Parses `text`; throws ExpressionError.
-  static Expression parse(const std::string& text, const ExpressionSymbols& symbols);
+  static Expression parse(const std::string& text, const ExpressionSymbols& symbols, bool blocks = true);
+
+  // Many additive terms of one shape (the terms of a sum over a chain, a lattice or
+  // pairs: the same operations on different variables and constants) are kept as a
+  // block, evaluated an instruction at a time across all its terms rather than a term
+  // at a time: one dispatch per instruction of the body, then tight loops over the
+  // terms. The top-level additive terms of an expression are grouped by shape; a group
+  // of at least kMinBlock terms becomes a block (parse(..., blocks = false) keeps every
+  // term on the tape, the reference the blocks are tested against).
+  static constexpr int kMinBlock = 16;
+  struct Block {
+    std::vector<Instr> body;                      // the first term's instructions (postfix)
+    std::vector<std::int32_t> arg_a, arg_b;       // operands of each body instruction
+    int terms = 0;
+    std::vector<std::vector<std::int32_t>> index;  // per Var instruction: its index in each term
+    std::vector<std::vector<double>> c;            // per instruction whose constant varies: each term's
+  };
+  const std::vector<Block>& blocks() const { return blocks_; }
 
   const std::string& text() const { return text_; }
   const std::vector<Instr>& tape() const { return tape_; }
@@ -164,7 +183,22 @@ class Expression {
   bool uses(int block, int index) const {
     for (const auto& in : tape_)
       if (in.op == Op::Var && in.block == block && in.index == index) return true;
+    for (const Block& b : blocks_)
+      for (std::size_t j = 0; j < b.body.size(); ++j)
+        if (b.body[j].op == Op::Var && b.body[j].block == block)
+          for (std::int32_t i : b.index[j])
+            if (i == index) return true;
     return false;
+  }
+  // Calls f(block, index) for every variable the expression reads (with repeats).
+  template <class F>
+  void for_each_variable(F&& f) const {
+    for (const auto& in : tape_)
+      if (in.op == Op::Var) f(int(in.block), int(in.index));
+    for (const Block& b : blocks_)
+      for (std::size_t j = 0; j < b.body.size(); ++j)
+        if (b.body[j].op == Op::Var)
+          for (std::int32_t i : b.index[j]) f(int(b.body[j].block), int(i));
   }
   bool empty() const { return tape_.empty(); }
 
@@ -199,8 +233,21 @@ class Expression {
   static T binary(Op op, const T& x, const T& y);
 
  private:
+  // Reverse mode through one instruction: z = op(x, y) with adjoint w adds to the
+  // adjoints of its operands (ay for binary operations only).
+  template <class T>
+  static void backward(const Instr& in, const T& w, const T& z, const T& x, const T* y, T& ax, T* ay);
+  // A block's values, instruction by instruction across its terms: val[j * terms + k]
+  // is instruction j of term k (raw storage, constructed here); returns their sum.
+  template <class T>
+  static T block_forward(const Block& b, const T* const* in, T* val);
+  // Its reverse sweep for the adjoint w of the sum, adding to grads[0], grads[1].
+  template <class T>
+  static void block_backward(const Block& b, const T& w, const T* val, T* adj, T* const* grads);
+
   std::string text_;
   std::vector<Instr> tape_;
+  std::vector<Block> blocks_;
   int depth_ = 0;
 };
 
@@ -316,6 +363,14 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
         s[top - 1] = binary(in.op, s[top - 1], s[top]);
         --top;
         break;
+      case Op::Block: {
+        const Block& b = blocks_[static_cast<std::size_t>(in.index)];
+        thread_local std::vector<T> work;
+        const std::size_t need = b.body.size() * static_cast<std::size_t>(b.terms);
+        if (work.size() < need) work.resize(need);
+        new (&s[++top]) T(block_forward(b, blocks, work.data()));
+        break;
+      }
       default: s[top] = unary(in.op, s[top], in); break;
     }
   }
@@ -323,13 +378,198 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
 }
 
 template <class T>
-bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
+void Expression::backward(const Instr& in, const T& w, const T& z, const T& x, const T* y, T& ax, T* ay) {
   using std::cos;
   using std::cosh;
   using std::log;
   using std::sin;
   using std::sinh;
   using std::sqrt;
+  switch (in.op) {
+    case Op::Neg: ax -= w; break;
+    case Op::AddC: ax += w; break;
+    case Op::MulC: ax += w * in.c; break;
+    case Op::DivC: ax += w / in.c; break;
+    case Op::RSubC: ax -= w; break;
+    case Op::RDivC: ax -= w * (z / x); break;
+    case Op::PowI:
+      if (in.index != 0) ax += w * (static_cast<double>(in.index) * expression_detail::power_int(x, in.index - 1));
+      break;
+    case Op::PowC: ax += w * (in.c * expression_detail::power_const(x, in.c - 1.0)); break;
+    case Op::Sin: ax += w * cos(x); break;
+    case Op::Cos: ax -= w * sin(x); break;
+    case Op::Tan: ax += w * (1.0 + z * z); break;
+    case Op::Asin: ax += w / sqrt(1.0 - x * x); break;
+    case Op::Acos: ax -= w / sqrt(1.0 - x * x); break;
+    case Op::Atan: ax += w / (1.0 + x * x); break;
+    case Op::Exp: ax += w * z; break;
+    case Op::Log: ax += w / x; break;
+    case Op::Sqrt: ax += w * (0.5 / z); break;
+    case Op::Cbrt: ax += w * (z / (3.0 * x)); break;
+    case Op::Abs:
+      if (value(x) < 0.0)
+        ax -= w;
+      else
+        ax += w;
+      break;
+    case Op::Sinh: ax += w * cosh(x); break;
+    case Op::Cosh: ax += w * sinh(x); break;
+    case Op::Tanh: ax += w * (1.0 - z * z); break;
+    case Op::Add: ax += w; *ay += w; break;
+    case Op::Sub: ax += w; *ay -= w; break;
+    case Op::Mul: ax += w * *y; *ay += w * x; break;
+    case Op::Div: ax += w / *y; *ay -= w * (z / *y); break;
+    case Op::Pow: ax += w * (z * *y / x); *ay += w * (z * log(x)); break;
+    case Op::Atan2: {  // atan2(x, y): d/dx = y/r^2, d/dy = -x/r^2
+      const T r2 = x * x + *y * *y;
+      ax += w * (*y / r2);
+      *ay -= w * (x / r2);
+      break;
+    }
+    default: break;
+  }
+}
+
+template <class T>
+T Expression::block_forward(const Block& b, const T* const* in, T* val) {
+  const std::size_t m = static_cast<std::size_t>(b.terms);
+  for (std::size_t j = 0; j < b.body.size(); ++j) {
+    const Instr& ins = b.body[j];
+    T* out = val + j * m;
+    const std::vector<double>& cs = b.c[j];
+    switch (ins.op) {
+      case Op::Const:
+        for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(constant<T>(cs.empty() ? ins.c : cs[k]));
+        continue;
+      case Op::Var: {
+        const T* src = in[ins.block];
+        const std::int32_t* ix = b.index[j].data();
+        for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(src[ix[k]]);
+        continue;
+      }
+      default: break;
+    }
+    const T* x = val + static_cast<std::size_t>(b.arg_a[j]) * m;
+    if (b.arg_b[j] >= 0) {
+      const T* y = val + static_cast<std::size_t>(b.arg_b[j]) * m;
+      switch (ins.op) {  // the common operations as plain loops (vectorised for doubles)
+        case Op::Add: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] + y[k]); break;
+        case Op::Sub: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] - y[k]); break;
+        case Op::Mul: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] * y[k]); break;
+        default: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(binary(ins.op, x[k], y[k])); break;
+      }
+      continue;
+    }
+    if (cs.empty()) {
+      switch (ins.op) {
+        case Op::MulC: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] * ins.c); break;
+        case Op::AddC: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] + ins.c); break;
+        case Op::Neg: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(-x[k]); break;
+        case Op::PowI:
+          if (ins.index == 2) {
+            for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] * x[k]);
+            break;
+          }
+          if (ins.index == 3) {
+            for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(x[k] * x[k] * x[k]);
+            break;
+          }
+          if (ins.index == 4) {
+            for (std::size_t k = 0; k < m; ++k) {
+              const T x2 = x[k] * x[k];
+              new (&out[k]) T(x2 * x2);
+            }
+            break;
+          }
+          [[fallthrough]];
+        default: for (std::size_t k = 0; k < m; ++k) new (&out[k]) T(unary(ins.op, x[k], ins)); break;
+      }
+    } else {
+      Instr t = ins;
+      for (std::size_t k = 0; k < m; ++k) {
+        t.c = cs[k];
+        new (&out[k]) T(unary(ins.op, x[k], t));
+      }
+    }
+  }
+  const T* last = val + (b.body.size() - 1) * m;
+  T sum = last[0];
+  for (std::size_t k = 1; k < m; ++k) sum += last[k];
+  return sum;
+}
+
+template <class T>
+void Expression::block_backward(const Block& b, const T& w, const T* val, T* adj, T* const* grads) {
+  const std::size_t m = static_cast<std::size_t>(b.terms), n = b.body.size();
+  for (std::size_t j = 0; j + 1 < n; ++j)
+    for (std::size_t k = 0; k < m; ++k) new (&adj[j * m + k]) T(constant<T>(0.0));
+  for (std::size_t k = 0; k < m; ++k) new (&adj[(n - 1) * m + k]) T(w);
+  for (std::size_t j = n; j-- > 0;) {
+    const Instr& ins = b.body[j];
+    const T* aj = adj + j * m;
+    if (ins.op == Op::Const) continue;
+    if (ins.op == Op::Var) {
+      if (ins.block < 2) {
+        T* g = grads[ins.block];
+        const std::int32_t* ix = b.index[j].data();
+        for (std::size_t k = 0; k < m; ++k) g[ix[k]] += aj[k];
+      }
+      continue;
+    }
+    const std::size_t a = static_cast<std::size_t>(b.arg_a[j]) * m;
+    const std::vector<double>& cs = b.c[j];
+    const T* z = val + j * m;
+    if (b.arg_b[j] >= 0) {
+      const std::size_t bb = static_cast<std::size_t>(b.arg_b[j]) * m;
+      switch (ins.op) {
+        case Op::Add:
+          for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k], adj[bb + k] += aj[k];
+          break;
+        case Op::Sub:
+          for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k], adj[bb + k] -= aj[k];
+          break;
+        case Op::Mul:
+          for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k] * val[bb + k], adj[bb + k] += aj[k] * val[a + k];
+          break;
+        default:
+          for (std::size_t k = 0; k < m; ++k) backward(ins, aj[k], z[k], val[a + k], &val[bb + k], adj[a + k], &adj[bb + k]);
+      }
+      continue;
+    }
+    if (cs.empty()) {
+      switch (ins.op) {
+        case Op::MulC: for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k] * ins.c; break;
+        case Op::AddC: for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k]; break;
+        case Op::Neg: for (std::size_t k = 0; k < m; ++k) adj[a + k] -= aj[k]; break;
+        case Op::PowI:
+          if (ins.index == 2) {
+            for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k] * (2.0 * val[a + k]);
+            break;
+          }
+          if (ins.index == 3) {
+            for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k] * (3.0 * (val[a + k] * val[a + k]));
+            break;
+          }
+          if (ins.index == 4) {
+            for (std::size_t k = 0; k < m; ++k) adj[a + k] += aj[k] * (4.0 * (val[a + k] * val[a + k] * val[a + k]));
+            break;
+          }
+          [[fallthrough]];
+        default:
+          for (std::size_t k = 0; k < m; ++k) backward(ins, aj[k], z[k], val[a + k], static_cast<const T*>(nullptr), adj[a + k], static_cast<T*>(nullptr));
+      }
+    } else {
+      Instr t = ins;
+      for (std::size_t k = 0; k < m; ++k) {
+        t.c = cs[k];
+        backward(t, aj[k], z[k], val[a + k], static_cast<const T*>(nullptr), adj[a + k], static_cast<T*>(nullptr));
+      }
+    }
+  }
+}
+
+template <class T>
+bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
   static_assert(std::is_trivially_destructible_v<T>, "the expression arrays never run destructors");
   const int n = static_cast<int>(tape_.size());
   // Storage: on the stack for short tapes, else in a per-thread buffer (raw: each slot
@@ -345,6 +585,21 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
     if (buffer.size() < static_cast<std::size_t>(n)) buffer.resize(static_cast<std::size_t>(n));
     slots = buffer.data();
   }
+  // the blocks' values and adjoints, kept from the forward sweep to the backward one
+  T* block_store = nullptr;
+  if (!blocks_.empty()) {
+    std::size_t need = 0;
+    for (const Block& b : blocks_) need += 2 * b.body.size() * static_cast<std::size_t>(b.terms);
+    thread_local std::vector<T> store;
+    if (store.size() < need) store.resize(need);
+    block_store = store.data();
+  }
+  auto block_values = [&](int id) {
+    std::size_t off = 0;
+    for (int k = 0; k < id; ++k) off += 2 * blocks_[static_cast<std::size_t>(k)].body.size() *
+                                        static_cast<std::size_t>(blocks_[static_cast<std::size_t>(k)].terms);
+    return block_store + off;
+  };
   std::int32_t stack[kMaxStack];
   struct Values {  // val[i], adj[i], arg_a[i], arg_b[i] of instruction i
     Slot* s;
@@ -354,15 +609,9 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
     Slot* s;
     T& operator[](int i) const { return *std::launder(reinterpret_cast<T*>(s[i].bytes + sizeof(T))); }
   };
-  struct Args {
-    Slot* s;
-    bool second;
-    std::int32_t& operator[](int i) const { return second ? s[i].b : s[i].a; }
-  };
   const Values val{slots};
   const Adjoints adj{slots};
-  const Args arg_a{slots, false}, arg_b{slots, true};
-  const T* blocks[2] = {b0, b1};
+  const T* blocks[3] = {b0, b1, nullptr};
   T* grads[2] = {g0, g1};
   int top = -1;
   for (int i = 0; i < n; ++i) {
@@ -370,15 +619,18 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
     switch (in.op) {
       case Op::Const: new (&val[i]) T(constant<T>(in.c)); break;
       case Op::Var: new (&val[i]) T(blocks[in.block][in.index]); break;
+      case Op::Block:
+        new (&val[i]) T(block_forward(blocks_[static_cast<std::size_t>(in.index)], blocks, block_values(in.index)));
+        break;
       case Op::Add: case Op::Sub: case Op::Mul: case Op::Div: case Op::Pow: case Op::Atan2:
-        arg_a[i] = stack[top - 1];
-        arg_b[i] = stack[top];
+        slots[i].a = stack[top - 1];
+        slots[i].b = stack[top];
         top -= 2;
-        new (&val[i]) T(binary(in.op, val[arg_a[i]], val[arg_b[i]]));
+        new (&val[i]) T(binary(in.op, val[slots[i].a], val[slots[i].b]));
         break;
       default:
-        arg_a[i] = stack[top--];
-        new (&val[i]) T(unary(in.op, val[arg_a[i]], in));
+        slots[i].a = stack[top--];
+        new (&val[i]) T(unary(in.op, val[slots[i].a], in));
         break;
     }
     stack[++top] = i;
@@ -388,62 +640,22 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
   for (int i = n - 1; i >= 0; --i) {
     const Instr& in = tape_[static_cast<std::size_t>(i)];
     const T& w = adj[i];
-    const T& z = val[i];
-    if (in.op == Op::Const) continue;
-    if (in.op == Op::Var) {
-      if (in.block < 2) grads[in.block][in.index] += w;
-      continue;
-    }
-    const int a = arg_a[i];
-    const T& x = val[a];
     switch (in.op) {
-      case Op::Neg: adj[a] -= w; break;
-      case Op::AddC: adj[a] += w; break;
-      case Op::MulC: adj[a] += w * in.c; break;
-      case Op::DivC: adj[a] += w / in.c; break;
-      case Op::RSubC: adj[a] -= w; break;
-      case Op::RDivC: adj[a] -= w * (z / x); break;
-      case Op::PowI:
-        if (in.index != 0) adj[a] += w * (static_cast<double>(in.index) * expression_detail::power_int(x, in.index - 1));
-        break;
-      case Op::PowC: adj[a] += w * (in.c * expression_detail::power_const(x, in.c - 1.0)); break;
-      case Op::Sin: adj[a] += w * cos(x); break;
-      case Op::Cos: adj[a] -= w * sin(x); break;
-      case Op::Tan: adj[a] += w * (1.0 + z * z); break;
-      case Op::Asin: adj[a] += w / sqrt(1.0 - x * x); break;
-      case Op::Acos: adj[a] -= w / sqrt(1.0 - x * x); break;
-      case Op::Atan: adj[a] += w / (1.0 + x * x); break;
-      case Op::Exp: adj[a] += w * z; break;
-      case Op::Log: adj[a] += w / x; break;
-      case Op::Sqrt: adj[a] += w * (0.5 / z); break;
-      case Op::Cbrt: adj[a] += w * (z / (3.0 * x)); break;
-      case Op::Abs:
-        if (value(x) < 0.0)
-          adj[a] -= w;
-        else
-          adj[a] += w;
-        break;
-      case Op::Sinh: adj[a] += w * cosh(x); break;
-      case Op::Cosh: adj[a] += w * sinh(x); break;
-      case Op::Tanh: adj[a] += w * (1.0 - z * z); break;
-      default: {
-        const int b = arg_b[i];
-        const T& y = val[b];
-        switch (in.op) {
-          case Op::Add: adj[a] += w; adj[b] += w; break;
-          case Op::Sub: adj[a] += w; adj[b] -= w; break;
-          case Op::Mul: adj[a] += w * y; adj[b] += w * x; break;
-          case Op::Div: adj[a] += w / y; adj[b] -= w * (z / y); break;
-          case Op::Pow: adj[a] += w * (z * y / x); adj[b] += w * (z * log(x)); break;
-          case Op::Atan2: {  // atan2(x, y): d/dx = y/r^2, d/dy = -x/r^2
-            const T r2 = x * x + y * y;
-            adj[a] += w * (y / r2);
-            adj[b] -= w * (x / r2);
-            break;
-          }
-          default: break;
-        }
+      case Op::Const: continue;
+      case Op::Var:
+        if (in.block < 2) grads[in.block][in.index] += w;
+        continue;
+      case Op::Block: {
+        const Block& b = blocks_[static_cast<std::size_t>(in.index)];
+        T* v = block_values(in.index);
+        block_backward(b, w, v, v + b.body.size() * static_cast<std::size_t>(b.terms), grads);
+        continue;
       }
+      case Op::Add: case Op::Sub: case Op::Mul: case Op::Div: case Op::Pow: case Op::Atan2:
+        backward(in, w, val[i], val[slots[i].a], &val[slots[i].b], adj[slots[i].a], &adj[slots[i].b]);
+        continue;
+      default:
+        backward(in, w, val[i], val[slots[i].a], static_cast<const T*>(nullptr), adj[slots[i].a], static_cast<T*>(nullptr));
     }
   }
   return true;
@@ -988,12 +1200,238 @@ inline int emit(const Node& root, std::vector<Expression::Instr>& tape) {
 
 }  // namespace expression_detail
 
-inline Expression Expression::parse(const std::string& text, const ExpressionSymbols& symbols) {
+namespace expression_detail {
+
+// The top-level additive terms of `root`, each with the factor that the sums, signs and
+// constant factors above it give it, and the sum of the constant terms (a work list: a
+// flat sum is a tree as deep as it is long).
+struct Term {
+  NodePtr* slot;
+  double scale;
+};
+inline std::vector<Term> additive_terms(NodePtr& root, double& constant_term) {
+  using O = Expression::Op;
+  std::vector<Term> terms, work{{&root, 1.0}};
+  // the constants added with Neumaier's compensated sum (a long sum of constants folds
+  // to its value rounded once, not once per term)
+  double sum = 0.0, carry = 0.0;
+  auto add_constant = [&](double c) {
+    const double t = sum + c;
+    carry += std::fabs(sum) >= std::fabs(c) ? (sum - t) + c : (c - t) + sum;
+    sum = t;
+  };
+  while (!work.empty()) {
+    const Term t = work.back();
+    work.pop_back();
+    Node& n = **t.slot;
+    switch (n.op) {
+      case O::Add: work.push_back({&n.kids[1], t.scale}); work.push_back({&n.kids[0], t.scale}); break;
+      case O::Sub: work.push_back({&n.kids[1], -t.scale}); work.push_back({&n.kids[0], t.scale}); break;
+      case O::Neg: work.push_back({&n.kids[0], -t.scale}); break;
+      case O::MulC: work.push_back({&n.kids[0], t.scale * n.c}); break;
+      case O::DivC: work.push_back({&n.kids[0], t.scale / n.c}); break;
+      case O::AddC: add_constant(t.scale * n.c); work.push_back({&n.kids[0], t.scale}); break;
+      case O::RSubC: add_constant(t.scale * n.c); work.push_back({&n.kids[0], -t.scale}); break;
+      case O::Const: add_constant(t.scale * n.c); break;
+      default: terms.push_back(t); break;
+    }
+  }
+  constant_term = sum + carry;
+  return terms;
+}
+
+// Whether an instruction carries a constant (its value may differ between the terms
+// of a block).
+inline bool has_constant(Expression::Op op) {
+  using O = Expression::Op;
+  return op == O::Const || op == O::AddC || op == O::MulC || op == O::DivC || op == O::RSubC || op == O::RDivC ||
+         op == O::PowC;
+}
+
+// Emits `root` into `tape`, with its top-level terms of one shape grouped into blocks
+// (Expression::Block) where a group has at least kMinBlock terms; otherwise as emit()
+// does. Returns the stack depth.
+inline int emit_blocked(NodePtr& root, std::vector<Expression::Instr>& tape, std::vector<Expression::Block>& blocks) {
+  using O = Expression::Op;
+  using Instr = Expression::Instr;
+  double constant_term = 0.0;
+  std::vector<Term> terms = additive_terms(root, constant_term);
+  if (static_cast<int>(terms.size()) < Expression::kMinBlock) return emit(*root, tape);
+  // each term as its own tape, times its factor; its shape is the operations without
+  // the variables' indices and the constants
+  std::vector<std::vector<Instr>> tapes(terms.size());
+  std::vector<int> depths(terms.size());
+  std::vector<std::string> shapes(terms.size());
+  std::map<std::string, std::vector<std::size_t>> groups;
+  std::vector<std::string> order;  // shapes in order of first appearance
+  for (std::size_t t = 0; t < terms.size(); ++t) {
+    depths[t] = emit(**terms[t].slot, tapes[t]);
+    Instr scale{};
+    scale.op = O::MulC;
+    scale.c = terms[t].scale;
+    tapes[t].push_back(scale);
+    std::string& key = shapes[t];
+    for (const Instr& in : tapes[t]) {
+      key += static_cast<char>(in.op);
+      key += static_cast<char>(in.block);
+      if (in.op == O::PowI) key += std::to_string(in.index) + ",";
+    }
+    auto& g = groups[key];
+    if (g.empty()) order.push_back(key);
+    g.push_back(t);
+  }
+  bool any = false;
+  for (const auto& [key, g] : groups) any = any || static_cast<int>(g.size()) >= Expression::kMinBlock;
+  if (!any) return emit(*root, tape);
+  int depth = 1;
+  bool first = true;
+  auto add = [&](int d) {  // a term pushed: add it to what is below
+    depth = std::max(depth, first ? d : 1 + d);
+    if (!first) {
+      Instr plus{};
+      plus.op = O::Add;
+      tape.push_back(plus);
+    }
+    first = false;
+  };
+  // groups too small for a block stay on the tape; the others go into one block per
+  // number of terms: sum_k (A_k + B_k) = sum_k A_k + sum_k B_k for any pairing of the
+  // terms, and where the groups come from one sum the pairs share subexpressions (the
+  // bond length of a chain in each power of it), computed once (below)
+  std::map<std::size_t, std::vector<const std::vector<std::size_t>*>> by_count;
+  std::vector<std::size_t> counts;
+  for (const std::string& key : order) {
+    const std::vector<std::size_t>& g = groups[key];
+    if (static_cast<int>(g.size()) < Expression::kMinBlock) {
+      for (std::size_t t : g) {
+        std::vector<Instr>& mine = tapes[t];
+        if (mine.back().c == 1.0) mine.pop_back();  // a factor of 1
+        tape.insert(tape.end(), mine.begin(), mine.end());
+        add(depths[t]);
+      }
+      continue;
+    }
+    auto& bucket = by_count[g.size()];
+    if (bucket.empty()) counts.push_back(g.size());
+    bucket.push_back(&g);
+  }
+  for (std::size_t m : counts) {
+    Expression::Block b;
+    b.terms = static_cast<int>(m);
+    // one body for the bucket, equal instructions merged: the same operation on the
+    // same operands with the same indices and constants in every term
+    std::map<std::vector<std::int32_t>, std::int32_t> index_ids;
+    std::map<std::vector<double>, std::int32_t> constant_ids;
+    std::map<std::tuple<int, int, int, double, std::int32_t, std::int32_t, std::int32_t, std::int32_t>, std::int32_t>
+        seen;
+    std::vector<std::int32_t> index_of, constant_of;  // per body instruction: ids (-1: none)
+    std::vector<std::vector<std::int32_t>> index_lists;
+    std::vector<std::vector<double>> constant_lists;
+    auto push = [&](Instr in, std::int32_t a, std::int32_t bb, std::vector<std::int32_t> ix,
+                    std::vector<double> cs) -> std::int32_t {
+      std::int32_t ixid = -1, cid = -1;
+      if (!ix.empty()) {
+        auto [it, fresh] = index_ids.emplace(ix, static_cast<std::int32_t>(index_lists.size()));
+        if (fresh) index_lists.push_back(std::move(ix));
+        ixid = it->second;
+      }
+      if (!cs.empty()) {
+        auto [it, fresh] = constant_ids.emplace(cs, static_cast<std::int32_t>(constant_lists.size()));
+        if (fresh) constant_lists.push_back(std::move(cs));
+        cid = it->second;
+      }
+      const auto key = std::make_tuple(int(in.op), int(in.block), in.op == O::Var ? 0 : int(in.index),
+                                       cid >= 0 ? 0.0 : in.c, a, bb, ixid, cid);
+      auto [it, fresh] = seen.emplace(key, static_cast<std::int32_t>(b.body.size()));
+      if (fresh) {
+        b.body.push_back(in);
+        b.arg_a.push_back(a);
+        b.arg_b.push_back(bb);
+        index_of.push_back(ixid);
+        constant_of.push_back(cid);
+      }
+      return it->second;
+    };
+    std::int32_t total = -1;
+    for (const std::vector<std::size_t>* g : by_count[m]) {
+      const std::vector<Instr>& shape = tapes[g->front()];
+      std::vector<std::int32_t> remap(shape.size()), stack;
+      for (std::size_t j = 0; j < shape.size(); ++j) {
+        const Instr& in = shape[j];
+        std::vector<std::int32_t> ix;
+        std::vector<double> cs;
+        if (in.op == O::Var) {
+          for (std::size_t t : *g) ix.push_back(tapes[t][j].index);
+        } else if (has_constant(in.op)) {
+          bool varies = false;
+          for (std::size_t t : *g) varies = varies || tapes[t][j].c != in.c;
+          if (varies)
+            for (std::size_t t : *g) cs.push_back(tapes[t][j].c);
+        }
+        std::int32_t a = -1, bb = -1;
+        if (in.op == O::Const || in.op == O::Var) {
+        } else if (in.op == O::Add || in.op == O::Sub || in.op == O::Mul || in.op == O::Div || in.op == O::Pow ||
+                   in.op == O::Atan2) {
+          bb = stack.back();
+          stack.pop_back();
+          a = stack.back();
+          stack.pop_back();
+        } else {
+          a = stack.back();
+          stack.pop_back();
+        }
+        remap[j] = push(in, a, bb, std::move(ix), std::move(cs));
+        stack.push_back(remap[j]);
+      }
+      if (total < 0) {
+        total = remap.back();
+      } else {
+        Instr plus{};
+        plus.op = O::Add;
+        total = push(plus, total, remap.back(), {}, {});
+      }
+    }
+    // the sum must be the last instruction (block_forward adds up the last column)
+    if (total != static_cast<std::int32_t>(b.body.size()) - 1) {
+      Instr one{};
+      one.op = O::MulC;
+      one.c = 1.0;
+      b.body.push_back(one);
+      b.arg_a.push_back(total);
+      b.arg_b.push_back(-1);
+      index_of.push_back(-1);
+      constant_of.push_back(-1);
+    }
+    b.index.assign(b.body.size(), {});
+    b.c.assign(b.body.size(), {});
+    for (std::size_t j = 0; j < b.body.size(); ++j) {
+      if (index_of[j] >= 0) b.index[j] = index_lists[static_cast<std::size_t>(index_of[j])];
+      if (constant_of[j] >= 0) b.c[j] = constant_lists[static_cast<std::size_t>(constant_of[j])];
+    }
+    Instr in{};
+    in.op = O::Block;
+    in.index = static_cast<std::int32_t>(blocks.size());
+    blocks.push_back(std::move(b));
+    tape.push_back(in);
+    add(1);
+  }
+  if (constant_term != 0.0) {
+    Instr c{};
+    c.op = O::AddC;
+    c.c = constant_term;
+    tape.push_back(c);
+  }
+  return depth;
+}
+
+}  // namespace expression_detail
+
+inline Expression Expression::parse(const std::string& text, const ExpressionSymbols& symbols, bool blocks) {
   expression_detail::Parser p(text, symbols);
   expression_detail::NodePtr root = expression_detail::simplify(p.parse());
   Expression e;
   e.text_ = text;
-  e.depth_ = expression_detail::emit(*root, e.tape_);
+  e.depth_ = blocks ? expression_detail::emit_blocked(root, e.tape_, e.blocks_) : expression_detail::emit(*root, e.tape_);
   if (e.depth_ > kMaxStack)
     throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(e.depth_) +
                                  ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
@@ -1073,30 +1511,8 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
   using O = Op;
   Parser p(text, symbols);
   NodePtr root = simplify(p.parse());
-  // the additive terms, each with the factor the sums, signs and constant factors
-  // above it give it (a work list: a flat sum is a tree as deep as it is long)
-  struct Term {
-    NodePtr* slot;
-    double scale;
-  };
-  std::vector<Term> terms, work{{&root, 1.0}};
   double constant_term = 0.0;
-  while (!work.empty()) {
-    const Term t = work.back();
-    work.pop_back();
-    Node& n = **t.slot;
-    switch (n.op) {
-      case O::Add: work.push_back({&n.kids[1], t.scale}); work.push_back({&n.kids[0], t.scale}); break;
-      case O::Sub: work.push_back({&n.kids[1], -t.scale}); work.push_back({&n.kids[0], t.scale}); break;
-      case O::Neg: work.push_back({&n.kids[0], -t.scale}); break;
-      case O::MulC: work.push_back({&n.kids[0], t.scale * n.c}); break;
-      case O::DivC: work.push_back({&n.kids[0], t.scale / n.c}); break;
-      case O::AddC: constant_term += t.scale * n.c; work.push_back({&n.kids[0], t.scale}); break;
-      case O::RSubC: constant_term += t.scale * n.c; work.push_back({&n.kids[0], -t.scale}); break;
-      case O::Const: constant_term += t.scale * n.c; break;
-      default: terms.push_back(t); break;
-    }
-  }
+  std::vector<Term> terms = additive_terms(root, constant_term);
   VelocitySplit out;
   std::vector<Term> kin, pot;
   bool diagonal = true;
@@ -1154,7 +1570,7 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
     }
     Expression r;
     r.text_ = std::string(what) + " terms of: " + text;
-    r.depth_ = emit(*sum, r.tape_);
+    r.depth_ = emit_blocked(sum, r.tape_, r.blocks_);
     if (r.depth_ > kMaxStack)
       throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(r.depth_) +
                                    ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");

@@ -1,6 +1,7 @@
 // libFuzzer target: the expression parser of written Lagrangians
-// (mechanics/expression.h). Text that parses is evaluated with doubles, with Jets
-// (first derivatives) and by the reverse-mode gradient, at a fixed point.
+// (mechanics/expression.h), arrays, lists and sums included. Text that parses is
+// evaluated with doubles, with Jets (first derivatives) and by the reverse-mode
+// gradient, at a fixed point, and split by its degree in the velocities.
 //
 // Any input must parse or throw ExpressionError; evaluation must not crash or run
 // into undefined behaviour (non-finite values are fine: log(-1) is NaN). Run by
@@ -15,9 +16,16 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
+  // two scalars and an array of 3 (fixed ends) in each block, a list, and constants
+  // usable as sizes in sums: the syntax of sums and indices (sum(i, 1, n, q[i] - q[i-1]))
   dvm::ExpressionSymbols sym;
   sym.variables = {{"x", 0, 0}, {"y", 0, 1}, {"x_dot", 1, 0}, {"y_dot", 1, 1}, {"p_x", 2, 0}, {"p_y", 2, 1}};
-  sym.constants = {{"m", 1.5}, {"k", 2.0}, {"g", 9.81}};
+  sym.arrays = {{"q", 0, 2, 3, dvm::ExpressionSymbols::Boundary::fixed},
+                {"q_dot", 1, 2, 3, dvm::ExpressionSymbols::Boundary::fixed},
+                {"r", 0, 2, 3, dvm::ExpressionSymbols::Boundary::periodic},
+                {"p_q", 2, 2, 3, dvm::ExpressionSymbols::Boundary::none}};
+  sym.constants = {{"m", 1.5}, {"k", 2.0}, {"g", 9.81}, {"n", 3.0}};
+  sym.constant_arrays = {{"c", {0.5, -1.0, 2.0}}};
   dvm::Expression e;
   try {
     e = dvm::Expression::parse(text, sym);
@@ -25,16 +33,30 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (err.offset > text.size()) __builtin_trap();  // the position must lie in the text
     return 0;
   }
-  const double q[2] = {0.3, -0.7}, v[2] = {1.1, 0.2}, p[2] = {0.5, -1.5};
+  const double q[5] = {0.3, -0.7, 0.1, 0.2, -0.4}, v[5] = {1.1, 0.2, -0.3, 0.5, 0.9}, p[5] = {0.5, -1.5, 1, 2, 3};
   volatile double value = e(q, v, p);
   (void)value;
   using J = ceres::Jet<double, 4>;
-  const J qj[2] = {J(0.3, 0), J(-0.7, 1)}, vj[2] = {J(1.1, 2), J(0.2, 3)}, pj[2] = {J(0.5), J(-1.5)};
+  const J qj[5] = {J(0.3, 0), J(-0.7, 1), J(0.1), J(0.2), J(-0.4)},
+          vj[5] = {J(1.1, 2), J(0.2, 3), J(-0.3), J(0.5), J(0.9)}, pj[5] = {J(0.5), J(-1.5), J(1), J(2), J(3)};
   volatile double d = e(qj, vj, pj).v[0];
   (void)d;
-  if (!e.uses(2, 0) && !e.uses(2, 1)) {  // the gradient takes blocks 0 and 1 only
-    double g0[2] = {0, 0}, g1[2] = {0, 0};
+  bool momenta = false;  // the gradient takes blocks 0 and 1 only
+  for (int i = 0; i < 5; ++i) momenta = momenta || e.uses(2, i);
+  if (!momenta) {
+    double g0[5] = {0, 0, 0, 0, 0}, g1[5] = {0, 0, 0, 0, 0};
     e.gradient(q, v, g0, g1);
+  }
+  // the velocity split reads the same text the same way
+  try {
+    dvm::Expression kin, pot;
+    const dvm::VelocitySplit s = dvm::Expression::split_velocity(text, sym, &kin, &pot);
+    if (s.constant_mass && !momenta) {
+      volatile double t = kin(q, v, p) + pot(q, v, p);
+      (void)t;
+    }
+  } catch (const dvm::ExpressionError&) {
+    __builtin_trap();  // parse accepted it
   }
   return 0;
 }

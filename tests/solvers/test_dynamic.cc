@@ -93,14 +93,15 @@ static_assert(DynamicThetaStep<NBodyDynamic>::N == Eigen::Dynamic &&
 
 namespace {
 
+// blocks = false: every term on the tape (Expression::Block)
 std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vector<std::pair<std::string, double>> params,
-                                       const std::string& L, const std::string& H = "") {
+                                       const std::string& L, const std::string& H = "", bool blocks = true) {
   auto s = std::make_shared<WrittenSystem>();
   s->name = "written";
   s->coordinates = std::move(coords);
   s->params = std::move(params);
   s->check_names();
-  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian), blocks);
   if (!H.empty()) s->hamiltonian = Expression::parse(H, s->symbols(WrittenSystem::Kind::hamiltonian));
   return s;
 }
@@ -127,7 +128,7 @@ std::shared_ptr<WrittenSystem> written_fpu() {
 
 // A chain of n unit masses with free ends, L = sum v_i^2/2 - sum_i V(x_{i+1} - x_i),
 // V(r) = k r^2/2 + beta r^4/4: translation invariant, so sum p_i is conserved.
-std::shared_ptr<WrittenSystem> written_chain(int n) {
+std::shared_ptr<WrittenSystem> written_chain(int n, bool blocks = true) {
   std::vector<std::string> c;
   for (int i = 0; i < n; ++i) c.push_back("x" + std::to_string(i));
   std::string kin, pot;
@@ -136,7 +137,7 @@ std::shared_ptr<WrittenSystem> written_chain(int n) {
     const std::string r = "(" + c[i + 1] + " - " + c[i] + ")";
     pot += (i ? " + " : "") + std::string("k/2*") + r + "^2 + beta/4*" + r + "^4";
   }
-  return written(c, {{"k", 1.0}, {"beta", 0.5}}, "(" + kin + ")/2 - (" + pot + ")");
+  return written(c, {{"k", 1.0}, {"beta", 0.5}}, "(" + kin + ")/2 - (" + pot + ")", "", blocks);
 }
 
 VectorXd random_vector(int n, double scale, unsigned seed) {
@@ -309,7 +310,7 @@ BOOST_AUTO_TEST_CASE(written_dynamic_equals_the_builtin_systems_both_ways) {
   check(kKepler, written_kepler(), 21);
   check(FermiPastaUlam(7.0), written_fpu(), 31);  // 12 directions: two passes of K = 8
   // a tape longer than the stack storage of reverse mode: still reverse by default
-  const auto chain = written_chain(50);
+  const auto chain = written_chain(50, false);
   BOOST_TEST(chain->lagrangian.tape().size() > static_cast<std::size_t>(Expression::kStackTape));
   BOOST_TEST(WrittenDynamic(chain).reverse_mode());
   BOOST_TEST(!WrittenDynamic(chain, WrittenDerivatives::forward_over_forward).reverse_mode());
@@ -322,12 +323,13 @@ BOOST_AUTO_TEST_CASE(long_tapes_are_differentiated_correctly_both_ways) {
   // from the stack, at a state where the coordinates from 10 on are equal and at rest
   // (the springs past the 12th carry no load, so the first 12 rows agree); and the
   // long chain in reverse mode against forward
-  const WrittenDynamic L50(written_chain(50), WrittenDerivatives::forward_over_forward), L12(written_chain(12)),
-      R50(written_chain(50));
+  const WrittenDynamic L50(written_chain(50, false), WrittenDerivatives::forward_over_forward),
+      L12(written_chain(12, false)), R50(written_chain(50, false)), B50(written_chain(50));
   BOOST_TEST(!L50.reverse_mode());
   BOOST_TEST(L12.reverse_mode());
   BOOST_TEST(R50.reverse_mode());
-  BOOST_TEST(written_chain(12)->lagrangian.tape().size() <= static_cast<std::size_t>(Expression::kStackTape));
+  BOOST_TEST(written_chain(12, false)->lagrangian.tape().size() <= static_cast<std::size_t>(Expression::kStackTape));
+  BOOST_TEST(!written_chain(50)->lagrangian.blocks().empty());
   VectorXd q = VectorXd::Zero(50), v = VectorXd::Zero(50);
   q.head(10) = random_vector(10, 0.5, 3);
   v.head(10) = random_vector(10, 0.5, 4);
@@ -335,6 +337,7 @@ BOOST_AUTO_TEST_CASE(long_tapes_are_differentiated_correctly_both_ways) {
   const Derivatives a = derivatives(L50, q, v);
   const VectorXd q2 = random_vector(50, 0.5, 5), v2 = random_vector(50, 0.5, 6);
   check_same(derivatives(R50, q2, v2), derivatives(L50, q2, v2), 1e-14);
+  check_same(derivatives(B50, q2, v2), derivatives(L50, q2, v2), 1e-13);  // blocks: another order of the sum
   const Derivatives b = derivatives(L12, VectorXd(q.head(12)), VectorXd(v.head(12)));
   BOOST_TEST(std::fabs(a.value - b.value) <= 1e-14 * std::fabs(b.value));
   BOOST_TEST(rel_diff(a.Lq.head(12), b.Lq) <= 1e-14);
