@@ -348,8 +348,15 @@ double energy(const Sys& L, const DynIn& q, const DynIn& v) {
 // given). Throws DegenerateLagrangianError where L_vv is singular.
 template <class Sys, std::enable_if_t<is_dynamic_system_v<Sys>, int> = 0>
 Eigen::VectorXd legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, const DynIn& guess) {
-  dynamic_detail::LegendreWork w(L.dim());
   Eigen::VectorXd v = guess;
+  // closed forms without the n x n workspace of Newton's method
+  if constexpr (has_dynamic_velocity<Sys>::value) {
+    L.velocity(q, p, v);
+    return v;
+  }
+  if constexpr (has_runtime_velocity<Sys>::value)
+    if (L.closed_velocity(q, p, v)) return v;
+  dynamic_detail::LegendreWork w(L.dim());
   dynamic_detail::legendre_inverse(L, q, p, v, w);
   return v;
 }
