@@ -98,6 +98,10 @@ struct ExpressionSymbols {
   std::vector<std::pair<std::string, double>> constants;  // parameters, in order
   std::vector<Array> arrays;
   std::vector<ConstantArray> constant_arrays;
+  // Named subexpressions, {name, text}: a definition may use the names above and the
+  // definitions before it; where an expression uses it, it is evaluated once per
+  // evaluation of the expression (Expression::kMaxDefinitions at most).
+  std::vector<std::pair<std::string, std::string>> definitions;
 
   // Every known name, variables then constants, for "unknown name" messages.
   std::string known_names() const {
@@ -107,6 +111,7 @@ struct ExpressionSymbols {
     for (const auto& a : arrays) add(a.name + "[1.." + std::to_string(a.size) + "]");
     for (const auto& c : constants) add(c.first);
     for (const auto& c : constant_arrays) add(c.name + "[1.." + std::to_string(c.values.size()) + "]");
+    for (const auto& d : definitions) add(d.first);
     add("pi");
     return out;
   }
@@ -137,6 +142,8 @@ class Expression {
   static constexpr int kMaxNesting = 256;
   // Most operations an expression may have once its sums are unrolled.
   static constexpr std::size_t kMaxNodes = std::size_t{1} << 20;
+  // Most definitions (ExpressionSymbols::definitions) an expression may use.
+  static constexpr int kMaxDefinitions = 64;
 
   enum class Op : std::uint8_t {
     Const, Var,
@@ -146,6 +153,7 @@ class Expression {
     Sin, Cos, Tan, Asin, Acos, Atan, Exp, Log, Sqrt, Cbrt, Abs, Sinh, Cosh, Tanh,
     Atan2,
     Block,  // pushes the sum of the terms of blocks_[index] (array-at-a-time, see Block)
+    Let,    // pops the value of definition `index` (read back as Var of block 3)
   };
   struct Instr {
     Op op;
@@ -249,6 +257,7 @@ class Expression {
   std::vector<Instr> tape_;
   std::vector<Block> blocks_;
   int depth_ = 0;
+  int definitions_ = 0;  // Let instructions on the tape
 };
 
 namespace expression_detail {
@@ -353,10 +362,13 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
   static_assert(std::is_trivially_destructible_v<T>, "the expression stack never runs destructors");
   alignas(T) unsigned char raw[kMaxStack * sizeof(T)];
   T* s = std::launder(reinterpret_cast<T*>(raw));
-  const T* blocks[3] = {b0, b1, b2};
+  alignas(T) unsigned char raw_defs[kMaxDefinitions * sizeof(T)];  // raw: only Let writes it
+  T* defs = std::launder(reinterpret_cast<T*>(raw_defs));
+  const T* blocks[4] = {b0, b1, b2, defs};
   int top = -1;
   for (const Instr& in : tape_) {
     switch (in.op) {
+      case Op::Let: new (&defs[in.index]) T(s[top--]); break;
       case Op::Const: new (&s[++top]) T(constant<T>(in.c)); break;
       case Op::Var: new (&s[++top]) T(blocks[in.block][in.index]); break;
       case Op::Add: case Op::Sub: case Op::Mul: case Op::Div: case Op::Pow: case Op::Atan2:
@@ -509,7 +521,7 @@ void Expression::block_backward(const Block& b, const T& w, const T* val, T* adj
     const T* aj = adj + j * m;
     if (ins.op == Op::Const) continue;
     if (ins.op == Op::Var) {
-      if (ins.block < 2) {
+      if (ins.block != 2) {
         T* g = grads[ins.block];
         const std::int32_t* ix = b.index[j].data();
         for (std::size_t k = 0; k < m; ++k) g[ix[k]] += aj[k];
@@ -611,12 +623,23 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
   };
   const Values val{slots};
   const Adjoints adj{slots};
-  const T* blocks[3] = {b0, b1, nullptr};
-  T* grads[2] = {g0, g1};
+  // definitions: their values (read as block 3) and adjoints
+  alignas(T) unsigned char raw_defs[2 * kMaxDefinitions * sizeof(T)];
+  T* defs = std::launder(reinterpret_cast<T*>(raw_defs));
+  T* defs_adj = defs + kMaxDefinitions;
+  for (int k = 0; k < definitions_; ++k) new (&defs_adj[k]) T(constant<T>(0.0));
+  const T* blocks[4] = {b0, b1, nullptr, defs};
+  T* grads[4] = {g0, g1, nullptr, defs_adj};
   int top = -1;
   for (int i = 0; i < n; ++i) {
     const Instr& in = tape_[static_cast<std::size_t>(i)];
     switch (in.op) {
+      case Op::Let:  // pops: nothing pushed
+        slots[i].a = stack[top--];
+        new (&val[i]) T(val[slots[i].a]);
+        new (&defs[in.index]) T(val[i]);
+        new (&adj[i]) T(constant<T>(0.0));
+        continue;
       case Op::Const: new (&val[i]) T(constant<T>(in.c)); break;
       case Op::Var: new (&val[i]) T(blocks[in.block][in.index]); break;
       case Op::Block:
@@ -643,7 +666,10 @@ bool Expression::gradient(const T* b0, const T* b1, T* g0, T* g1) const {
     switch (in.op) {
       case Op::Const: continue;
       case Op::Var:
-        if (in.block < 2) grads[in.block][in.index] += w;
+        if (in.block != 2) grads[in.block][in.index] += w;
+        continue;
+      case Op::Let:  // all its uses come later on the tape: their adjoints are in
+        adj[slots[i].a] += defs_adj[in.index];
         continue;
       case Op::Block: {
         const Block& b = blocks_[static_cast<std::size_t>(in.index)];
@@ -714,9 +740,22 @@ inline std::string function_names() {
 
 NodePtr simplify(NodePtr root);
 
+// The definitions an expression uses (ExpressionSymbols::definitions), shared by the
+// parsers of the expression and of each definition: each is parsed at its first use,
+// and gets the next slot (so a definition's own definitions have lower slots).
+struct Definitions {
+  std::vector<NodePtr> trees;   // by slot
+  std::vector<int> slot;        // by definition: its slot, -1 while unused
+  std::size_t nodes = 0;        // made so far (Expression::kMaxNodes), all texts together
+};
+
 class Parser {
  public:
-  Parser(const std::string& text, const ExpressionSymbols& symbols) : t_(text), sym_(symbols) {}
+  Parser(const std::string& text, const ExpressionSymbols& symbols, Definitions* defs = nullptr, int visible = -1)
+      : t_(text), sym_(symbols), defs_(defs ? defs : &own_), visible_(visible < 0 ? static_cast<int>(symbols.definitions.size()) : visible) {
+    if (defs_->slot.size() != symbols.definitions.size()) defs_->slot.assign(symbols.definitions.size(), -1);
+  }
+  Definitions& definitions() { return *defs_; }
 
   NodePtr parse() {
     if (t_.size() > Expression::kMaxText)
@@ -752,7 +791,7 @@ class Parser {
   }
 
   NodePtr make(Expression::Op op, std::size_t pos) {
-    if (++nodes_ > Expression::kMaxNodes)
+    if (++defs_->nodes > Expression::kMaxNodes)
       fail(pos, "the expression has more than " + std::to_string(Expression::kMaxNodes) +
                     " operations once its sums are unrolled; write a smaller system or fewer terms");
     auto n = std::make_unique<Node>();
@@ -883,6 +922,8 @@ class Parser {
       if (i_ < t_.size() && t_[i_] == '[') return element(name, at);
       for (auto k = indices_.rbegin(); k != indices_.rend(); ++k)
         if (k->first == name) return make_const(static_cast<double>(k->second), at);
+      for (int k = 0; k < static_cast<int>(sym_.definitions.size()); ++k)
+        if (sym_.definitions[static_cast<std::size_t>(k)].first == name) return definition(k, at);
       for (const auto& a : sym_.arrays)
         if (a.name == name)
           fail(at, "'" + name + "' is an array of " + std::to_string(a.size) + " entries; write " + name +
@@ -924,9 +965,9 @@ class Parser {
     skip();
     const std::size_t at = i_;
     need_operand(what);
-    const std::size_t kept = nodes_;  // the nodes made here are gone once it is folded
+    const std::size_t kept = defs_->nodes;  // the nodes made here are gone once it is folded
     NodePtr n = simplify(expr());
-    nodes_ = kept;
+    defs_->nodes = kept;
     if (!n->is_const())
       fail(at, std::string("expected ") + what +
                    " made of numbers, parameters and sum indices only (a whole number known before the run)");
@@ -1015,9 +1056,39 @@ class Parser {
                        (boundary == B::none && var ? "; an array of coordinates may declare fixed or periodic ends" : ""));
   }
 
+  // A use of definition k: its value, read back from its slot (Var of block 3); the
+  // definition is parsed at its first use, seeing the definitions before it only.
+  NodePtr definition(int k, std::size_t at) {
+    const auto& [name, text] = sym_.definitions[static_cast<std::size_t>(k)];
+    if (k >= visible_)
+      fail(at, "'" + name + "' is defined after the definition that uses it; a definition may use the ones "
+                            "before it only");
+    int& slot = defs_->slot[static_cast<std::size_t>(k)];
+    if (slot < 0) {
+      if (static_cast<int>(defs_->trees.size()) >= Expression::kMaxDefinitions)
+        fail(at, "more than " + std::to_string(Expression::kMaxDefinitions) + " definitions are used");
+      NodePtr tree;
+      try {
+        Parser sub(text, sym_, defs_, k);
+        tree = sub.parse();
+      } catch (const ExpressionError& e) {
+        fail(at, "in the definition of '" + name + "' (character " + std::to_string(e.offset + 1) + " of \"" + text +
+                     "\"): " + e.what());
+      }
+      slot = static_cast<int>(defs_->trees.size());
+      defs_->trees.push_back(std::move(tree));
+    }
+    NodePtr n = make(Expression::Op::Var, at);
+    n->block = 3;
+    n->index = slot;
+    return n;
+  }
+
   // Whether a name already means something here.
   bool known(const std::string& name) const {
     if (name == "pi" || name == "sum" || name == "t") return true;
+    for (const auto& d : sym_.definitions)
+      if (d.first == name) return true;
     for (const auto& f : functions())
       if (name == f.name) return true;
     for (const auto& v : sym_.variables)
@@ -1057,9 +1128,11 @@ class Parser {
 
   const std::string& t_;
   const ExpressionSymbols& sym_;
+  Definitions own_;
+  Definitions* defs_;  // shared with the parsers of the definitions
+  int visible_;        // the definitions this text may use: 0 .. visible_ - 1
   std::size_t i_ = 0;
   int nesting_ = 0;
-  std::size_t nodes_ = 0;                           // made so far, indices not counted (kMaxNodes)
   std::vector<std::pair<std::string, long>> indices_;  // the enclosing sums' indices and values
   int dry_ = 0;                                     // > 0: inside a sum with no terms
 };
@@ -1426,12 +1499,34 @@ inline int emit_blocked(NodePtr& root, std::vector<Expression::Instr>& tape, std
 
 }  // namespace expression_detail
 
+namespace expression_detail {
+
+// The definitions in slot order, each followed by the Let that stores it (a
+// definition's own definitions have lower slots: they come first). Returns the depth.
+inline int emit_definitions(Definitions& d, std::vector<Expression::Instr>& tape) {
+  int depth = 0;
+  for (std::size_t k = 0; k < d.trees.size(); ++k) {
+    d.trees[k] = simplify(std::move(d.trees[k]));
+    depth = std::max(depth, emit(*d.trees[k], tape));
+    Expression::Instr let{};
+    let.op = Expression::Op::Let;
+    let.index = static_cast<std::int32_t>(k);
+    tape.push_back(let);
+  }
+  return depth;
+}
+
+}  // namespace expression_detail
+
 inline Expression Expression::parse(const std::string& text, const ExpressionSymbols& symbols, bool blocks) {
   expression_detail::Parser p(text, symbols);
   expression_detail::NodePtr root = expression_detail::simplify(p.parse());
   Expression e;
   e.text_ = text;
+  const int defs = expression_detail::emit_definitions(p.definitions(), e.tape_);
+  e.definitions_ = static_cast<int>(p.definitions().trees.size());
   e.depth_ = blocks ? expression_detail::emit_blocked(root, e.tape_, e.blocks_) : expression_detail::emit(*root, e.tape_);
+  e.depth_ = std::max(e.depth_, defs);
   if (e.depth_ > kMaxStack)
     throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(e.depth_) +
                                  ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
@@ -1465,7 +1560,7 @@ struct Degree {
   bool uses_q = false;
   int velocity = -1;
 };
-inline Degree term_degree(const Node& term) {
+inline Degree term_degree(const Node& term, const std::vector<Degree>& definitions) {
   using O = Expression::Op;
   std::vector<Degree> stack;
   for (const Node* n : post_order(term)) {
@@ -1485,6 +1580,13 @@ inline Degree term_degree(const Node& term) {
     switch (n->op) {
       case O::Const: d.degree = 0; break;
       case O::Var:
+        if (n->block == 3) {  // a definition: what its text is
+          const Degree& e = definitions[static_cast<std::size_t>(n->index)];
+          d.degree = e.degree;
+          d.uses_q = e.uses_q;
+          d.velocity = e.velocity;
+          break;
+        }
         d.degree = n->block == 1 ? 1 : 0;
         d.uses_q = n->block == 0;
         if (n->block == 1) d.velocity = n->index;
@@ -1511,13 +1613,19 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
   using O = Op;
   Parser p(text, symbols);
   NodePtr root = simplify(p.parse());
+  Definitions& defs = p.definitions();
+  std::vector<Degree> def_degrees;  // by slot (a definition's definitions first)
+  for (auto& tree : defs.trees) {
+    tree = simplify(std::move(tree));
+    def_degrees.push_back(term_degree(*tree, def_degrees));
+  }
   double constant_term = 0.0;
   std::vector<Term> terms = additive_terms(root, constant_term);
   VelocitySplit out;
   std::vector<Term> kin, pot;
   bool diagonal = true;
   for (const Term& t : terms) {
-    const Degree d = term_degree(**t.slot);
+    const Degree d = term_degree(**t.slot, def_degrees);
     if (d.degree == 0) {
       ++out.potential_terms;
       pot.push_back(t);
@@ -1570,7 +1678,16 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
     }
     Expression r;
     r.text_ = std::string(what) + " terms of: " + text;
-    r.depth_ = emit_blocked(sum, r.tape_, r.blocks_);
+    for (std::size_t k = 0; k < defs.trees.size(); ++k) {  // every definition, each part its own copy
+      const int dd = emit(*defs.trees[k], r.tape_);
+      r.depth_ = std::max(r.depth_, dd);
+      Instr let{};
+      let.op = O::Let;
+      let.index = static_cast<std::int32_t>(k);
+      r.tape_.push_back(let);
+    }
+    r.definitions_ = static_cast<int>(defs.trees.size());
+    r.depth_ = std::max(r.depth_, emit_blocked(sum, r.tape_, r.blocks_));
     if (r.depth_ > kMaxStack)
       throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(r.depth_) +
                                    ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");

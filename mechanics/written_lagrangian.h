@@ -50,6 +50,9 @@ struct WrittenSystem {
   std::vector<ExpressionSymbols::Array> arrays;
   std::vector<std::pair<std::string, double>> params;
   std::vector<ExpressionSymbols::ConstantArray> param_arrays;
+  // Named subexpressions {name, text}, usable in every expression (and in the
+  // definitions after them); evaluated once per evaluation.
+  std::vector<std::pair<std::string, std::string>> definitions;
   Expression lagrangian;   // in q (block 0) and v (block 1)
   Expression energy;       // optional: q, v, p (blocks 0, 1, 2)
   Expression hamiltonian;  // optional: q (block 0) and p (block 2)
@@ -84,6 +87,7 @@ struct WrittenSystem {
         if (kind != Kind::lagrangian) s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
       }
       s.constants = params;
+      s.definitions = definitions;
       return s;
     }
     for (int i = 0; i < dim(); ++i) {
@@ -100,6 +104,7 @@ struct WrittenSystem {
     }
     s.constants = params;
     s.constant_arrays = param_arrays;
+    s.definitions = definitions;
     return s;
   }
 
@@ -154,6 +159,9 @@ struct WrittenSystem {
       claim(p.name, "parameter list");
       if (p.values.empty()) throw std::invalid_argument("the parameter list '" + p.name + "' is empty");
     }
+    for (const auto& d : definitions) claim(d.first, "definition");
+    if (static_cast<int>(definitions.size()) > Expression::kMaxDefinitions)
+      throw std::invalid_argument("at most " + std::to_string(Expression::kMaxDefinitions) + " definitions");
     for (const char* r : {"sum", "t"})
       if (seen.count(r))
         throw std::invalid_argument(std::string("the name '") + r + "' is reserved (" +

@@ -208,11 +208,43 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
       throw InputError(key_where(path, *ends_node, "system.ends." + name) + ": '" + name +
                        "' is not an array of coordinates (declare it as coordinates = [\"" + name + "[n]\"])");
   }
+  // definitions = ["r = sqrt(x^2 + y^2)", ...]: name = text, each checked here where it
+  // is written (in the names of the energy: coordinates, velocities and momenta)
+  const toml::node* defs = sys.get("definitions");
+  if (defs) {
+    const toml::array* da = defs->as_array();
+    if (!da) throw InputError(key_where(path, *defs, "system.definitions") + ": expected an array of \"name = expression\"");
+    for (std::size_t i = 0; i < da->size(); ++i) {
+      const toml::node& d = *da->get(i);
+      const std::string key = "system.definitions[" + std::to_string(i) + "]";
+      const auto text = d.value<std::string>();
+      const std::size_t eq = d.is_string() ? text->find('=') : std::string::npos;
+      if (eq == std::string::npos)
+        throw InputError(key_where(path, d, key) + ": expected a string \"name = expression\"");
+      std::string name = text->substr(0, eq);
+      name.erase(0, name.find_first_not_of(" \t"));
+      name.erase(name.find_last_not_of(" \t") + 1);
+      w->definitions.emplace_back(name, text->substr(eq + 1));
+    }
+  }
   try {
     w->check_names();
   } catch (const std::invalid_argument& e) {
     const toml::node* at = c ? c : sys.get("params") ? sys.get("params") : sys.get("lagrangian");
     throw InputError(key_where(path, *at, c ? "system.coordinates" : "system.params") + ": " + e.what());
+  }
+  for (std::size_t i = 0; i < w->definitions.size(); ++i) {
+    ExpressionSymbols before = w->symbols(WrittenSystem::Kind::energy);
+    before.definitions.resize(i);
+    const toml::node& d = *defs->as_array()->get(i);
+    const std::string& text = w->definitions[i].second;
+    try {
+      Expression::parse(text, before);
+    } catch (const ExpressionError& e) {
+      const std::size_t start = d.value<std::string>()->find('=') + 1;
+      throw InputError(string_location(path, d, start + e.offset) + ": in system.definitions[" + std::to_string(i) +
+                       "] ('" + w->definitions[i].first + "'): " + e.what());
+    }
   }
   auto parse = [&](const char* key, WrittenSystem::Kind kind, Expression& out, bool required) {
     const toml::node* n = sys.get(key);

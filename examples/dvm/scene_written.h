@@ -8,6 +8,7 @@
 //   ends = { q = "fixed" }                       # optional, per array: "none", "fixed", "periodic"
 //   lagrangian = "... a, b, a_dot, b_dot, parameters ..."
 //   params = { m1 = 1.0, k = [1.0, 2.0], ... }   # any names: numbers, or lists (k[1], k[2])
+//   definitions = ["r = sqrt(x^2 + y^2)"]        # optional: named subexpressions
 //   energy = "..."                               # optional: q, q_dot and p_q names
 //   hamiltonian = "..."                          # optional: q and p_q names
 //

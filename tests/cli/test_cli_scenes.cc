@@ -462,3 +462,41 @@ BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
   // ... while the explicit steps take it
   BOOST_TEST(dvm({"run", path, "--set", "system.params={ n = 5000 }"}).status == 0);
 }
+
+BOOST_AUTO_TEST_CASE(written_definitions_match_the_built_in_system) {
+  // Kepler written with definitions (r evaluated once), against the built-in
+  const std::string kepler = write_scene(
+      "kepler_defs.toml",
+      "[system]\ncoordinates = [\"x\", \"y\"]\nparams = { mu = 1.0 }\n"
+      "definitions = [\"r = sqrt(x^2 + y^2)\", \"T = (x_dot^2 + y_dot^2)/2\"]\n"
+      "lagrangian = \"T + mu/r\"\nhamiltonian = \"(p_x^2 + p_y^2)/2 - mu/r\"\n"
+      "[initial]\nq = [0.4, 0.0]\np = [0.0, 2.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.005\nt_end = 10.0\n");
+  for (const char* form : {"lagrangian", "hamiltonian"}) {
+    const std::vector<std::string> sets = {"--set", std::string("integrator.form=") + form, "--set",
+                                           "integrator.t_end=10.0"};
+    std::vector<std::string> args = {"run", kepler, "--json"};
+    args.insert(args.end(), sets.begin(), sets.end());
+    const Output w = dvm(args), b = run_json("kepler.toml", sets);
+    BOOST_TEST_CONTEXT(form << "\n" << w.err) {
+      BOOST_TEST(w.status == 0);
+      BOOST_TEST(json_string(w.out, "structure") == "separable");
+      BOOST_TEST(max_diff(json_array(w.out, "q_final"), json_array(b.out, "q_final")) <= 1e-12);
+      BOOST_TEST(max_diff(json_array(w.out, "p_final"), json_array(b.out, "p_final")) <= 1e-12);
+    }
+  }
+  // an error inside a definition is reported where it is written; a definition may not
+  // use a later one, nor take a name already taken
+  const Output e = dvm({"run", kepler, "--set", "system.definitions=[\"r = sqrt(x^2 + * y^2)\"]"});
+  BOOST_TEST(e.status == 2);
+  BOOST_TEST(e.err.find("in system.definitions[0] ('r'): expected a number, name or '(' after '+'") != std::string::npos,
+             e.err);
+  const Output f = dvm({"run", kepler, "--set", "system.definitions=[\"T = (x_dot^2 + y_dot^2)/2 + r\", \"r = 1\"]"});
+  BOOST_TEST(f.status == 2);
+  BOOST_TEST(f.err.find("unknown name 'r'") != std::string::npos, f.err);
+  const Output g = dvm({"run", kepler, "--set", "system.definitions=[\"mu = 2\"]"});
+  BOOST_TEST(g.status == 2);
+  BOOST_TEST(g.err.find("the name 'mu' is used twice") != std::string::npos, g.err);
+  const Output h = dvm({"run", kepler, "--set", "system.definitions=[\"just text\"]"});
+  BOOST_TEST(h.status == 2);
+  BOOST_TEST(h.err.find("expected a string \"name = expression\"") != std::string::npos, h.err);
+}

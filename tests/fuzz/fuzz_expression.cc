@@ -1,5 +1,5 @@
 // libFuzzer target: the expression parser of written Lagrangians
-// (mechanics/expression.h), arrays, lists and sums included. Text that parses is
+// (mechanics/expression.h), arrays, lists, sums and definitions included. Text that parses is
 // evaluated with doubles, with Jets (first derivatives) and by the reverse-mode
 // gradient, at a fixed point, and split by its degree in the velocities.
 //
@@ -26,6 +26,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
                 {"p_q", 2, 2, 3, dvm::ExpressionSymbols::Boundary::none}};
   sym.constants = {{"m", 1.5}, {"k", 2.0}, {"g", 9.81}, {"n", 3.0}};
   sym.constant_arrays = {{"c", {0.5, -1.0, 2.0}}};
+  sym.definitions = {{"r", "sqrt(x^2 + y^2)"}, {"s", "r*q[1] + x_dot*c[2]"}, {"u", "sum(i, 1, n, s*q[i])"}};
   dvm::Expression e;
   try {
     e = dvm::Expression::parse(text, sym);

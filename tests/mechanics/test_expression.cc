@@ -769,3 +769,94 @@ BOOST_AUTO_TEST_CASE(the_velocity_split_sorts_terms_by_their_degree_in_v) {
     }
   }
 }
+
+// Definitions (ExpressionSymbols::definitions): named subexpressions evaluated once. The
+// same Lagrangian with and without them gives the same values and derivatives, and its
+// structure is read through them.
+BOOST_AUTO_TEST_CASE(definitions_are_named_subexpressions_evaluated_once) {
+  ExpressionSymbols s;
+  s.variables = {{"x", 0, 0}, {"y", 0, 1}, {"x_dot", 1, 0}, {"y_dot", 1, 1}};
+  s.arrays = {{"q", 0, 2, 20, ExpressionSymbols::Boundary::fixed}, {"q_dot", 1, 2, 20, ExpressionSymbols::Boundary::fixed}};
+  s.constants = {{"mu", 1.5}, {"n", 20}};
+  s.definitions = {{"r", "sqrt(x^2 + y^2)"}, {"T", "(x_dot^2 + y_dot^2)/2"}, {"U", "mu/r + 0.1/r^2"},
+                   {"E", "sum(i, 1, n, q_dot[i]^2/2)"}, {"unused", "x*y"}};
+  const std::string with = "T + U + E - sum(i, 1, n + 1, (q[i] - q[i-1])^2*r)";
+  const std::string without =
+      "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2) + 0.1/sqrt(x^2 + y^2)^2 + sum(i, 1, n, q_dot[i]^2/2)"
+      " - sum(i, 1, n + 1, (q[i] - q[i-1])^2*sqrt(x^2 + y^2))";
+  const Expression a = Expression::parse(with, s), b = Expression::parse(without, s);
+  // r is evaluated once: its square root appears once on the tape (once per use without)
+  auto roots = [](const Expression& e) {
+    int k = 0;
+    for (const auto& in : e.tape()) k += in.op == Expression::Op::Sqrt;
+    for (const auto& blk : e.blocks())
+      for (const auto& in : blk.body) k += in.op == Expression::Op::Sqrt;
+    return k;
+  };
+  BOOST_TEST(roots(a) == 1);
+  BOOST_TEST(roots(b) >= 3);
+  int lets = 0;
+  for (const auto& in : a.tape()) lets += in.op == Expression::Op::Let;
+  BOOST_TEST(lets == 4);  // the unused definition is not evaluated
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> U(-0.9, 0.9);
+  for (int t = 0; t < 3; ++t) {
+    std::vector<double> q(22), v(22), ga(22, 0.0), pa(22, 0.0), gb(22, 0.0), pb(22, 0.0);
+    for (int i = 0; i < 22; ++i) q[i] = U(rng), v[i] = U(rng);
+    q[0] += 1.5;  // away from r = 0
+    const double la = a(q.data(), v.data()), lb = b(q.data(), v.data());
+    BOOST_TEST(std::fabs(la - lb) <= 1e-14 * std::fabs(lb));
+    a.gradient(q.data(), v.data(), ga.data(), pa.data());
+    b.gradient(q.data(), v.data(), gb.data(), pb.data());
+    for (int i = 0; i < 22; ++i) {
+      BOOST_TEST(std::fabs(ga[i] - gb[i]) <= 1e-13 * std::fmax(1.0, std::fabs(gb[i])));
+      BOOST_TEST(std::fabs(pa[i] - pb[i]) <= 1e-13 * std::fmax(1.0, std::fabs(pb[i])));
+    }
+    // second derivatives: the reverse gradient in Jets, and forward mode
+    using J = ceres::Jet<double, 3>;
+    std::vector<J> qj(22), vj(22), gja(22, J(0.0)), pja(22, J(0.0)), gjb(22, J(0.0)), pjb(22, J(0.0));
+    for (int i = 0; i < 22; ++i) qj[i] = J(q[i]), vj[i] = J(v[i]);
+    qj[0].v[0] = 1.0;
+    qj[5].v[1] = 1.0;
+    vj[1].v[2] = 1.0;
+    a.gradient(qj.data(), vj.data(), gja.data(), pja.data());
+    b.gradient(qj.data(), vj.data(), gjb.data(), pjb.data());
+    for (int i = 0; i < 22; ++i) {
+      BOOST_TEST(max_abs(gja[i].v - gjb[i].v) <= 1e-12 * std::fmax(1.0, max_abs(gjb[i].v)));
+      BOOST_TEST(max_abs(pja[i].v - pjb[i].v) <= 1e-12 * std::fmax(1.0, max_abs(pjb[i].v)));
+    }
+    BOOST_TEST(max_abs(a(qj.data(), vj.data()).v - b(qj.data(), vj.data()).v) <= 1e-12);
+  }
+  // the split sees through the definitions: T is kinetic (not diagonal through a
+  // definition: it holds two velocities), U and the bonds potential
+  Expression kin, pot;
+  const VelocitySplit sp = Expression::split_velocity(with, s, &kin, &pot);
+  BOOST_TEST(sp.constant_mass);
+  BOOST_TEST(!sp.diagonal);
+  std::vector<double> q(22, 0.3), v(22, -0.2), zero(22, 0.0);
+  q[0] = 1.2;
+  BOOST_TEST(std::fabs(kin(q.data(), v.data()) + pot(q.data(), v.data()) - a(q.data(), v.data())) <= 1e-13);
+  BOOST_TEST(pot(q.data(), zero.data()) == pot(q.data(), v.data()));
+  ExpressionSymbols m = s;
+  m.definitions.push_back({"K", "(1 + x^2)*x_dot^2"});
+  BOOST_TEST(!Expression::split_velocity("K - U", m).constant_mass);
+  BOOST_TEST(Expression::split_velocity("K - U", m).quadratic);
+  m.definitions.push_back({"W", "x_dot*y"});
+  BOOST_TEST(!Expression::split_velocity("T + W", m).quadratic);
+  // errors: where the definition is used, saying which and where in its text
+  ExpressionSymbols e = s;
+  e.definitions.push_back({"bad", "x + * y"});
+  e.definitions.insert(e.definitions.begin(), {"early", "U + 1"});
+  auto error = [&](const std::string& text) {
+    try {
+      Expression::parse(text, e);
+    } catch (const ExpressionError& err) {
+      return std::to_string(err.offset) + ": " + err.what();
+    }
+    return std::string("(no error)");
+  };
+  const std::string e1 = error("x + bad");
+  BOOST_TEST(e1.find("4: in the definition of 'bad' (character 5 of \"x + * y\"): expected a number") == 0, e1);
+  const std::string e2 = error("early");
+  BOOST_TEST(e2.find("'U' is defined after the definition that uses it") != std::string::npos, e2);
+}
