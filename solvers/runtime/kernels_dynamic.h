@@ -214,15 +214,15 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   view.constant_hessian = constant_hessian;
   const V q = Eigen::Map<const V>(pr.q.data(), n);
   V p(n), v0(n);
-  auto dense_limit = [&](const char* what) {
+  auto dense_limit = [&](const std::string& what) {
     if (n > kMaxDenseDynamicDim)
-      throw InputError(std::string("integrator: ") + what + " forms dense " + std::to_string(n) + " x " +
-                       std::to_string(n) + " matrices for this system, beyond the " +
+      throw InputError(what + " needs dense " + std::to_string(n) + " x " + std::to_string(n) + " matrices, beyond the " +
                        std::to_string(kMaxDenseDynamicDim) +
                        " coordinates the run-time-sized dense steps take; on a separable system "
                        "map = \"explicit-euler\" or \"adjoint-euler\", composed or not, steps without them");
   };
-  if (!constant_hessian) dense_limit("checking the Legendre transform of a Lagrangian that is not separable");
+  if (!constant_hessian)
+    dense_limit("system: a Lagrangian that is not separable (its velocity Hessian, checked at the start)");
   auto check = [&](const V& v) {
     if (!constant_hessian) require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where);
   };
@@ -264,7 +264,8 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         if (L.separable()) return splitting_run(view, WrittenSeparable(L), R, me, h, q, p, v0, base, pr.steps);
     }
   }
-  dense_limit(me.galerkin ? "method = \"galerkin\"" : "this map and form");
+  dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
+                          : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");
   if (me.galerkin)
     return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
   const ThetaMap R = dynamic_theta_map(me);

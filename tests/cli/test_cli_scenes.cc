@@ -457,8 +457,13 @@ BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
   refused({"system.params={ n = 4, i = 1 }", "system.lagrangian=\"sum(j, 1, n, q_dot[j]^2/2)\""},
           "the parameter 'i' would hide the index i");
   // a dense implicit step beyond the size the run-time-sized steps take
-  refused({"system.params={ n = 5000 }", "integrator.map=midpoint"}, "beyond the 4096 coordinates");
-  refused({"system.params={ n = 5000 }", "integrator.method=galerkin"}, "beyond the 4096 coordinates");
+  refused({"system.params={ n = 5000 }", "integrator.map=midpoint"},
+          "integrator.map: map = \"midpoint\" in the lagrangian form needs dense 5000 x 5000 matrices, beyond the 4096 "
+          "coordinates");
+  refused({"system.params={ n = 5000 }", "integrator.method=galerkin"},
+          "integrator.method: method = \"galerkin\" needs dense 5000 x 5000 matrices");
+  refused({"system.params={ n = 5000 }", "system.lagrangian=\"sum(i, 1, n, (1 + q[i]^2)*q_dot[i]^2)\""},
+          "system: a Lagrangian that is not separable (its velocity Hessian, checked at the start) needs dense");
   // ... while the explicit steps take it
   BOOST_TEST(dvm({"run", path, "--set", "system.params={ n = 5000 }"}).status == 0);
 }
