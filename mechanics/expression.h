@@ -745,15 +745,20 @@ NodePtr simplify(NodePtr root);
 // and gets the next slot (so a definition's own definitions have lower slots).
 struct Definitions {
   std::vector<NodePtr> trees;   // by slot
-  std::vector<int> slot;        // by definition: its slot, -1 while unused
+  std::vector<int> slot;        // by definition: its slot, -1 while unused, -2 a constant
+  std::vector<double> value;    // by definition: its value when it folds to a constant
   std::size_t nodes = 0;        // made so far (Expression::kMaxNodes), all texts together
+  std::size_t folded = 0;       // made in indices and bounds and folded away (4 kMaxNodes)
 };
 
 class Parser {
  public:
   Parser(const std::string& text, const ExpressionSymbols& symbols, Definitions* defs = nullptr, int visible = -1)
       : t_(text), sym_(symbols), defs_(defs ? defs : &own_), visible_(visible < 0 ? static_cast<int>(symbols.definitions.size()) : visible) {
-    if (defs_->slot.size() != symbols.definitions.size()) defs_->slot.assign(symbols.definitions.size(), -1);
+    if (defs_->slot.size() != symbols.definitions.size()) {
+      defs_->slot.assign(symbols.definitions.size(), -1);
+      defs_->value.assign(symbols.definitions.size(), 0.0);
+    }
   }
   Definitions& definitions() { return *defs_; }
 
@@ -965,9 +970,15 @@ class Parser {
     skip();
     const std::size_t at = i_;
     need_operand(what);
-    const std::size_t kept = defs_->nodes;  // the nodes made here are gone once it is folded
+    // the nodes made here are gone once it is folded; they count toward a budget of
+    // their own (an index may hold a sum, made again at each use)
+    const std::size_t kept = defs_->nodes;
     NodePtr n = simplify(expr());
+    defs_->folded += defs_->nodes - kept;
     defs_->nodes = kept;
+    if (defs_->folded > 4 * Expression::kMaxNodes)
+      fail(at, "the indices and bounds of sums take more than " + std::to_string(4 * Expression::kMaxNodes) +
+                   " operations to compute; write them more simply");
     if (!n->is_const())
       fail(at, std::string("expected ") + what +
                    " made of numbers, parameters and sum indices only (a whole number known before the run)");
@@ -1063,21 +1074,29 @@ class Parser {
     if (k >= visible_)
       fail(at, "'" + name + "' is defined after the definition that uses it; a definition may use the ones "
                             "before it only");
+    if (dry_ > 0) return make_const(0.0, at);  // inside a sum with no terms: never evaluated
     int& slot = defs_->slot[static_cast<std::size_t>(k)];
-    if (slot < 0) {
-      if (static_cast<int>(defs_->trees.size()) >= Expression::kMaxDefinitions)
-        fail(at, "more than " + std::to_string(Expression::kMaxDefinitions) + " definitions are used");
+    if (slot == -1) {
       NodePtr tree;
       try {
         Parser sub(text, sym_, defs_, k);
-        tree = sub.parse();
+        sub.nesting_ = nesting_;  // one limit for the whole recursion
+        tree = simplify(sub.parse());
       } catch (const ExpressionError& e) {
         fail(at, "in the definition of '" + name + "' (character " + std::to_string(e.offset + 1) + " of \"" + text +
                      "\"): " + e.what());
       }
-      slot = static_cast<int>(defs_->trees.size());
-      defs_->trees.push_back(std::move(tree));
+      if (tree->is_const()) {  // a number: used as one (folded, x^k a whole power)
+        slot = -2;
+        defs_->value[static_cast<std::size_t>(k)] = tree->c;
+      } else {
+        if (static_cast<int>(defs_->trees.size()) >= Expression::kMaxDefinitions)
+          fail(at, "more than " + std::to_string(Expression::kMaxDefinitions) + " definitions are used");
+        slot = static_cast<int>(defs_->trees.size());
+        defs_->trees.push_back(std::move(tree));
+      }
     }
+    if (slot == -2) return make_const(defs_->value[static_cast<std::size_t>(k)], at);
     NodePtr n = make(Expression::Op::Var, at);
     n->block = 3;
     n->index = slot;

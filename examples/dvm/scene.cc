@@ -215,6 +215,9 @@ std::vector<double> initial_vector(const Reader& r, const std::string& path, con
     sym.constants.emplace_back(name, value);
   }
   if (s.written) sym.constant_arrays = s.written->param_arrays;
+  for (const auto& a : sym.constant_arrays)
+    if (a.name == "i")
+      throw InputError(r.where(&n, key) + ": the parameter list 'i' would hide the index i of the expression; rename it");
   const std::string text = *n.value<std::string>();
   Expression e;
   try {

@@ -859,4 +859,28 @@ BOOST_AUTO_TEST_CASE(definitions_are_named_subexpressions_evaluated_once) {
   BOOST_TEST(e1.find("4: in the definition of 'bad' (character 5 of \"x + * y\"): expected a number") == 0, e1);
   const std::string e2 = error("early");
   BOOST_TEST(e2.find("'U' is defined after the definition that uses it") != std::string::npos, e2);
+  // a definition that is a number is used as one: x^k a whole power (right for x < 0,
+  // the text still separable), q[k] an index; one used only inside an empty sum is
+  // never evaluated
+  ExpressionSymbols c = s;
+  c.definitions = {{"k", "2"}, {"j", "k + 1"}, {"D", "1/x"}};
+  const Expression power = Expression::parse("x_dot^k/2 - x^k/2 + q[j] + sum(i, 1, 0, D)", c);
+  const Expression plain = Expression::parse("x_dot^2/2 - x^2/2 + q[3]", s);
+  for (const auto& in : power.tape()) BOOST_TEST((in.op != Expression::Op::Let && in.op != Expression::Op::Pow));
+  {
+    std::vector<double> qn(22, -0.5), vn(22, -0.3), gn(22, 0.0), pn(22, 0.0);
+    qn[0] = 0.0;  // 1/x is infinite here; D is never used
+    BOOST_TEST(power(qn.data(), vn.data()) == plain(qn.data(), vn.data()));
+    power.gradient(qn.data(), vn.data(), gn.data(), pn.data());
+    for (int i = 0; i < 22; ++i) BOOST_TEST((std::isfinite(gn[i]) && std::isfinite(pn[i])));
+  }
+  BOOST_TEST(Expression::split_velocity("x_dot^k/2 - x^k/2", c).constant_mass);
+  // indices that are costly to compute are refused, not computed for ever
+  std::string msg;
+  try {
+    Expression::parse("sum(i, 1, 100000, q[1 + 0*sum(j, 1, 400000, j)])", s);
+  } catch (const ExpressionError& err) {
+    msg = err.what();
+  }
+  BOOST_TEST(msg.find("the indices and bounds of sums take more than") != std::string::npos, msg);
 }
