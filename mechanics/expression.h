@@ -31,6 +31,12 @@
 // unless the array says what lies beyond its ends: `fixed` (entries 0 and size + 1
 // are 0: walls at rest) or `periodic` (the index is taken modulo the size).
 //
+// Definitions (ExpressionSymbols::definitions) name subexpressions: each is evaluated
+// once per evaluation (stored by a Let instruction, read back as a variable of a fourth
+// block) and differentiated through; one that folds to a number is used as that number.
+// Many terms of one shape are evaluated as a block (Expression::Block), an instruction
+// at a time across the terms.
+//
 // Names are resolved at parse time: each is a variable (an index into one of up to
 // three input blocks, e.g. q, v and p) or a constant (a parameter value). Constant
 // sub-expressions are folded, and an operation with a constant operand becomes a
