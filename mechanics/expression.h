@@ -251,6 +251,8 @@ class Expression {
   // adjoints of its operands (ay for binary operations only).
   template <class T>
   static void backward(const Instr& in, const T& w, const T& z, const T& x, const T* y, T& ax, T* ay);
+  // Throws ExpressionError when an evaluation would need more than kMaxStack slots.
+  static void require_depth(int depth);
   // A block's values, instruction by instruction across its terms: val[j * terms + k]
   // is instruction j of term k (raw storage, constructed here); returns their sum.
   template <class T>
@@ -1526,12 +1528,12 @@ inline int emit_blocked(NodePtr& root, std::vector<Expression::Instr>& tape, std
 
 namespace expression_detail {
 
-// The definitions in slot order, each followed by the Let that stores it (a
-// definition's own definitions have lower slots: they come first). Returns the depth.
-inline int emit_definitions(Definitions& d, std::vector<Expression::Instr>& tape) {
+// The definitions (simplified when parsed) in slot order, each followed by the Let that
+// stores it (a definition's own definitions have lower slots: they come first).
+// Returns the depth.
+inline int emit_definitions(const Definitions& d, std::vector<Expression::Instr>& tape) {
   int depth = 0;
   for (std::size_t k = 0; k < d.trees.size(); ++k) {
-    d.trees[k] = simplify(std::move(d.trees[k]));
     depth = std::max(depth, emit(*d.trees[k], tape));
     Expression::Instr let{};
     let.op = Expression::Op::Let;
@@ -1552,10 +1554,14 @@ inline Expression Expression::parse(const std::string& text, const ExpressionSym
   e.definitions_ = static_cast<int>(p.definitions().trees.size());
   e.depth_ = blocks ? expression_detail::emit_blocked(root, e.tape_, e.blocks_) : expression_detail::emit(*root, e.tape_);
   e.depth_ = std::max(e.depth_, defs);
-  if (e.depth_ > kMaxStack)
-    throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(e.depth_) +
-                                 ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
+  require_depth(e.depth_);
   return e;
+}
+
+inline void Expression::require_depth(int depth) {
+  if (depth > kMaxStack)
+    throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(depth) +
+                                 ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
 }
 
 namespace expression_detail {
@@ -1640,10 +1646,7 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
   NodePtr root = simplify(p.parse());
   Definitions& defs = p.definitions();
   std::vector<Degree> def_degrees;  // by slot (a definition's definitions first)
-  for (auto& tree : defs.trees) {
-    tree = simplify(std::move(tree));
-    def_degrees.push_back(term_degree(*tree, def_degrees));
-  }
+  for (const auto& tree : defs.trees) def_degrees.push_back(term_degree(*tree, def_degrees));
   double constant_term = 0.0;
   std::vector<Term> terms = additive_terms(root, constant_term);
   VelocitySplit out;
@@ -1703,19 +1706,10 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
     }
     Expression r;
     r.text_ = std::string(what) + " terms of: " + text;
-    for (std::size_t k = 0; k < defs.trees.size(); ++k) {  // every definition, each part its own copy
-      const int dd = emit(*defs.trees[k], r.tape_);
-      r.depth_ = std::max(r.depth_, dd);
-      Instr let{};
-      let.op = O::Let;
-      let.index = static_cast<std::int32_t>(k);
-      r.tape_.push_back(let);
-    }
+    r.depth_ = emit_definitions(defs, r.tape_);  // every definition, each part its own copy
     r.definitions_ = static_cast<int>(defs.trees.size());
     r.depth_ = std::max(r.depth_, emit_blocked(sum, r.tape_, r.blocks_));
-    if (r.depth_ > kMaxStack)
-      throw ExpressionError(0, "the expression nests too deeply (needs a stack of " + std::to_string(r.depth_) +
-                                   ", at most " + std::to_string(kMaxStack) + "); write it as a flatter sum");
+    require_depth(r.depth_);
     *e = std::move(r);
   };
   assemble(kin, 0.0, "the kinetic", kinetic);
