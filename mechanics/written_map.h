@@ -77,6 +77,18 @@ class WrittenMap {
     a.adjoint_ = !adjoint_;
     return a;
   }
+  // The same retraction at another theta (Prop. 2.3; the stages of a composition with a
+  // theta per stage), its symmetry measured again. Throws std::invalid_argument for a
+  // map written as q0 and q1, which has no theta, or a theta outside [0, 1].
+  WrittenMap at_theta(double theta) const {
+    if (!retraction_) throw std::invalid_argument("a map written as q0 and q1 has no theta");
+    if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1], got " + show(theta));
+    WrittenMap m = *this;
+    m.theta_ = theta;
+    m.adjoint_ = false;
+    m.finish();
+    return m;
+  }
   const std::string& text(int which) const { return (which == 0 ? first_ : second_)->text(); }
 
   template <class T, int N>

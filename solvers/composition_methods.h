@@ -424,6 +424,67 @@ inline CompositionScheme dirk_scheme(const std::vector<double>& b) {
   return s;
 }
 
+// Symplectic partitioned Runge-Kutta pairs from two DIRKs (paper Sec. 6.2, the remark
+// after the DIRK composition; solvers/partitioned_dirk.h derives them): weights b_i and
+// a theta per stage, stage i the Hamiltonian step of the theta map theta_i of size
+// b_i h. All thetas 1/2 give the DIRK of weights b.
+struct PartitionedDirk {
+  std::vector<double> weight;  // b_i
+  std::vector<double> theta;   // a_ii / b_i
+  bool symmetric = false;      // b palindromic and theta_{s+1-i} = 1 - theta_i
+  int order = 1;               // see above: a proved lower bound
+
+  // The two tableaux: a (for q) when `momentum` is false, a^ (for p) when it is true.
+  std::vector<std::vector<double>> tableau(bool momentum) const {
+    const std::size_t s = weight.size();
+    std::vector<std::vector<double>> a(s, std::vector<double>(s, 0.0));
+    for (std::size_t i = 0; i < s; ++i) {
+      for (std::size_t j = 0; j < i; ++j) a[i][j] = weight[j];
+      a[i][i] = (momentum ? 1.0 - theta[i] : theta[i]) * weight[i];
+    }
+    return a;
+  }
+};
+
+// The pair of weights b and thetas theta_i = a_ii / b_i. Throws std::invalid_argument for
+// weights dirk_scheme refuses (empty, a zero, not summing to 1), thetas of another
+// length, or a theta outside [0, 1] (where the theta map is defined).
+inline PartitionedDirk partitioned_dirk_thetas(const std::vector<double>& b, const std::vector<double>& theta) {
+  const CompositionScheme weights = dirk_scheme(b);  // validates b
+  if (theta.size() != b.size())
+    throw std::invalid_argument("partitioned dirk: " + std::to_string(b.size()) + " weights but " +
+                                std::to_string(theta.size()) + " thetas");
+  PartitionedDirk m;
+  m.weight = b;
+  double second = 0.0, size = 0.0;  // sum (theta_i - 1/2) b_i^2, and sum b_i^2 for its round-off
+  for (std::size_t i = 0; i < b.size(); ++i) {
+    const double th = theta[i];
+    size += b[i] * b[i];
+    if (!(th >= 0.0 && th <= 1.0))
+      throw std::invalid_argument("partitioned dirk: theta_i = a_ii / b_i must lie in [0, 1], got " +
+                                  std::to_string(th) + " at stage " + std::to_string(i + 1));
+    m.theta.push_back(th);
+    second += (th - 0.5) * b[i] * b[i];
+  }
+  m.symmetric = weights.symmetric;
+  for (std::size_t i = 0; i < b.size(); ++i)  // (theta_i as a quotient carries one rounding)
+    m.symmetric = m.symmetric && std::fabs(m.theta[i] + m.theta[b.size() - 1 - i] - 1.0) <= 4e-16;
+  bool all_midpoint = true;
+  for (double th : m.theta) all_midpoint = all_midpoint && th == 0.5;
+  m.order = all_midpoint ? weights.order : std::fabs(second) <= 1e-14 * size ? 2 : 1;
+  return m;
+}
+
+// The pair of weights b and q-tableau diagonal a_ii (theta_i = a_ii / b_i).
+inline PartitionedDirk partitioned_dirk(const std::vector<double>& b, const std::vector<double>& a_diagonal) {
+  if (a_diagonal.size() != b.size())
+    throw std::invalid_argument("partitioned dirk: " + std::to_string(b.size()) + " weights but " +
+                                std::to_string(a_diagonal.size()) + " diagonal entries");
+  std::vector<double> theta;
+  for (std::size_t i = 0; i < b.size(); ++i) theta.push_back(a_diagonal[i] / b[i]);
+  return partitioned_dirk_thetas(b, theta);
+}
+
 // One substep of a composition: a step of fraction `weight` of h with the basic map
 // (adjoint = false) or its adjoint (adjoint = true).
 struct Substep {

@@ -195,7 +195,12 @@ class DynamicThetaStep {
 
 // The Hamiltonian step (Eq. 5.1) of the theta map for a run-time-sized Hamiltonian Ham
 // (WrittenDynamicHamiltonian, LegendreDynamicHamiltonian<Sys>, or any type of the
-// concept with (q, p) as its blocks).
+// concept with (q, p) as its blocks):
+//   q1 - q0 = h dH/dp(Q, P),  p1 - p0 = -h dH/dq(Q, P),  Q = q0 + theta dq,
+// with P = p0 + (1 - theta) dp for the cotangent lift of the theta map on Q, and
+// P = p0 + theta dp for the theta map given directly on T*Q (`on_bundle`, the map of
+// OnCotangentBundle<ThetaMap> in solvers/hamiltonian_step.h: the theta method, not
+// symplectic unless theta = 1/2).
 template <class Ham>
 class DynamicHamiltonianThetaStep {
   static_assert(is_dynamic_system_v<Ham>,
@@ -205,8 +210,8 @@ class DynamicHamiltonianThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
-  DynamicHamiltonianThetaStep(Ham H, ThetaMap R, double h, StepOptions options = {})
-      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options) {
+  DynamicHamiltonianThetaStep(Ham H, ThetaMap R, double h, StepOptions options = {}, bool on_bundle = false)
+      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), on_bundle_(on_bundle) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
     const int n = H_.dim();
@@ -231,7 +236,7 @@ class DynamicHamiltonianThetaStep {
 
   // The step of the adjoint map (1 - theta), of the same size.
   DynamicHamiltonianThetaStep adjoint() const {
-    return DynamicHamiltonianThetaStep(H_, R_.adjoint(), h_, options_);
+    return DynamicHamiltonianThetaStep(H_, R_.adjoint(), h_, options_, on_bundle_);
   }
 
   // One step from (q0, p0); (dq, dp) hold the starting guess on entry and the
@@ -241,7 +246,7 @@ class DynamicHamiltonianThetaStep {
     const int n = H_.dim();
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
     if (dp.size() != n) dp.setZero(n);
-    const double th = R_.theta(), b = 1.0 - th;
+    const double th = R_.theta(), b = on_bundle_ ? th : 1.0 - th;
     y_.head(n) = dq;
     y_.tail(n) = dp;
     try {
@@ -303,6 +308,7 @@ class DynamicHamiltonianThetaStep {
   ThetaMap R_;
   double h_;
   StepOptions options_;
+  bool on_bundle_;
   mutable V x_, p_, Hq_, Hp_, y_, r_;
   mutable Eigen::MatrixXd Hqq_, Hqp_, Hpp_, J_;
   mutable DenseLU lu_;

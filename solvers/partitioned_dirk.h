@@ -24,6 +24,12 @@
 // 1 - theta, Prop. 2.4), so a symmetric method of even order. `order` states what is
 // proved here: the DIRK's order when every theta is 1/2, else 1 or 2; the third-order
 // conditions of partitioned methods are not checked, so a pair may exceed it.
+//
+// PartitionedDirk (b, the thetas, symmetry, order) and its constructors
+// partitioned_dirk(b, a_diagonal) and partitioned_dirk_thetas(b, theta) are in
+// solvers/composition_methods.h, with the other composition schemes; a scene names the
+// pair by composition = "dirk", integrator.weights and integrator.thetas, in any form
+// and with any map that takes a theta (stage i then takes the map at theta_i).
 #pragma once
 
 #include <cmath>
@@ -37,52 +43,6 @@
 #include "solvers/hamiltonian_step.h"
 
 namespace dvm {
-
-struct PartitionedDirk {
-  std::vector<double> weight;  // b_i
-  std::vector<double> theta;   // a_ii / b_i
-  bool symmetric = false;      // b palindromic and theta_{s+1-i} = 1 - theta_i
-  int order = 1;               // see above: a proved lower bound
-
-  // The two tableaux: a (for q) when `momentum` is false, a^ (for p) when it is true.
-  std::vector<std::vector<double>> tableau(bool momentum) const {
-    const std::size_t s = weight.size();
-    std::vector<std::vector<double>> a(s, std::vector<double>(s, 0.0));
-    for (std::size_t i = 0; i < s; ++i) {
-      for (std::size_t j = 0; j < i; ++j) a[i][j] = weight[j];
-      a[i][i] = (momentum ? 1.0 - theta[i] : theta[i]) * weight[i];
-    }
-    return a;
-  }
-};
-
-// The pair of weights b and q-tableau diagonal a_ii. Throws std::invalid_argument for
-// weights dirk_scheme refuses (empty, a zero, not summing to 1), a diagonal of another
-// length, or a_ii / b_i outside [0, 1] (where the theta map is defined).
-inline PartitionedDirk partitioned_dirk(const std::vector<double>& b, const std::vector<double>& a_diagonal) {
-  const CompositionScheme weights = dirk_scheme(b);  // validates b
-  if (a_diagonal.size() != b.size())
-    throw std::invalid_argument("partitioned dirk: " + std::to_string(b.size()) + " weights but " +
-                                std::to_string(a_diagonal.size()) + " diagonal entries");
-  PartitionedDirk m;
-  m.weight = b;
-  double second = 0.0;
-  for (std::size_t i = 0; i < b.size(); ++i) {
-    const double th = a_diagonal[i] / b[i];
-    if (!(th >= 0.0 && th <= 1.0))
-      throw std::invalid_argument("partitioned dirk: a_ii / b_i must lie in [0, 1], got " + std::to_string(th) +
-                                  " at stage " + std::to_string(i + 1));
-    m.theta.push_back(th);
-    second += (th - 0.5) * b[i] * b[i];
-  }
-  m.symmetric = weights.symmetric;
-  for (std::size_t i = 0; i < b.size(); ++i)  // (theta_i as a quotient carries one rounding)
-    m.symmetric = m.symmetric && std::fabs(m.theta[i] + m.theta[b.size() - 1 - i] - 1.0) <= 4e-16;
-  bool all_midpoint = true;
-  for (double th : m.theta) all_midpoint = all_midpoint && th == 0.5;
-  m.order = all_midpoint ? weights.order : std::fabs(second) <= 1e-14 ? 2 : 1;
-  return m;
-}
 
 // The method as a composition of Hamiltonian steps of theta maps: stage i is the step
 // of ThetaMap(theta_i) and size b_i h.

@@ -141,6 +141,12 @@ const char* kRunHelp =
     "                               (hamiltonian: Eq. 5.1, cotangent lift; sode1, sode2:\n"
     "                               Eq. 4.1, 4.2, tangent lift of the map; newmark: Eq. 4.1\n"
     "                               with its own map on TQ, Sec. 4.1, not integrator.map)\n"
+    "    lift = (the form's)        string: @LIFTS@; how the map\n"
+    "                               reaches the form's bundle. hamiltonian: \"cotangent\"\n"
+    "                               (default, R_d^{T*}) or \"none\" (the map on T*Q itself,\n"
+    "                               z = (q, p); R^n). sode1, sode2: \"tangent\" (default,\n"
+    "                               R_d^T) or \"legendre\" (R_d^L of Prop. 5.3; fixed-size\n"
+    "                               systems). none and legendre take the theta maps\n"
     "    gamma = 0.5, beta = 0.25   numbers, form newmark only\n"
     "    composition = \"none\"       string (see 'dvm methods'): @COMPOSITIONS@,\n"
     "                               or \"triple-jump:<even order>\", or \"dirk\"; the basic\n"
@@ -150,6 +156,12 @@ const char* kRunHelp =
     "    weights = [b1, b2, ...]    numbers, composition dirk only (required there): substeps\n"
     "                               of sizes b_i h, nonzero, summing to 1; with the midpoint\n"
     "                               map the symplectic DIRK of weights b (Sec. 6.2)\n"
+    "    thetas = [t1, t2, ...]     numbers in [0, 1], composition dirk only, one per weight:\n"
+    "                               stage i takes the map at theta_i (a map that takes\n"
+    "                               theta; not with integrator.theta); with the hamiltonian\n"
+    "                               form, its default cotangent lift and map theta the\n"
+    "                               symplectic partitioned pair a_ii = theta_i b_i,\n"
+    "                               a^_ii = (1 - theta_i) b_i (Sec. 6.2)\n"
     "    method = \"map\"             string: \"map\" (the map's own step) | \"galerkin\"\n"
     "                               (Galerkin discrete Lagrangians of order 2 stages;\n"
     "                               the systems with galerkin \"yes\" in the table below,\n"
@@ -314,18 +326,20 @@ std::string run_help() {
     }
     h.replace(at, tag.size(), out);
   };
-  std::vector<std::string> systems, maps, theta_maps, form_names, compositions;
+  std::vector<std::string> systems, maps, theta_maps, form_names, compositions, lifts;
   for (const auto& e : dvm::system_registry()) systems.push_back(e.name);
   for (const auto& m : dvm::map_registry()) {
     maps.push_back(m.name);
     if (m.takes_theta) theta_maps.push_back(m.name);
   }
   for (const auto& f : dvm::form_registry()) form_names.push_back(f.name);
+  for (const auto& l : dvm::lift_registry()) lifts.push_back(l.name);
   for (const auto& c : dvm::composition_schemes()) compositions.push_back(c.name);
   wrap("@SYSTEMS@", systems);
   wrap("@MAPS@", maps);
   wrap("@THETA_MAPS@", theta_maps);
   wrap("@FORMS@", form_names);
+  wrap("@LIFTS@", lifts);
   wrap("@COMPOSITIONS@", compositions);
   fill("@STAGES_MAX@", std::to_string(dvm::kGalerkinStagesMax));
   h += "\nWhat each system runs (any other combination is refused with exit 2):\n";

@@ -72,7 +72,17 @@ int methods_command(bool json) {
           .num("order", g.order)
           .boolean("symmetric", true)
           .str("citation", g.citation);
-      out += "  " + j.dump(4) + (i + 1 < galerkin.size() ? ",\n" : "\n");
+      out += "  " + j.dump(4) + ",\n";
+    }
+    // the lifts of the map (integrator.lift), named "lift <name>" apart from the compositions
+    const auto& lifts = lift_registry();
+    for (std::size_t i = 0; i < lifts.size(); ++i) {
+      const LiftEntry& l = lifts[i];
+      std::string forms;
+      for (Form f : l.forms) forms += (forms.empty() ? "" : ", ") + std::string(to_string(f));
+      Json::Object j;
+      j.str("name", "lift " + l.name).str("lift", l.name).str("forms", forms).str("description", l.description);
+      out += "  " + j.dump(4) + (i + 1 < lifts.size() ? ",\n" : "\n");
     }
     std::cout << out << "]\n";
     return 0;
@@ -92,8 +102,19 @@ int methods_command(bool json) {
       "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n"
       "composition = \"dirk\" with integrator.weights = [b1, ..., bs] (summing to 1) is the symplectic\n"
       "DIRK of those weights as a composition of steps of b_i h (paper Sec. 6.2): order 2, 3 when\n"
-      "the cubes of the weights sum to 0, 4 when the weights are also symmetric.\n",
+      "the cubes of the weights sum to 0, 4 when the weights are also symmetric. With\n"
+      "integrator.thetas = [t1, ..., ts] stage i takes the map at theta_i: with the hamiltonian form\n"
+      "(its default cotangent lift; lift = \"none\" makes each stage the theta method on T*Q, not\n"
+      "symplectic) and map = \"theta\" the symplectic partitioned Runge-Kutta pair a_ij = a^_ij = b_j (j < i),\n"
+      "a_ii = theta_i b_i, a^_ii = (1 - theta_i) b_i (Sec. 6.2); order 2 when\n"
+      "sum (theta_i - 1/2) b_i^2 = 0, else 1 (the DIRK's order when every theta is 1/2).\n",
       RecursiveTripleJump::max_order);
+  std::printf("\nLifts of the map to the form's bundle: [integrator] lift = \"NAME\"\n");
+  for (const LiftEntry& l : lift_registry()) {
+    std::string forms;
+    for (Form f : l.forms) forms += (forms.empty() ? "" : ", ") + std::string(to_string(f));
+    std::printf("  %-10s (%s) %s\n", l.name.c_str(), forms.c_str(), l.description.c_str());
+  }
   std::printf(
       "\nGalerkin discrete Lagrangians: [integrator] method = \"galerkin\", stages = s, quadrature = q\n"
       "(curves of degree s through the step's end points; every system but the chains, lagrangian\n"

@@ -479,8 +479,8 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
 // validate()'s.
 void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method& me) {
   r.only_keys(in, "integrator", {"map", "theta", "step", "steps", "t_end", "solver", "max_iterations", "tolerance",
-                                  "composition", "weights", "form", "gamma", "beta", "method", "stages",
-                                  "quadrature", "use_structure"});
+                                  "composition", "weights", "thetas", "form", "lift", "gamma", "beta", "method",
+                                  "stages", "quadrature", "use_structure"});
   if (const toml::node* f = in.get("form")) me.form = find_form(r.string(*f, "integrator.form"), r.where(f, "integrator.form"));
   for (const char* key : {"gamma", "beta"}) {
     const toml::node* n = in.get(key);
@@ -540,6 +540,17 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
                        echo(me.composition) + "\"");
     me.weights = r.vector(*w, "integrator.weights");
   }
+  if (const toml::node* t = in.get("thetas")) {
+    if (me.composition != "dirk")
+      throw InputError(r.where(t, "integrator.thetas") + ": thetas apply only to composition = \"dirk\", not \"" +
+                       echo(me.composition) + "\"");
+    if (const toml::node* th = in.get("theta"))
+      throw InputError(r.where(th, "integrator.theta") +
+                       ": with integrator.thetas each stage has its own theta; give thetas only");
+    me.thetas = r.vector(*t, "integrator.thetas");
+  }
+  if (const toml::node* l = in.get("lift"))
+    me.lift = find_lift(r.string(*l, "integrator.lift"), r.where(l, "integrator.lift"));
   const toml::node* h = in.get("step");
   if (!h) throw InputError(r.path() + ": missing key 'integrator.step'");
   pr.step = r.number(*h, "integrator.step");

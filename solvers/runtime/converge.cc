@@ -130,8 +130,13 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
   rep.galerkin = me.galerkin;
   rep.stages = me.galerkin ? me.stages : 0;
   rep.quadrature = me.galerkin ? to_string(me.quadrature) : "";
+  rep.weights = me.weights;
+  rep.thetas = me.thetas;
+  if (!me.galerkin && default_lift(me.form) != Lift::automatic) rep.lift = to_string(me.effective_lift());
   rep.map_order = me.galerkin ? 2 * me.stages : (me.form == Form::newmark ? (me.newmark_gamma == 0.5 ? 2 : 1)
                                                                            : (me.map ? me.map->order(me.theta) : 0));
+  for (double th : me.thetas)  // a theta per stage: the least order of the stages' maps
+    rep.map_order = std::min(rep.map_order, me.map->order(th));
   rep.method_order = me.order();
   rep.t_end = T;
 
@@ -247,7 +252,11 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
 int print_converge(const ConvergeReport& r, bool json) {
   if (json) {
     Json::Object j;
-    j.str("system", r.system).str("map", r.map).str("form", r.form).str("composition", r.composition);
+    j.str("system", r.system).str("map", r.map).str("form", r.form);
+    if (!r.lift.empty()) j.str("lift", r.lift);
+    j.str("composition", r.composition);
+    if (!r.weights.empty()) j.arr("weights", r.weights);
+    if (!r.thetas.empty()) j.arr("thetas", r.thetas);
     if (r.galerkin) j.str("method", "galerkin").num("stages", r.stages).str("quadrature", r.quadrature);
     j.num("t_end", r.t_end).str("reference", r.reference).num("reference_accuracy", r.reference_accuracy);
     std::string rows = "[\n";

@@ -49,6 +49,8 @@ struct ConvergeRow {
 
 struct ConvergeReport {
   std::string system, map, method_label, form, composition;
+  std::vector<double> weights, thetas;  // composition "dirk": its weights and a theta per stage
+  std::string lift;                     // hamiltonian and sode forms: the lift of the map
   bool galerkin = false;
   int stages = 0;
   std::string quadrature;

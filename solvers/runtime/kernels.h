@@ -203,23 +203,66 @@ std::unique_ptr<Run> stepper_run(const View& view, Stepper stepper, const typena
   return std::make_unique<StepperRun<View, Stepper>>(view, std::move(stepper), q0, p0, v0, base, steps);
 }
 
-// The basic method's run, or its composition's when the method names one:
-// make(hk, adjoint) builds the step of size hk of the basic method or of its adjoint.
-template <class View, class Make>
-std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h, bool symmetric, const Make& make,
-                                    const typename View::Point& q0, const typename View::Covector& p0,
-                                    const typename View::Covector& v0, const RunReport& base, std::int64_t steps) {
-  if (me.composition == "none") return stepper_run(view, make(h, false), q0, p0, v0, base, steps);
-  using Step = decltype(make(h, false));
-  ComposedStep<Step> step(
-      h, substeps(me.scheme(), symmetric), [&](double hk) { return make(hk, false); },
-      [&](double hk) { return make(hk, true); });
-  return stepper_run(view, std::move(step), q0, p0, v0, base, steps);
-}
-
+// ---- compositions: the map of each stage --------------------------------------------
 // The substeps of the method's composition ({{1, false}} for none).
 inline std::vector<Substep> method_substeps(const Method& me, bool map_symmetric) {
   return me.composition == "none" ? single_substep() : substeps(me.scheme(), map_symmetric);
+}
+
+// A stage of a composition: its fraction of the step and the map (or other basic step
+// description) it takes.
+template <class Map>
+struct Stage {
+  double weight;
+  Map map;
+};
+
+// The stages of the method's composition: the substeps of its scheme, each with the map
+// R or its adjoint (adjoint(R), the map at 1 - theta for the theta families, Prop. 2.4);
+// with integrator.thetas (composition "dirk") stage i is at_theta(theta_i) of weight b_i,
+// the partitioned pair of solvers/partitioned_dirk.h. `symmetric`: R is its own adjoint.
+template <class Map, class Adjoint, class AtTheta>
+std::vector<Stage<Map>> composition_stages(const Method& me, const Map& R, bool symmetric, const Adjoint& adjoint,
+                                           const AtTheta& at_theta) {
+  std::vector<Stage<Map>> out;
+  if (!me.thetas.empty()) {
+    for (std::size_t i = 0; i < me.thetas.size(); ++i) out.push_back({me.weights.at(i), at_theta(me.thetas[i])});
+    return out;
+  }
+  for (const Substep& s : method_substeps(me, symmetric)) out.push_back({s.weight, s.adjoint ? adjoint(R) : R});
+  return out;
+}
+
+// The composed step of the stages (Composed: ComposedStep<Step> on R^n,
+// ComposedPointStep<Step> on manifolds), make(hk, map) building the step of size hk.
+template <class Composed, class Map, class Make>
+Composed compose_stages(double h, const std::vector<Stage<Map>>& stages, const Make& make) {
+  std::vector<Substep> subs;
+  for (const Stage<Map>& s : stages) subs.push_back({s.weight, false});
+  std::size_t k = 0;  // the composed types build their stages in order
+  auto next = [&](double hk) { return make(hk, stages.at(k++).map); };
+  return Composed(h, subs, next, next);
+}
+
+// The basic method's run (composition "none"), or its composition's.
+template <class View, class Map, class Make>
+std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h, const std::vector<Stage<Map>>& stages,
+                                    const Make& make, const typename View::Point& q0,
+                                    const typename View::Covector& p0, const typename View::Covector& v0,
+                                    const RunReport& base, std::int64_t steps) {
+  if (me.composition == "none") return stepper_run(view, make(h, stages.front().map), q0, p0, v0, base, steps);
+  using Step = decltype(make(h, stages.front().map));
+  return stepper_run(view, compose_stages<ComposedStep<Step>>(h, stages, make), q0, p0, v0, base, steps);
+}
+
+// The stages of a theta-family map on R^n (ThetaMap, WrittenMap).
+inline ThetaMap at_theta(const ThetaMap& R, double th) { return ThetaMap(th, R.name()); }
+inline WrittenMap at_theta(const WrittenMap& R, double th) { return R.at_theta(th); }
+template <class Map>
+std::vector<Stage<Map>> rn_stages(const Method& me, const Map& R) {
+  return composition_stages(
+      me, R, R.symmetric(), [](const Map& m) { return same_type_adjoint(m); },
+      [&](double th) { return at_theta(R, th); });
 }
 
 // The structure of S into the report: its declaration, checked at points around the
@@ -251,7 +294,8 @@ void report_structure(RunReport& r, const S& L, const V& q, const V& v0, const P
 // Whether the method is an explicit Euler map (theta 0 or 1, composed or not) that a
 // separable system steps by kicks and drifts (Method::use_structure).
 inline bool splitting_applies(const Method& me, const ThetaMap& R) {
-  return me.use_structure && me.solver == SolverKind::newton && (R.theta() == 0.0 || R.theta() == 1.0);
+  return me.use_structure && me.solver == SolverKind::newton && me.thetas.empty() &&
+         (R.theta() == 0.0 || R.theta() == 1.0);
 }
 
 // An explicit Euler map (theta 0 or 1), alone or composed, on a separable system: kicks

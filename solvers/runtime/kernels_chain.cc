@@ -67,8 +67,8 @@ std::unique_ptr<Run> chain(const Problem& pr, const Method& me) {
   const RunReport base = kernels::base_report(pr, me, "chain");
   const ThetaMap R = std::get<ThetaMap>(kernels::rn_map(me));
   const StepOptions opt = me.step_options();
-  auto make = [&](double hk, bool adj) { return ChainStep(C, adj ? R.adjoint() : R, hk, opt); };
-  return kernels::composable_run(view, me, pr.step, R.symmetric(), make, q, p, v0, base, pr.steps);
+  auto make = [&](double hk, const ThetaMap& Rk) { return ChainStep(C, Rk, hk, opt); };
+  return kernels::composable_run(view, me, pr.step, kernels::rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }
 
 }  // namespace dvm::factories

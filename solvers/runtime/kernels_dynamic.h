@@ -270,18 +270,20 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
   const ThetaMap R = dynamic_theta_map(me);
   if (me.form == Form::hamiltonian) {
+    // lift = "none": the theta map on T*Q itself (P = p0 + theta dp, not 1 - theta)
+    const bool on_bundle = me.effective_lift() == Lift::none;
     auto run_with = [&](const auto& H) {
       using Step = DynamicHamiltonianThetaStep<std::decay_t<decltype(H)>>;
-      auto make = [&](double hk, bool adj) { return Step(H, adj ? R.adjoint() : R, hk, opt); };
-      return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+      auto make = [&](double hk, const ThetaMap& Rk) { return Step(H, Rk, hk, opt, on_bundle); };
+      return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
     };
     if constexpr (std::is_same_v<Sys, WrittenDynamic>)
       if (hamiltonian) return run_with(WrittenDynamicHamiltonian(hamiltonian));
     return run_with(LegendreDynamicHamiltonian<Sys>(L));
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
-  auto make = [&](double hk, bool adj) { return DynamicThetaStep<Sys>(L, adj ? R.adjoint() : R, hk, opt); };
-  return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+  auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt); };
+  return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }
 
 }  // namespace dvm::kernels

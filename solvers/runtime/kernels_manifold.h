@@ -56,6 +56,14 @@ inline SO3Map so3_map(const Method& m) {
   return SO3Map(retraction_kind(*m.map), m.theta, m.map->name);
 }
 
+// The map of a composition's stage at theta (integrator.thetas): the same retraction.
+inline SphereMap at_theta(const SphereMap& R, double th) { return SphereMap(R.kind(), th, R.name()); }
+inline SO3Map at_theta(const SO3Map& R, double th) { return SO3Map(R.kind(), th, R.name()); }
+template <int K>
+SpherePowerMap<K> at_theta(const SpherePowerMap<K>& R, double th) {
+  return SpherePowerMap<K>(at_theta(R.factor(), th));
+}
+
 // ---- built-in or written: one set of steps per space ---------------------------------
 // A Lagrangian (or Hamiltonian) on S^2 or SO(3) that is either a built-in B or one
 // written in the scene, W. The kernels are instantiated once for both (the steps,
@@ -403,27 +411,26 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
     else
       throw InputError("integrator.method: unsupported");  // refused by validate()
   }
+  const std::vector<Stage<Map>> stages = composition_stages(
+      me, R, R.symmetric(), [](const Map& m) { return adjoint_map(m); },
+      [&](double th) { return at_theta(R, th); });
   auto composed = [&](auto make) -> std::unique_ptr<Run> {
-    using Stage = decltype(make(h, false));
-    if (me.composition == "none") return stepper_run(view, make(h, false), q, p, v0, base, pr.steps);
-    ComposedPointStep<Stage> step(
-        h, substeps(me.scheme(), R.symmetric()), [&](double hk) { return make(hk, false); },
-        [&](double hk) { return make(hk, true); });
-    return stepper_run(view, std::move(step), q, p, v0, base, pr.steps);
+    using Step = decltype(make(h, R));
+    if (me.composition == "none") return stepper_run(view, make(h, R), q, p, v0, base, pr.steps);
+    return stepper_run(view, compose_stages<ComposedPointStep<Step>>(h, stages, make), q, p, v0, base, pr.steps);
   };
   if (me.form == Form::hamiltonian) {
     if constexpr (Hamiltonian) {
       using H = decltype(hamiltonian_of(L));
-      return composed([&](double hk, bool adj) {
-        return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), adj ? adjoint_map(R) : R, hk, opt);
+      return composed([&](double hk, const Map& Rk) {
+        return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), Rk, hk, opt);
       });
     } else {
       throw InputError("integrator.form: unsupported");  // refused by validate()
     }
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
-  return composed(
-      [&](double hk, bool adj) { return ManifoldStep<S, Map>(L, adj ? adjoint_map(R) : R, hk, opt); });
+  return composed([&](double hk, const Map& Rk) { return ManifoldStep<S, Map>(L, Rk, hk, opt); });
 }
 
 template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue>

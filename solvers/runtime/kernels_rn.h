@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "mechanics/hamiltonian.h"
+#include "mechanics/legendre_lift.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
@@ -290,10 +291,11 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
       throw InputError("integrator.form: unsupported");  // refused by validate()
     } else {
       const NewmarkStep<S> basic(L, h, me.newmark_gamma, me.newmark_beta, opt);
-      auto make = [&](double hk, bool adj) {
-        return VelocityFormStep<NewmarkStep<S>>((adj ? basic.adjoint() : basic).with_step(hk));
-      };
-      return composable_run(view, me, h, me.newmark_gamma == 0.5, make, q, p, v0, base, pr.steps);
+      auto make = [&](double hk, const NewmarkStep<S>& b) { return VelocityFormStep<NewmarkStep<S>>(b.with_step(hk)); };
+      const auto stages = composition_stages(
+          me, basic, me.newmark_gamma == 0.5, [](const NewmarkStep<S>& b) { return b.adjoint(); },
+          [&](double) -> NewmarkStep<S> { throw InputError("integrator.thetas: unsupported"); });  // refused by validate()
+      return composable_run(view, me, h, stages, make, q, p, v0, base, pr.steps);
     }
   }
 
@@ -305,27 +307,33 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
             if constexpr (is_separable_v<S> && std::is_same_v<Map, ThetaMap>)
               if (splitting_applies(me, R))
                 return splitting_run<RnView<S>, S, Map>(view, L, R, me, h, q, p, v0, base, pr.steps);
-            auto make = [&](double hk, bool adj) {
-              return PositionMomentumStep<S, Map>(L, adj ? same_type_adjoint(R) : R, hk, opt);
-            };
-            return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+            auto make = [&](double hk, const Map& Rk) { return PositionMomentumStep<S, Map>(L, Rk, hk, opt); };
+            return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
           }
           case Form::hamiltonian: {
             if constexpr (!Set::hamiltonian) {
               throw InputError("integrator.form: unsupported");  // refused by validate()
-            } else if constexpr (is_written<S>::value) {
-              // the scene's own H (H from a written L would need a third level of Jets)
-              using H = WrittenHamiltonian<N>;
-              auto make = [&](double hk, bool adj) {
-                return HamiltonianStep<H, Map>(H{L.system}, adj ? same_type_adjoint(R) : R, hk, opt);
-              };
-              return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
             } else {
-              using H = LegendreHamiltonian<S>;
-              auto make = [&](double hk, bool adj) {
-                return HamiltonianStep<H, Map>(H(L), adj ? same_type_adjoint(R) : R, hk, opt);
-              };
-              return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+              // the scene's own H for a written L (H from it would need a third level of Jets)
+              using H = std::conditional_t<is_written<S>::value, WrittenHamiltonian<N>, LegendreHamiltonian<S>>;
+              const H ham = [&] {
+                if constexpr (is_written<S>::value)
+                  return H{L.system};
+                else
+                  return H(L);
+              }();
+              if (me.effective_lift() == Lift::none) {
+                // the map itself on T*Q = R^{2n} (the theta family: validate refuses written maps)
+                if constexpr (std::is_same_v<Map, ThetaMap>) {
+                  auto make = [&](double hk, const Map& Rk) {
+                    return HamiltonianStep<H, OnCotangentBundle<Map>>(ham, OnCotangentBundle<Map>{Rk}, hk, opt);
+                  };
+                  return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+                }
+                throw InputError("integrator.lift: unsupported");
+              }
+              auto make = [&](double hk, const Map& Rk) { return HamiltonianStep<H, Map>(ham, Rk, hk, opt); };
+              return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
             }
           }
           case Form::sode1:
@@ -333,14 +341,26 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
             if constexpr (!Set::sode) {
               throw InputError("integrator.form: unsupported");  // refused by validate()
             } else {
-              // the tangent lift of the adjoint map gives the adjoint SODE step
+              // the lift of the adjoint map gives the adjoint SODE step (Prop. 3.3 for the
+              // tangent lift; R_d^L is the cotangent lift of R_d conjugated by FL, Prop. 3.7)
               const SodeForm f = me.form == Form::sode1 ? SodeForm::sode1 : SodeForm::sode2;
-              auto make = [&, f](double hk, bool adj) {
-                const auto lift = tangent_lift(adj ? same_type_adjoint(R) : R);
+              if (me.effective_lift() == Lift::legendre) {
+                // (the theta family: validate refuses written maps)
+                if constexpr (std::is_same_v<Map, ThetaMap>) {
+                  using RL = LegendreLiftedMap<S, Map>;
+                  auto make = [&, f](double hk, const Map& Rk) {
+                    return VelocityFormStep<SodeStep<S, RL>>(SodeStep<S, RL>(L, RL(L, Rk), hk, f, opt));
+                  };
+                  return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+                }
+                throw InputError("integrator.lift: unsupported");
+              }
+              auto make = [&, f](double hk, const Map& Rk) {
+                const auto lift = tangent_lift(Rk);
                 using Step = SodeStep<S, std::decay_t<decltype(lift)>>;
                 return VelocityFormStep<Step>(Step(L, lift, hk, f, opt));
               };
-              return composable_run(view, me, h, R.symmetric(), make, q, p, v0, base, pr.steps);
+              return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
             }
           }
           case Form::newmark:

@@ -27,6 +27,7 @@ bool Method::basic_symmetric() const {
 
 int Method::order() const {
   if (galerkin) return 2 * stages;
+  if (composition == "dirk" && !thetas.empty()) return partitioned_dirk_thetas(weights, thetas).order;
   if (composition != "none") return scheme().order;
   if (form == Form::newmark) return newmark_gamma == 0.5 ? 2 : 1;
   if (map && map->family == MapFamily::written) return written_map ? written_map->order() : 0;
@@ -64,12 +65,16 @@ std::string Method::label() const {
     s += ")";
   }
   if (form != Form::lagrangian && !galerkin) s += ", " + std::string(to_string(form)) + " form";
+  if (lift != Lift::automatic && lift != default_lift(form)) s += ", lift " + std::string(to_string(lift));
   if (composition != "none") s += ", composition " + composition;
-  if (!weights.empty()) {
-    s += " (";
-    for (std::size_t i = 0; i < weights.size(); ++i) s += (i ? ", " : "") + shortest(weights[i]);
+  auto list = [&](const char* what, const std::vector<double>& x) {
+    if (x.empty()) return;
+    s += std::string(" (") + what;
+    for (std::size_t i = 0; i < x.size(); ++i) s += (i ? ", " : "") + shortest(x[i]);
     s += ")";
-  }
+  };
+  list("", weights);
+  list("thetas ", thetas);
   return s;
 }
 
@@ -181,6 +186,27 @@ void validate(const Problem& pr, const Method& me) {
                        fmt(me.written_map->theta()));
   }
 
+  // [integrator] lift
+  if (me.lift != Lift::automatic) {
+    const LiftEntry* l = nullptr;
+    for (const LiftEntry& e : lift_registry())
+      if (e.lift == me.lift) l = &e;
+    if (!l) throw InputError("integrator.lift: unknown lift");
+    if (me.galerkin || std::find(l->forms.begin(), l->forms.end(), me.form) == l->forms.end())
+      throw InputError("integrator.lift: lift = \"" + l->name + "\" applies to the " + form_list(l->forms) +
+                       " form" + (l->forms.size() > 1 ? "s" : "") + ", not to " +
+                       (me.galerkin ? std::string("method = \"galerkin\"") : "form = \"" + std::string(to_string(me.form)) + "\"") +
+                       " (the lagrangian form and Galerkin use the map on Q itself; newmark its own map on TQ)");
+    if ((me.lift == Lift::none || me.lift == Lift::legendre) && me.map && me.map->family != MapFamily::theta &&
+        sys.space == Space::euclidean)
+      throw InputError("integrator.lift: lift = \"" + l->name + "\" is built for the theta maps (explicit-euler, "
+                       "adjoint-euler, midpoint, theta), not integrator.map = \"" + me.map->name +
+                       "\" (retraction-theta is the theta map in closed form: map = \"theta\")");
+    if (me.lift == Lift::none && sys.space != Space::euclidean)
+      throw InputError(std::string("integrator.lift: lift = \"none\" applies the map to (q, p) in T*Q = R^{2n}; on ") +
+                       to_string(sys.space) + " the hamiltonian form takes the cotangent lift (lift = \"cotangent\")");
+  }
+
   // [integrator] composition
   if (!me.weights.empty() && me.composition != "dirk")
     throw InputError("integrator.weights: weights apply only to composition = \"dirk\", not \"" + me.composition +
@@ -193,6 +219,30 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError(std::string(weights ? "integrator.weights: " : "integrator.composition: ") + e.what());
     }
     if (!caps.composition) throw InputError("integrator.composition: " + name + " takes no composition" + note);
+  }
+  if (!me.thetas.empty()) {
+    if (me.composition != "dirk")
+      throw InputError("integrator.thetas: thetas apply only to composition = \"dirk\" (a theta per stage), not \"" +
+                       me.composition + "\"");
+    if (me.galerkin || me.form == Form::newmark)
+      throw InputError(std::string("integrator.thetas: stage i takes the map at theta_i, and ") +
+                       (me.galerkin ? "method = \"galerkin\" takes no map" : "form = \"newmark\" uses its own map on TQ"));
+    const bool per_stage = me.map && me.map->takes_theta &&
+                           !(me.map->family == MapFamily::written && me.written_map && !me.written_map->is_retraction());
+    if (!per_stage)
+      throw InputError("integrator.thetas: stage i takes the map at theta_i; expected a map that takes theta (" +
+                       theta_map_names() + ", or a written retraction), got " +
+                       (me.map ? "\"" + me.map->name + "\"" : std::string("no map")));
+    if (me.theta != me.map->theta)
+      throw InputError("integrator.theta: with integrator.thetas each stage has its own theta; give thetas only");
+    try {
+      partitioned_dirk_thetas(me.weights, me.thetas);
+      // a written retraction is checked at each theta it will run at
+      if (me.map->family == MapFamily::written && me.written_map)
+        for (double th : me.thetas) me.written_map->at_theta(th);
+    } catch (const std::invalid_argument& e) {
+      throw InputError(std::string("integrator.thetas: ") + e.what());
+    }
   }
 
   // [integrator] newmark

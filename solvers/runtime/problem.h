@@ -65,6 +65,13 @@ struct Method {
   // from `weights` (the symplectic DIRK of those weights with the midpoint map).
   std::string composition = "none";
   std::vector<double> weights;
+  // composition = "dirk" only: a theta per stage (stage i takes the map at theta_i;
+  // with the hamiltonian form and the theta map the symplectic partitioned pair of
+  // Sec. 6.2, solvers/partitioned_dirk.h). Empty: every stage takes the map itself.
+  std::vector<double> thetas;
+  // How the map reaches the bundle of the form (registry.h): automatic is the
+  // cotangent lift for hamiltonian and the tangent lift for sode1/sode2.
+  Lift lift = Lift::automatic;
   bool galerkin = false;
   int stages = 2;
   QuadratureKind quadrature = QuadratureKind::gauss;
@@ -89,6 +96,8 @@ struct Method {
   // The composition's coefficients (find_composition, or dirk_scheme of `weights`);
   // throws std::invalid_argument for an unknown name or weights it refuses.
   CompositionScheme scheme() const;
+  // The lift the form uses: `lift`, or the form's default (registry.h).
+  Lift effective_lift() const { return lift == Lift::automatic ? default_lift(form) : lift; }
   // "midpoint", "galerkin gauss s=4 (order 8)", "newmark", ...
   std::string map_label() const;
   std::string label() const;

@@ -75,6 +75,55 @@ Form find_form(const std::string& name, const std::string& key) {
   throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names));
 }
 
+const char* to_string(Lift l) {
+  switch (l) {
+    case Lift::automatic: return "automatic";
+    case Lift::cotangent: return "cotangent";
+    case Lift::none: return "none";
+    case Lift::tangent: return "tangent";
+    case Lift::legendre: return "legendre";
+  }
+  return "?";
+}
+
+const std::vector<LiftEntry>& lift_registry() {
+  static const std::vector<LiftEntry> list = {
+      {Lift::cotangent, "cotangent", {Form::hamiltonian},
+       "R_d^{T*}, the cotangent lift of the map (Prop. 3.4, inverse Eq. 3.6): symplectic for any map (Prop. 5.1); "
+       "the default of the hamiltonian form"},
+      {Lift::none, "none", {Form::hamiltonian},
+       "the map itself on T*Q = R^{2n}, applied to z = (q, p) (Eq. 5.1 with a map given on T*Q): the theta map gives "
+       "z1 - z0 = h X_H(z0 + theta (z1 - z0)), symplectic only at theta = 1/2; R^n only"},
+      {Lift::tangent, "tangent", {Form::sode1, Form::sode2},
+       "R_d^T = T R_d o kappa_Q, the tangent lift of the map (Prop. 3.2); the default of the sode forms"},
+      {Lift::legendre, "legendre", {Form::sode1, Form::sode2},
+       "R_d^L = (FL^{-1}, FL^{-1}) o R_d^{T*} o TFL (Prop. 5.3): with sode2 (Eq. 5.2) the method of the hamiltonian "
+       "form carried to TQ by the Legendre map, symplectic; equal to the tangent lift for a constant mass matrix and "
+       "the midpoint map (Cor. 5.4)"},
+  };
+  return list;
+}
+
+Lift find_lift(const std::string& name, const std::string& key) {
+  std::vector<std::string> names;
+  for (const LiftEntry& l : lift_registry()) {
+    if (l.name == name) return l.lift;
+    names.push_back(l.name);
+  }
+  throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names));
+}
+
+Lift default_lift(Form f) {
+  switch (f) {
+    case Form::hamiltonian: return Lift::cotangent;
+    case Form::sode1:
+    case Form::sode2: return Lift::tangent;
+    case Form::lagrangian:
+    case Form::newmark: break;
+  }
+  return Lift::automatic;
+}
+
 const std::vector<MapEntry>& map_registry() {
   using F = MapFamily;
   using R = MapRetraction;

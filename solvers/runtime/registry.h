@@ -57,6 +57,26 @@ const std::vector<FormEntry>& form_registry();
 // Throws InputError naming `key` for an unknown name.
 Form find_form(const std::string& name, const std::string& key);
 
+// ---- lifts --------------------------------------------------------------------------
+// How the map on Q becomes the map on the bundle a form discretizes: the hamiltonian
+// form (Eq. 5.1) needs a map on T*Q, the sode forms (Eq. 4.1, 4.2) a map on TQ.
+// `automatic` is each form's default: the cotangent lift for hamiltonian, the tangent
+// lift for sode1 and sode2.
+enum class Lift { automatic, cotangent, none, tangent, legendre };
+const char* to_string(Lift l);
+
+struct LiftEntry {
+  Lift lift;
+  std::string name;
+  std::vector<Form> forms;  // the forms it applies to
+  std::string description;
+};
+const std::vector<LiftEntry>& lift_registry();
+// Throws InputError naming `key` for an unknown name.
+Lift find_lift(const std::string& name, const std::string& key);
+// The lift a form uses when the method names none (Lift::automatic for forms without one).
+Lift default_lift(Form f);
+
 // ---- maps ---------------------------------------------------------------------------
 // How a map's type is built: the family decides the C++ type the kernels dispatch on.
 enum class MapFamily {

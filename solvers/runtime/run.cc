@@ -31,6 +31,8 @@ RunReport base_report(const Problem& pr, const Method& me, const std::string& sy
   r.method = me.galerkin ? "galerkin" : "map";
   r.composition = me.composition;
   r.weights = me.weights;
+  r.thetas = me.thetas;
+  if (!me.galerkin && default_lift(me.form) != Lift::automatic) r.lift = to_string(me.effective_lift());
   r.solver = to_string(me.solver);
   r.form = to_string(me.form);
   r.method_label = me.label();
@@ -109,7 +111,10 @@ std::string report_json(const RunReport& r) {
   if (!r.manifold.empty()) j.str("manifold", r.manifold);
   j.str("map", r.map).str("method", r.method).str("composition", r.composition).str("solver", r.solver);
   if (!r.weights.empty()) j.arr("weights", r.weights);
-  j.str("form", r.form).str("problem", r.boundary_value ? "boundary-value" : "initial-value");
+  if (!r.thetas.empty()) j.arr("thetas", r.thetas);
+  j.str("form", r.form);
+  if (!r.lift.empty()) j.str("lift", r.lift);
+  j.str("problem", r.boundary_value ? "boundary-value" : "initial-value");
   if (!r.structure.empty()) j.str("structure", r.structure).str("structure_source", r.structure_source);
   if (!r.step_path.empty()) j.str("step_path", r.step_path);
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));

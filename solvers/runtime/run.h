@@ -45,6 +45,8 @@ struct RunReport {
   std::string method;        // "map" or "galerkin"
   std::string composition;   // "none" or the composition's name
   std::vector<double> weights;  // composition "dirk": its weights
+  std::vector<double> thetas;   // composition "dirk": a theta per stage (empty: none given)
+  std::string lift;             // hamiltonian and sode forms: the lift of the map; empty otherwise
   std::string solver;        // "newton" or "tiny"
   std::string form;
   std::string method_label;  // for the text table

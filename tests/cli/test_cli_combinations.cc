@@ -276,6 +276,47 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
   BOOST_TEST_MESSAGE(g_runs << " runs: " << g_ok << " ran, " << g_refused << " refused");
 }
 
+// integrator.lift and integrator.thetas on every system: each lift of the registry in
+// the forms it names and in one it does not, with the space's midpoint map and its
+// theta map, and a theta per stage of a dirk composition. Runs where the rules say it
+// applies (the JSON names the lift asked for), is refused naming a key otherwise:
+//   lift: the form is one of the lift's (cotangent, none: hamiltonian; tangent,
+//   legendre: sode1, sode2), none only on R^n, none and legendre only with the theta
+//   maps of R^n; thetas: a map that takes theta and a system that composes.
+BOOST_AUTO_TEST_CASE(every_lift_and_theta_per_stage_runs_or_is_refused) {
+  const std::map<std::string, std::set<std::string>> lift_forms = {{"cotangent", {"hamiltonian"}},
+                                                                   {"none", {"hamiltonian"}},
+                                                                   {"tangent", {"sode1", "sode2"}},
+                                                                   {"legendre", {"sode1", "sode2"}}};
+  const Output listed = dvm({"methods"});
+  BOOST_REQUIRE(listed.status == 0);
+  for (const auto& [lift, forms] : lift_forms) BOOST_TEST(listed.out.find("  " + lift + " ") != std::string::npos);
+  const int runs_before = g_runs;
+  for (const SystemCaps& sys : registry_systems()) {
+    const std::string head = heads().at(sys.name);
+    const std::string theta_map = sys.space == "S^2" ? "sphere-exp-theta" : sys.space == "SO(3)" ? "so3-exp-theta" : "theta";
+    for (const std::string& map : {midpoint_map(sys.space), theta_map})
+      for (const char* form : {"lagrangian", "hamiltonian", "sode2"}) {
+        const std::string f = form;
+        const std::string base = "form = \"" + f + "\"\nmap = \"" + map + "\"\n";
+        for (const auto& [lift, forms] : lift_forms) {
+          const bool theta_family = sys.space == "R^n";  // midpoint and theta are theta maps there
+          const bool supported = sys.forms.count(f) && forms.count(f) && (lift != "none" || sys.space == "R^n") &&
+                                 ((lift != "none" && lift != "legendre") || theta_family);
+          check(sys.name + " map=" + map + " form=" + f + " lift=" + lift,
+                head + integrator(base + "lift = \"" + lift + "\"\n"), supported, {},
+                {{"form", f}, {"lift", lift}, {"map", map}});
+        }
+        const bool takes_theta = map == theta_map;
+        check(sys.name + " map=" + map + " form=" + f + " thetas",
+              head + integrator(base + "composition = \"dirk\"\nweights = [0.5, 0.5]\nthetas = [0.4, 0.6]\n"),
+              sys.forms.count(f) && sys.composition && takes_theta, {},
+              {{"form", f}, {"composition", "dirk"}, {"map", map}});
+      }
+  }
+  BOOST_TEST_MESSAGE(g_runs - runs_before << " runs of lifts and thetas");
+}
+
 // dvm converge on every form, on every space, composed: a table whose runs used the
 // method asked for (the order measured is the method's), or exit 2 naming the keys.
 BOOST_AUTO_TEST_CASE(converge_runs_every_combination_or_refuses_it) {

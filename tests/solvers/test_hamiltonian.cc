@@ -11,6 +11,7 @@
 #include "solvers/integrate.h"
 #include "solvers/partitioned_dirk.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/runtime/run.h"
 
 using namespace dvm;
 using V1 = Vec<double, 1>;
@@ -535,4 +536,42 @@ BOOST_AUTO_TEST_CASE(orders_of_partitioned_dirk_methods) {
                                             << ": measured " << o1 << ", " << o2);
     BOOST_TEST(std::fabs(o2 - m.order) <= 0.15, o2);
   }
+}
+
+BOOST_AUTO_TEST_CASE(the_runtime_runs_the_partitioned_pair_the_method_names) {
+  // composition = "dirk", integrator.weights and integrator.thetas with the hamiltonian
+  // form and map = "theta" (what a scene writes, through make_run) take the steps of
+  // partitioned_dirk_step, checked above against the tableaux: the same trajectory, to
+  // round-off, on the pendulum (H = p^2/2 - cos q) over 200 steps
+  const std::vector<double> b = {0.25, 0.5, -0.1, 0.35}, theta = {0.2, 0.9, 0.5, 0.4};
+  Problem pr;
+  pr.system = &find_system_entry("pendulum", "test");
+  for (const ParamEntry& e : pr.system->params) pr.params[e.name] = e.default_value;
+  pr.dim = 1;
+  pr.q = {2.0};
+  pr.p = {0.3};
+  pr.momentum_given = true;
+  pr.step = 0.05;
+  pr.steps = 200;
+  Method me;
+  me.form = Form::hamiltonian;
+  me.map = &find_map_entry("theta", "test");
+  me.composition = "dirk";
+  me.weights = b;
+  me.thetas = theta;
+  const RunReport r = make_run(pr, me)->execute(nullptr);
+  BOOST_TEST_REQUIRE(!r.failed);
+  BOOST_TEST(me.order() == 1);
+  const Pendulum P(pr.params.at("m"), pr.params.at("l"), pr.params.at("g"));
+  const auto S = partitioned_dirk_step(LegendreHamiltonian<Pendulum>(P), partitioned_dirk_thetas(b, theta), pr.step);
+  V1 q(2.0), p(0.3), v = V1::Zero();
+  BOOST_TEST_REQUIRE(!integrate(S, 0.0, q, p, v, pr.steps, [](auto&&...) {}).failed);
+  BOOST_TEST_MESSAGE("runtime vs partitioned_dirk_step: " << std::fabs(r.q_final.at(0) - q[0]) << ", "
+                                                           << std::fabs(r.p_final.at(0) - p[0]));
+  BOOST_TEST(std::fabs(r.q_final.at(0) - q[0]) <= 1e-13);
+  BOOST_TEST(std::fabs(r.p_final.at(0) - p[0]) <= 1e-13);
+  // a pair whose second-order condition holds is stated as order 2
+  me.weights = {0.5, 0.5};
+  me.thetas = {0.0, 1.0};
+  BOOST_TEST(me.order() == 2);
 }
