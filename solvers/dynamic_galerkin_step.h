@@ -79,7 +79,8 @@ class DynamicGalerkinStep {
       for (int j = 0; j < s; ++j) WAf_[i][j] = h_ * t_.WA[i][j];
     }
     const int K = s * n;
-    for (V* x : {&X_, &Xprev_, &Xext_, &err1_, &err2_, &corr_, &R_, &delta_}) x->setZero(K);
+    for (V* x : {&X_, &Xprev_, &Xext_, &R_, &delta_}) x->setZero(K);
+    guess_.zero_like(X_);
     q_end_.setZero(n);
     force_.setZero(n);
     xs_.setZero(n, m);
@@ -109,15 +110,15 @@ class DynamicGalerkinStep {
   long jacobian_updates() const { return jacobian_updates_; }
   void set_contraction(double c) { contraction_ = c; }
   double last_guess_error() const {
-    return guess_measured_ ? (err1_ - corr_).template lpNorm<Eigen::Infinity>() : NAN;
+    return guess_measured_ ? (guess_.err1 - guess_.corr).template lpNorm<Eigen::Infinity>() : NAN;
   }
   double last_extrapolation_error() const {
-    return guess_measured_ ? err1_.template lpNorm<Eigen::Infinity>() : NAN;
+    return guess_measured_ ? guess_.err1.template lpNorm<Eigen::Infinity>() : NAN;
   }
   void reset() const {
     have_prev_ = false;
     lu_valid_ = false;
-    errors_known_ = 0;
+    guess_.forget();
     guess_measured_ = false;
   }
 
@@ -138,16 +139,10 @@ class DynamicGalerkinStep {
     const bool continues = have_prev_ && gap <= 1e-12 * (max_abs(q0) + max_abs(dq)) + 1e-300;
     if (continues) {
       extrapolate();
-      if (errors_known_ >= 2)
-        corr_ = 2.0 * err1_ - err2_;
-      else if (errors_known_ == 1)
-        corr_ = err1_;
-      else
-        corr_.setZero();
-      X_ = Xext_ + corr_;
+      X_ = Xext_ + guess_.correction();
     } else {
       for (int j = 1; j <= s; ++j) X_.segment((j - 1) * n, n) = (static_cast<double>(j) / s) * dq;
-      errors_known_ = 0;
+      guess_.forget();
     }
     have_prev_ = false;
     bool fresh = false;
@@ -180,9 +175,7 @@ class DynamicGalerkinStep {
             return sum;
           }
           if (continues) {
-            err2_ = err1_;
-            err1_ = X_ - Xext_;
-            if (errors_known_ < 2) ++errors_known_;
+            guess_.record(X_, Xext_);
             guess_measured_ = true;
           }
           Xprev_ = X_;
@@ -222,12 +215,7 @@ class DynamicGalerkinStep {
   }
 
  private:
-  static int check_stages(int s) {
-    if (s < 1 || s > kGalerkinMaxStages)
-      throw std::invalid_argument("galerkin stages must be 1.." + std::to_string(kGalerkinMaxStages) + ", got " +
-                                  std::to_string(s));
-    return s;
-  }
+  static int check_stages(int s) { return check_galerkin_stages(s, 0); }
 
   // R_ and force_ at X_, as GalerkinStep::residual_fast:
   //   x = q0 + X A, v = X B / h (n x m), R = h G WA + P WB (n x s), force = h G b,
@@ -347,8 +335,8 @@ class DynamicGalerkinStep {
   std::array<std::array<double, SMax + 1>, MMax> WAf_{};
   std::array<std::array<double, MMax>, SMax> Af_{}, Bf_{};
   // workspace and the state carried from step to step (as GalerkinStep)
-  mutable V X_, Xprev_, R_, delta_, Xext_, err1_, err2_, corr_;
-  mutable int errors_known_ = 0;
+  mutable V X_, Xprev_, R_, delta_, Xext_;
+  mutable ExtrapolationErrors<V> guess_;
   mutable bool guess_measured_ = false;
   mutable V q_end_, force_, Lq_, Lv_, x_, v_;
   mutable Eigen::MatrixXd xs_, vs_, G_, P_, Lqq_, Lqv_, Lvv_, dg_, dpk_, J_, Jinv_;

@@ -73,6 +73,50 @@ namespace dvm {
 
 constexpr int kGalerkinMaxStages = 6;
 
+// s, checked: 1..kGalerkinMaxStages, and equal to `compiled` when that is nonzero (a
+// compile-time stage count). Throws std::invalid_argument otherwise.
+inline int check_galerkin_stages(int s, int compiled) {
+  if (s < 1 || s > kGalerkinMaxStages || (compiled > 0 && s != compiled))
+    throw std::invalid_argument("galerkin stages must be 1.." + std::to_string(kGalerkinMaxStages) +
+                                (compiled > 0 ? " and equal to the compiled " + std::to_string(compiled) : std::string()) +
+                                ", got " + std::to_string(s));
+  return s;
+}
+
+// The correction of a starting guess by the errors of the last two extrapolations (see
+// the top of this file): a step that continues its predecessor starts from
+// E X_prev + correction(), and once it has converged record(X, E X_prev) books the
+// error d_n = X - E X_prev. T is the unknowns' Eigen type (vector or matrix).
+template <class T>
+struct ExtrapolationErrors {
+  T err1, err2, corr;  // d_n (the latest), d_{n-1}, and the last correction
+  int known = 0;       // how many of d_n, d_{n-1} are known
+
+  void zero_like(const T& x) {
+    err1 = err2 = corr = x;
+    err1.setZero();
+    err2.setZero();
+    corr.setZero();
+    known = 0;
+  }
+  // 2 d_n - d_{n-1}, or d_n, or 0 with fewer errors known
+  const T& correction() {
+    if (known >= 2)
+      corr = 2.0 * err1 - err2;
+    else if (known == 1)
+      corr = err1;
+    else
+      corr.setZero();
+    return corr;
+  }
+  void record(const T& solution, const T& extrapolated) {
+    err2.swap(err1);
+    err1 = solution - extrapolated;
+    if (known < 2) ++known;
+  }
+  void forget() { known = 0; }
+};
+
 // The coefficient tables of a Galerkin step with s stages (s <= SMax) and a quadrature
 // (c_i, b_i) of m points: b_i, A_ij = l_j(c_i), B_ij = l_j'(c_i), WA_ij = b_i l_j(c_i),
 // WB_ij = b_i l_j'(c_i) (l_j the Lagrange basis on the control points j / s), and E, the
@@ -153,9 +197,7 @@ class GalerkinStep {
     X_.setZero(s * N);
     Xprev_.setZero(s * N);
     Xext_.setZero(s * N);
-    err1_.setZero(s * N);
-    err2_.setZero(s * N);
-    corr_.setZero(s * N);
+    guess_.zero_like(X_);
     R_.setZero(s * N);
     delta_.setZero(s * N);
     J_.setZero(s * N, s * N);
@@ -176,16 +218,16 @@ class GalerkinStep {
   // distance of the guess used, and of the plain extrapolation E X_prev, from the
   // solution. Computed on request from the predictor's state (not in the step).
   double last_guess_error() const {
-    return guess_measured_ ? (err1_ - corr_).template lpNorm<Eigen::Infinity>() : NAN;
+    return guess_measured_ ? (guess_.err1 - guess_.corr).template lpNorm<Eigen::Infinity>() : NAN;
   }
   double last_extrapolation_error() const {
-    return guess_measured_ ? err1_.template lpNorm<Eigen::Infinity>() : NAN;
+    return guess_measured_ ? guess_.err1.template lpNorm<Eigen::Infinity>() : NAN;
   }
   // Forget the previous step (its polynomial and the Jacobian).
   void reset() const {
     have_prev_ = false;
     lu_valid_ = false;
-    errors_known_ = 0;
+    guess_.forget();
     guess_measured_ = false;
   }
 
@@ -230,16 +272,10 @@ class GalerkinStep {
     if (continues) {
       extrapolate();  // Xext_ = E Xprev_
       // the extrapolation errors of the last steps, extrapolated in the step index
-      if (errors_known_ >= 2)
-        corr_ = 2.0 * err1_ - err2_;
-      else if (errors_known_ == 1)
-        corr_ = err1_;
-      else
-        corr_.setZero();
-      X_ = Xext_ + corr_;
+      X_ = Xext_ + guess_.correction();
     } else {
       for (int j = 1; j <= s; ++j) X_.template segment<N>((j - 1) * N) = (static_cast<double>(j) / s) * dq;
-      errors_known_ = 0;
+      guess_.forget();
     }
     have_prev_ = false;
     bool fresh = false;
@@ -279,9 +315,7 @@ class GalerkinStep {
             return sum;
           }
           if (continues) {
-            err2_ = err1_;
-            err1_ = X_ - Xext_;
-            if (errors_known_ < 2) ++errors_known_;
+            guess_.record(X_, Xext_);
             guess_measured_ = true;
           }
           Xprev_ = X_;
@@ -356,13 +390,7 @@ class GalerkinStep {
   }
 
  private:
-  static int check_stages(int s) {
-    if (s < 1 || s > kGalerkinMaxStages || (S > 0 && s != S))
-      throw std::invalid_argument("galerkin stages must be 1.." + std::to_string(kGalerkinMaxStages) +
-                                  (S > 0 ? " and equal to the compiled " + std::to_string(S) : std::string()) +
-                                  ", got " + std::to_string(s));
-    return s;
-  }
+  static int check_stages(int s) { return check_galerkin_stages(s, S); }
 
   template <class T>
   void node(int i, const Vec<T, N>& q0, const XV<T>& X, Vec<T, N>& x, Vec<T, N>& v) const {
@@ -477,11 +505,11 @@ class GalerkinStep {
   mutable XV<double> X_, Xprev_, R_;
   mutable XV<double> delta_;
   // the predictor: the plain extrapolation of this step and the errors of the plain
-  // extrapolations of the last two steps (err1_ the latest); errors_known_ of them;
-  // guess_measured_: the last step converged continuing its predecessor, so err1_ and
-  // corr_ are its extrapolation error and its correction
-  mutable XV<double> Xext_, err1_, err2_, corr_;
-  mutable int errors_known_ = 0;
+  // extrapolations of the last two steps; guess_measured_: the last step converged
+  // continuing its predecessor, so guess_.err1 and guess_.corr are its extrapolation
+  // error and its correction
+  mutable XV<double> Xext_;
+  mutable ExtrapolationErrors<XV<double>> guess_;
   mutable bool guess_measured_ = false;
   mutable XM J_, Jinv_;
   double contraction_ = 0.25;

@@ -40,6 +40,7 @@
 #include <Eigen/Cholesky>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/separable.h"
 #include "mechanics/structure.h"
 #include "solvers/composition_methods.h"
 #include "solvers/newton.h"
@@ -81,20 +82,7 @@ class ExplicitSplittingStep {
     fsal_ = ops_.front().kick && ops_.back().kick;
     q_ = force_ = dLdv_ = zero_ = vel_ = p_ = V::Zero(n_);
     end_q_ = V::Constant(n_, std::numeric_limits<double>::quiet_NaN());
-    if constexpr (!closed_velocity) {
-      // M from its columns dL/dv(q_ref, e_j) (dL/dv is linear in v), factored once
-      Mat<double, N, N> M = Mat<double, N, N>::Zero(n_, n_);
-      V e = zero_, a = zero_, b = zero_;
-      for (Eigen::Index j = 0; j < n_; ++j) {
-        e.setZero();
-        e[j] = 1.0;
-        gradient_of(L_, q_ref, e, a, b);
-        M.col(j) = b;
-      }
-      llt_.compute(M);
-      if (llt_.info() != Eigen::Success || !M.allFinite())
-        throw std::invalid_argument(L_.name() + ": the mass matrix is not positive definite");
-    }
+    if constexpr (!closed_velocity) llt_ = factor_mass_matrix(L_, q_ref);  // M is constant
   }
 
   double step_size() const { return h_; }

@@ -12,8 +12,23 @@
 //   with Jacobian M/h + (h/4) Hess V(x). The same starting guess (linear
 //   extrapolation of the previous increments), stopping rule and compensated sums as
 //   the generic loop (solvers/integrate.h, solvers/newton.h).
+//
+//   Gauss collocation of 6 stages (order 12) on Kepler, by hand, in the Nystrom form of
+//   Hairer, Lubich, Wanner, Geometric Numerical Integration (GNI), II.2.3 and VIII.6,
+//   as their gni_irk2 code solves it: with a = -grad V (M = I) and stage increments
+//   Z_i = Q_i - q0,
+//     Z_i = c_i h v0 + h^2 sum_j abar_ij a(q0 + Z_j),   abar = A^2,
+//     q1 = q0 + h v0 + h^2 sum_i bbar_i a(Q_i),        bbar = b^T A,
+//     v1 = v0 + h sum_i b_i a(Q_i),
+//   iterated to a fixed point (6 forces a sweep, no Jacobian) from the previous step's
+//   stage polynomial extrapolated to the new stages; stopped, as dvm's steps are, when
+//   a sweep changes Z by at most 2e-15 (|Z| + |q0|) or stops decreasing below 1e-14
+//   times that. The coefficients are computed here on their own (Gauss nodes by Newton
+//   on the Legendre polynomial, A by integrating the Lagrange basis in monomials), not
+//   taken from dvm.
 #pragma once
 
+#include <array>
 #include <cmath>
 #include <cstdint>
 
@@ -154,6 +169,147 @@ std::int64_t hand_midpoint_kepler(const Kepler& K, Vec<double, 2>& q, Vec<double
     observe(q, p);
   }
   return iters;
+}
+
+// The s-stage Gauss method's Nystrom coefficients on [0, 1], in long double: nodes c,
+// weights b, abar = A^2, bbar = b^T A, and the extrapolation matrix E of the stage
+// polynomial (through 0 and the Z_i) to the next step: Z_i' = u(1 + c_i) - u(1).
+template <int S>
+struct HandGaussTables {
+  std::array<double, S> c{}, b{}, bbar{};
+  std::array<std::array<double, S>, S> abar{}, E{};
+  HandGaussTables() {
+    using LD = long double;
+    std::array<LD, S> x{}, w{};
+    const LD pi = 3.141592653589793238462643383279502884L;
+    for (int i = 0; i < S; ++i) {  // roots of P_S on [-1, 1] by Newton
+      LD r = std::cos(pi * (i + 0.75L) / (S + 0.5L)), dP = 0;
+      for (int it = 0; it < 100; ++it) {
+        LD p0 = 1, p1 = r;
+        for (int k = 1; k < S; ++k) {
+          const LD p2 = ((2 * k + 1) * r * p1 - k * p0) / (k + 1);
+          p0 = p1;
+          p1 = p2;
+        }
+        dP = S * (r * p1 - p0) / (r * r - 1);
+        const LD d = p1 / dP;
+        r -= d;
+        if (std::fabs(d) < 1e-19L) break;
+      }
+      x[i] = 0.5L * (1 - r);  // ascending on [0, 1]
+      w[i] = 1 / ((1 - r * r) * dP * dP);
+    }
+    // A_ij = int_0^{c_i} l_j: l_j's monomial coefficients, integrated term by term
+    std::array<std::array<LD, S>, S> A{};
+    for (int j = 0; j < S; ++j) {
+      std::array<LD, S + 1> poly{};
+      poly[0] = 1;
+      int deg = 0;
+      for (int k = 0; k < S; ++k) {
+        if (k == j) continue;
+        const LD den = x[j] - x[k];
+        for (int d = deg + 1; d >= 0; --d) poly[d] = ((d > 0 ? poly[d - 1] : 0) - x[k] * poly[d]) / den;
+        ++deg;
+      }
+      for (int i = 0; i < S; ++i) {
+        LD sum = 0, t = x[i];
+        for (int d = 0; d <= deg; ++d, t *= x[i]) sum += poly[d] * t / (d + 1);
+        A[i][j] = sum;
+      }
+    }
+    auto basis0 = [&](int k, LD t) {  // Lagrange basis on 0, c_1..c_S, for c_k
+      LD l = t / x[k];
+      for (int m = 0; m < S; ++m)
+        if (m != k) l *= (t - x[m]) / (x[k] - x[m]);
+      return l;
+    };
+    for (int i = 0; i < S; ++i) {
+      c[i] = static_cast<double>(x[i]);
+      b[i] = static_cast<double>(w[i]);
+      LD bb = 0;
+      for (int k = 0; k < S; ++k) bb += w[k] * A[k][i];
+      bbar[i] = static_cast<double>(bb);
+      for (int j = 0; j < S; ++j) {
+        LD a2 = 0;
+        for (int k = 0; k < S; ++k) a2 += A[i][k] * A[k][j];
+        abar[i][j] = static_cast<double>(a2);
+        E[i][j] = static_cast<double>(basis0(j, 1 + x[i]) - basis0(j, 1));
+      }
+    }
+  }
+};
+
+// Gauss-6 collocation on Kepler by hand (see the top of this file). Returns the force
+// evaluations, or -(1 + step index) for a step whose iteration did not converge.
+template <class Observer>
+std::int64_t hand_gauss6_kepler(const Kepler& K, Vec<double, 2>& q, Vec<double, 2>& p, double h,
+                                std::int64_t steps, Observer&& observe) {
+  constexpr int S = 6;
+  static const HandGaussTables<S> t;
+  const double mu = K.mu;
+  double hc[S], hb[S], h2bbar[S], h2abar[S][S];
+  for (int i = 0; i < S; ++i) {
+    hc[i] = h * t.c[i];
+    hb[i] = h * t.b[i];
+    h2bbar[i] = h * h * t.bbar[i];
+    for (int j = 0; j < S; ++j) h2abar[i][j] = h * h * t.abar[i][j];
+  }
+  double Z[S][2], Zn[S][2], F[S][2], cq[2] = {0, 0}, cp[2] = {0, 0};
+  std::int64_t forces = 0;
+  for (std::int64_t n = 0; n < steps; ++n) {
+    if (n == 0) {
+      for (int i = 0; i < S; ++i)
+        for (int a = 0; a < 2; ++a) Z[i][a] = hc[i] * p[a];
+    } else {  // the previous stage polynomial, extrapolated
+      for (int i = 0; i < S; ++i)
+        for (int a = 0; a < 2; ++a) {
+          double z = 0;
+          for (int k = 0; k < S; ++k) z += t.E[i][k] * Zn[k][a];
+          Z[i][a] = z;
+        }
+    }
+    double dn_prev = INFINITY;
+    bool ok = false;
+    for (int it = 0; it < 25; ++it) {
+      for (int j = 0; j < S; ++j) {
+        const double x0 = q[0] + Z[j][0], x1 = q[1] + Z[j][1];
+        const double r2 = x0 * x0 + x1 * x1, k = -mu / (r2 * std::sqrt(r2));
+        F[j][0] = k * x0;
+        F[j][1] = k * x1;
+      }
+      forces += S;
+      double dn = 0, zn = 0;
+      for (int i = 0; i < S; ++i)
+        for (int a = 0; a < 2; ++a) {
+          double z = hc[i] * p[a];
+          for (int j = 0; j < S; ++j) z += h2abar[i][j] * F[j][a];
+          dn = std::fmax(dn, std::fabs(z - Z[i][a]));
+          zn = std::fmax(zn, std::fabs(z));
+          Zn[i][a] = z;
+        }
+      for (int i = 0; i < S; ++i)
+        for (int a = 0; a < 2; ++a) Z[i][a] = Zn[i][a];
+      const double scale = zn + std::fmax(std::fabs(q[0]), std::fabs(q[1]));
+      if (dn <= 2e-15 * scale || (dn >= dn_prev && dn <= 1e-14 * scale)) {
+        ok = true;
+        break;
+      }
+      if (!(dn < dn_prev)) break;
+      dn_prev = dn;
+    }
+    if (!ok) return -1 - n;
+    for (int a = 0; a < 2; ++a) {
+      double dq = h * p[a], dp = 0;
+      for (int i = 0; i < S; ++i) {
+        dq += h2bbar[i] * F[i][a];
+        dp += hb[i] * F[i][a];
+      }
+      kahan_add(q[a], cq[a], dq);
+      kahan_add(p[a], cp[a], dp);
+    }
+    observe(q, p);
+  }
+  return forces;
 }
 
 }  // namespace dvm::bench

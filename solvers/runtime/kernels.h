@@ -16,6 +16,8 @@
 //   sode1 / sode2     SodeStep<S, tangent lift of Map>    (refused)
 //   newmark           NewmarkStep<S>                      (refused)
 //   galerkin          GalerkinStep<S>                     ManifoldGalerkinStep<S, s>
+//     Gauss quadrature on a separable S (Method::use_structure):
+//                     SeparableGaussStep<S> (collocation, fixed point on the stage forces)
 //   composition       ComposedStep<Step> of any of these, adjoint stages from the
 //                     adjoint map (theta -> 1 - theta, Prop. 2.4) or Newmark's adjoint
 //   boundary value    BoundaryValueProblem<S, Map>        SphereBoundaryValueProblem
@@ -42,6 +44,7 @@
 #include "mechanics/hamiltonian.h"
 #include "mechanics/lagrangian.h"
 #include "solvers/boundary_value.h"
+#include "solvers/collocation_step.h"
 #include "solvers/composition.h"
 #include "solvers/integrate.h"
 #include "solvers/runtime/run.h"
@@ -86,6 +89,13 @@ inline WrittenMap same_type_adjoint(const WrittenMap& R) { return R.adjoint(); }
 //   void finish_report(RunReport&, const Point&, const Covector&) const;  stored forms
 //   double point_defect(const Point&) const;  (< 0: not a manifold)
 constexpr int kMaxInvariantValues = 8;
+
+// A step that may hand some steps to a Newton iteration reports how many
+// (SeparableGaussStep::newton_steps).
+template <class S, class = void>
+struct has_newton_steps : std::false_type {};
+template <class S>
+struct has_newton_steps<S, std::void_t<decltype(std::declval<const S&>().newton_steps())>> : std::true_type {};
 
 template <class View, class Stepper>
 class StepperRun final : public Run {
@@ -137,9 +147,18 @@ class StepperRun final : public Run {
       monitored = k;
     };
     const auto start = std::chrono::steady_clock::now();
+    // the next step that writes a row and the next one monitored (rec->wants and
+    // k % monitor_every, counted instead of divided: two integer divisions a step cost
+    // a Kepler Galerkin step 4%)
+    const bool rows = rec && rec->writes_rows();
+    const std::int64_t every = rec ? std::max<std::int64_t>(1, rec->every()) : 1;
+    std::int64_t next_row = rows ? every : -1, next_monitor = monitor_every;
     auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
-      const bool row = rec && rec->writes_rows() && rec->wants(k, steps_);
-      if (monitor_every == 1 || row || k % monitor_every == 0 || k == steps_) monitor(k, qk, pk);
+      const bool row = rows && (k == next_row || k == steps_);
+      if (row && k == next_row) next_row += every;
+      const bool due = k == next_monitor;
+      if (due) next_monitor += monitor_every;
+      if (row || due || k == steps_) monitor(k, qk, pk);
       if (rec) {
         if (row) {
           view_.fill_row(row_values.data(), t, qk, pk, E);
@@ -149,6 +168,7 @@ class StepperRun final : public Run {
       }
     };
     r.loop = integrate(stepper_, 0.0, q, p, v0_, steps_, observer);
+    if constexpr (has_newton_steps<Stepper>::value) r.newton_steps = stepper_.newton_steps();
     if (monitored != r.loop.steps_done) {
       // a failed run stopped between monitored steps: its last state, where it can be evaluated
       try {
@@ -308,6 +328,23 @@ std::unique_ptr<Run> splitting_run(const View& view, const S& L, const Map& R, c
   base.step_path = "explicit-splitting";
   return stepper_run(view, ExplicitSplittingStep<S>(L, R.theta(), h, method_substeps(me, R.symmetric()), q), q, p, v0,
                      base, steps);
+}
+
+// Whether a Galerkin method is Gauss collocation on the stage forces when the system is
+// separable (solvers/collocation_step.h): Gauss quadrature, Method::use_structure.
+inline bool collocation_applies(const Method& me) {
+  return me.galerkin && me.use_structure && me.quadrature == QuadratureKind::gauss;
+}
+
+// Galerkin Gauss on a separable system: the stages iterated to a fixed point on their
+// forces (Step: SeparableGaussStep<...>; a template parameter for the same reason as
+// splitting_run's Map).
+template <class View, class Step>
+std::unique_ptr<Run> collocation_run(const View& view, Step step, const typename View::Point& q,
+                                     const typename View::Covector& p, const typename View::Covector& v0,
+                                     RunReport base, std::int64_t steps) {
+  base.step_path = "gauss-collocation";
+  return stepper_run(view, std::move(step), q, p, v0, base, steps);
 }
 
 // ---- boundary-value problems: one solve of every interior node -------------------------

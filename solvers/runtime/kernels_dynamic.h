@@ -264,6 +264,18 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         if (L.separable()) return splitting_run(view, WrittenSeparable(L), R, me, h, q, p, v0, base, pr.steps);
     }
   }
+  if (collocation_applies(me)) {
+    // any size: the Newton iteration a step may be handed to is dense (at most the limit)
+    if constexpr (is_separable_v<Sys>)
+      return collocation_run(view, SeparableGaussStep<Sys>(L, me.stages, h, opt, q, kMaxDenseDynamicDim), q, p, v0,
+                             base, pr.steps);
+    if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+      if (L.separable())
+        return collocation_run(view,
+                               SeparableGaussStep<WrittenSeparable, 0, WrittenDynamic>(WrittenSeparable(L), L, me.stages,
+                                                                                       h, opt, q, kMaxDenseDynamicDim),
+                               q, p, v0, base, pr.steps);
+  }
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                           : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");
   if (me.galerkin)

@@ -117,6 +117,7 @@ std::string report_json(const RunReport& r) {
   j.str("problem", r.boundary_value ? "boundary-value" : "initial-value");
   if (!r.structure.empty()) j.str("structure", r.structure).str("structure_source", r.structure_source);
   if (!r.step_path.empty()) j.str("step_path", r.step_path);
+  if (r.newton_steps >= 0) j.num("newton_steps", static_cast<double>(r.newton_steps));
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
   if (!r.boundary_value) j.num("steps_requested", static_cast<double>(r.steps_requested));
   j.num("t_final", r.t_final);
@@ -183,9 +184,13 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
         }
       if (r.max_point_defect >= 0.0)
         std::fprintf(to, "  largest distance from %s: %.1e\n", r.manifold.c_str(), r.max_point_defect);
-      if (!r.structure.empty())
-        std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(),
-                     r.step_path == "explicit-splitting" ? "explicit (kicks and drifts, no solve)" : "by the generic path");
+      if (!r.structure.empty()) {
+        std::string how = "by the generic path";
+        if (r.step_path == "explicit-splitting") how = "explicit (kicks and drifts, no solve)";
+        if (r.step_path == "gauss-collocation")
+          how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
+        std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());
+      }
       std::fprintf(to, "  solver iterations %lld (%.2f per step, at most %d in a step); wall time %.3f s (%.3g us/step)\n",
                   static_cast<long long>(r.solver_iterations),
                   static_cast<double>(r.solver_iterations) / std::fmax(1.0, static_cast<double>(r.steps)),

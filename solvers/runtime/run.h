@@ -55,6 +55,9 @@ struct RunReport {
   // the Lagrangian at sample points ("sampled"), and how each step is taken:
   // "explicit-splitting" (kicks and drifts, no solve) or "generic". Empty: not reported.
   std::string structure, structure_source, step_path;
+  // step_path gauss-collocation: the steps whose fixed-point iteration did not converge,
+  // solved by the generic Galerkin step's Newton iteration instead (-1: not such a path)
+  std::int64_t newton_steps = -1;
   bool boundary_value = false;
   double step = 0.0;
   std::int64_t steps = 0, steps_requested = 0;

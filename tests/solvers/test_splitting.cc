@@ -6,6 +6,8 @@
 //   - the explicit steps of the Euler maps, alone and in every composition, give the
 //     states the generic Newton path gives, through the runtime (use_structure true and
 //     false), on every separable built-in;
+//   - Galerkin Gauss on a separable system runs as Gauss collocation on the stage forces,
+//     with the generic Galerkin step's states;
 //   - first same as last: velocity Verlet costs one force per step;
 //   - a full (non-diagonal) mass matrix is solved with, not inverted entry by entry.
 #define BOOST_TEST_MODULE splitting
@@ -267,6 +269,50 @@ BOOST_AUTO_TEST_CASE(explicit_steps_equal_the_generic_path_on_every_separable_bu
                    1e-9 * std::fmax(1.0, std::fabs(a.energy_initial)));
       }
     }
+}
+
+// Galerkin with Gauss quadrature on a separable system is Gauss collocation iterated on
+// the stage forces (solvers/collocation_step.h): the same final states as the generic
+// Galerkin step (use_structure = false) for every separable built-in and s = 1, 3, 6,
+// and for written separable texts (run-time sized); Lobatto and non-separable systems
+// keep the generic step.
+BOOST_AUTO_TEST_CASE(galerkin_gauss_on_separable_systems_is_collocation_on_the_stage_forces) {
+  auto galerkin = [](int s, QuadratureKind k) {
+    Method me;
+    me.map = &find_map_entry("midpoint", "test");
+    me.galerkin = true;
+    me.stages = s;
+    me.quadrature = k;
+    return me;
+  };
+  std::vector<Problem> problems = separable_problems();
+  problems.push_back(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 - x^2*y + (x^2 + y^2)/2"),
+                                     {0.3, 0.1}, {0.0, 0.2}));
+  problems.back().steps = 300;
+  for (const Problem& pr : problems)
+    for (int s : {1, 3, 6}) {
+      const Method me = galerkin(s, QuadratureKind::gauss);
+      Method generic = me;
+      generic.use_structure = false;
+      const RunReport a = run(pr, me), b = run(pr, generic);
+      BOOST_TEST_CONTEXT(pr.system->name << ", s = " << s) {
+        BOOST_TEST(!a.failed, a.loop.failure.message);
+        BOOST_TEST(!b.failed);
+        BOOST_TEST(a.step_path == "gauss-collocation");
+        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(a.newton_steps == 0);
+        BOOST_TEST(b.newton_steps == -1);
+        BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+        BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+      }
+    }
+  const Problem kepler = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
+  BOOST_TEST(run(kepler, galerkin(3, QuadratureKind::lobatto)).step_path == "generic");
+  BOOST_TEST(run(builtin("double-pendulum", {0.5, 1.0}, {0.1, -0.3}), galerkin(3, QuadratureKind::gauss)).step_path ==
+             "generic");
+  const std::string j = report_json(run(kepler, galerkin(6, QuadratureKind::gauss)));
+  BOOST_TEST(j.find("\"step_path\": \"gauss-collocation\"") != std::string::npos, j);
+  BOOST_TEST(j.find("\"newton_steps\": 0") != std::string::npos, j);
 }
 
 BOOST_AUTO_TEST_CASE(implicit_maps_and_tiny_take_the_generic_path) {
