@@ -45,6 +45,12 @@ enum class CompositionKind {
   of_symmetric,
   // pairs (beta_i, alpha_i): Phi^*_{beta_i h} then Phi_{alpha_i h}, i = 1..s
   with_adjoint,
+  // a splitting method for H = T(p) + V(q) with T quadratic (Runge-Kutta-Nystrom
+  // problems): kicks b_1 h, ..., b_{m+1} h and drifts a_1 h, ..., a_m h, kick first,
+  // applied as a composition of the explicit Euler map (kick then drift) and its
+  // adjoint (below). Its order holds for separable systems and the explicit Euler maps
+  // only: the order conditions use [B, [B, [B, A]]] = 0 (T quadratic in p).
+  rkn_splitting,
 };
 
 // A composition method as plain data (what the tables below produce).
@@ -57,6 +63,7 @@ struct CompositionScheme {
   std::vector<double> gamma;        // of_symmetric: gamma_1..gamma_s
   std::vector<double> alpha, beta;  // with_adjoint
   std::string citation;
+  std::vector<double> kick, drift;  // rkn_splitting: b_1..b_{m+1}, a_1..a_m
 };
 
 namespace composition_detail {
@@ -321,6 +328,67 @@ struct McLachlan4 {
   }
 };
 
+// Blanes & Moan's splitting methods for Runge-Kutta-Nystrom problems (J. Comput. Appl.
+// Math. 142 (2002) 313, Table 3, SRKN_6^b and SRKN_11^b): symmetric, kick first,
+//   e^{b_1 h B} e^{a_1 h A} e^{b_2 h B} ... e^{a_1 h A} e^{b_1 h B},
+// B the kick p += c F(q), A the drift q += c M^{-1} p. FSAL: m + 1 kicks cost m forces
+// a step. Their coefficients minimise the leading error terms among methods with that
+// many forces; the order holds where T is quadratic in p and V depends on q alone.
+namespace composition_detail {
+// (b_1..b_k, a_1..a_j) of the first half to the whole palindromes: the middle kick
+// (odd number of kicks) or drift is 1 - 2 (sum of the others in its half).
+inline CompositionScheme rkn_palindrome(const char* name, int order, std::vector<double> b, std::vector<double> a,
+                                        bool middle_kick, const char* citation) {
+  auto close = [](std::vector<double> half, bool odd) {
+    double sum = 0.0;
+    for (double x : half) sum += x;
+    if (odd) {
+      half.push_back(1.0 - 2.0 * sum);
+      return mirror(half);
+    }
+    half.back() = 0.5 - (sum - half.back());  // the last listed entry of an even half is 1/2 - the rest
+    std::vector<double> whole = half;
+    whole.insert(whole.end(), half.rbegin(), half.rend());
+    return whole;
+  };
+  CompositionScheme s;
+  s.name = name;
+  s.order = order;
+  s.symmetric = true;
+  s.kind = CompositionKind::rkn_splitting;
+  s.kick = close(std::move(b), middle_kick);
+  s.drift = close(std::move(a), !middle_kick);
+  s.stages = static_cast<int>(s.kick.size()) - 1;  // forces a step (first same as last)
+  s.citation = citation;
+  return s;
+}
+}  // namespace composition_detail
+
+// SRKN_6^b, order 4, 6 forces: b_4 = 1 - 2 (b_1 + b_2 + b_3), a_3 = 1/2 - (a_1 + a_2).
+struct BlanesMoan4 {
+  static constexpr const char* name = "blanes-moan4";
+  static CompositionScheme scheme() {
+    return composition_detail::rkn_palindrome(
+        name, 4, {0.0829844064174052, 0.396309801498368, -0.0390563049223486},
+        {0.245298957184271, 0.604872665711080, 0.0}, true,
+        "Blanes & Moan, J. Comput. Appl. Math. 142 (2002) 313, SRKN_6^b (Table 3); separable systems, explicit "
+        "Euler maps");
+  }
+};
+
+// SRKN_11^b, order 6, 11 forces: b_6 = 1/2 - (b_1 + ... + b_5), a_6 = 1 - 2 (a_1 + ... + a_5).
+struct BlanesMoan6 {
+  static constexpr const char* name = "blanes-moan6";
+  static CompositionScheme scheme() {
+    return composition_detail::rkn_palindrome(
+        name, 6,
+        {0.0414649985182624, 0.198128671918067, -0.0400061921041533, 0.0752539843015807, -0.0115113874206879, 0.0},
+        {0.123229775946271, 0.290553797799558, -0.127049212625417, -0.246331761062075, 0.357208872795928}, false,
+        "Blanes & Moan, J. Comput. Appl. Math. 142 (2002) 313, SRKN_11^b (Table 3); separable systems, explicit "
+        "Euler maps");
+  }
+};
+
 // The triple jump applied recursively (Yoshida 1990; Creutz & Gocksch 1989): from a
 // symmetric method of order p (even), (g Psi, (1 - 2g) Psi, g Psi) with
 // g = 1/(2 - 2^{1/(p+1)}) has order p + 2. Order 2k needs 3^{k-1} stages.
@@ -371,6 +439,8 @@ inline const std::vector<CompositionScheme>& composition_schemes() {
       describe<Yoshida8E>(),
       describe<SuzukiUmeno8>(),
       describe<KahanLi8>(),
+      BlanesMoan4::scheme(),
+      BlanesMoan6::scheme(),
   };
   return list;
 }
@@ -495,8 +565,28 @@ struct Substep {
 // The substeps of a scheme applied to a basic map whose symmetry is given: a
 // symmetric map is its own symmetric basic method; any other map enters through
 // Phi_{h/2} o Phi^*_{h/2} (adjoint half first).
+//
+// A splitting (rkn_splitting) takes Phi = the explicit Euler map, kick x then drift x,
+// and Phi^* = drift y then kick y: Phi_{x_1}, Phi^*_{y_1}, Phi_{x_2}, ... gives kicks
+// x_1, y_1 + x_2, ... and drifts x_1 + y_1, x_2 + y_2, ..., so x_1 = b_1,
+// y_i = a_i - x_i, x_{i+1} = b_{i+1} - y_i (the correspondence of HLW GNI Sec. II.5).
+// Called with map_symmetric, it throws std::invalid_argument: a symmetric map has no
+// kicks and drifts. For the adjoint Euler map as Phi, flip every substep's adjoint.
 inline std::vector<Substep> substeps(const CompositionScheme& s, bool map_symmetric) {
   std::vector<Substep> out;
+  if (s.kind == CompositionKind::rkn_splitting) {
+    if (map_symmetric)
+      throw std::invalid_argument(s.name + " is a splitting into kicks and drifts: it composes the explicit Euler "
+                                  "map with its adjoint, not a symmetric map");
+    double x = s.kick.at(0);
+    for (std::size_t i = 0; i < s.drift.size(); ++i) {
+      const double y = s.drift[i] - x;
+      out.push_back({x, false});
+      out.push_back({y, true});
+      x = s.kick.at(i + 1) - y;
+    }
+    return out;
+  }
   if (s.kind == CompositionKind::with_adjoint) {
     for (std::size_t i = 0; i < s.alpha.size(); ++i) {
       out.push_back({s.beta[i], true});
@@ -513,6 +603,12 @@ inline std::vector<Substep> substeps(const CompositionScheme& s, bool map_symmet
     }
   }
   return out;
+}
+
+// The substeps with Phi and Phi^* exchanged (the same method from the adjoint map).
+inline std::vector<Substep> adjoint_substeps(std::vector<Substep> s) {
+  for (Substep& x : s) x.adjoint = !x.adjoint;
+  return s;
 }
 
 }  // namespace dvm

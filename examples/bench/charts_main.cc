@@ -180,7 +180,8 @@ double trace_threshold(const std::string& name) {
   if (body == "theta-0.3") return composition_threshold(0.3, single_substep());
   if (body == "stormer-verlet (EE composed)")
     return composition_threshold(0.0, substeps(find_composition("stormer-verlet"), false));
-  if (ends(" (SV)")) return composition_threshold(0.0, substeps(find_composition(body.substr(0, body.size() - 5)), false));
+  if (ends(" (SV)") || ends(" (EE)"))
+    return composition_threshold(0.0, substeps(find_composition(body.substr(0, body.size() - 5)), false));
   if (ends(" (midpoint)"))
     return composition_threshold(0.5, substeps(find_composition(body.substr(0, body.size() - 11)), true));
   return NAN;

@@ -248,7 +248,8 @@ inline std::vector<std::string> suite_compositions() {
 
 // The dvm table for a system: the theta maps alone (position-momentum form), on small
 // systems also the Hamiltonian, SODE and Newmark forms, the compositions of
-// explicit Euler (Stormer-Verlet basic method) and of the midpoint map. `heavy`
+// explicit Euler (Stormer-Verlet basic method; the splittings into kicks and drifts
+// directly of explicit Euler and its adjoint) and of the midpoint map. `heavy`
 // problems (large dim: every Newton iteration forms an N x N Jacobian by nested
 // Jets) get the compositions of explicit Euler and a few of the midpoint map. The
 // Galerkin methods (Gauss, s = 2, 4, 6: orders 4, 8, 12) are measured on every system
@@ -275,16 +276,21 @@ std::vector<Method<System>> dvm_methods(bool heavy) {
   add("dvm galerkin gauss s=2", 4, true, true, dvm_galerkin<System, 2>(QuadratureKind::gauss));
   add("dvm galerkin gauss s=4", 8, true, true, dvm_galerkin<System, 4>(QuadratureKind::gauss));
   add("dvm galerkin gauss s=6", 12, true, true, dvm_galerkin<System, 6>(QuadratureKind::gauss));
-  const std::vector<std::string> chart_ee = {"triple-jump", "mclachlan4", "kahan-li6", "kahan-li8"};
+  const std::vector<std::string> chart_ee = {"triple-jump", "mclachlan4", "kahan-li6", "kahan-li8", "blanes-moan4",
+                                             "blanes-moan6"};
   const std::vector<std::string> chart_mp = {"triple-jump", "kahan-li8"};
   const std::vector<std::string> heavy_mp = {"triple-jump", "kahan-li6", "kahan-li8"};
   for (const std::string& c : suite_compositions()) {
     const int order = find_composition(c).order;
     const bool ce = std::find(chart_ee.begin(), chart_ee.end(), c) != chart_ee.end();
-    add("dvm " + c + " (SV)", order, false, ce, dvm_composition<System>(ThetaMap::explicit_euler(), c));
+    // a splitting into kicks and drifts composes explicit Euler with its adjoint directly (EE)
+    const bool splitting = find_composition(c).kind == CompositionKind::rkn_splitting;
+    add("dvm " + c + (splitting ? " (EE)" : " (SV)"), order, false, ce,
+        dvm_composition<System>(ThetaMap::explicit_euler(), c));
   }
   for (const std::string& c : suite_compositions()) {
     if (heavy && std::find(heavy_mp.begin(), heavy_mp.end(), c) == heavy_mp.end()) continue;
+    if (find_composition(c).kind == CompositionKind::rkn_splitting) continue;  // no midpoint stages
     const int order = find_composition(c).order;
     const bool cm = std::find(chart_mp.begin(), chart_mp.end(), c) != chart_mp.end();
     add("dvm " + c + " (midpoint)", order, true, cm, dvm_composition<System>(ThetaMap::midpoint(), c));

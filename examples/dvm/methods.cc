@@ -19,15 +19,18 @@ struct MethodRow {
   CompositionScheme scheme;
   double threshold_verlet;     // basic method from map explicit-euler (Stormer-Verlet)
   bool midpoint_unconditional;  // basic method midpoint: stable for every h omega
+  bool splitting() const { return scheme.kind == CompositionKind::rkn_splitting; }  // no midpoint
 };
 
 std::vector<MethodRow> method_rows() {
   std::vector<CompositionScheme> list = composition_schemes();
   for (int p = 6; p <= RecursiveTripleJump::max_order; p += 2) list.push_back(find_composition("triple-jump:" + std::to_string(p)));
   std::vector<MethodRow> rows;
-  for (const CompositionScheme& s : list)
+  for (const CompositionScheme& s : list) {
+    const bool splitting = s.kind == CompositionKind::rkn_splitting;  // kicks and drifts: no midpoint stages
     rows.push_back({s, composition_threshold(0.0, substeps(s, false)),
-                    std::isinf(composition_threshold(0.5, substeps(s, true)))});
+                    !splitting && std::isinf(composition_threshold(0.5, substeps(s, true)))});
+  }
   return rows;
 }
 
@@ -56,9 +59,13 @@ int methods_command(bool json) {
           .num("order", r.scheme.order)
           .num("stages", r.scheme.stages)
           .boolean("symmetric", r.scheme.symmetric)
-          .num("stability_threshold_explicit_euler", r.threshold_verlet)
-          .boolean("midpoint_unconditionally_stable", r.midpoint_unconditional)
-          .str("citation", r.scheme.citation);
+          .num("stability_threshold_explicit_euler", r.threshold_verlet);
+      if (r.splitting())  // refused with map = "midpoint"; stages count the forces of a step
+        j.raw("midpoint_unconditionally_stable", "null")
+            .str("applies_to", "separable systems, map explicit-euler or adjoint-euler");
+      else
+        j.boolean("midpoint_unconditionally_stable", r.midpoint_unconditional);
+      j.str("citation", r.scheme.citation);
       out += "  " + j.dump(4) + ",\n";
     }
     const auto& galerkin = galerkin_registry();
@@ -93,13 +100,18 @@ int methods_command(bool json) {
               "the map's own step (threshold: explicit-euler)");
   for (const MethodRow& r : rows)
     std::printf("%-16s %-5d %-6d %-9s %-13.6f %-9s %s\n", r.scheme.name.c_str(), r.scheme.order, r.scheme.stages,
-                r.scheme.symmetric ? "yes" : "no", r.threshold_verlet, r.midpoint_unconditional ? "stable" : "LIMITED",
+                r.scheme.symmetric ? "yes" : "no", r.threshold_verlet,
+                r.splitting() ? "refused" : r.midpoint_unconditional ? "stable" : "LIMITED",
                 r.scheme.citation.c_str());
   std::printf(
       "\nthreshold(SV): largest stable h*omega on q'' = -omega^2 q with map = \"explicit-euler\" (or\n"
       "\"adjoint-euler\"), whose symmetric basic method is Stormer-Verlet; found from |trace| < 2 of\n"
       "the one-step matrix. midpoint: with map = \"midpoint\" every composition is stable for all\n"
       "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n"
+      "blanes-moan4 and blanes-moan6 are splittings into kicks and drifts (stages: forces a step):\n"
+      "their order holds on separable systems (L = v^T M v / 2 - V(q)) with map = \"explicit-euler\"\n"
+      "or \"adjoint-euler\" (the same method), lagrangian or hamiltonian form; other maps, forms\n"
+      "and systems are refused.\n"
       "composition = \"dirk\" with integrator.weights = [b1, ..., bs] (summing to 1) is the symplectic\n"
       "DIRK of those weights as a composition of steps of b_i h (paper Sec. 6.2): order 2, 3 when\n"
       "the cubes of the weights sum to 0, 4 when the weights are also symmetric. With\n"

@@ -224,9 +224,14 @@ std::unique_ptr<Run> stepper_run(const View& view, Stepper stepper, const typena
 }
 
 // ---- compositions: the map of each stage --------------------------------------------
-// The substeps of the method's composition ({{1, false}} for none).
+// The substeps of the method's composition ({{1, false}} for none). A splitting into
+// kicks and drifts (validate() admits it with the explicit Euler maps only) is the same
+// method from either map: from the adjoint Euler map (theta 1) its substeps are flipped.
 inline std::vector<Substep> method_substeps(const Method& me, bool map_symmetric) {
-  return me.composition == "none" ? single_substep() : substeps(me.scheme(), map_symmetric);
+  if (me.composition == "none") return single_substep();
+  const CompositionScheme s = me.scheme();
+  if (s.kind == CompositionKind::rkn_splitting && me.theta == 1.0) return adjoint_substeps(substeps(s, map_symmetric));
+  return substeps(s, map_symmetric);
 }
 
 // A stage of a composition: its fraction of the step and the map (or other basic step
@@ -309,6 +314,18 @@ void report_structure(RunReport& r, const S& L, const V& q, const V& v0, const P
     r.structure_source = "sampled";
   }
   r.step_path = "generic";
+}
+
+// A splitting into kicks and drifts (CompositionKind::rkn_splitting) has its order on a
+// separable system only: refused, naming the key, on a system whose structure (as
+// reported) is another.
+inline void require_splitting_structure(const RunReport& r, const Method& me, const Problem& pr) {
+  if (me.composition == "none" || me.composition == "dirk" || me.scheme().kind != CompositionKind::rkn_splitting) return;
+  if (r.structure != "separable")
+    throw InputError(pr.origin + ": key 'integrator.composition': \"" + me.composition +
+                     "\" is a splitting for separable systems (L = v^T M v / 2 - V(q), M constant): its order "
+                     "conditions need T quadratic in p; this system's structure is \"" + r.structure + "\" (" +
+                     r.structure_source + ")");
 }
 
 // Whether the method is an explicit Euler map (theta 0 or 1, composed or not) that a

@@ -254,6 +254,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   }
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
   report_structure(base, L, q, v0, pr);
+  require_splitting_structure(base, me, pr);
 
   if (me.form == Form::lagrangian && !me.galerkin) {
     const ThetaMap R = dynamic_theta_map(me);

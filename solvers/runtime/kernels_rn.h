@@ -289,6 +289,7 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
   view.sigma0 = velocity_hessian_scale(L, q, v0);
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
   report_structure(base, L, q, v0, pr);
+  require_splitting_structure(base, me, pr);
 
   if (me.galerkin) {
     if constexpr (is_separable_v<S>)

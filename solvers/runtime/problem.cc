@@ -219,6 +219,25 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError(std::string(weights ? "integrator.weights: " : "integrator.composition: ") + e.what());
     }
     if (!caps.composition) throw InputError("integrator.composition: " + name + " takes no composition" + note);
+    if (me.scheme().kind == CompositionKind::rkn_splitting) {
+      // kicks and drifts: the explicit Euler map and its adjoint, on R^n, in a form where
+      // they are the two symplectic Euler methods (the structure is checked when the run starts)
+      const std::string what = "integrator.composition: \"" + me.composition +
+                               "\" is a splitting into kicks and drifts for separable systems: ";
+      if (sys.space != Space::euclidean)
+        throw InputError(what + "it runs on R^n, not on " + to_string(sys.space));
+      if (me.form != Form::lagrangian && me.form != Form::hamiltonian)
+        throw InputError(what + "expected form = \"lagrangian\" or \"hamiltonian\", got \"" +
+                         std::string(to_string(me.form)) + "\"");
+      if (!me.map || me.map->family != MapFamily::theta || !(me.theta == 0.0 || me.theta == 1.0))
+        throw InputError(what + "it composes the explicit Euler map with its adjoint; expected integrator.map = "
+                                "\"explicit-euler\" or \"adjoint-euler\" (the same method), got \"" +
+                         (me.map ? me.map->name : std::string("none")) + "\"" +
+                         (me.map && me.map->takes_theta ? " with theta " + shortest(me.theta) : std::string()));
+      if (me.form == Form::hamiltonian && me.effective_lift() != Lift::cotangent)
+        throw InputError(what + "with the hamiltonian form the stages are the cotangent lifts of the Euler maps; "
+                                "got integrator.lift = \"" + std::string(to_string(me.effective_lift())) + "\"");
+    }
   }
   if (!me.thetas.empty()) {
     if (me.composition != "dirk")

@@ -405,7 +405,8 @@ BOOST_AUTO_TEST_CASE(methods_lists_every_method) {
   BOOST_TEST(t.status == 0);
   for (const char* name : {"none", "stormer-verlet", "triple-jump", "suzuki5", "mclachlan4", "yoshida6a", "yoshida6b",
                            "yoshida6c", "kahan-li6", "yoshida8a", "yoshida8b", "yoshida8c", "yoshida8d", "yoshida8e",
-                           "suzuki-umeno8", "kahan-li8", "triple-jump:6", "triple-jump:12"})
+                           "suzuki-umeno8", "kahan-li8", "blanes-moan4", "blanes-moan6", "triple-jump:6",
+                           "triple-jump:12"})
     BOOST_TEST(t.out.find(std::string("\n") + name + " ") != std::string::npos, name);
   const Output j = dvm({"methods", "--json"});
   BOOST_TEST(j.status == 0);
@@ -417,6 +418,11 @@ BOOST_AUTO_TEST_CASE(methods_lists_every_method) {
   BOOST_TEST(std::fabs(json_number(j.out.substr(tj), "stability_threshold_explicit_euler") - 1.5734) <= 1e-4);
   BOOST_TEST(json_number(j.out.substr(tj), "order") == 4.0);
   BOOST_TEST(json_number(j.out.substr(tj), "stages") == 3.0);
+  // a splitting: its stages are the forces of a step; no midpoint stages to be stable with
+  const std::string bm = j.out.substr(j.out.find("\"name\": \"blanes-moan4\""));
+  BOOST_TEST(json_number(bm, "order") == 4.0);
+  BOOST_TEST(json_number(bm, "stages") == 6.0);
+  BOOST_TEST(bm.substr(0, bm.find('}')).find("\"midpoint_unconditionally_stable\": null") != std::string::npos);
   const Output h = dvm({"methods", "--help"});
   BOOST_TEST(h.status == 0);
   BOOST_TEST(h.out.find("example") != std::string::npos);

@@ -276,6 +276,36 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
   BOOST_TEST_MESSAGE(g_runs << " runs: " << g_ok << " ran, " << g_refused << " refused");
 }
 
+// A splitting into kicks and drifts on every system: with each Euler map (and the
+// theta map at 0), the space's midpoint map, in the lagrangian, hamiltonian and sode1
+// forms. They run on R^n, on a system that composes and is separable (not the double
+// pendulum, the charged particle or the written double pendulum), in the lagrangian or
+// hamiltonian form, with an Euler map; every other case is refused naming a key.
+BOOST_AUTO_TEST_CASE(every_splitting_runs_or_is_refused) {
+  const std::set<std::string> not_separable = {"double-pendulum", "charged-particle", "lagrangian"};
+  for (const SystemCaps& sys : registry_systems()) {
+    const std::string head = heads().at(sys.name);
+    const Output ref =
+        dvm({"run", write_scene("ref.toml", head + integrator("map = \"" + midpoint_map(sys.space) + "\"\n")),
+             "--json", "--quiet"});
+    BOOST_REQUIRE_MESSAGE(ref.status == 0, ref.err);
+    const std::vector<double> q_ref = json_array(ref.out, "q_final");
+    for (const char* comp : {"blanes-moan4"})  // (blanes-moan6 takes the same path and rules)
+      for (const std::string& map : {std::string("explicit-euler"), std::string("adjoint-euler"), std::string("theta"),
+                                     midpoint_map(sys.space)})
+        for (const char* form : {"lagrangian", "hamiltonian", "sode1"}) {
+          const std::string f = form;
+          const bool euler = map != midpoint_map(sys.space);
+          const bool supported = sys.space == "R^n" && sys.composition && sys.forms.count(f) &&
+                                 (f == "lagrangian" || f == "hamiltonian") && euler && !not_separable.count(sys.name);
+          const std::string keys = "form = \"" + f + "\"\nmap = \"" + map + "\"\ncomposition = \"" + comp + "\"\n" +
+                                   (map == "theta" ? "theta = 0.0\n" : "");
+          check(sys.name + " map=" + map + " form=" + f + " composition=" + comp, head + integrator(keys), supported,
+                q_ref, {{"form", f}, {"composition", comp}, {"map", map}});
+        }
+  }
+}
+
 // integrator.lift and integrator.thetas on every system: each lift of the registry in
 // the forms it names and in one it does not, with the space's midpoint map and its
 // theta map, and a theta per stage of a dirk composition. Runs where the rules say it

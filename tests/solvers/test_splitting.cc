@@ -271,6 +271,85 @@ BOOST_AUTO_TEST_CASE(explicit_steps_equal_the_generic_path_on_every_separable_bu
     }
 }
 
+// The splittings into kicks and drifts (blanes-moan4, blanes-moan6) are the same method
+// from either Euler map and from either form (the cotangent lift of an Euler map is a
+// symplectic Euler method), and are refused where their order does not hold: another
+// map, form or lift, a manifold, a system that is not separable (declared or read off
+// a written text).
+BOOST_AUTO_TEST_CASE(splittings_are_one_method_and_refused_where_their_order_fails) {
+  auto method = [](const char* map, const char* composition, Form form = Form::lagrangian) {
+    Method me;
+    me.map = &find_map_entry(map, "test");
+    me.theta = me.map->theta;
+    me.composition = composition;
+    me.form = form;
+    return me;
+  };
+  auto refused = [](const Problem& pr, const Method& me, const std::string& key, const std::string& word) {
+    try {
+      validate(pr, me);
+      run(pr, me);
+    } catch (const InputError& e) {
+      const std::string m = e.what();
+      BOOST_TEST(m.find(key) != std::string::npos, m);
+      BOOST_TEST(m.find(word) != std::string::npos, m);
+      return true;
+    }
+    return false;
+  };
+  const Problem kepler = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
+  for (const char* c : {"blanes-moan4", "blanes-moan6"}) {
+    BOOST_TEST_CONTEXT(c) {
+      const RunReport a = run(kepler, method("explicit-euler", c));
+      const RunReport b = run(kepler, method("adjoint-euler", c));
+      const RunReport h = run(kepler, method("explicit-euler", c, Form::hamiltonian));
+      const RunReport t = run(kepler, [&] {
+        Method me = method("theta", c);
+        me.theta = 1.0;
+        return me;
+      }());
+      BOOST_TEST(a.step_path == "explicit-splitting");
+      BOOST_TEST(h.step_path == "generic");
+      // the same kicks and drifts: equal to the last bit from either Euler map
+      BOOST_TEST(max_diff(a.q_final, b.q_final) == 0.0);
+      BOOST_TEST(max_diff(a.p_final, b.p_final) == 0.0);
+      BOOST_TEST(max_diff(b.q_final, t.q_final) == 0.0);
+      // the Hamiltonian form's Newton solves: to their tolerance
+      BOOST_TEST(max_diff(a.q_final, h.q_final) <= 1e-12);
+      BOOST_TEST(max_diff(a.p_final, h.p_final) <= 1e-12);
+      // refused: another map, form or lift, a manifold, a non-separable system
+      BOOST_TEST(refused(kepler, method("midpoint", c), "integrator.composition", "\"midpoint\""));
+      BOOST_TEST(refused(kepler, [&] {
+        Method me = method("theta", c);
+        me.theta = 0.3;
+        return me;
+      }(), "integrator.composition", "theta 0.3"));
+      BOOST_TEST(refused(kepler, method("explicit-euler", c, Form::sode1), "integrator.composition", "sode1"));
+      BOOST_TEST(refused(kepler, [&] {
+        Method me = method("explicit-euler", c, Form::hamiltonian);
+        me.lift = Lift::none;
+        return me;
+      }(), "integrator.composition", "lift"));
+      Problem sphere;
+      sphere.system = &find_system_entry("spherical-pendulum", "test");
+      for (const ParamEntry& e : sphere.system->params) sphere.params[e.name] = e.default_value;
+      sphere.dim = 3;
+      sphere.q = {0.6, 0.0, -0.8};
+      sphere.v = {0.0, 0.9, 0.0};
+      sphere.step = 0.01;
+      sphere.steps = 10;
+      BOOST_TEST(refused(sphere, method("sphere-exp", c), "integrator.composition", "R^n"));
+      BOOST_TEST(refused(builtin("double-pendulum", {0.5, 1.0}, {0.1, -0.3}), method("explicit-euler", c),
+                         "integrator.composition", "\"mechanical\" (declared)"));
+      BOOST_TEST(refused(written_problem(written({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a) + cos(b)"),
+                                         {0.5, 1.0}, {0.1, -0.3}),
+                         method("explicit-euler", c), "integrator.composition", "\"mechanical\" (expression)"));
+      BOOST_TEST(refused(builtin("charged-particle", {1.0, 0.2}, {0.0, 1.0}), method("adjoint-euler", c),
+                         "integrator.composition", "\"general\""));
+    }
+  }
+}
+
 // Galerkin with Gauss quadrature on a separable system is Gauss collocation iterated on
 // the stage forces (solvers/collocation_step.h): the same final states as the generic
 // Galerkin step (use_structure = false) for every separable built-in and s = 1, 3, 6,

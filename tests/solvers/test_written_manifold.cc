@@ -130,7 +130,8 @@ int compare(const Pair& s, const Method& me, const std::string& what) {
 int every_method(const Pair& s, Space space) {
   int n = 0;
   std::vector<std::string> compositions = {"none"};
-  for (const CompositionScheme& c : composition_schemes()) compositions.push_back(c.name);
+  for (const CompositionScheme& c : composition_schemes())  // (splittings run on R^n only, refused here)
+    if (c.kind != CompositionKind::rkn_splitting) compositions.push_back(c.name);
   for (const MapEntry& e : map_registry()) {
     if (e.space != space) continue;
     std::vector<double> thetas = {e.theta};

@@ -78,8 +78,10 @@ BOOST_AUTO_TEST_CASE(measured_orders_on_kepler) {
   std::printf("%-16s %5s %7s  %-22s %-22s\n", "method", "order", "stages", "measured (midpoint)", "measured (Stormer-Verlet)");
   for (const CompositionScheme& s : every_scheme()) {
     BOOST_TEST_CONTEXT(s.name) {
-      const OrderResult a = kepler_order(s, ThetaMap::midpoint(), true);
+      // a splitting into kicks and drifts has no midpoint stages: its own row measured twice
+      const bool splitting = s.kind == CompositionKind::rkn_splitting;
       const OrderResult b = kepler_order(s, ThetaMap::explicit_euler(), false);
+      const OrderResult a = splitting ? b : kepler_order(s, ThetaMap::midpoint(), true);
       std::printf("%-16s %5d %7d  %6.3f (%2d points)      %6.3f (%2d points)\n", s.name.c_str(), s.order, s.stages,
                   a.order, a.points, b.order, b.points);
       BOOST_TEST(a.points >= 5);
@@ -150,8 +152,23 @@ BOOST_AUTO_TEST_CASE(stability_thresholds_two_ways) {
         const double a = std::fmax(1.0, A.cwiseAbs().maxCoeff());
         BOOST_TEST(std::fabs(A.determinant() - 1.0) <= 1e-13 * a * a);
       }
-      // stable just below, unstable just above, seen by running the integrator
+      // stable just below, unstable just above, seen by running the integrator. Where
+      // the first instability is a narrow band in which |trace| barely passes 2
+      // (blanes-moan6: h omega from 3.14144 to 3.14232, |trace| - 2 < 3e-7) the growth
+      // over 1500 steps stays below a factor 4, which the runs cannot see: there the
+      // trace is checked on both sides of the threshold instead.
       double lo = xt * (1.0 - 1e-3), hi = xt * (1.0 + 1e-3);
+      const double tr_hi = std::fabs(composition_matrix(0.0, subs, hi).trace());
+      const double rho_hi = tr_hi > 2.0 ? 0.5 * (tr_hi + std::sqrt(tr_hi * tr_hi - 4.0)) : 1.0;
+      if (std::pow(rho_hi, 1500.0) < 4.0) {
+        const double below = std::fabs(composition_matrix(0.0, subs, xt * (1.0 - 1e-6)).trace()),
+                     above = std::fabs(composition_matrix(0.0, subs, xt * (1.0 + 1e-5)).trace());
+        std::printf("%-24s %-20.12f %-20s (|trace| - 2: %.2e below, %.2e above)\n", name.c_str(), xt,
+                    "(growth too slow)", below - 2.0, above - 2.0);
+        BOOST_TEST(below < 2.0);
+        BOOST_TEST(above > 2.0);
+        continue;
+      }
       BOOST_TEST_REQUIRE(!grows(subs, 0.0, lo));
       BOOST_TEST_REQUIRE(grows(subs, 0.0, hi));
       // and the threshold of the runs, by bisection in that bracket
@@ -179,6 +196,7 @@ BOOST_AUTO_TEST_CASE(midpoint_compositions_never_lose_stability) {
   // composition is orthogonal: stable at every h omega. Checked on a grid, and by a
   // run at h omega = 10 keeping |z| = 1.
   for (const CompositionScheme& s : every_scheme()) {
+    if (s.kind == CompositionKind::rkn_splitting) continue;  // kicks and drifts: no midpoint stages
     BOOST_TEST_CONTEXT(s.name) {
       const std::vector<Substep> subs = substeps(s, true);
       double worst = 0.0;

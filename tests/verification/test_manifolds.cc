@@ -346,8 +346,8 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
     // every table up to order 6 with the midpoint map (the order-8 tables need another
     // range of steps: next test case)
     std::vector<Case> cases;
-    for (const CompositionScheme& sc : composition_schemes())
-      if (sc.order <= 6) cases.push_back({sc.name, double(sc.order)});
+    for (const CompositionScheme& sc : composition_schemes())  // (splittings run on R^n only)
+      if (sc.order <= 6 && sc.kind != CompositionKind::rkn_splitting) cases.push_back({sc.name, double(sc.order)});
     cases.push_back({"triple-jump:6", 6});
     for (const auto& c : cases) {
       const std::vector<double>& steps = hs;
