@@ -27,11 +27,10 @@
 
 namespace dvm {
 
-// The Cholesky factor of the constant mass matrix M of a separable S, read off at q_ref
-// column by column, M e_j = dL/dv(q_ref, e_j) (dL/dv is linear in v). Throws
-// std::invalid_argument when M is not positive definite.
+// The constant mass matrix M of a separable S, read off at q_ref column by column,
+// M e_j = dL/dv(q_ref, e_j) (dL/dv is linear in v).
 template <class S, int N = state_size<S>::value>
-Eigen::LLT<Mat<double, N, N>> factor_mass_matrix(const S& L, const Vec<double, N>& q_ref) {
+Mat<double, N, N> mass_matrix(const S& L, const Vec<double, N>& q_ref) {
   const Eigen::Index n = q_ref.size();
   Mat<double, N, N> M = Mat<double, N, N>::Zero(n, n);
   Vec<double, N> e = Vec<double, N>::Zero(n), a = e, b = e;
@@ -41,6 +40,13 @@ Eigen::LLT<Mat<double, N, N>> factor_mass_matrix(const S& L, const Vec<double, N
     gradient_of(L, q_ref, e, a, b);
     M.col(j) = b;
   }
+  return M;
+}
+
+// Its Cholesky factor. Throws std::invalid_argument when M is not positive definite.
+template <class S, int N = state_size<S>::value>
+Eigen::LLT<Mat<double, N, N>> factor_mass_matrix(const S& L, const Vec<double, N>& q_ref) {
+  const Mat<double, N, N> M = mass_matrix(L, q_ref);
   Eigen::LLT<Mat<double, N, N>> llt(M);
   if (llt.info() != Eigen::Success || !M.allFinite())
     throw std::invalid_argument(L.name() + ": the mass matrix is not positive definite");

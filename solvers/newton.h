@@ -82,6 +82,21 @@ inline NewtonVerdict newton_verdict(StepSummary& s, double dxn, double x_size, c
   return NewtonVerdict::failed;
 }
 
+// newton_verdict, and where the updates stalled above the tolerances, again with the
+// round-off floor of the residual: formed from points of size x_size (a map inverted by
+// Newton's method forms q1 = q0 + dq) it cannot go below |J| eps x_size, and 64 times
+// that is round-off, whatever the scale of its terms.
+inline NewtonVerdict newton_verdict_floored(StepSummary& s, double dxn, double x_size, const StepOptions& opt,
+                                           double jacobian_norm) {
+  NewtonVerdict verdict = newton_verdict(s, dxn, x_size, opt);
+  if (verdict == NewtonVerdict::failed) {
+    const double floor = 64.0 * std::numeric_limits<double>::epsilon() * jacobian_norm * x_size;
+    verdict = newton_verdict(s, dxn, x_size, opt, floor);
+    if (verdict == NewtonVerdict::converged) s.message.clear();
+  }
+  return verdict;
+}
+
 // dx with J dx = r; false if J is singular to working precision.
 template <int N>
 bool newton_update(const Mat<double, N, N>& J, const Vec<double, N>& r, Vec<double, N>& dx) {
@@ -127,15 +142,7 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       s.message = "non-finite residual or Jacobian";
       return s;
     }
-    NewtonVerdict verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt);
-    if (verdict == NewtonVerdict::failed) {
-      // stalled above the tolerances: a residual formed from points of size |x| + x0 (a
-      // map inverted by Newton's method forms q1 = q0 + dq) cannot go below
-      // |J| eps (|x| + x0), and 64 times that is round-off, whatever the scale of its terms
-      const double floor = 64.0 * std::numeric_limits<double>::epsilon() * max_abs(J) * (max_abs(x) + x0);
-      verdict = newton_verdict(s, dxn, max_abs(x) + x0, opt, floor);
-      if (verdict == NewtonVerdict::converged) s.message.clear();
-    }
+    const NewtonVerdict verdict = newton_verdict_floored(s, dxn, max_abs(x) + x0, opt, max_abs(J));
     if (verdict == NewtonVerdict::failed) return s;
     if (verdict == NewtonVerdict::converged) {
       // Apply the Newton correction already paid for: it takes the residual from

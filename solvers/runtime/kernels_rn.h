@@ -316,9 +316,16 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
         using Map = std::decay_t<decltype(R)>;
         switch (me.form) {
           case Form::lagrangian: {
-            if constexpr (is_separable_v<S> && std::is_same_v<Map, ThetaMap>)
+            if constexpr (is_separable_v<S> && std::is_same_v<Map, ThetaMap>) {
               if (splitting_applies(me, R))
                 return splitting_run<RnView<S>, S, Map>(view, L, R, me, h, q, p, v0, base, pr.steps);
+              if (S::dim >= 3 && separable_newton_applies(me)) {
+                // any theta (a theta per stage included): Newton on the structured equation
+                auto make = [&](double hk, const Map& Rk) { return SeparableThetaStep<S>(L, Rk.theta(), hk, opt, q); };
+                base.step_path = "separable-newton";
+                return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+              }
+            }
             auto make = [&](double hk, const Map& Rk) { return PositionMomentumStep<S, Map>(L, Rk, hk, opt); };
             return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
           }

@@ -24,6 +24,7 @@
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 #include "solvers/runtime/problem.h"
+#include "solvers/separable_theta_step.h"
 #include "solvers/runtime/run.h"
 #include "solvers/splitting_step.h"
 
@@ -271,6 +272,73 @@ BOOST_AUTO_TEST_CASE(explicit_steps_equal_the_generic_path_on_every_separable_bu
     }
 }
 
+// The theta maps that are not explicit (midpoint, theta 0.3 and 0.7), alone, composed,
+// as a DIRK and with a theta per stage: Newton on the structured equation
+// (solvers/separable_theta_step.h) gives the generic path's states (use_structure =
+// false) to the Newton tolerance over the run, with no more Jacobians, through the
+// runtime on FPU (the separable built-in of fixed size >= 3) and as step types on every
+// separable built-in of 1 and 2 coordinates.
+BOOST_AUTO_TEST_CASE(implicit_theta_maps_on_separable_systems_equal_the_generic_path) {
+  std::vector<Method> methods;
+  for (double th : {0.5, 0.3, 0.7})
+    for (const char* c : {"none", "triple-jump", "kahan-li6", "dirk", "dirk-thetas"}) {
+      Method me;
+      const std::string comp = c;
+      me.map = &find_map_entry(th == 0.5 && comp != "dirk-thetas" ? "midpoint" : "theta", "test");
+      me.theta = th;
+      me.composition = comp == "dirk-thetas" ? "dirk" : comp;
+      if (me.composition == "dirk") me.weights = {0.3, 0.4, 0.3};
+      if (comp == "dirk-thetas") {
+        me.thetas = {0.2, th, 0.8};
+        me.theta = me.map->theta;
+      }
+      methods.push_back(me);
+    }
+  int compared = 0;
+  for (const Problem& pr : separable_problems()) {
+    if (pr.dim < 3 || pr.system->name == "nbody") continue;  // small or run-time sized: the generic path
+    for (const Method& me : methods) {
+      Method generic = me;
+      generic.use_structure = false;
+      validate(pr, me);
+      const RunReport a = run(pr, me), b = run(pr, generic);
+      BOOST_TEST_CONTEXT(pr.system->name << ", " << me.label()) {
+        BOOST_TEST(!a.failed);
+        BOOST_TEST(!b.failed);
+        BOOST_TEST(a.step_path == "separable-newton");
+        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(a.solver_iterations <= b.solver_iterations);
+        BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+        BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+        ++compared;
+      }
+    }
+  }
+  BOOST_TEST(compared == 15);
+  // the step types themselves on the small systems, 300 steps of a midpoint and a theta
+  // 0.3 map, against PositionMomentumStep
+  auto compare = [](const auto& L, const auto& q0, const auto& p0, double h, const char* what) {
+    using Sys = std::decay_t<decltype(L)>;
+    using Vn = Vec<double, Sys::dim>;
+    for (double th : {0.5, 0.3}) {
+      const SeparableThetaStep<Sys> A(L, th, h, StepOptions{}, q0);
+      const PositionMomentumStep<Sys, ThetaMap> B(L, ThetaMap(th), h);
+      Vn qa = q0, pa = p0, qb = q0, pb = p0;
+      const bool fa = integrate(A, 0.0, qa, pa, p0, 300, [](auto&&...) {}).failed;
+      const bool fb = integrate(B, 0.0, qb, pb, p0, 300, [](auto&&...) {}).failed;
+      BOOST_TEST_CONTEXT(what << ", theta " << th) {
+        BOOST_TEST(!fa);
+        BOOST_TEST(!fb);
+        BOOST_TEST((qa - qb).cwiseAbs().maxCoeff() <= 1e-12 * std::fmax(1.0, qb.cwiseAbs().maxCoeff()));
+        BOOST_TEST((pa - pb).cwiseAbs().maxCoeff() <= 1e-12 * std::fmax(1.0, pb.cwiseAbs().maxCoeff()));
+      }
+    }
+  };
+  compare(Kepler(), V2(0.4, 0.0), V2(0.0, 2.0), 0.01, "kepler");
+  compare(Pendulum(1.0, 1.0, 1.0), V1(2.0), V1(0.0), 0.01, "pendulum");
+  compare(HenonHeiles(), V2(0.1, -0.2), V2(0.3, 0.2), 0.01, "henon-heiles");
+}
+
 // The splittings into kicks and drifts (blanes-moan4, blanes-moan6) are the same method
 // from either Euler map and from either form (the cotangent lift of an Euler map is a
 // symplectic Euler method), and are refused where their order does not hold: another
@@ -394,11 +462,16 @@ BOOST_AUTO_TEST_CASE(galerkin_gauss_on_separable_systems_is_collocation_on_the_s
   BOOST_TEST(j.find("\"newton_steps\": 0") != std::string::npos, j);
 }
 
-BOOST_AUTO_TEST_CASE(implicit_maps_and_tiny_take_the_generic_path) {
+BOOST_AUTO_TEST_CASE(implicit_maps_take_the_structured_newton_step_and_tiny_the_generic_path) {
   const Problem pr = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
   Method mid;
   mid.map = &find_map_entry("midpoint", "test");
-  BOOST_TEST(run(pr, mid).step_path == "generic");
+  BOOST_TEST(run(pr, mid).step_path == "generic");  // 2 coordinates: the generic step
+  const Problem fpu = builtin("fpu", {0.2, 0.2 + 1.0 / 50, 0.0, 0.0, 0.0, 0.0}, {0, 0, 0, 0, 0, 0});
+  BOOST_TEST(run(fpu, mid).step_path == "separable-newton");
+  Method mid_tiny = mid;
+  mid_tiny.solver = SolverKind::tiny;
+  BOOST_TEST(run(fpu, mid_tiny).step_path == "generic");
   Method tiny;
   tiny.map = &find_map_entry("explicit-euler", "test");
   tiny.theta = 0.0;
