@@ -45,6 +45,7 @@
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/separable_theta_step.h"
 #include "solvers/sode_step.h"
 #include "solvers/splitting_step.h"
 
@@ -157,23 +158,49 @@ RunFn<System> dvm_splitting(ThetaMap R, const std::vector<Substep>& sub) {
   return nullptr;
 }
 
-// The position-momentum step of a theta map, alone (explicit where dvm run's is).
+// Any other theta map, alone or composed, on a separable system of 3 coordinates or more:
+// Newton on the structured equation as `dvm run` steps it (solvers/separable_theta_step.h);
+// null otherwise.
 template <class System>
-RunFn<System> dvm_map(ThetaMap R) {
-  if (RunFn<System> f = dvm_splitting<System>(R, single_substep())) return f;
+RunFn<System> dvm_separable_newton(ThetaMap R, const std::vector<Substep>& sub) {
+  if constexpr (is_separable_v<System> && System::dim >= 3) {
+    return [R, sub](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
+      auto make = [&](double theta) {
+        return [&P, theta](double hk) { return SeparableThetaStep<System>(P.sys, theta, hk, StepOptions{}, P.q0); };
+      };
+      if (sub.size() == 1 && !sub.front().adjoint && sub.front().weight == 1.0)
+        return run_step(SeparableThetaStep<System>(P.sys, R.theta(), h, StepOptions{}, P.q0), P, steps, track);
+      const ComposedStep<SeparableThetaStep<System>> C(h, sub, make(R.theta()), make(1.0 - R.theta()));
+      return run_step(C, P, steps, track);
+    };
+  }
+  return nullptr;
+}
+
+// The position-momentum step of a theta map, alone (explicit or structured where dvm
+// run's is, unless `generic`: Newton on the step equation of L_d, use_structure = false).
+template <class System>
+RunFn<System> dvm_map(ThetaMap R, bool generic = false) {
+  if (!generic) {
+    if (RunFn<System> f = dvm_splitting<System>(R, single_substep())) return f;
+    if (RunFn<System> f = dvm_separable_newton<System>(R, single_substep())) return f;
+  }
   return [R](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
     const PositionMomentumStep<System, ThetaMap> S(P.sys, R, h);
     return run_step(S, P, steps, track);
   };
 }
 
-// A composition of a theta map (route 1; explicit where dvm run's is, unless `generic`:
-// then by Newton's method on each substep's equation, as with use_structure = false).
+// A composition of a theta map (route 1; explicit or structured where dvm run's is,
+// unless `generic`: then by Newton's method on each substep's equation of L_d, as with
+// use_structure = false).
 template <class System>
 RunFn<System> dvm_composition(ThetaMap R, const std::string& scheme, bool generic = false) {
   const std::vector<Substep> sub = substeps(find_composition(scheme), R.symmetric());
-  if (!generic)
+  if (!generic) {
     if (RunFn<System> f = dvm_splitting<System>(R, sub)) return f;
+    if (RunFn<System> f = dvm_separable_newton<System>(R, sub)) return f;
+  }
   return [R, sub](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
     const CompositionStep<System, ThetaMap> S(P.sys, R, h, sub);
     return run_step(S, P, steps, track);
