@@ -37,10 +37,12 @@
 namespace dvm {
 
 struct WrittenSystem {
-  // Where the point lives: R^n (any number of coordinates), S^2 (the embedded unit
-  // vector, three coordinates), SO(3) (the rotation matrix; no coordinate names).
+  // Where the point lives: R^n (any number of coordinates), S^2 or a power (S^2)^K
+  // (the embedded unit vectors, three coordinates each), SO(3) (the rotation matrix;
+  // no coordinate names).
   enum class Space { euclidean, sphere, rotation };
   Space space = Space::euclidean;
+  int factors = 1;  // K, the number of S^2 factors (space sphere)
   std::string name = "lagrangian";
   // One name per coordinate, in the order of the state: the declared names, with an
   // array's entries named q[1], q[2], ... (these name the columns).
@@ -136,9 +138,13 @@ struct WrittenSystem {
         claim("pi" + std::to_string(i), "angular momentum");
       }
     }
-    if (space == Space::sphere && coordinates.size() != 3)
+    if (space == Space::sphere && factors == 1 && coordinates.size() != 3)
       throw std::invalid_argument("on S^2 the coordinates are the 3 components of the embedded unit vector, got " +
                                   std::to_string(coordinates.size()) + " names");
+    if (space == Space::sphere && static_cast<int>(coordinates.size()) != 3 * factors)
+      throw std::invalid_argument("on (S^2)^" + std::to_string(factors) + " the coordinates are the 3 components of " +
+                                  "each of the " + std::to_string(factors) + " embedded unit vectors (" +
+                                  std::to_string(3 * factors) + " names), got " + std::to_string(coordinates.size()));
     if (space != Space::rotation && coordinates.empty()) throw std::invalid_argument("at least one coordinate is needed");
     if (space != Space::euclidean && !arrays.empty())
       throw std::invalid_argument("arrays of coordinates are written on R^n only");

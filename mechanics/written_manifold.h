@@ -8,6 +8,9 @@
 //          text names their components after the coordinates (default x, y, z and
 //          x_dot, y_dot, z_dot). H(x, p) takes the stored covector p (a tangent
 //          3-vector acting by v -> p.v) as p_x, p_y, p_z.
+//   (S^2)^K  K unit vectors x_1 ... x_K stacked in one 3K-vector (SpherePower<K>), the
+//          coordinates named three per factor (default x1, y1, z1, x2, ...); it runs
+//          the spherical chain's steps.
 //   SO(3)  L(R, w): R11 ... R33 the entries of the rotation matrix, w1 w2 w3 the body
 //          angular velocity (dR/dt = R hat(w)); H(R, pi) with pi1 pi2 pi3 the body
 //          angular momentum.
@@ -16,8 +19,9 @@
 // each evaluation reads the stored point and vector in place.
 //
 // Symmetries. A rotation Q about a coordinate axis e_k acts on S^2 by (x, v) ->
-// (Q x, Q v) and on SO(3) by left multiplication (R, w) -> (Q R, w). Where L is
-// invariant, Noether's theorem conserves J_k = (x cross p)_k on S^2 and the spatial
+// (Q x, Q v), on (S^2)^K by the same Q on every factor, and on SO(3) by left
+// multiplication (R, w) -> (Q R, w). Where L is invariant, Noether's theorem conserves
+// J_k = (x cross p)_k on S^2 (sum_i (x_i cross p_i)_k on (S^2)^K) and the spatial
 // angular momentum component J_k = (R pi)_k on SO(3). rotation_symmetries() finds the
 // axes numerically: L at a few fixed sample states against L at their rotated images,
 // equal to 1e-10 relative. Those J_k are reported as invariants; the built-in systems
@@ -40,18 +44,39 @@ namespace dvm {
 
 namespace written_manifold_detail {
 
+// The number of S^2 factors of M: 1 for S^2, K for (S^2)^K, 0 for SO(3).
+template <class M>
+struct sphere_factors : std::integral_constant<int, 0> {};
+template <>
+struct sphere_factors<Sphere> : std::integral_constant<int, 1> {};
+template <int K>
+struct sphere_factors<SpherePower<K>> : std::integral_constant<int, K> {};
+
 template <class M>
 constexpr WrittenSystem::Space space_of() {
-  static_assert(std::is_same_v<M, Sphere> || std::is_same_v<M, SO3>, "written systems live on R^n, S^2 or SO(3)");
-  return std::is_same_v<M, Sphere> ? WrittenSystem::Space::sphere : WrittenSystem::Space::rotation;
+  static_assert(sphere_factors<M>::value > 0 || std::is_same_v<M, SO3>,
+                "written systems live on R^n, S^2, (S^2)^K or SO(3)");
+  return sphere_factors<M>::value > 0 ? WrittenSystem::Space::sphere : WrittenSystem::Space::rotation;
 }
 
 template <class M>
 const std::shared_ptr<const WrittenSystem>& checked(const std::shared_ptr<const WrittenSystem>& s) {
   if (!s || s->lagrangian.empty()) throw std::invalid_argument("a written system needs a Lagrangian");
-  if (s->space != space_of<M>())
-    throw std::invalid_argument(s->name + ": the written system does not live on " + std::string(M::name));
+  if (s->space != space_of<M>() || (sphere_factors<M>::value > 0 && s->factors != sphere_factors<M>::value))
+    throw std::invalid_argument(s->name + ": the written system does not live on " + std::string(M::name) +
+                                (sphere_factors<M>::value > 1 ? " with " + std::to_string(sphere_factors<M>::value) +
+                                                                    " factors"
+                                                              : std::string()));
   return s;
+}
+
+// J = sum_i x_i cross p_i over the S^2 factors of a stacked point.
+template <int N>
+Vec<double, 3> total_cross(const Vec<double, N>& x, const Vec<double, N>& p) {
+  Vec<double, 3> J = Vec<double, 3>::Zero();
+  for (int i = 0; i < N / 3; ++i)
+    J += Vec<double, 3>(x.template segment<3>(3 * i)).cross(Vec<double, 3>(p.template segment<3>(3 * i)));
+  return J;
 }
 
 // The rotation by angle a about the coordinate axis k.
@@ -82,9 +107,9 @@ struct WrittenManifoldLagrangian {
   std::string name() const { return system->name; }
 
   // (one overload per space: the scalar is deduced from the argument types)
-  template <class T>
-  T operator()(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
-    static_assert(std::is_same_v<M, Sphere>, "a point of S^2 is a 3-vector");
+  template <class T, int N>
+  T operator()(const Vec<T, N>& x, const Vec<T, N>& v) const {
+    static_assert(N == 3 * written_manifold_detail::sphere_factors<M>::value, "a point of (S^2)^K is a 3K-vector");
     return system->lagrangian(x.data(), v.data());
   }
   template <class T>
@@ -103,10 +128,10 @@ struct WrittenManifoldLagrangian {
   // J_k for each symmetric axis k, in order.
   std::vector<double> momenta(const P<double>& x, const V<double>& p) const {
     Vec<double, 3> J;
-    if constexpr (std::is_same_v<M, Sphere>)
-      J = x.cross(p);
-    else
+    if constexpr (std::is_same_v<M, SO3>)
       J = x * p;
+    else
+      J = written_manifold_detail::total_cross(x, p);
     std::vector<double> out;
     for (int k = 0; k < 3; ++k)
       if (symmetric_axes[static_cast<std::size_t>(k)]) out.push_back(J[k]);
@@ -127,11 +152,19 @@ struct WrittenManifoldLagrangian {
         for (double a : {0.7, 2.3}) {
           const Mat<double, 3, 3> Q = axis_rotation(k, a);
           double L0, L1;
-          if constexpr (std::is_same_v<M, Sphere>) {
-            const Vec<double, 3> x = dirs[s].normalized();
-            const Vec<double, 3> v = vels[s] - vels[s].dot(x) * x;
+          if constexpr (!std::is_same_v<M, SO3>) {
+            // factor i starts from the sample directions in turn
+            P<double> x, v, Qx, Qv;
+            for (int i = 0; i < x.size() / 3; ++i) {
+              const Vec<double, 3> xi = dirs[(s + i) % 3].normalized();
+              const Vec<double, 3> vi = vels[(s + 2 * i) % 3] - vels[(s + 2 * i) % 3].dot(xi) * xi;
+              x.template segment<3>(3 * i) = xi;
+              v.template segment<3>(3 * i) = vi;
+              Qx.template segment<3>(3 * i) = Q * xi;
+              Qv.template segment<3>(3 * i) = Q * vi;
+            }
             L0 = (*this)(x, v);
-            L1 = (*this)(Vec<double, 3>(Q * x), Vec<double, 3>(Q * v));
+            L1 = (*this)(Qx, Qv);
           } else {
             const Mat<double, 3, 3> R = SO3::exp(Vec<double, 3>(1.3 * dirs[s]));
             L0 = (*this)(R, vels[s]);
@@ -155,9 +188,9 @@ struct WrittenManifoldHamiltonian {
   using Manifold = M;
   std::shared_ptr<const WrittenSystem> system;
   std::string name() const { return system->name; }
-  template <class T>
-  T operator()(const Vec<T, 3>& x, const Vec<T, 3>& p) const {
-    static_assert(std::is_same_v<M, Sphere>, "a point of S^2 is a 3-vector");
+  template <class T, int N>
+  T operator()(const Vec<T, N>& x, const Vec<T, N>& p) const {
+    static_assert(N == 3 * written_manifold_detail::sphere_factors<M>::value, "a point of (S^2)^K is a 3K-vector");
     return system->hamiltonian(x.data(), static_cast<const T*>(nullptr), p.data());
   }
   template <class T>

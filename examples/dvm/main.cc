@@ -96,9 +96,11 @@ const char* kRunHelp =
     "    ends = { q = \"fixed\" }     per array: \"none\" (default: q[0], q[n+1] refused),\n"
     "                               \"fixed\" (q[0] = q[n+1] = 0, walls at rest) or\n"
     "                               \"periodic\" (q[0] is q[n], q[n+1] is q[1])\n"
-    "    space = \"R^n\"              string, \"R^n\" (default), \"S^2\" or \"SO(3)\". S^2: the\n"
-    "                               3 coordinates are the embedded unit vector (default\n"
-    "                               x, y, z), p_x.. the stored covector. SO(3): fixed\n"
+    "    space = \"R^n\"              string, \"R^n\" (default), \"S^2\", \"(S^2)^K\" (K = 1..4)\n"
+    "                               or \"SO(3)\". S^2: the 3 coordinates are the embedded\n"
+    "                               unit vector (default x, y, z), p_x.. the stored\n"
+    "                               covector. (S^2)^K: 3 per factor (default x1, y1, z1,\n"
+    "                               x2, ..); lagrangian form only. SO(3): fixed\n"
     "                               names R11 .. R33 (the matrix), w1 w2 w3 (the body\n"
     "                               angular velocity), pi1 pi2 pi3 (its momentum)\n"
     "    params = { m = 1.0, ... }  numbers, any names the expressions use; a list\n"
@@ -352,19 +354,21 @@ std::string run_help() {
   fill("@STAGES_MAX@", std::to_string(dvm::kGalerkinStagesMax));
   h += "\nWhat each system runs (any other combination is refused with exit 2):\n";
   char line[256];
-  std::snprintf(line, sizeof line, "  %-18s %-6s %-38s %-5s %-8s %s\n", "system", "space", "forms", "comp.", "galerkin",
+  std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", "system", "space", "forms", "comp.", "galerkin",
                 "boundary-value");
   h += line;
-  auto row = [&](const dvm::SystemEntry& e) {
+  auto row = [&](const dvm::SystemEntry& e, const char* space = nullptr) {
     std::string forms;
     for (dvm::Form f : e.caps.forms) forms += (forms.empty() ? "" : ",") + std::string(dvm::to_string(f));
-    std::snprintf(line, sizeof line, "  %-18s %-6s %-38s %-5s %-8s %s\n", e.name.c_str(), dvm::to_string(e.space),
+    std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", e.name.c_str(),
+                  space ? space : dvm::to_string(e.space),
                   forms.c_str(), e.caps.composition ? "yes" : "no", e.caps.galerkin ? "yes" : "no",
                   e.caps.boundary_value ? "yes" : "no");
     h += line;
   };
   for (const auto& e : dvm::system_registry()) row(e);
   for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation}) row(dvm::written_system_entry(sp));
+  row(dvm::written_system_entry(dvm::Space::sphere, 2), "(S^2)^K");
   return h;
 }
 

@@ -98,10 +98,15 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   const toml::node* sp = sys.get("space");
   if (sp) {
     const auto v = sp->value<std::string>();
-    if (!sp->is_string() || !(*v == "R^n" || *v == "S^2" || *v == "SO(3)"))
-      throw InputError(key_where(path, *sp, "system.space") + ": expected \"R^n\", \"S^2\" or \"SO(3)\"" +
+    // "(S^2)^K": K unit vectors, K = 1..4 (the sizes the spherical chain's steps are built for)
+    const bool power = sp->is_string() && v->size() == 7 && v->compare(0, 6, "(S^2)^") == 0 && (*v)[6] >= '1' &&
+                       (*v)[6] <= '4';
+    if (!sp->is_string() || !(*v == "R^n" || *v == "S^2" || *v == "SO(3)" || power))
+      throw InputError(key_where(path, *sp, "system.space") +
+                       ": expected \"R^n\", \"S^2\", \"(S^2)^K\" with K from 1 to 4, or \"SO(3)\"" +
                        (sp->is_string() ? ", got \"" + *v + "\"" : ""));
-    space = *v == "S^2" ? Space::sphere : *v == "SO(3)" ? Space::rotation : Space::euclidean;
+    space = *v == "S^2" || power ? Space::sphere : *v == "SO(3)" ? Space::rotation : Space::euclidean;
+    if (power) w->factors = (*v)[6] - '0';
   }
   w->space = space == Space::sphere     ? WrittenSystem::Space::sphere
              : space == Space::rotation ? WrittenSystem::Space::rotation
@@ -159,7 +164,9 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   if (!c && space == Space::euclidean)
     throw InputError(path + ": missing key 'system.coordinates' (the names of the coordinates, e.g. "
                             "coordinates = [\"theta\"]; velocities are then named theta_dot)");
-  if (!c && space == Space::sphere) w->coordinates = {"x", "y", "z"};
+  if (!c && space == Space::sphere && w->factors == 1) w->coordinates = {"x", "y", "z"};
+  for (int k = 1; !c && space == Space::sphere && w->factors > 1 && k <= w->factors; ++k)
+    for (const char* n : {"x", "y", "z"}) w->coordinates.push_back(n + std::to_string(k));
   if (c) {
     const toml::array* ca = c->as_array();
     if (!ca || ca->empty())
@@ -266,7 +273,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   const toml::node* L = sys.get("lagrangian");
   pr.written_where = key_where(path, *L, "system.lagrangian");
   if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
-  pr.system = &written_system_entry(space);
+  pr.system = &written_system_entry(space, w->factors);
   pr.dim = w->dim();
   pr.written = std::move(w);
 }

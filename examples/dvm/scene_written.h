@@ -2,8 +2,10 @@
 //
 //   [system]
 //   name = "double pendulum"                     # optional, shown in the output
-//   space = "R^n"                                # optional: "R^n", "S^2" or "SO(3)"
-//   coordinates = ["a", "b"]                     # S^2: three (default x, y, z); SO(3): none
+//   space = "R^n"                                # optional: "R^n", "S^2", "(S^2)^K" (K = 1..4)
+//                                                # or "SO(3)"
+//   coordinates = ["a", "b"]                     # S^2: three (default x, y, z); (S^2)^K: 3K
+//                                                # (default x1, y1, z1, x2, ...); SO(3): none
 //                                                # R^n: "q[n]" or "q[1000]" is an array q[1..n]
 //   ends = { q = "fixed" }                       # optional, per array: "none", "fixed", "periodic"
 //   lagrangian = "... a, b, a_dot, b_dot, parameters ..."

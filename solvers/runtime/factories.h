@@ -21,6 +21,7 @@ std::unique_ptr<Run> nbody(const Problem&, const Method&);
 std::unique_ptr<Run> chain(const Problem&, const Method&);
 std::unique_ptr<Run> written(const Problem&, const Method&);
 std::unique_ptr<Run> written_sphere(const Problem&, const Method&);
+std::unique_ptr<Run> written_sphere_power(const Problem&, const Method&);
 std::unique_ptr<Run> written_rotation(const Problem&, const Method&);
 std::unique_ptr<Run> spherical_pendulum(const Problem&, const Method&);
 std::unique_ptr<Run> spherical_chain(const Problem&, const Method&);

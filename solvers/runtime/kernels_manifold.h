@@ -81,8 +81,8 @@ struct BuiltinOr {
   std::string name() const { return written ? written->name() : builtin->name(); }
   // The built-in branch is the expected one and stays inlined; the written one is a
   // call (its tape interpreter is large).
-  template <class T>
-  [[gnu::always_inline]] T operator()(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+  template <class T, int N>
+  [[gnu::always_inline]] T operator()(const Vec<T, N>& x, const Vec<T, N>& v) const {
     if (__builtin_expect(written.has_value(), 0)) return call_written(*written, x, v);
     return (*builtin)(x, v);
   }
@@ -212,14 +212,14 @@ std::vector<std::string> point_columns(const WrittenManifoldLagrangian<M>& L) {
 template <class M>
 std::vector<std::string> covector_columns(const WrittenManifoldLagrangian<M>& L) {
   std::vector<std::string> out;
-  for (int i = 0; i < 3; ++i)
+  for (int i = 0; i < M::template Tangent<double>::RowsAtCompileTime; ++i)
     out.push_back(std::is_same_v<M, SO3> ? "pi" + std::to_string(i + 1)
                                          : "p_" + L.system->coordinates[static_cast<std::size_t>(i)]);
   return out;
 }
 template <class M>
 std::vector<double> momentum_map(const WrittenManifoldLagrangian<M>& L, const typename M::template Point<double>& x,
-                                 const V3& p) {
+                                 const typename M::template Tangent<double>& p) {
   return L.momenta(x, p);
 }
 template <class M>
@@ -245,7 +245,7 @@ std::vector<InvariantReport> momentum_reports(const WrittenManifoldLagrangian<M>
 }
 template <class M>
 double monitored_energy(const WrittenManifoldLagrangian<M>& L, const typename M::template Point<double>& x,
-                        const V3& p) {
+                        const typename M::template Tangent<double>& p) {
   return L.energy_at(x, manifold_legendre_inverse(L, x, p), p);
 }
 template <class S>

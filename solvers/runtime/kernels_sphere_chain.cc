@@ -1,28 +1,52 @@
-// Run kernels of the chain of spherical pendulums on (S^2)^n, n = 1..4
-// (solvers/runtime/kernels_manifold.h).
+// Run kernels on (S^2)^n, n = 1..4: the chain of spherical pendulums and Lagrangians
+// written on (S^2)^K, K = 2..4, through one set of steps per n
+// (BuiltinOrWritten<SphericalChain<K>>, solvers/runtime/kernels_manifold.h).
 #include "solvers/runtime/factories.h"
 #include "solvers/runtime/kernels_manifold.h"
 
 namespace dvm::factories {
 
+namespace {
+
+// Calls run(std::integral_constant<int, K>) for K = n in 1..4.
+template <class F>
+std::unique_ptr<Run> for_factors(int n, int first, F&& run, const char* what) {
+  if (n >= first) switch (n) {
+      case 1: return run(std::integral_constant<int, 1>{});
+      case 2: return run(std::integral_constant<int, 2>{});
+      case 3: return run(std::integral_constant<int, 3>{});
+      case 4: return run(std::integral_constant<int, 4>{});
+      default: break;
+    }
+  throw InputError(what);
+}
+
+}  // namespace
+
 std::unique_ptr<Run> spherical_chain(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
-  const int n = static_cast<int>(P.at("n"));
   const SphereMap f = kernels::sphere_map(me);
   auto run = [&](auto k) {
     constexpr int K = decltype(k)::value;
+    using Sys = kernels::BuiltinOrWritten<SphericalChain<K>>;
     const SphericalChain<K> L(Vec<double, K>::Constant(P.at("m")), Vec<double, K>::Constant(P.at("l")), P.at("g"));
-    return kernels::make_manifold_run<SphericalChain<K>, SpherePowerMap<K>, false, false, false>(
-        L, SpherePowerMap<K>(f), pr, me);
+    return kernels::make_manifold_run<Sys, SpherePowerMap<K>, false, false, false, SphericalChain<K>>(
+        kernels::as_builtin(L), SpherePowerMap<K>(f), pr, me, L);
   };
-  switch (n) {
-    case 1: return run(std::integral_constant<int, 1>{});
-    case 2: return run(std::integral_constant<int, 2>{});
-    case 3: return run(std::integral_constant<int, 3>{});
-    case 4: return run(std::integral_constant<int, 4>{});
-    default: break;
-  }
-  throw InputError("system.params.n: the spherical chain takes 1 to 4 links");
+  return for_factors(static_cast<int>(P.at("n")), 1, run, "system.params.n: the spherical chain takes 1 to 4 links");
+}
+
+std::unique_ptr<Run> written_sphere_power(const Problem& pr, const Method& me) {
+  const SphereMap f = kernels::sphere_map(me);
+  auto run = [&](auto k) {
+    constexpr int K = decltype(k)::value;
+    using Sys = kernels::BuiltinOrWritten<SphericalChain<K>>;
+    const WrittenManifoldLagrangian<SpherePower<K>> L(pr.written);
+    return kernels::make_manifold_run<Sys, SpherePowerMap<K>, false, false, false,
+                                      WrittenManifoldLagrangian<SpherePower<K>>>(
+        kernels::as_written<SphericalChain<K>>(L), SpherePowerMap<K>(f), pr, me, L);
+  };
+  return for_factors(pr.written->factors, 2, run, "system.space: Lagrangians are written on (S^2)^K for K = 2 to 4");
 }
 
 }  // namespace dvm::factories

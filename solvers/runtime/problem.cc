@@ -126,7 +126,7 @@ void validate(const Problem& pr, const Method& me) {
     const Space space = pr.written->space == WrittenSystem::Space::sphere     ? Space::sphere
                         : pr.written->space == WrittenSystem::Space::rotation ? Space::rotation
                                                                               : Space::euclidean;
-    if (&sys != &written_system_entry(space))
+    if (&sys != &written_system_entry(space, pr.written->factors))
       throw InputError(std::string("system.space: the written system lives on ") + to_string(space) +
                        " but the problem names the system entry \"" + name + "\" on " + to_string(sys.space));
   }

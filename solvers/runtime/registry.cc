@@ -334,7 +334,7 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
   throw InputError(where + ": unknown system \"" + echo(name) + "\"; expected one of: " + join(names));
 }
 
-const SystemEntry& written_system_entry(Space space) {
+const SystemEntry& written_system_entry(Space space, int factors) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
   // On S^2 and SO(3) a written Lagrangian runs the steps of the built-in systems there;
@@ -349,9 +349,18 @@ const SystemEntry& written_system_entry(Space space) {
       {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
        "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2", true, false},
       factories::written_rotation, ""};
+  // On (S^2)^K it runs the spherical chain's steps, and what they run.
+  static const SystemEntry sphere_power = {
+      "lagrangian", "written in the scene in x1, x1_dot, ..., xK, xK_dot (K embedded unit vectors)", Space::sphere,
+      0, {},
+      {{Form::lagrangian}, true, true, false, false,
+       "on (S^2)^K the written Lagrangian runs the spherical chain's steps: the lagrangian form with every S^2 map "
+       "and composition; no hamiltonian form, Galerkin method or boundary values",
+       true, false},
+      factories::written_sphere_power, "3 per factor"};
   switch (space) {
     case Space::euclidean: return rn;
-    case Space::sphere: return sphere;
+    case Space::sphere: return factors > 1 ? sphere_power : sphere;
     case Space::rotation: return rotation;
   }
   return rn;

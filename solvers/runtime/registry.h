@@ -159,8 +159,8 @@ struct SystemEntry {
 const std::vector<SystemEntry>& system_registry();
 // Throws InputError ("<where>: unknown system ...; expected one of: ...").
 const SystemEntry& find_system_entry(const std::string& name, const std::string& where);
-// The entry of Lagrangians written in a scene on R^n, S^2 or SO(3) (name "lagrangian",
-// not listed as built-in).
-const SystemEntry& written_system_entry(Space space = Space::euclidean);
+// The entry of Lagrangians written in a scene on R^n, S^2, (S^2)^K (space sphere,
+// factors K = 2..4) or SO(3) (name "lagrangian", not listed as built-in).
+const SystemEntry& written_system_entry(Space space = Space::euclidean, int factors = 1);
 
 }  // namespace dvm

@@ -52,6 +52,10 @@ const std::map<std::string, std::string>& heads() {
       {"lagrangian on S^2",
        "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
        "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
+      {"lagrangian on (S^2)^2",
+       "[system]\nspace = \"(S^2)^2\"\nlagrangian = \"(x1_dot^2 + y1_dot^2 + z1_dot^2) + (x1_dot*x2_dot + y1_dot*y2_dot + "
+       "z1_dot*z2_dot) + (x2_dot^2 + y2_dot^2 + z2_dot^2)/2 - 2*z1 - z2\"\n[initial]\n"
+       "q = [0.6, 0.0, -0.8, 0.0, 0.6, -0.8]\nv = [0.0, 0.5, 0.0, 0.4, 0.4, 0.3]\n"},
       {"lagrangian on SO(3)",
        "[system]\nspace = \"SO(3)\"\nlagrangian = \"(w1^2 + w2^2 + w3^2/2)/2 - R33\"\n"
        "hamiltonian = \"(pi1^2 + pi2^2 + 2*pi3^2)/2 + R33\"\n[initial]\n"
@@ -121,6 +125,13 @@ std::vector<SystemCaps> registry_systems() {
     c.boundary_value = c.space == "S^2";
     out.push_back(c);
   }
+  // written on (S^2)^K: the spherical chain's capabilities
+  SystemCaps c = w;
+  c.space = "S^2";
+  c.name = "lagrangian on (S^2)^2";
+  c.forms = {"lagrangian"};
+  c.galerkin = false;
+  out.push_back(c);
   return out;
 }
 

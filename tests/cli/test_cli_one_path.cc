@@ -618,6 +618,30 @@ BOOST_AUTO_TEST_CASE(lagrangians_written_on_curved_spaces) {
   BOOST_TEST(named.status == 0, named.err);
   BOOST_TEST(first_line(temp_dir() + "/abc.csv") == "t,a,b,c,p_a,p_b,p_c,energy,J3");
 
+  // on (S^2)^2 with equal masses and rods: the built-in spherical chain of two links
+  {
+    const std::string csv = temp_dir() + "/written_power.csv";
+    std::vector<std::string> sets = {"--set", "integrator.t_end=0.5", "--set", "initial.q=[0.6, 0.0, -0.8, 0.0, 0.6, -0.8]",
+                                     "--set", "initial.v=[0.0, 0.5, 0.0, 0.4, 0.4, 0.3]", "--set",
+                                     "integrator.composition=\"kahan-li6\""};
+    std::vector<std::string> a = {"run", scene("spherical_double_pendulum_written.toml"), "--json", "--quiet", "--csv",
+                                  csv, "--set", "system.params.m2=1.0", "--set", "system.params.l2=1.0"};
+    std::vector<std::string> b = {"run", scene("spherical-chain.toml"), "--json", "--quiet", "--csv", csv, "--set",
+                                  "system.params.n=2", "--set", "system.params.g=9.81"};
+    a.insert(a.end(), sets.begin(), sets.end());
+    b.insert(b.end(), sets.begin(), sets.end());
+    const Output w = dvm(a);
+    BOOST_TEST(w.status == 0, w.err);
+    BOOST_TEST(first_line(csv) == "t,x1,y1,z1,x2,y2,z2,p_x1,p_y1,p_z1,p_x2,p_y2,p_z2,energy,J3");
+    const Output o = dvm(b);
+    BOOST_TEST(o.status == 0, o.err);
+    const auto qw = json_array(w.out, "q_final"), qb = json_array(o.out, "q_final");
+    BOOST_TEST_REQUIRE(qw.size() == 6u);
+    BOOST_TEST_REQUIRE(qb.size() == 6u);
+    for (std::size_t i = 0; i < qw.size(); ++i) BOOST_TEST(std::fabs(qw[i] - qb[i]) <= 1e-13);
+    BOOST_TEST(w.out.find("\"angular momentum about e3\"") != std::string::npos, w.out);
+  }
+
   struct Refused {
     const char* scene;
     std::vector<std::string> sets;
@@ -627,8 +651,17 @@ BOOST_AUTO_TEST_CASE(lagrangians_written_on_curved_spaces) {
   const char* sp = "spherical_pendulum_written.toml";
   const char* top = "heavy_top_written.toml";
   for (const Refused& r : std::vector<Refused>{
-           {sp, {"system.space=\"S3\""}, "system.space", "expected \"R^n\", \"S^2\" or \"SO(3)\""},
+           {sp, {"system.space=\"S3\""}, "system.space", "expected \"R^n\", \"S^2\", \"(S^2)^K\" with K from 1 to 4, or \"SO(3)\""},
            {sp, {"system.coordinates=[\"x\", \"y\"]"}, "system.coordinates", "3 components"},
+           {"spherical_double_pendulum_written.toml", {"system.space=\"(S^2)^3\""}, "initial.q",
+            "expected 9"},
+           {"spherical_double_pendulum_written.toml", {"system.coordinates=[\"a\", \"b\", \"c\"]"},
+            "system.coordinates", "the 3 components of each of the 2 embedded unit vectors"},
+           {"spherical_double_pendulum_written.toml", {"system.space=\"(S^2)^5\""}, "system.space", "K from 1 to 4"},
+           {"spherical_double_pendulum_written.toml", {"integrator.form=\"hamiltonian\""}, "integrator.form",
+            "spherical chain's steps"},
+           {"spherical_double_pendulum_written.toml", {"integrator.method=\"galerkin\""}, "integrator.method",
+            "spherical chain's steps"},
            {top, {"system.coordinates=[\"a\"]"}, "system.coordinates", "names are fixed"},
            {top, {"system.params.w1=2.0"}, "system.params", "used twice"},
            {sp, {"system.lagrangian=\"0.5*(x_dot^2 + y_dot^2 + w_dot^2)\""}, "system.lagrangian", "unknown name 'w_dot'"},

@@ -125,9 +125,61 @@ int compare(const Pair& s, const Method& me, const std::string& what) {
   return 1;
 }
 
-// Every map of the space (theta maps also at theta = 0.3), both forms, every
-// composition; every Galerkin method.
-int every_method(const Pair& s, Space space) {
+// The chain of K spherical pendulums written on (S^2)^K, link i of mass m and length l
+// at r_i = l (x_1 + ... + x_i): L = sum_i m |dr_i/dt|^2/2 - g sum_i m (r_i)_3, spelt
+// out over the coordinates x1, y1, z1, ... (the built-in spherical chain's Lagrangian).
+std::shared_ptr<WrittenSystem> chain_text(int K) {
+  auto w = std::make_shared<WrittenSystem>();
+  w->space = WrittenSystem::Space::sphere;
+  w->factors = K;
+  w->name = "written chain";
+  for (int k = 1; k <= K; ++k)
+    for (const char* c : {"x", "y", "z"}) w->coordinates.push_back(c + std::to_string(k));
+  w->params = {{"m", 1.2}, {"l", 0.7}, {"g", 9.81}};
+  w->check_names();
+  std::string kinetic, height;
+  for (int i = 1; i <= K; ++i) {
+    for (const char* c : {"x", "y", "z"}) {
+      std::string u;
+      for (int j = 1; j <= i; ++j) u += (j > 1 ? " + " : "") + std::string(c) + std::to_string(j) + "_dot";
+      kinetic += (kinetic.empty() ? "" : " + ") + std::string("(") + u + ")^2";
+    }
+    for (int j = 1; j <= i; ++j) height += (height.empty() ? "" : " + ") + std::string("z") + std::to_string(j);
+  }
+  w->lagrangian = Expression::parse("m*l^2/2*(" + kinetic + ") - m*g*l*(" + height + ")",
+                                    w->symbols(WrittenSystem::Kind::lagrangian));
+  return w;
+}
+
+Pair chain_pair(int K) {
+  Pair s;
+  s.builtin.system = &find_system_entry("spherical-chain", "test");
+  s.builtin.params = {{"n", K}, {"m", 1.2}, {"l", 0.7}, {"g", 9.81}};
+  s.builtin.dim = 3 * K;
+  // link k: tilted by 0.3 + 0.2 k from the downward vertical, towards azimuth k; its
+  // velocity horizontal and orthogonal to it
+  for (int k = 0; k < K; ++k) {
+    const double a = 0.3 + 0.2 * k, b = 1.0 * k;
+    const Vec<double, 3> x(std::sin(a) * std::cos(b), std::sin(a) * std::sin(b), -std::cos(a));
+    const Vec<double, 3> v = 0.8 * Vec<double, 3>(0, 0, 1).cross(x) + Vec<double, 3>(0.1, 0.2 * k, 0.0).cross(x);
+    for (int j = 0; j < 3; ++j) {
+      s.builtin.q.push_back(x[j]);
+      s.builtin.v.push_back(v[j]);
+    }
+  }
+  s.builtin.steps = 5;
+  s.builtin.step = 0.01;
+  s.text = s.builtin;
+  s.text.system = &written_system_entry(Space::sphere, K);
+  s.text.written = chain_text(K);
+  s.text.params.clear();
+  return s;
+}
+
+// Every map of the space (theta maps also at theta = 0.3), every composition, in the
+// lagrangian form; where the system runs them (`full`), also the hamiltonian form and
+// every Galerkin method.
+int every_method(const Pair& s, Space space, bool full = true) {
   int n = 0;
   std::vector<std::string> compositions = {"none"};
   for (const CompositionScheme& c : composition_schemes())  // (splittings run on R^n only, refused here)
@@ -139,6 +191,7 @@ int every_method(const Pair& s, Space space) {
     for (double th : thetas)
       for (Form f : {Form::lagrangian, Form::hamiltonian})
         for (const std::string& c : compositions) {
+          if (f == Form::hamiltonian && !full) continue;
           // the non-closed-form theta maps (Newton inverse) under the long compositions
           // cost seconds each; their step is the same, one composition covers them
           if (th == 0.3 && !e.closed_inverse && c != "none" && c != "triple-jump") continue;
@@ -156,6 +209,7 @@ int every_method(const Pair& s, Space space) {
   dirk.weights = {0.3, 0.4, 0.3};
   n += compare(s, dirk, "dirk");
   for (const GalerkinEntry& g : galerkin_registry()) {
+    if (!full) break;
     Method me;
     me.galerkin = true;
     me.stages = g.stages;
@@ -261,4 +315,53 @@ BOOST_AUTO_TEST_CASE(validate_refuses_what_the_written_system_cannot_run) {
   b.text.system = &written_system_entry(Space::rotation);
   b.text.written = top_pair().text.written;
   BOOST_CHECK_THROW(validate(b.text, me), InputError);
+}
+
+BOOST_AUTO_TEST_CASE(written_chains_on_powers_of_the_sphere_match_the_builtin_chain) {
+  // two links with every map and composition; three and four links with the default map
+  const int n = every_method(chain_pair(2), Space::sphere, false);
+  BOOST_TEST_MESSAGE("spherical chain of 2 links, built-in against written: " << n << " methods");
+  BOOST_TEST(n >= 60);
+  Method me;
+  me.map = &find_map_entry("sphere-exp", "test");
+  compare(chain_pair(3), me, "3 links");
+  me.composition = "suzuki5";
+  compare(chain_pair(4), me, "4 links");
+  // the vertical angular momentum is found in the text; a field along e1 breaks it
+  BOOST_TEST((WrittenManifoldLagrangian<SpherePower<2>>(chain_text(2)).symmetric_axes ==
+              std::array<bool, 3>{false, false, true}));
+  auto tilted = std::make_shared<WrittenSystem>(*chain_text(2));
+  tilted->lagrangian = Expression::parse("(x1_dot^2 + y1_dot^2 + z1_dot^2 + x2_dot^2 + y2_dot^2 + z2_dot^2)/2 - x1",
+                                         tilted->symbols(WrittenSystem::Kind::lagrangian));
+  BOOST_TEST((WrittenManifoldLagrangian<SpherePower<2>>(tilted).symmetric_axes ==
+              std::array<bool, 3>{true, false, false}));
+}
+
+BOOST_AUTO_TEST_CASE(written_powers_of_the_sphere_refuse_what_the_chain_steps_do_not_run) {
+  Pair s = chain_pair(2);
+  auto starts = [](const std::string& prefix) {
+    return [prefix](const InputError& e) { return std::string(e.what()).rfind(prefix, 0) == 0; };
+  };
+  Method me;
+  me.map = &find_map_entry("sphere-exp", "test");
+  me.form = Form::hamiltonian;
+  BOOST_CHECK_EXCEPTION(validate(s.text, me), InputError, starts("integrator.form:"));
+  me.form = Form::lagrangian;
+  me.map = nullptr;
+  me.galerkin = true;
+  BOOST_CHECK_EXCEPTION(validate(s.text, me), InputError, starts("integrator.method:"));
+  // a product named as the single sphere's entry
+  me.galerkin = false;
+  me.map = &find_map_entry("sphere-exp", "test");
+  s.text.system = &written_system_entry(Space::sphere);
+  BOOST_CHECK_EXCEPTION(validate(s.text, me), InputError, starts("system.space:"));
+  // six names declared for one sphere, three for two
+  auto w = std::make_shared<WrittenSystem>(*chain_text(2));
+  w->factors = 1;
+  BOOST_CHECK_THROW(w->check_names(), std::invalid_argument);
+  w->factors = 2;
+  w->coordinates.resize(3);
+  BOOST_CHECK_THROW(w->check_names(), std::invalid_argument);
+  // the evaluator of one power refuses a text written on another
+  BOOST_CHECK_THROW(WrittenManifoldLagrangian<SpherePower<3>>{chain_text(2)}, std::invalid_argument);
 }
