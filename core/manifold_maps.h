@@ -28,6 +28,10 @@
 
 #include <string>
 
+#include <memory>
+#include <stdexcept>
+
+#include "core/embedded_retraction.h"
 #include "core/manifolds.h"
 #include "core/map_operations.h"
 
@@ -43,12 +47,15 @@ struct ManifoldTangent {
   typename M::template Tangent<T> v;
 };
 
-enum class RetractionKind { exp, projection, cayley };
+// written: a retraction given as a function into the embedding, normalised onto the
+// manifold (core/embedded_retraction.h); its maps use Newton's inverse at every theta.
+enum class RetractionKind { exp, projection, cayley, written };
 
 inline std::string to_string(RetractionKind k) {
   switch (k) {
     case RetractionKind::exp: return "exp";
     case RetractionKind::projection: return "projection";
+    case RetractionKind::written: return "written";
     default: return "cayley";
   }
 }
@@ -57,6 +64,19 @@ namespace detail {
 inline void check_theta(double theta) {
   if (!(theta >= 0.0 && theta <= 1.0))
     throw std::invalid_argument("theta must lie in [0, 1], got " + std::to_string(theta));
+}
+
+// f(x, v) for a written retraction, in the scalar type of the step.
+template <class T, int P, int V, int O>
+Eigen::Matrix<T, O, 1> evaluate_embedded(const EmbeddedRetraction& f, const T* x, const T* v) {
+  Eigen::Matrix<T, O, 1> out;
+  if constexpr (EmbeddedRetraction::supports<T>) {
+    f.evaluate(x, v, out.data());
+  } else {
+    throw std::logic_error("a written retraction is evaluated for the scalar types of the steps on S^2 and SO(3) "
+                           "only (core/embedded_retraction.h)");
+  }
+  return out;
 }
 }  // namespace detail
 
@@ -68,23 +88,64 @@ template <class Map, class P>
 ManifoldTangent<typename Map::Manifold, typename P::Scalar> newton_manifold_inverse(const Map& map, const P& q0,
                                                                                     const P& q1);
 
-// Discretization maps on S^2 from the exponential or the projection retraction.
-class SphereMap {
+// What the maps of Prop. 2.3 on S^2 and SO(3) share: the retraction (built in, or
+// written in the embedding), theta and the name; symmetric and of order 2 at theta = 1/2.
+template <class Derived>
+class RetractionThetaMap {
  public:
-  using Manifold = Sphere;
-  SphereMap(RetractionKind kind, double theta, std::string name) : kind_(kind), theta_(theta), name_(std::move(name)) {
-    detail::check_theta(theta);
-    if (kind == RetractionKind::cayley) throw std::invalid_argument("S^2 maps use the exp or projection retraction");
-  }
   RetractionKind kind() const { return kind_; }
   double theta() const { return theta_; }
   std::string name() const { return name_; }
   bool symmetric() const { return theta_ == 0.5; }
   int order() const { return symmetric() ? 2 : 1; }
-  bool closed_form_inverse() const { return theta_ == 0.0 || theta_ == 0.5 || theta_ == 1.0; }
+  const std::shared_ptr<const EmbeddedRetraction>& written() const { return written_; }
+  // The same retraction at another theta (the adjoint is 1 - theta: Prop. 2.4).
+  Derived at_theta(double theta, std::string name) const {
+    Derived m = static_cast<const Derived&>(*this);
+    detail::check_theta(theta);
+    m.theta_ = theta;
+    m.name_ = std::move(name);
+    return m;
+  }
+
+ protected:
+  RetractionThetaMap(RetractionKind kind, double theta, std::string name, std::shared_ptr<const EmbeddedRetraction> f,
+                     const char* space)
+      : kind_(kind), theta_(theta), name_(std::move(name)), written_(std::move(f)) {
+    detail::check_theta(theta);
+    if ((kind == RetractionKind::written) != static_cast<bool>(written_))
+      throw std::invalid_argument(std::string("a written ") + space + " map needs its function, and only it has one");
+  }
+  RetractionKind kind_;
+  double theta_;
+  std::string name_;
+  std::shared_ptr<const EmbeddedRetraction> written_;
+};
+
+// Discretization maps on S^2 from the exponential or the projection retraction, or a
+// retraction written in the embedding.
+class SphereMap : public RetractionThetaMap<SphereMap> {
+ public:
+  using Manifold = Sphere;
+  SphereMap(RetractionKind kind, double theta, std::string name)
+      : RetractionThetaMap(kind, theta, std::move(name), nullptr, "S^2") {
+    if (kind == RetractionKind::cayley) throw std::invalid_argument("S^2 maps use the exp or projection retraction");
+  }
+  // The map of Prop. 2.3 from the retraction R_x(v) = f(x, v)/|f(x, v)|.
+  SphereMap(std::shared_ptr<const EmbeddedRetraction> f, double theta, std::string name)
+      : RetractionThetaMap(RetractionKind::written, theta, std::move(name), std::move(f), "S^2") {}
+  bool closed_form_inverse() const {
+    return kind_ != RetractionKind::written && (theta_ == 0.0 || theta_ == 0.5 || theta_ == 1.0);
+  }
 
   template <class T>
   Vec<T, 3> retract(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
+    if (kind_ == RetractionKind::written) {
+      using std::sqrt;
+      const Vec<T, 3> y = detail::evaluate_embedded<T, 3, 3, 3>(*written_, x.data(), v.data());
+      const T n = sqrt(detail::dot(y, y));
+      return Vec<T, 3>(y[0] / n, y[1] / n, y[2] / n);
+    }
     return kind_ == RetractionKind::exp ? Sphere::exp(x, v) : Sphere::projection(x, v);
   }
 
@@ -153,28 +214,22 @@ class SphereMap {
     }
     return {x, Vec<T, 3>(k * d[0], k * d[1], k * d[2])};
   }
-
- private:
-  RetractionKind kind_;
-  double theta_;
-  std::string name_;
 };
 
 // Discretization maps on SO(3) from the group exponential or the Cayley map.
-class SO3Map {
+class SO3Map : public RetractionThetaMap<SO3Map> {
  public:
   using Manifold = SO3;
-  SO3Map(RetractionKind kind, double theta, std::string name) : kind_(kind), theta_(theta), name_(std::move(name)) {
-    detail::check_theta(theta);
+  SO3Map(RetractionKind kind, double theta, std::string name)
+      : RetractionThetaMap(kind, theta, std::move(name), nullptr, "SO(3)") {
     if (kind == RetractionKind::projection) throw std::invalid_argument("SO(3) maps use the exp or Cayley retraction");
   }
-  RetractionKind kind() const { return kind_; }
-  double theta() const { return theta_; }
-  std::string name() const { return name_; }
-  bool symmetric() const { return theta_ == 0.5; }
-  int order() const { return symmetric() ? 2 : 1; }
+  // The map of Prop. 2.3 from the retraction R_R(w) = the orthonormalised f(R, w).
+  SO3Map(std::shared_ptr<const EmbeddedRetraction> f, double theta, std::string name)
+      : RetractionThetaMap(RetractionKind::written, theta, std::move(name), std::move(f), "SO(3)") {}
   bool closed_form_inverse() const {
-    return kind_ == RetractionKind::exp || theta_ == 0.0 || theta_ == 0.5 || theta_ == 1.0;
+    return kind_ == RetractionKind::exp ||
+           (kind_ == RetractionKind::cayley && (theta_ == 0.0 || theta_ == 0.5 || theta_ == 1.0));
   }
 
   template <class T>
@@ -183,7 +238,28 @@ class SO3Map {
   }
   template <class T>
   Mat<T, 3, 3> retract(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
+    if (kind_ == RetractionKind::written) return orthonormalised(detail::evaluate_embedded<T, 9, 3, 9>(*written_, R.data(), w.data()));
     return SO3::mul(R, tau(w));
+  }
+  // Gram-Schmidt on the columns of A (stored column-major in a): Q with Q^T Q = I,
+  // equal to A where A is already a rotation.
+  template <class T>
+  static Mat<T, 3, 3> orthonormalised(const Vec<T, 9>& a) {
+    using std::sqrt;
+    Vec<T, 3> c[3];
+    for (int j = 0; j < 3; ++j) {
+      c[j] = Vec<T, 3>(a[3 * j], a[3 * j + 1], a[3 * j + 2]);
+      for (int k = 0; k < j; ++k) {
+        const T p = detail::dot(c[k], c[j]);
+        for (int i = 0; i < 3; ++i) c[j][i] = c[j][i] - p * c[k][i];
+      }
+      const T n = sqrt(detail::dot(c[j], c[j]));
+      for (int i = 0; i < 3; ++i) c[j][i] = c[j][i] / n;
+    }
+    Mat<T, 3, 3> Q;
+    for (int j = 0; j < 3; ++j)
+      for (int i = 0; i < 3; ++i) Q(i, j) = c[j][i];
+    return Q;
   }
 
   template <class T>
@@ -216,19 +292,12 @@ class SO3Map {
     const Vec<T, 3> w(k * (W(2, 1) - W(1, 2)), k * (W(0, 2) - W(2, 0)), k * (W(1, 0) - W(0, 1)));
     return {SO3::mul(q0, SO3::cay(Vec<T, 3>(0.5 * w))), w};
   }
-
- private:
-  RetractionKind kind_;
-  double theta_;
-  std::string name_;
 };
 
 // The adjoint of a Prop. 2.3 map is the map of the same retraction with theta
 // replaced by 1 - theta (Prop. 2.4).
-inline SphereMap adjoint_map(const SphereMap& m) {
-  return SphereMap(m.kind(), 1.0 - m.theta(), m.name() + "*");
-}
-inline SO3Map adjoint_map(const SO3Map& m) { return SO3Map(m.kind(), 1.0 - m.theta(), m.name() + "*"); }
+inline SphereMap adjoint_map(const SphereMap& m) { return m.at_theta(1.0 - m.theta(), m.name() + "*"); }
+inline SO3Map adjoint_map(const SO3Map& m) { return m.at_theta(1.0 - m.theta(), m.name() + "*"); }
 
 // The map in the chart centred at c: a discretization map on R^dim.
 template <class Map>

@@ -8,6 +8,7 @@
 #include "examples/dvm/commands.h"
 #include "examples/dvm/scene.h"
 #include "solvers/runtime/json.h"
+#include "solvers/runtime/manifold_map_of.h"
 #include "solvers/runtime/registry.h"
 
 namespace dvm::cli {
@@ -61,20 +62,13 @@ int report_rn_dim(const std::variant<ThetaMap, WrittenMap>& map, int dim, double
   throw InputError("check-map: --dim " + std::to_string(dim) + " is not supported; expected 1, 2, 3 or 4");
 }
 
-RetractionKind kind_of(const MapEntry& e) {
-  switch (e.retraction) {
-    case MapRetraction::exp: return RetractionKind::exp;
-    case MapRetraction::projection: return RetractionKind::projection;
-    case MapRetraction::cayley: return RetractionKind::cayley;
-    case MapRetraction::none: break;
-  }
-  throw InputError("check-map: map \"" + e.name + "\" is not built from a retraction of S^2 or SO(3)");
-}
-
 }  // namespace
 
-int check_map_command(const std::string& name, double theta, int dim, double tolerance) {
+int check_map_command(const std::string& name, double theta, int dim, double tolerance,
+                      const std::shared_ptr<const WrittenRetraction>& written) {
   const MapEntry& e = find_map_entry(name, "check-map");
+  if (e.retraction == MapRetraction::written && !written)
+    throw InputError("check-map: map \"" + e.name + "\" is read from a scene: dvm check-map --scene FILE");
   if (theta < 0.0) theta = e.theta;  // not given: the map's own
   if (!(theta >= 0.0 && theta <= 1.0))
     throw InputError("check-map: --theta " + std::to_string(theta) + " is outside [0, 1]");
@@ -84,8 +78,8 @@ int check_map_command(const std::string& name, double theta, int dim, double tol
     if (dim > 0)
       throw InputError("check-map: --dim applies only to maps on R^n; \"" + e.name + "\" lives on " +
                        to_string(e.space));
-    if (e.family == MapFamily::sphere) return report_manifold(SphereMap(kind_of(e), theta, e.name), tolerance);
-    return report_manifold(SO3Map(kind_of(e), theta, e.name), tolerance);
+    if (e.family == MapFamily::sphere) return report_manifold(sphere_map_of(e, theta, written), tolerance);
+    return report_manifold(so3_map_of(e, theta, written), tolerance);
   }
   if (e.family == MapFamily::theta) return report_rn_dim(ThetaMap(theta, e.name), dim, theta, tolerance);
   if (e.family == MapFamily::retraction_theta)
@@ -101,7 +95,7 @@ int check_scene_map_command(const std::string& path, const std::vector<std::stri
   if (!me.map) throw InputError("check-map: " + path + " names no map (integrator.map)");
   if (me.map->family == MapFamily::written)
     return report_rn_dim(*me.written_map, dim, me.written_map->is_retraction() ? me.theta : NAN, tolerance);
-  return check_map_command(me.map->name, me.theta, dim, tolerance);
+  return check_map_command(me.map->name, me.theta, dim, tolerance, me.written_retraction);
 }
 
 }  // namespace dvm::cli

@@ -27,7 +27,9 @@ int run_scene(const Scene& scene, const RunOptions& options);
 
 // Prints the identity residuals of a map as JSON; returns 0 if every identity holds
 // to `tolerance`, 1 otherwise. Throws InputError for a bad name, theta or dimension.
-int check_map_command(const std::string& name, double theta, int dim, double tolerance);
+// `written`: the retraction of a "sphere-written" or "so3-written" map (from a scene).
+int check_map_command(const std::string& name, double theta, int dim, double tolerance,
+                      const std::shared_ptr<const WrittenRetraction>& written = nullptr);
 // `dvm check-map --scene FILE`: the map the scene runs (a written one from its [map]).
 int check_scene_map_command(const std::string& path, const std::vector<std::string>& overrides, int dim,
                             double tolerance);

@@ -17,6 +17,7 @@
 
 #include "examples/dvm/scene_written.h"
 #include "mechanics/written_lagrangian.h"
+#include "mechanics/written_retraction.h"
 #include "solvers/runtime/registry.h"
 
 namespace dvm::cli {
@@ -429,16 +430,24 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
 // with exit 2 and the residual.
 void read_written_map(const Reader& r, const toml::table& root, Method& me) {
   const toml::node* sec = root.get("map");
-  const bool written = me.map && me.map->family == MapFamily::written;
+  const bool manifold = me.map && me.map->retraction == MapRetraction::written;  // sphere-written, so3-written
+  const bool written = me.map && (me.map->family == MapFamily::written || manifold);
   if (!sec) {
-    if (written) throw InputError(r.path() + ": missing section [map] (map = \"written\": q0 and q1, or retraction)");
+    const toml::node* integ = root.get("integrator");
+    const toml::node* key = integ && integ->is_table() ? integ->as_table()->get("map") : nullptr;
+    const std::string at = key ? r.where(key, "integrator.map") : r.path() + ": key 'integrator.map'";
+    if (manifold)
+      throw InputError(at + ": map = \"" + me.map->name + "\" needs the section [map] (retraction = [" +
+                       (me.map->space == Space::sphere ? "3" : "9") + " expressions])");
+    if (written) throw InputError(at + ": map = \"written\" needs the section [map] (q0 and q1, or retraction)");
     return;
   }
   const toml::table& m = r.section(root, "map", true);
   r.only_keys(m, "map", {"q0", "q1", "retraction", "name", "params"});
   if (!written)
-    throw InputError(r.where(sec, "map") + ": the section [map] belongs to integrator.map = \"written\", not \"" +
-                     (me.map ? me.map->name : std::string("none")) + "\"");
+    throw InputError(r.where(sec, "map") + ": the section [map] belongs to integrator.map = \"written\", " +
+                     "\"sphere-written\" or \"so3-written\", not \"" + (me.map ? me.map->name : std::string("none")) +
+                     "\"");
   WrittenMap::Params params;
   if (const toml::node* ps = m.get("params")) {
     if (!ps->is_table()) throw InputError(r.where(ps, "map.params") + ": expected a table of numbers");
@@ -446,6 +455,39 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
   }
   std::string name = "written";
   if (const toml::node* n = m.get("name")) name = r.string(*n, "map.name");
+  if (manifold) {
+    // retraction = ["...", ...]: f(x, v) in the embedding, 3 components on S^2, 9 on SO(3)
+    const bool sphere = me.map->space == Space::sphere;
+    for (const char* k : {"q0", "q1"})
+      if (const toml::node* n = m.get(k))
+        throw InputError(r.where(n, std::string("map.") + k) + ": map = \"" + me.map->name +
+                         "\" is written as a retraction (map.retraction), not as q0 and q1");
+    const toml::node* rt = m.get("retraction");
+    const std::string expect = sphere ? "an array of 3 strings: f(x, v) in x1 x2 x3 and v1 v2 v3"
+                                      : "an array of 9 strings: f(R, w) row by row in R11 ... R33 and w1 w2 w3";
+    if (!rt) throw InputError(r.path() + ": missing key 'map.retraction' (" + expect + ")");
+    const toml::array* a = rt->as_array();
+    std::vector<std::string> texts;
+    for (std::size_t i = 0; a && i < a->size(); ++i) {
+      if (!a->get(i)->is_string()) break;
+      texts.push_back(*a->get(i)->value<std::string>());
+    }
+    if (!a || texts.size() != a->size() || texts.size() != (sphere ? 3u : 9u))
+      throw InputError(r.where(rt, "map.retraction") + ": expected " + expect);
+    try {
+      me.written_retraction = std::make_shared<const WrittenRetraction>(
+          sphere ? WrittenRetraction::Space::sphere : WrittenRetraction::Space::rotation, texts, params, name);
+    } catch (const std::invalid_argument& e) {
+      // "retraction[i]: ..." (a parse error in component i) or "retraction: ..." (an axiom)
+      const std::string what = e.what();
+      const std::size_t close = what.find("]: ");
+      const toml::node* at = rt;
+      if (what.rfind("retraction[", 0) == 0 && close != std::string::npos)
+        at = a->get(static_cast<std::size_t>(std::stoul(what.substr(11, close - 11))));
+      throw InputError(r.where(at, "map.retraction") + ": " + what);
+    }
+    return;
+  }
   const toml::node* q0 = m.get("q0");
   const toml::node* q1 = m.get("q1");
   const toml::node* rt = m.get("retraction");

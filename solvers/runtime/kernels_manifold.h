@@ -26,6 +26,7 @@
 #include "solvers/manifold_hamiltonian_step.h"
 #include "solvers/manifold_step.h"
 #include "solvers/runtime/kernels.h"
+#include "solvers/runtime/manifold_map_of.h"
 
 namespace dvm::kernels {
 
@@ -33,32 +34,19 @@ using V3 = Vec<double, 3>;
 using M3 = Mat<double, 3, 3>;
 
 // ---- maps from registry entries ------------------------------------------------------
-inline RetractionKind retraction_kind(const MapEntry& e) {
-  switch (e.retraction) {
-    case MapRetraction::exp: return RetractionKind::exp;
-    case MapRetraction::projection: return RetractionKind::projection;
-    case MapRetraction::cayley: return RetractionKind::cayley;
-    case MapRetraction::none: break;
-  }
-  throw InputError("integrator.map: map \"" + e.name + "\" is not built from a retraction of S^2 or SO(3)");
-}
 // (Galerkin takes no map: the default map's type is only a template argument there.)
 inline SphereMap sphere_map(const Method& m) {
   if (!m.map) return SphereMap(RetractionKind::exp, 0.5, "sphere-exp");
-  if (m.map->family != MapFamily::sphere)
-    throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on S^2");
-  return SphereMap(retraction_kind(*m.map), m.theta, m.map->name);
+  return sphere_map_of(*m.map, m.theta, m.written_retraction);
 }
 inline SO3Map so3_map(const Method& m) {
   if (!m.map) return SO3Map(RetractionKind::exp, 0.5, "so3-exp");
-  if (m.map->family != MapFamily::rotation)
-    throw InputError("integrator.map: map \"" + m.map->name + "\" does not live on SO(3)");
-  return SO3Map(retraction_kind(*m.map), m.theta, m.map->name);
+  return so3_map_of(*m.map, m.theta, m.written_retraction);
 }
 
 // The map of a composition's stage at theta (integrator.thetas): the same retraction.
-inline SphereMap at_theta(const SphereMap& R, double th) { return SphereMap(R.kind(), th, R.name()); }
-inline SO3Map at_theta(const SO3Map& R, double th) { return SO3Map(R.kind(), th, R.name()); }
+inline SphereMap at_theta(const SphereMap& R, double th) { return R.at_theta(th, R.name()); }
+inline SO3Map at_theta(const SO3Map& R, double th) { return R.at_theta(th, R.name()); }
 template <int K>
 SpherePowerMap<K> at_theta(const SpherePowerMap<K>& R, double th) {
   return SpherePowerMap<K>(at_theta(R.factor(), th));

@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "mechanics/written_lagrangian.h"
+#include "mechanics/written_retraction.h"
 #include "solvers/runtime/run.h"  // shortest: 0.3, not 0.29999999999999999
 
 namespace dvm {
@@ -64,6 +65,8 @@ std::string Method::label() const {
                                       : "q0 = " + written_map->text(0) + ", q1 = " + written_map->text(1);
     s += ")";
   }
+  if (!galerkin && map && map->retraction == MapRetraction::written && written_retraction)
+    s += " " + written_retraction->name() + " (" + written_retraction->text() + ", theta " + shortest(theta) + ")";
   if (form != Form::lagrangian && !galerkin) s += ", " + std::string(to_string(form)) + " form";
   if (lift != Lift::automatic && lift != default_lift(form)) s += ", lift " + std::string(to_string(lift));
   if (composition != "none") s += ", composition " + composition;
@@ -177,6 +180,11 @@ void validate(const Problem& pr, const Method& me) {
     if (m.family == MapFamily::written && !caps.written_maps)
       throw InputError("integrator.map: " + name + " runs on the run-time-sized steps, which take the theta-family maps; "
                        "map = \"written\" runs on the built-in systems of fixed size" + note);
+    if (m.retraction == MapRetraction::written && !caps.written_maps)
+      throw InputError("integrator.map: " + name + " takes no written retraction (map = \"" + m.name +
+                       "\" runs on one S^2 or SO(3), not on products of spheres)" + note);
+    if (m.retraction == MapRetraction::written && !me.written_retraction)
+      throw InputError("integrator.map: map = \"" + m.name + "\" needs the scene's [map] section (retraction = [...])");
     if (m.family == MapFamily::written && !me.written_map)
       throw InputError("integrator.map: map = \"written\" needs the scene's [map] section (q0 and q1, or retraction)");
     if (m.family == MapFamily::written && !me.written_map->is_retraction() && me.theta != m.theta)

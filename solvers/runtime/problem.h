@@ -55,12 +55,17 @@ struct Problem {
   std::string written_where, hamiltonian_where;
 };
 
+class WrittenRetraction;  // mechanics/written_retraction.h
+
 struct Method {
   Form form = Form::lagrangian;
   const MapEntry* map = nullptr;  // none: newmark, galerkin without a map
   double theta = 0.5;             // the map's theta (set from the entry when it takes none)
   // map = "written": the map the scene writes (mechanics/written_map.h).
   std::shared_ptr<const WrittenMap> written_map;
+  // map = "sphere-written" or "so3-written": the retraction the scene writes in the
+  // embedding (mechanics/written_retraction.h); theta is integrator.theta.
+  std::shared_ptr<const WrittenRetraction> written_retraction;
   // The composition ("none": the basic method's own step); "dirk" takes its weights
   // from `weights` (the symplectic DIRK of those weights with the midpoint map).
   std::string composition = "none";

@@ -166,6 +166,13 @@ const std::vector<MapEntry>& map_registry() {
        "Prop. 2.3 with any theta; inverse w = log(R0^T R1), R = R0 exp(theta w)"},
       {"so3-cayley-theta", "(R cay(-theta w), R cay((1 - theta) w))", Space::rotation, F::rotation, R::cayley, 0.5,
        true, false, "Prop. 2.3 with any theta; Newton's method in a chart except at theta in {0, 1/2, 1}"},
+      {"sphere-written", "(R_x(-theta v), R_x((1 - theta) v)), R_x(v) = f(x, v)/|f(x, v)|, f from the scene's [map]",
+       Space::sphere, F::sphere, R::written, 0.5, true, false,
+       "retraction = [3 expressions in x1 x2 x3, v1 v2 v3]; its axioms checked when read; Newton's method in a chart"},
+      {"so3-written", "(R_R(-theta w), R_R((1 - theta) w)), R_R(w) = f(R, w) orthonormalised, f from the scene's [map]",
+       Space::rotation, F::rotation, R::written, 0.5, true, false,
+       "retraction = [9 expressions, row by row, in R11 ... R33, w1 w2 w3]; its axioms checked when read; Newton's "
+       "method in a chart"},
   };
   return list;
 }
@@ -234,7 +241,8 @@ const std::vector<SystemEntry>& system_registry() {
         {"g", 1.0, "gravitational acceleration"}},
        {{Form::lagrangian}, true, true, false, false,
         "the spherical chain runs the lagrangian form only (it has no written-out Hamiltonian) and no Galerkin "
-        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)"},
+        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)",
+        true, false},
        factories::spherical_chain,
        "3 per link"},
       {"rigid-body",
@@ -342,12 +350,12 @@ const SystemEntry& written_system_entry(Space space, int factors) {
   static const SystemEntry sphere = {
       "lagrangian", "written in the scene in x, x_dot (the embedded unit vector)", Space::sphere, 3, {},
       {{Form::lagrangian, Form::hamiltonian}, true, true, true, true,
-       "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)", true, false},
+       "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)", true, true},
       factories::written_sphere, ""};
   static const SystemEntry rotation = {
       "lagrangian", "written in the scene in R, w (the body angular velocity)", Space::rotation, 3, {},
       {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
-       "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2", true, false},
+       "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2", true, true},
       factories::written_rotation, ""};
   // On (S^2)^K it runs the spherical chain's steps, and what they run.
   static const SystemEntry sphere_power = {

@@ -86,7 +86,8 @@ enum class MapFamily {
   rotation,          // SO(3): SO3Map(retraction, theta)
   written,           // R^n: WrittenMap from the scene's [map] section, Newton inverse (generic path)
 };
-enum class MapRetraction { none, exp, projection, cayley };
+// written: the retraction of the scene's [map] section (Method::written_retraction)
+enum class MapRetraction { none, exp, projection, cayley, written };
 
 struct MapEntry {
   std::string name;
@@ -137,7 +138,8 @@ struct SystemCapabilities {
   bool boundary_value = false;     // [problem] kind = "boundary-value" (lagrangian form)
   std::string note;                // why something is missing, for messages and listings
   bool tiny_solver = true;         // solver = "tiny" (ceres::TinySolver) for its map-based steps
-  bool written_maps = true;        // map = "written" (the fixed-size steps on R^n)
+  bool written_maps = true;        // map = "written" (the fixed-size steps on R^n), "sphere-written" or
+                                   // "so3-written" (one S^2 or SO(3), not their products)
 };
 
 using RunFactory = std::unique_ptr<Run> (*)(const Problem&, const Method&);

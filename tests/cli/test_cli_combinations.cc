@@ -123,6 +123,7 @@ std::vector<SystemCaps> registry_systems() {
     c.space = space;
     c.name = "lagrangian on " + c.space;
     c.boundary_value = c.space == "S^2";
+    c.written_maps = true;  // sphere-written, so3-written
     out.push_back(c);
   }
   // written on (S^2)^K: the spherical chain's capabilities
@@ -189,6 +190,22 @@ void check(const std::string& what, const std::string& text, bool supported, con
 // map = "written": the midpoint map written in the scene (its [map] section follows the
 // [integrator] keys)
 const char* kWrittenMidpoint = "[map]\nq0 = \"x - v/2\"\nq1 = \"x + v/2\"\n";
+// map = "sphere-written": the projection retraction; "so3-written": R (I + hat(w)),
+// orthonormalised (a retraction of its own)
+const char* kWrittenSphere = "[map]\nretraction = [\"x1 + v1\", \"x2 + v2\", \"x3 + v3\"]\n";
+const char* kWrittenRotation =
+    "[map]\nretraction = [\"R11 + R12*w3 - R13*w2\", \"R12 - R11*w3 + R13*w1\", \"R13 + R11*w2 - R12*w1\",\n"
+    "  \"R21 + R22*w3 - R23*w2\", \"R22 - R21*w3 + R23*w1\", \"R23 + R21*w2 - R22*w1\",\n"
+    "  \"R31 + R32*w3 - R33*w2\", \"R32 - R31*w3 + R33*w1\", \"R33 + R31*w2 - R32*w1\"]\n";
+// The [map] section a map needs (none for the built-in maps).
+std::string map_section(const std::string& map) {
+  return map == "written" ? kWrittenMidpoint : map == "sphere-written" ? kWrittenSphere
+                                             : map == "so3-written"    ? kWrittenRotation
+                                                                       : "";
+}
+bool is_written_map(const std::string& map) {
+  return map == "written" || map == "sphere-written" || map == "so3-written";
+}
 
 const char* kCompositions[] = {"none", "stormer-verlet", "mclachlan4", "kahan-li8", "triple-jump:6"};
 const char* kForms[] = {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"};
@@ -226,11 +243,11 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
             std::string keys = "form = \"" + f + "\"\n";
             if (!map.empty()) keys += "map = \"" + map + "\"\n";
             if (c != "none") keys += "composition = \"" + c + "\"\n";
-            if (map == "written") keys += kWrittenMidpoint;
+            keys += map_section(map);
             const bool map_ok = f == "newmark" || !map.empty();
             const bool supported = sys.forms.count(f) && map_ok && (c == "none" || sys.composition) &&
                                    (map != "retraction-theta" || sys.retraction) &&
-                                   (map != "written" || (sys.retraction && sys.written_maps));
+                                   (!is_written_map(map) || (sys.retraction && sys.written_maps));
             std::map<std::string, std::string> expect = {{"form", f}, {"composition", c}, {"method", "map"}};
             if (f == "newmark")
               expect["map"] = "newmark";
@@ -276,10 +293,10 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
           const std::string f = form;
           const std::string text = sys_section + "[initial]\n" + q0 + "\n[problem]\nkind = \"boundary-value\"\n" +
                                    "q_final = " + qf + "\nsteps = 3\n[integrator]\nstep = 0.001\nmap = \"" + map +
-                                   "\"\nform = \"" + f + "\"\n" + (map == "written" ? kWrittenMidpoint : "");
+                                   "\"\nform = \"" + f + "\"\n" + map_section(map);
           check(sys.name + " boundary-value map=" + map + " form=" + f, text,
                 sys.boundary_value && f == "lagrangian" && (map != "retraction-theta" || sys.retraction) &&
-                    (map != "written" || sys.written_maps),
+                    (!is_written_map(map) || sys.written_maps),
                 {}, {{"problem", "boundary-value"}});
         }
     }
