@@ -28,10 +28,15 @@ std::unique_ptr<Run> spherical_chain(const Problem& pr, const Method& me) {
   const SphereMap f = kernels::sphere_map(me);
   auto run = [&](auto k) {
     constexpr int K = decltype(k)::value;
-    using Sys = kernels::BuiltinOrWritten<SphericalChain<K>>;
     const SphericalChain<K> L(Vec<double, K>::Constant(P.at("m")), Vec<double, K>::Constant(P.at("l")), P.at("g"));
-    return kernels::make_manifold_run<Sys, SpherePowerMap<K>, false, false, false, SphericalChain<K>>(
-        kernels::as_builtin(L), SpherePowerMap<K>(f), pr, me, L);
+    if constexpr (K == 1) {  // (S^2)^1 is written as S^2 (kernels_sphere.cc): no written branch
+      return kernels::make_manifold_run<SphericalChain<1>, SpherePowerMap<1>, false, false, false>(
+          L, SpherePowerMap<1>(f), pr, me);
+    } else {
+      using Sys = kernels::BuiltinOrWritten<SphericalChain<K>>;
+      return kernels::make_manifold_run<Sys, SpherePowerMap<K>, false, false, false, SphericalChain<K>>(
+          kernels::as_builtin(L), SpherePowerMap<K>(f), pr, me, L);
+    }
   };
   return for_factors(static_cast<int>(P.at("n")), 1, run, "system.params.n: the spherical chain takes 1 to 4 links");
 }
