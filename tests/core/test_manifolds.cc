@@ -326,7 +326,7 @@ namespace {
 // for any 3 x 3 matrix Y (matrices stored column-major). The generic R^n cotangent lift
 // (core/map_operations.h) applies to them unchanged.
 struct EmbeddedSphereExp {
-  static constexpr bool provides_inverse = false;
+  [[maybe_unused]] static constexpr bool provides_inverse = false;  // (the map concept; no inverse is asked for)
   std::string name() const { return "embedded sphere exp"; }
   template <class T, int N>
   PointPair<T, N> operator()(const Vec<T, N>& x, const Vec<T, N>& xi) const {
@@ -334,7 +334,7 @@ struct EmbeddedSphereExp {
   }
 };
 struct EmbeddedCayley {
-  static constexpr bool provides_inverse = false;
+  [[maybe_unused]] static constexpr bool provides_inverse = false;
   std::string name() const { return "embedded cayley"; }
   template <class T, int N>
   PointPair<T, N> operator()(const Vec<T, N>& a, const Vec<T, N>& x) const {
