@@ -13,10 +13,10 @@
 // The steps evaluate a retraction for their scalar types: double and the Jets of
 // their chart dimensions, nested for second derivatives. Core cannot see what computes
 // f (an expression written in a scene lives in mechanics/), so the function is an
-// interface with one virtual evaluate per scalar type of EmbeddedScalars: the steps on
-// S^2 and SO(3) (one factor) use exactly these. `supports<T>` says whether a type is in
-// the list; a map asked for another type throws (the runtime refuses those
-// combinations before a run: products of spheres take no written retraction).
+// interface with one virtual evaluate per scalar type of EmbeddedRetraction: the steps on
+// S^2, (S^2)^K and SO(3) use exactly these. `supports<T>` says whether a type is in
+// the list; a map asked for another type throws std::logic_error (no step of the
+// runtime asks for one).
 #pragma once
 
 #include <string>
@@ -45,9 +45,9 @@ template <int N>
 using J = ceres::Jet<double, N>;
 }  // namespace embedded_detail
 
-// The scalar types of the steps on S^2 (chart dimension 2) and SO(3) (3), with the
-// Jets of two points (4, 6), nested Jets for the Jacobians of the step equations, and
-// Jet<Jet<double, 9>, 3> of the boundary-value problem on S^2 (the list is what the
+// The scalar types of the steps on S^2 (chart dimension 2), (S^2)^K (2K, K <= 4) and
+// SO(3) (3), with the Jets of two points (4, 6), nested Jets for the Jacobians of the
+// step equations, and Jet<Jet<double, 9>, 3> of the boundary-value problem on S^2 (the list is what the
 // kernels of solvers/runtime and the map checks instantiate, found by compiling them
 // with a static_assert in detail::evaluate_embedded).
 using EmbeddedRetraction =
@@ -55,6 +55,8 @@ using EmbeddedRetraction =
                      embedded_detail::J<4>, embedded_detail::J<6>, ceres::Jet<embedded_detail::J<2>, 2>,
                      ceres::Jet<embedded_detail::J<3>, 3>, ceres::Jet<embedded_detail::J<4>, 4>,
                      ceres::Jet<embedded_detail::J<6>, 6>, ceres::Jet<embedded_detail::J<9>, 3>,
+                     // the spherical chain of 4 links, (S^2)^4 (2, 3 links: the sizes above)
+                     embedded_detail::J<8>, ceres::Jet<embedded_detail::J<8>, 8>,
                      // the identity checks of core/map_checks.h (dvm check-map)
                      ceres::Jet<embedded_detail::J<8>, 1>, ceres::Jet<embedded_detail::J<8>, 4>,
                      ceres::Jet<embedded_detail::J<12>, 1>, ceres::Jet<embedded_detail::J<12>, 6>>;

@@ -25,6 +25,7 @@
 // (mechanics/written_retraction.cc, library dvm_written_retraction): with them the
 // vtable and the tape evaluations for every scalar type of EmbeddedRetraction are
 // instantiated in that one translation unit, not in each file that makes a retraction.
+// On (S^2)^K the sphere's map acts on each factor (SpherePowerMap).
 #pragma once
 
 #include <memory>

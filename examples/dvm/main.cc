@@ -202,7 +202,7 @@ const char* kRunHelp =
     "                               strings f(x, v) in x1 x2 x3, v1 v2 v3, R = f/|f|; SO(3):\n"
     "                               9 strings f(R, w), row by row, in R11 .. R33, w1 w2 w3,\n"
     "                               R = f with its columns orthonormalised. Checked:\n"
-    "                               R(x, 0) = x, D_v R(x, 0) = Id. One S^2 or SO(3) only\n"
+    "                               R(x, 0) = x, D_v R(x, 0) = Id. On (S^2)^K: each factor\n"
     "    name = \"written\"           string, the map's name in reports\n"
     "    params = { c = 0.1, ... }  numbers, names the expressions use\n"
     "  [problem]\n"

@@ -181,8 +181,7 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError("integrator.map: " + name + " runs on the run-time-sized steps, which take the theta-family maps; "
                        "map = \"written\" runs on the built-in systems of fixed size" + note);
     if (m.retraction == MapRetraction::written && !caps.written_maps)
-      throw InputError("integrator.map: " + name + " takes no written retraction (map = \"" + m.name +
-                       "\" runs on one S^2 or SO(3), not on products of spheres)");
+      throw InputError("integrator.map: " + name + " takes no written retraction (map = \"" + m.name + "\")" + note);
     if (m.retraction == MapRetraction::written && !me.written_retraction)
       throw InputError("integrator.map: map = \"" + m.name + "\" needs the scene's [map] section (retraction = [...])");
     if (m.family == MapFamily::written && !me.written_map)

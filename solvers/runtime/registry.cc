@@ -241,8 +241,7 @@ const std::vector<SystemEntry>& system_registry() {
         {"g", 1.0, "gravitational acceleration"}},
        {{Form::lagrangian}, true, true, false, false,
         "the spherical chain runs the lagrangian form only (it has no written-out Hamiltonian) and no Galerkin "
-        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)",
-        true, false},
+        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)"},
        factories::spherical_chain,
        "3 per link"},
       {"rigid-body",
@@ -363,8 +362,7 @@ const SystemEntry& written_system_entry(Space space, int factors) {
       0, {},
       {{Form::lagrangian}, true, true, false, false,
        "on (S^2)^K the written Lagrangian runs the spherical chain's steps: the lagrangian form with every S^2 map "
-       "and composition; no hamiltonian form, Galerkin method or boundary values",
-       true, false},
+       "and composition; no hamiltonian form, Galerkin method or boundary values"},
       factories::written_sphere_power, "3 per factor"};
   switch (space) {
     case Space::euclidean: return rn;

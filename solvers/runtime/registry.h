@@ -139,7 +139,7 @@ struct SystemCapabilities {
   std::string note;                // why something is missing, for messages and listings
   bool tiny_solver = true;         // solver = "tiny" (ceres::TinySolver) for its map-based steps
   bool written_maps = true;        // map = "written" (the fixed-size steps on R^n), "sphere-written" or
-                                   // "so3-written" (one S^2 or SO(3), not their products)
+                                   // "so3-written" (S^2, (S^2)^K, SO(3))
 };
 
 using RunFactory = std::unique_ptr<Run> (*)(const Problem&, const Method&);

@@ -132,6 +132,7 @@ std::vector<SystemCaps> registry_systems() {
   c.name = "lagrangian on (S^2)^2";
   c.forms = {"lagrangian"};
   c.galerkin = false;
+  c.written_maps = true;  // sphere-written on each factor
   out.push_back(c);
   return out;
 }

@@ -1530,12 +1530,15 @@ BOOST_AUTO_TEST_CASE(run_help_lists_every_scene_key) {
 //     the built-in maps' trajectories at theta 0.3, in the lagrangian and hamiltonian forms;
 //   - the shipped truncated exponential is of order 2 at theta = 1/2 and 1 at 0.3, and
 //     check-map --scene passes on it;
-//   - texts that break an axiom, have the wrong count or the wrong form, and systems
-//     that take no written retraction, are refused with exit 2 naming the key.
+//   - on the spherical chain the written projection acts on each link as
+//     sphere-projection-theta does;
+//   - texts that break an axiom, have the wrong count or the wrong form, or a missing
+//     [map], are refused with exit 2 naming the key.
 BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
   const std::string S = scene("spherical_pendulum_written_map.toml");
   auto run_q = [](std::vector<std::string> args) {
-    args.insert(args.end(), {"--json", "--quiet", "--set", "integrator.t_end=0.5"});
+    args.insert(args.end(), {"--json", "--quiet", "--csv", temp_dir() + "/written_retraction.csv", "--set",
+                             "integrator.t_end=0.5"});
     const Output o = dvm(args);
     BOOST_TEST(o.status == 0, o.err);
     return json_array(o.out, "q_final");
@@ -1585,6 +1588,15 @@ BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
   const Output ok = dvm({"check-map", "--scene", S});
   BOOST_TEST(ok.status == 0, ok.out << ok.err);
   BOOST_TEST(ok.out.find("\"passed\": true") != std::string::npos, ok.out);
+  // on the spherical chain: the written projection on each link, as sphere-projection-theta
+  {
+    const std::string chain = scene("spherical-chain.toml");
+    const auto a = run_q({"run", chain, "--set", "integrator.map=\"sphere-written\"", "--set", proj, "--set",
+                          "integrator.theta=0.3"});
+    const auto b = run_q({"run", chain, "--set", "integrator.map=\"sphere-projection-theta\"", "--set",
+                          "integrator.theta=0.3"});
+    BOOST_TEST(close(a, b));
+  }
 
   struct Refused {
     std::string scene;
@@ -1600,8 +1612,6 @@ BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
            {S, {"map.q0=\"x - v/2\""}, "map.q0", "written as a retraction"},
            {scene("spherical-pendulum.toml"), {"integrator.map=\"sphere-written\""}, "integrator.map",
             "needs the section [map]"},
-           {scene("spherical-chain.toml"), {"integrator.map=\"sphere-written\"", proj}, "integrator.map",
-            "takes no written retraction"},
            {top, {"integrator.map=\"so3-written\"", proj}, "map.retraction", "array of 9 strings"},
        }) {
     std::vector<std::string> args = {"run", r.scene, "--quiet"};

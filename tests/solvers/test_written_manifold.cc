@@ -187,11 +187,10 @@ int every_method(const Pair& s, Space space, bool full = true) {
     if (c.kind != CompositionKind::rkn_splitting) compositions.push_back(c.name);
   for (const MapEntry& e : map_registry()) {
     if (e.space != space) continue;
-    // a retraction written in the embedding (the projection on S^2, R (I + hat(w))
-    // orthonormalised on SO(3)); products of spheres take none
+    // a retraction written in the embedding (the projection on S^2 and on each factor
+    // of (S^2)^K, R (I + hat(w)) orthonormalised on SO(3))
     std::shared_ptr<const WrittenRetraction> text;
     if (e.retraction == MapRetraction::written) {
-      if (!full) continue;
       text = space == Space::sphere
               ? std::make_shared<const WrittenRetraction>(WrittenRetraction::Space::sphere,
                                                           std::vector<std::string>{"x1 + v1", "x2 + v2", "x3 + v3"})
