@@ -1,7 +1,7 @@
-// Lagrangians written on S^2 and SO(3) (mechanics/written_manifold.h) against the
-// built-in spherical pendulum and heavy top: the same numbers with every map, form,
-// composition, Galerkin method and boundary-value problem the built-ins run, through
-// the runtime API (solvers/runtime/run.h), so the test compiles no kernel of its own.
+// Lagrangians written on S^2, (S^2)^K and SO(3) (mechanics/written_manifold.h) against the
+// built-in spherical pendulum, spherical chain and heavy top: the same numbers with every
+// map, form, composition, Galerkin method and boundary-value problem the built-ins run,
+// through the runtime API (solvers/runtime/run.h), so the test compiles no kernel of its own.
 #define BOOST_TEST_MODULE written_manifold
 #include <boost/test/unit_test.hpp>
 
