@@ -26,10 +26,9 @@
 // apply to it unchanged, and are the identities of the manifold map in coordinates.
 #pragma once
 
-#include <string>
-
 #include <memory>
 #include <stdexcept>
+#include <string>
 
 #include "core/embedded_retraction.h"
 #include "core/manifolds.h"
@@ -66,15 +65,16 @@ inline void check_theta(double theta) {
     throw std::invalid_argument("theta must lie in [0, 1], got " + std::to_string(theta));
 }
 
-// f(x, v) for a written retraction, in the scalar type of the step.
-template <class T, int P, int V, int O>
+// f(x, v) for a written retraction, in the scalar type of the step: O numbers (3 on
+// S^2, 9 on SO(3)).
+template <int O, class T>
 Eigen::Matrix<T, O, 1> evaluate_embedded(const EmbeddedRetraction& f, const T* x, const T* v) {
   Eigen::Matrix<T, O, 1> out;
   if constexpr (EmbeddedRetraction::supports<T>) {
     f.evaluate(x, v, out.data());
   } else {
-    throw std::logic_error("a written retraction is evaluated for the scalar types of the steps on S^2 and SO(3) "
-                           "only (core/embedded_retraction.h)");
+    throw std::logic_error("a written retraction is evaluated for the scalar types of the steps on S^2, (S^2)^K "
+                           "and SO(3) only (core/embedded_retraction.h)");
   }
   return out;
 }
@@ -142,7 +142,7 @@ class SphereMap : public RetractionThetaMap<SphereMap> {
   Vec<T, 3> retract(const Vec<T, 3>& x, const Vec<T, 3>& v) const {
     if (kind_ == RetractionKind::written) {
       using std::sqrt;
-      const Vec<T, 3> y = detail::evaluate_embedded<T, 3, 3, 3>(*written_, x.data(), v.data());
+      const Vec<T, 3> y = detail::evaluate_embedded<3>(*written_, x.data(), v.data());
       const T n = sqrt(detail::dot(y, y));
       return Vec<T, 3>(y[0] / n, y[1] / n, y[2] / n);
     }
@@ -238,7 +238,8 @@ class SO3Map : public RetractionThetaMap<SO3Map> {
   }
   template <class T>
   Mat<T, 3, 3> retract(const Mat<T, 3, 3>& R, const Vec<T, 3>& w) const {
-    if (kind_ == RetractionKind::written) return orthonormalised(detail::evaluate_embedded<T, 9, 3, 9>(*written_, R.data(), w.data()));
+    if (kind_ == RetractionKind::written)
+      return orthonormalised(detail::evaluate_embedded<9>(*written_, R.data(), w.data()));
     return SO3::mul(R, tau(w));
   }
   // Gram-Schmidt on the columns of A (stored column-major in a): Q with Q^T Q = I,

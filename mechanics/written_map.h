@@ -32,6 +32,14 @@
 
 namespace dvm {
 
+// x to six significant digits, for the messages about written texts.
+inline std::string show_number(double x) {
+  std::ostringstream out;
+  out.precision(6);
+  out << x;
+  return out.str();
+}
+
 class WrittenMap {
  public:
   static constexpr bool provides_inverse = false;
@@ -48,7 +56,8 @@ class WrittenMap {
   }
   // R_d(x, v) = (R(x, -theta v), R(x, (1 - theta) v)) for a retraction R(x, v).
   static WrittenMap retraction(std::string name, const std::string& r, double theta, const Params& params = {}) {
-    if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1], got " + show(theta));
+    if (!(theta >= 0.0 && theta <= 1.0))
+      throw std::invalid_argument("theta must lie in [0, 1], got " + show_number(theta));
     WrittenMap m(std::move(name));
     m.first_ = parse("retraction", r, params);
     m.retraction_ = true;
@@ -82,7 +91,8 @@ class WrittenMap {
   // map written as q0 and q1, which has no theta, or a theta outside [0, 1].
   WrittenMap at_theta(double theta) const {
     if (!retraction_) throw std::invalid_argument("a map written as q0 and q1 has no theta");
-    if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1], got " + show(theta));
+    if (!(theta >= 0.0 && theta <= 1.0))
+      throw std::invalid_argument("theta must lie in [0, 1], got " + show_number(theta));
     WrittenMap m = *this;
     m.theta_ = theta;
     m.adjoint_ = false;
@@ -127,13 +137,6 @@ class WrittenMap {
     return {(*first_)(&x, &v), (*second_)(&x, &v)};
   }
 
-  static std::string show(double x) {
-    std::ostringstream out;
-    out.precision(6);
-    out << x;
-    return out.str();
-  }
-
   static std::shared_ptr<const Expression> parse(const std::string& key, const std::string& text, const Params& params) {
     ExpressionSymbols s;
     s.variables.push_back({"x", 0, 0});
@@ -157,13 +160,13 @@ class WrittenMap {
       if (!(e0 <= 1e-13 * (1.0 + std::fabs(x))) || !(e1 <= 1e-13 * (1.0 + std::fabs(x))))
         throw std::invalid_argument(std::string(retraction_ ? "retraction" : e0 > e1 ? "q0" : "q1") +
                                     ": not a discretization map (Def. 2.2): R_d(x, 0) = (x, x) fails at x = " +
-                                    show(x) + " by " + show(std::fmax(e0, e1)));
+                                    show_number(x) + " by " + show_number(std::fmax(e0, e1)));
       const std::pair<J, J> d = plain(J(x), J(0.0, 0));
       const double slope = d.second.v[0] - d.first.v[0];
       if (!(std::fabs(slope - 1.0) <= 1e-12))
         throw std::invalid_argument(std::string(where) +
                                     ": not a discretization map (Def. 2.2): d/dv (R^2 - R^1) at v = 0 must be 1, is " +
-                                    show(slope) + " at x = " + show(x));
+                                    show_number(slope) + " at x = " + show_number(x));
     }
     asymmetry_ = 0.0;
     for (double x : xs)

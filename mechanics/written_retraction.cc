@@ -3,24 +3,13 @@
 #include "mechanics/written_retraction.h"
 
 #include <cmath>
-#include <sstream>
 #include <stdexcept>
 #include <utility>
 
 #include "core/manifold_maps.h"
+#include "mechanics/written_map.h"  // show_number
 
 namespace dvm {
-
-namespace {
-
-std::string show(double x) {
-  std::ostringstream o;
-  o.precision(6);
-  o << x;
-  return o.str();
-}
-
-}  // namespace
 
 WrittenRetraction::WrittenRetraction(Space space, const std::vector<std::string>& texts, const Params& params,
                                      std::string name)
@@ -71,9 +60,11 @@ void WrittenRetraction::check_axioms() {
   auto self = std::shared_ptr<const EmbeddedRetraction>(std::shared_ptr<const EmbeddedRetraction>{}, this);
   const Vec<double, 3> dirs[4] = {{0.48, -0.6, 0.64}, {-0.36, 0.8, 0.48}, {0.8, 0.36, -0.48}, {0.0, 0.0, 1.0}};
   residual_ = 0.0;
+  const SphereMap sphere(self, 0.0, "written");
+  const SO3Map rotation(self, 0.0, "written");
   for (const Vec<double, 3>& d : dirs) {
     if (space_ == Space::sphere) {
-      const SphereMap R(self, 0.0, "written");
+      const SphereMap& R = sphere;
       const Vec<double, 3> x = d.normalized();
       const Vec<double, 3> r0 = R.retract(x, Vec<double, 3>(Vec<double, 3>::Zero()));
       refuse_if((r0 - x).norm(), "R_x(0) = x", x.data());
@@ -92,7 +83,7 @@ void WrittenRetraction::check_axioms() {
         refuse_if((slope - u).norm(), "d/dt R_x(t u) = u at t = 0", x.data());
       }
     } else {
-      const SO3Map R(self, 0.0, "written");
+      const SO3Map& R = rotation;
       const Mat<double, 3, 3> X = SO3::exp(Vec<double, 3>(1.3 * d));
       const Mat<double, 3, 3> r0 = R.retract(X, Vec<double, 3>(Vec<double, 3>::Zero()));
       refuse_if((r0 - X).norm(), "R_R(0) = R", d.data());
@@ -114,12 +105,13 @@ void WrittenRetraction::check_axioms() {
     }
   }
 }
+
 void WrittenRetraction::refuse_if(double residual, const char* axiom, const double* at) {
   if (!std::isfinite(residual) || !(residual <= 1e-12))
     throw std::invalid_argument("retraction: not a retraction (Def. 2.2 through Prop. 2.3): " + std::string(axiom) +
-                                " fails by " + show(residual) + " at " +
-                                (space_ == Space::sphere ? "x = (" : "R = exp(1.3 (") + show(at[0]) + ", " +
-                                show(at[1]) + ", " + show(at[2]) + (space_ == Space::sphere ? ")" : "))"));
+                                " fails by " + show_number(residual) + " at " +
+                                (space_ == Space::sphere ? "x = (" : "R = exp(1.3 (") + show_number(at[0]) + ", " +
+                                show_number(at[1]) + ", " + show_number(at[2]) + (space_ == Space::sphere ? ")" : "))"));
   residual_ = std::fmax(residual_, residual);
 }
 

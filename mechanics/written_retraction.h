@@ -17,8 +17,8 @@
 // and each tangent direction u,
 //   R_x(0) = x   and   d/dt R_x(t u) at t = 0 = u      (S^2: u tangent at x; SO(3):
 //                                                      R hat(u), u = e1, e2, e3),
-// the derivative by a Jet; a text that breaks either (or is not finite near the zero
-// section) is refused with the residual and the point. Together they are Def. 2.2
+// the derivative by a Jet; a text that breaks either (or is not finite there) is
+// refused with the residual and the point. Together they are Def. 2.2
 // for every theta (Prop. 2.3).
 //
 // The constructor, the destructor and the check are compiled once

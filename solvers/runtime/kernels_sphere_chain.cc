@@ -8,17 +8,15 @@ namespace dvm::factories {
 
 namespace {
 
-// Calls run(std::integral_constant<int, K>) for K = n in 1..4.
-template <class F>
-std::unique_ptr<Run> for_factors(int n, int first, F&& run, const char* what) {
-  if (n >= first) switch (n) {
-      case 1: return run(std::integral_constant<int, 1>{});
-      case 2: return run(std::integral_constant<int, 2>{});
-      case 3: return run(std::integral_constant<int, 3>{});
-      case 4: return run(std::integral_constant<int, 4>{});
-      default: break;
-    }
-  throw InputError(what);
+// Calls run(std::integral_constant<int, n>) for n in K..4, instantiating run for
+// those sizes only; throws InputError(what) for any other n.
+template <int K, class F>
+std::unique_ptr<Run> for_factors(int n, F&& run, const char* what) {
+  if (n == K) return run(std::integral_constant<int, K>{});
+  if constexpr (K < 4)
+    return for_factors<K + 1>(n, run, what);
+  else
+    throw InputError(what);
 }
 
 }  // namespace
@@ -38,7 +36,7 @@ std::unique_ptr<Run> spherical_chain(const Problem& pr, const Method& me) {
           kernels::as_builtin(L), SpherePowerMap<K>(f), pr, me, L);
     }
   };
-  return for_factors(static_cast<int>(P.at("n")), 1, run, "system.params.n: the spherical chain takes 1 to 4 links");
+  return for_factors<1>(static_cast<int>(P.at("n")), run, "system.params.n: the spherical chain takes 1 to 4 links");
 }
 
 std::unique_ptr<Run> written_sphere_power(const Problem& pr, const Method& me) {
@@ -51,7 +49,7 @@ std::unique_ptr<Run> written_sphere_power(const Problem& pr, const Method& me) {
                                       WrittenManifoldLagrangian<SpherePower<K>>>(
         kernels::as_written<SphericalChain<K>>(L), SpherePowerMap<K>(f), pr, me, L);
   };
-  return for_factors(pr.written->factors, 2, run, "system.space: Lagrangians are written on (S^2)^K for K = 2 to 4");
+  return for_factors<2>(pr.written->factors, run, "system.space: Lagrangians are written on (S^2)^K for K = 2 to 4");
 }
 
 }  // namespace dvm::factories
