@@ -6,6 +6,8 @@
 //   lagrangian      ExplicitSplittingStep for theta 0 or 1 on a separable system (n
 //                   bodies; a written Lagrangian whose text is separable, through
 //                   WrittenSeparable), composition included;
+//                   SparseSeparableThetaStep for the other theta maps on a written
+//                   separable Lagrangian (sparse Hessian of U, any size);
 //                   DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
 //                   with the flat retraction R_x(v) = x + v is the theta map itself,
 //                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
@@ -28,6 +30,7 @@
 #include "mechanics/hamiltonian.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"
+#include "solvers/sparse_separable_step.h"
 #include "solvers/runtime/kernels.h"
 
 namespace dvm::kernels {
@@ -276,6 +279,25 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
                                SeparableGaussStep<WrittenSeparable, 0, WrittenDynamic>(WrittenSeparable(L), L, me.stages,
                                                                                        h, opt, q, kMaxDenseDynamicDim),
                                q, p, v0, base, pr.steps);
+  }
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
+    // a theta map (composed or not, a theta per stage included) on a written separable
+    // Lagrangian: Newton on the structured equation with the sparse Hessian of U
+    if (me.form == Form::lagrangian && !me.galerkin && L.separable() && separable_newton_applies(me)) {
+      const ThetaMap R = dynamic_theta_map(me);
+      std::shared_ptr<SparsePotentialHessian> H;
+      try {
+        H = SparseSeparableThetaStep::hessian_of(L, q);
+      } catch (const SparsePotentialHessian::TooDense&) {
+        // terms coupling most coordinates: the dense steps below, within their limit
+      }
+      if (H) {
+        auto make = [&](double hk, const ThetaMap& Rk) { return SparseSeparableThetaStep(L, H, Rk.theta(), hk, opt); };
+        base.step_path = "separable-sparse-newton";
+        base.hessian_colours = H->colours();
+        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      }
+    }
   }
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                           : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");

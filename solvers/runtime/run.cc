@@ -118,6 +118,7 @@ std::string report_json(const RunReport& r) {
   if (!r.structure.empty()) j.str("structure", r.structure).str("structure_source", r.structure_source);
   if (!r.step_path.empty()) j.str("step_path", r.step_path);
   if (r.newton_steps >= 0) j.num("newton_steps", static_cast<double>(r.newton_steps));
+  if (r.hessian_colours >= 0) j.num("hessian_colours", r.hessian_colours);
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
   if (!r.boundary_value) j.num("steps_requested", static_cast<double>(r.steps_requested));
   j.num("t_final", r.t_final);
@@ -187,6 +188,10 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
       if (!r.structure.empty()) {
         std::string how = "by the generic path";
         if (r.step_path == "explicit-splitting") how = "explicit (kicks and drifts, no solve)";
+        if (r.step_path == "separable-newton") how = "by Newton on the structured equation (Jacobian M/h + Hess V)";
+        if (r.step_path == "separable-sparse-newton")
+          how = "by Newton on the structured equation, sparse Jacobian (Hess V in " +
+                std::to_string(r.hessian_colours) + " colours)";
         if (r.step_path == "gauss-collocation")
           how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());

@@ -53,8 +53,14 @@ struct RunReport {
   // R^n, fixed size: the system's structure ("separable", "mechanical", "general"),
   // whether the system declares it ("declared", checked at startup) or it was read off
   // the Lagrangian at sample points ("sampled"), and how each step is taken:
-  // "explicit-splitting" (kicks and drifts, no solve) or "generic". Empty: not reported.
+  // "explicit-splitting" (kicks and drifts, no solve), "separable-newton" (Newton on the
+  // structured equation, solvers/separable_theta_step.h), "separable-sparse-newton" (the
+  // same with the sparse Hessian of a written potential, solvers/sparse_separable_step.h),
+  // "gauss-collocation" or "generic". Empty: not reported.
   std::string structure, structure_source, step_path;
+  // step_path separable-sparse-newton: the colours of the Hessian's columns, so the
+  // gradient passes per Jacobian are ceil(colours / 8) (-1: not such a path)
+  int hessian_colours = -1;
   // step_path gauss-collocation: the steps whose fixed-point iteration did not converge,
   // solved by the generic Galerkin step's Newton iteration instead (-1: not such a path)
   std::int64_t newton_steps = -1;

@@ -377,11 +377,11 @@ BOOST_AUTO_TEST_CASE(written_arrays_and_sums_match_the_built_in_systems) {
   BOOST_TEST(json_string(w.out, "step_path") == "explicit-splitting");
   BOOST_TEST(max_diff(json_array(w.out, "q_final"), json_array(b.out, "q_final")) <= 1e-13);
   BOOST_TEST(max_diff(json_array(w.out, "p_final"), json_array(b.out, "p_final")) <= 1e-13);
-  // and with the implicit midpoint (the generic dense path of a written system)
+  // and with the implicit midpoint (Newton with the sparse Hessian of the written potential)
   const std::vector<std::string> mid = {"--set", "integrator.map=midpoint", "--set", "integrator.composition=none",
                                         "--set", "integrator.t_end=1.0"};
   const Output wm = run_json("nbody_written.toml", mid), bm = run_json("figure_eight.toml", mid);
-  BOOST_TEST(json_string(wm.out, "step_path") == "generic");
+  BOOST_TEST(json_string(wm.out, "step_path") == "separable-sparse-newton");
   BOOST_TEST(max_diff(json_array(wm.out, "q_final"), json_array(bm.out, "q_final")) <= 1e-13);
   // the written FPU chain against the built-in chain (walls, alpha = 0.25, beta = 1), at
   // 8 and 1000 particles, the initial state an expression in i for both
@@ -456,17 +456,22 @@ BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
   refused({"initial.q=\"x*i\""}, "in initial.q (an expression in i = 1 ... 4 and the parameters): unknown name 'x'");
   refused({"system.params={ n = 4, i = 1 }", "system.lagrangian=\"sum(j, 1, n, q_dot[j]^2/2)\""},
           "the parameter 'i' would hide the index i");
-  // a dense implicit step beyond the size the run-time-sized steps take
-  refused({"system.params={ n = 5000 }", "integrator.map=midpoint"},
+  // a dense implicit step beyond the size the run-time-sized steps take (the generic
+  // path; the structured one of a separable text is sparse, below)
+  refused({"system.params={ n = 5000 }", "integrator.map=midpoint", "integrator.use_structure=false"},
           "integrator.map: map = \"midpoint\" in the lagrangian form needs dense 5000 x 5000 matrices, beyond the 4096 "
           "coordinates");
   refused({"system.params={ n = 5000 }", "integrator.method=galerkin", "integrator.quadrature=lobatto"},
           "integrator.method: method = \"galerkin\" needs dense 5000 x 5000 matrices");
   refused({"system.params={ n = 5000 }", "system.lagrangian=\"sum(i, 1, n, (1 + q[i]^2)*q_dot[i]^2)\""},
           "system: a Lagrangian that is not separable (its velocity Hessian, checked at the start) needs dense");
-  // ... while the explicit steps and Gauss collocation (Galerkin Gauss on a separable
-  // text: a fixed point on the stage forces, no matrix) take it
+  // ... while the explicit steps, the implicit theta maps by Newton with the sparse
+  // Hessian of the potential, and Gauss collocation (Galerkin Gauss on a separable text:
+  // a fixed point on the stage forces, no matrix) take it
   BOOST_TEST(dvm({"run", path, "--set", "system.params={ n = 5000 }"}).status == 0);
+  const Output m = dvm({"run", path, "--json", "--set", "system.params={ n = 5000 }", "--set", "integrator.map=midpoint"});
+  BOOST_TEST(m.status == 0, m.err);
+  BOOST_TEST(json_string(m.out, "step_path") == "separable-sparse-newton");
   const Output g = dvm({"run", path, "--json", "--set", "system.params={ n = 5000 }", "--set", "integrator.method=galerkin"});
   BOOST_TEST(g.status == 0, g.err);
   BOOST_TEST(g.out.find("\"step_path\": \"gauss-collocation\"") != std::string::npos, g.out);

@@ -1,0 +1,247 @@
+// The Hessian of a written potential U(q) of many coordinates, as a sparse matrix.
+//
+// A chain, a ring or a lattice written with sum(...) has a potential whose Hessian
+// d2U/dq_i dq_j has a few entries per row. Which entries may be nonzero is read off the
+// tape (mechanics/expression.h):
+//   - the additive terms of a sum of one shape are kept as a block (Expression::Block),
+//     and a block's value enters the expression only as a term of its top-level sum
+//     (Expression::parse emits blocks there and nowhere else); a term of a block
+//     contributes every pair of the coordinates it reads, plus, when it reads a
+//     definition (a named subexpression, evaluated on the main tape), every pair with
+//     the coordinates the main tape reads;
+//   - the rest of the tape (terms outside blocks, and the definitions) contributes every
+//     pair of the coordinates it reads.
+// The union of these cliques holds every nonzero entry. It is checked when built: at the
+// point given, the sparse Hessian times a pseudo-random vector must equal the Hessian-
+// vector product of one forward-over-reverse pass (reverse gradient in Jets seeded
+// with the vector) to round-off; a pattern that misses an entry fails that check.
+//
+// Evaluation by colouring (Coleman and More, "Estimation of sparse Jacobian matrices
+// and graph coloring problems", SIAM J. Numer. Anal. 20 (1983)): columns that share no
+// row get one colour (greedy distance-2 colouring in column order). The Hessian times
+// the sum of the unit vectors of a colour has, in row i, the one entry H(i, j) of that
+// colour's columns in row i. Those products are the reverse gradient of U evaluated
+// in ceres::Jet<double, 8> seeded with 8 colours a pass: the whole Hessian costs
+// ceil(colours / 8) gradient passes (a chain of neighbour terms has 3 colours: one
+// pass), where the dense forward-over-reverse Hessian costs ceil(n / 8).
+//
+// The pattern is symmetric and includes the diagonal. Workspace is allocated at
+// construction; an evaluation allocates nothing. The expression must outlive the
+// object. One object must not be used from two threads at once.
+#pragma once
+
+#include <ceres/jet.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "mechanics/expression.h"
+
+namespace dvm {
+
+class SparsePotentialHessian {
+ public:
+  static constexpr int kColoursPerPass = 8;
+  using Jet = ceres::Jet<double, kColoursPerPass>;
+  // Most entries a pattern may have (as many as a dense Hessian of 4096 coordinates).
+  static constexpr std::size_t kMaxEntries = std::size_t{1} << 24;
+
+  // Thrown when the cliques would give more than kMaxEntries entries.
+  struct TooDense : std::length_error {
+    using std::length_error::length_error;
+  };
+
+  // U: a tape in the coordinates (block 0) alone; n: their number; q: a point where U is
+  // defined (the pattern check). Throws TooDense for a pattern beyond kMaxEntries, and
+  // std::logic_error if the check fails.
+  SparsePotentialHessian(const Expression& U, int n, const double* q) : U_(&U), n_(n) {
+    if (n < 1) throw std::invalid_argument("a sparse Hessian needs at least one coordinate");
+    build_pattern();
+    colour();
+    in_.resize(static_cast<std::size_t>(2 * n));
+    out_.resize(static_cast<std::size_t>(2 * n));
+    check(q);
+  }
+
+  int dim() const { return n_; }
+  int colours() const { return colours_; }
+  // Row indices of the entries of column j, ascending (the diagonal among them).
+  const std::vector<std::vector<int>>& columns() const { return columns_; }
+  std::size_t entries() const { return entries_; }
+  // The colour of column j (columns of one colour share no row).
+  int colour_of(int j) const { return colour_[static_cast<std::size_t>(j)]; }
+
+  // H(i, j) for every entry of the pattern, column by column in the order of columns():
+  // values must hold entries() numbers.
+  void evaluate(const double* q, double* values) const {
+    for (int c0 = 0; c0 < colours_; c0 += kColoursPerPass) {
+      pass(q, [&](int i) {
+        const int c = colour_[static_cast<std::size_t>(i)] - c0;
+        return c >= 0 && c < kColoursPerPass ? c : -1;
+      });
+      std::size_t k = 0;
+      for (int j = 0; j < n_; ++j) {
+        const auto& col = columns_[static_cast<std::size_t>(j)];
+        const int c = colour_[static_cast<std::size_t>(j)] - c0;
+        if (c < 0 || c >= kColoursPerPass) {
+          k += col.size();
+          continue;
+        }
+        for (int i : col) values[k++] = out_[static_cast<std::size_t>(i)].v[c];
+      }
+    }
+  }
+
+  // H(q) r by one forward-over-reverse pass (the check, and tests).
+  void times(const double* q, const double* r, double* out) const {
+    for (int i = 0; i < n_; ++i) {
+      in_[static_cast<std::size_t>(i)] = Jet(q[i]);
+      in_[static_cast<std::size_t>(i)].v[0] = r[i];
+    }
+    gradient();
+    for (int i = 0; i < n_; ++i) out[i] = out_[static_cast<std::size_t>(i)].v[0];
+  }
+
+ private:
+  // The cliques of the terms, as sorted coordinate lists, merged into columns_.
+  void build_pattern() {
+    const Expression& U = *U_;
+    std::vector<int> main;
+    for (const auto& in : U.tape())
+      if (in.op == Expression::Op::Var && in.block == 0) main.push_back(in.index);
+    unique(main);
+    std::vector<std::vector<int>> cols(static_cast<std::size_t>(n_));
+    std::vector<int> term;
+    std::size_t pairs = 0;  // before merging: a bound on the entries
+    auto clique = [&](std::vector<int>& s) {
+      unique(s);
+      pairs += s.size() * s.size();
+      if (pairs > kMaxEntries)
+        throw TooDense("the potential's Hessian has terms coupling too many coordinates for a sparse matrix (more "
+                       "than " + std::to_string(kMaxEntries) + " entries)");
+      for (int j : s) {
+        require_index(j);
+        auto& c = cols[static_cast<std::size_t>(j)];
+        c.insert(c.end(), s.begin(), s.end());
+      }
+    };
+    term = main;
+    clique(term);
+    for (const Expression::Block& b : U.blocks()) {
+      bool reads_definition = false;
+      for (const auto& in : b.body)
+        if (in.op == Expression::Op::Var && in.block == 3) reads_definition = true;
+      for (int k = 0; k < b.terms; ++k) {
+        term.clear();
+        for (std::size_t j = 0; j < b.body.size(); ++j)
+          if (b.body[j].op == Expression::Op::Var && b.body[j].block == 0)
+            term.push_back(b.index[j][static_cast<std::size_t>(k)]);
+        if (reads_definition) term.insert(term.end(), main.begin(), main.end());
+        clique(term);
+      }
+    }
+    entries_ = 0;
+    columns_.resize(static_cast<std::size_t>(n_));
+    for (int j = 0; j < n_; ++j) {
+      auto& c = cols[static_cast<std::size_t>(j)];
+      c.push_back(j);
+      unique(c);
+      entries_ += c.size();
+      columns_[static_cast<std::size_t>(j)] = std::move(c);
+    }
+  }
+
+  // Greedy distance-2 colouring: column j takes the smallest colour no column sharing a
+  // row with it has.
+  void colour() {
+    colour_.assign(static_cast<std::size_t>(n_), -1);
+    std::vector<int> mark;  // mark[c] == j: colour c is taken for column j
+    colours_ = 0;
+    for (int j = 0; j < n_; ++j) {
+      for (int i : columns_[static_cast<std::size_t>(j)])
+        for (int k : columns_[static_cast<std::size_t>(i)]) {  // the pattern is symmetric: row i of column k
+          const int c = colour_[static_cast<std::size_t>(k)];
+          if (c >= 0) mark[static_cast<std::size_t>(c)] = j;
+        }
+      int c = 0;
+      while (c < colours_ && mark[static_cast<std::size_t>(c)] == j) ++c;
+      if (c == colours_) {
+        ++colours_;
+        mark.push_back(-1);
+      }
+      colour_[static_cast<std::size_t>(j)] = c;
+    }
+  }
+
+  // The reverse gradient of U in Jets, coordinate i seeded in slot slot_of(i) (none if < 0).
+  template <class Slot>
+  void pass(const double* q, Slot&& slot_of) const {
+    for (int i = 0; i < n_; ++i) {
+      in_[static_cast<std::size_t>(i)] = Jet(q[i]);
+      const int s = slot_of(i);
+      if (s >= 0) in_[static_cast<std::size_t>(i)].v[s] = 1.0;
+    }
+    gradient();
+  }
+  void gradient() const {
+    for (int i = 0; i < n_; ++i) {
+      in_[static_cast<std::size_t>(n_ + i)] = Jet(0.0);
+      out_[static_cast<std::size_t>(i)] = Jet(0.0);
+      out_[static_cast<std::size_t>(n_ + i)] = Jet(0.0);
+    }
+    U_->gradient(in_.data(), in_.data() + n_, out_.data(), out_.data() + n_);
+  }
+
+  // The sparse Hessian times a fixed pseudo-random vector against one pass with it.
+  void check(const double* q) {
+    std::vector<double> r(static_cast<std::size_t>(n_)), direct(static_cast<std::size_t>(n_)),
+        sparse(static_cast<std::size_t>(n_), 0.0), abs(static_cast<std::size_t>(n_), 0.0), values(entries_);
+    std::uint64_t x = 0x9E3779B97F4A7C15ull;
+    for (double& ri : r) {
+      x ^= x << 13;
+      x ^= x >> 7;
+      x ^= x << 17;
+      ri = 0.5 + static_cast<double>(x >> 11) * 0x1.0p-53;  // in [0.5, 1.5): no cancellation by sign
+    }
+    times(q, r.data(), direct.data());
+    evaluate(q, values.data());
+    std::size_t k = 0;
+    for (int j = 0; j < n_; ++j)
+      for (int i : columns_[static_cast<std::size_t>(j)]) {
+        sparse[static_cast<std::size_t>(i)] += values[k] * r[static_cast<std::size_t>(j)];
+        abs[static_cast<std::size_t>(i)] += std::fabs(values[k]) * r[static_cast<std::size_t>(j)];
+        ++k;
+      }
+    for (int i = 0; i < n_; ++i) {
+      const double d = std::fabs(sparse[static_cast<std::size_t>(i)] - direct[static_cast<std::size_t>(i)]);
+      const double tol = 1e-12 * (abs[static_cast<std::size_t>(i)] + std::fabs(direct[static_cast<std::size_t>(i)])) + 1e-300;
+      if (!(d <= tol) && std::isfinite(direct[static_cast<std::size_t>(i)]))
+        throw std::logic_error("the sparsity pattern read off the expression misses Hessian entries in row " +
+                               std::to_string(i) + " (sparse product " + std::to_string(sparse[static_cast<std::size_t>(i)]) +
+                               ", direct " + std::to_string(direct[static_cast<std::size_t>(i)]) + ")");
+    }
+  }
+
+  void require_index(int j) const {
+    if (j < 0 || j >= n_)
+      throw std::logic_error("the expression reads coordinate " + std::to_string(j) + " of " + std::to_string(n_));
+  }
+  static void unique(std::vector<int>& s) {
+    std::sort(s.begin(), s.end());
+    s.erase(std::unique(s.begin(), s.end()), s.end());
+  }
+
+  const Expression* U_;
+  int n_;
+  std::vector<std::vector<int>> columns_;
+  std::size_t entries_ = 0;
+  std::vector<int> colour_;
+  int colours_ = 0;
+  mutable std::vector<Jet> in_, out_;
+};
+
+}  // namespace dvm

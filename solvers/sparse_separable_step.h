@@ -1,0 +1,210 @@
+// The position-momentum step of a theta map on a separable Lagrangian written in a
+// scene, of any size, by Newton's method with a sparse Jacobian.
+//
+// It solves the equation of SeparableThetaStep (solvers/separable_theta_step.h): for
+// L(q, v) = v^T M v / 2 + U(q) with M constant (mechanics/dynamic_system.h, WrittenParts),
+// the theta map R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), D = q1 - q0
+// and q_theta = q0 + theta D, the discrete Legendre equations of Sec. 5.3 are
+//   p0 = M D / h - h (1 - theta) F(q_theta),   p1 - p0 = h F(q_theta),   F = grad U,
+// and the first is solved for D by simplified Newton, with the Jacobian of the residual
+// -(M / h - h theta (1 - theta) Hess U). Hess U comes from SparsePotentialHessian
+// (mechanics/sparse_hessian.h): its pattern read off the tape and ceil(colours / 8)
+// reverse gradients in Jets, so a chain or a lattice costs O(n) per Jacobian, where
+// the generic run-time-sized step (DynamicThetaStep) forms the full 2n x 2n Hessian of L
+// (ceil(2n / 8) passes, O(n^2)) and factors it densely (O(n^3)). The Jacobian is a
+// sparse symmetric matrix of M's and Hess U's entries, factored by Eigen's
+// SimplicialLDLT (fill-reducing ordering analysed once, at construction); a failed
+// factorisation or a zero pivot is a failed step with a message. The equation is the
+// generic step's, so the two agree to round-off (tests/solvers/test_sparse_separable.cc).
+//
+// It has the contract of `integrate` (N = Eigen::Dynamic, step_size(), step(q, p, dq,
+// dp)). Workspace is allocated at construction; the steps of a composition share one
+// SparsePotentialHessian (its pattern and colouring), and copies of a step share its
+// factorisation, so steps must not run on two threads at once.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/SparseCholesky>
+#include <Eigen/SparseCore>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/sparse_hessian.h"
+#include "solvers/dynamic_step.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+class SparseSeparableThetaStep {
+ public:
+  static constexpr int N = Eigen::Dynamic;
+  using V = Eigen::VectorXd;
+
+  // The pattern and colouring of Hess U at the state q (mechanics/sparse_hessian.h), to
+  // share between the steps of a composition.
+  static std::shared_ptr<SparsePotentialHessian> hessian_of(const WrittenDynamic& L, const V& q) {
+    return std::make_shared<SparsePotentialHessian>(L.parts().potential, L.dim(), q.data());
+  }
+
+  SparseSeparableThetaStep(const WrittenDynamic& L, std::shared_ptr<SparsePotentialHessian> hessian, double theta,
+                           double h, StepOptions options = {})
+      : L_(L), separable_(L), hessian_(std::move(hessian)), theta_(theta), h_(h), options_(options) {
+    if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1]");
+    dynamic_detail::require_step(h);
+    dynamic_detail::require_newton(options);
+    const int n = L_.dim();
+    if (!hessian_ || hessian_->dim() != n) throw std::invalid_argument("the sparse Hessian is not the system's");
+    const WrittenParts& w = L.parts();
+    x_.resize(n);
+    F_.resize(n);
+    Lv_.resize(n);
+    r_.resize(n);
+    dx_.resize(n);
+    zero_ = V::Zero(n);
+    hess_.resize(hessian_->entries());
+    // J's pattern: Hess U's (the diagonal included) and M's nonzero entries
+    std::vector<Eigen::Triplet<double>> t;
+    t.reserve(hessian_->entries());
+    const auto& cols = hessian_->columns();
+    for (int j = 0; j < n; ++j)
+      for (int i : cols[static_cast<std::size_t>(j)]) t.emplace_back(i, j, 0.0);
+    if (!w.split.diagonal)
+      for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i)
+          if (w.mass(i, j) != 0.0) t.emplace_back(i, j, 0.0);
+    J_.resize(n, n);
+    J_.setFromTriplets(t.begin(), t.end());  // duplicates summed: zeros
+    J_.makeCompressed();
+    // where each Hessian entry sits among J's values, and M / h at every value
+    position_.resize(hessian_->entries());
+    mass_over_h_.assign(static_cast<std::size_t>(J_.nonZeros()), 0.0);
+    std::size_t k = 0;
+    for (int j = 0; j < n; ++j) {
+      Eigen::SparseMatrix<double>::InnerIterator it(J_, j);
+      for (int i : cols[static_cast<std::size_t>(j)]) {
+        while (it.row() < i) ++it;
+        position_[k++] = static_cast<std::size_t>(&it.valueRef() - J_.valuePtr());
+      }
+      for (Eigen::SparseMatrix<double>::InnerIterator m(J_, j); m; ++m) {
+        const double Mij = w.split.diagonal ? (m.row() == j ? w.mass_diagonal[j] : 0.0) : w.mass(m.row(), j);
+        mass_over_h_[static_cast<std::size_t>(&m.valueRef() - J_.valuePtr())] = Mij / h_;
+      }
+    }
+    ldlt_ = std::make_shared<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>>();
+    ldlt_->analyzePattern(J_);
+  }
+
+  double step_size() const { return h_; }
+  double theta() const { return theta_; }
+  int dim() const { return L_.dim(); }
+
+  // One step from (q0, p0): dq holds the starting guess on entry and q1 - q0 on return,
+  // dp receives p1 - p0 = h F(q_theta). Simplified Newton as SeparableThetaStep: the
+  // Jacobian is formed and factored at the starting guess and again only where an
+  // iteration fails to shrink the residual fourfold; the stopping rule and the final
+  // correction are those of solve_newton (solvers/newton.h).
+  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+    StepSummary s;
+    const int n = L_.dim();
+    if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
+    if (dp.size() != n) dp.resize(n);
+    const StepOptions& opt = options_;
+    const double pscale = dynamic_detail::inf_norm(p0), x0 = dynamic_detail::inf_norm(q0);
+    bool have_jacobian = false;
+    double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
+    for (int it = 0; it < opt.max_iterations; ++it) {
+      x_ = q0 + theta_ * dq;
+      force(x_);
+      mass_times(dq, r_);
+      r_ = p0 - r_ / h_ + (h_ * (1.0 - theta_)) * F_;
+      s.residual = dynamic_detail::inf_norm(r_);
+      if (!have_jacobian || !(s.residual <= 0.25 * last)) {
+        Jmax = jacobian(x_);
+        have_jacobian = true;
+        ++s.iterations;  // (Jacobian evaluations, as solve_newton counts them)
+        if (std::isfinite(Jmax) && !factor()) {
+          s.message = "singular step Jacobian (sparse LDL^T factorisation failed)";
+          return s;
+        }
+      }
+      last = s.residual;
+      s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+      if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+        s.message = "non-finite residual or Jacobian";
+        return s;
+      }
+      const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, Jmax);
+      if (verdict == NewtonVerdict::failed) return s;
+      dx_ = ldlt_->solve(r_);  // J dx = r; the Jacobian of r is -J
+      if (!std::isfinite(dynamic_detail::inf_norm(dx_))) {
+        s.converged = false;
+        s.message = "singular step Jacobian";
+        return s;
+      }
+      dq += dx_;
+      if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
+      dxn = dynamic_detail::inf_norm(dx_);
+    }
+    if (!s.converged) {
+      s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
+      return s;
+    }
+    x_ = q0 + theta_ * dq;
+    force(x_);
+    dp = h_ * F_;
+    if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+      s.converged = false;
+      s.message = "non-finite momentum";
+    }
+    return s;
+  }
+
+ private:
+  // F = grad U(x): the reverse gradient of the potential's tape
+  void force(const V& x) const { separable_.gradient(x, zero_, F_, Lv_); }
+  void mass_times(const V& v, V& out) const {
+    const WrittenParts& w = L_.parts();
+    if (w.split.diagonal)
+      out = v.cwiseProduct(w.mass_diagonal);
+    else
+      out.noalias() = w.mass * v;
+  }
+  // J = M / h - h theta (1 - theta) Hess U(x); returns its largest entry in magnitude
+  double jacobian(const V& x) const {
+    hessian_->evaluate(x.data(), hess_.data());
+    double* J = J_.valuePtr();
+    for (std::size_t k = 0; k < mass_over_h_.size(); ++k) J[k] = mass_over_h_[k];
+    const double c = h_ * theta_ * (1.0 - theta_);
+    for (std::size_t k = 0; k < position_.size(); ++k) J[position_[k]] -= c * hess_[k];
+    double m = 0.0;
+    for (std::size_t k = 0; k < mass_over_h_.size(); ++k) m = std::fmax(m, std::fabs(J[k]));
+    return std::isfinite(m) ? m : INFINITY;
+  }
+  bool factor() const {
+    ldlt_->factorize(J_);
+    if (ldlt_->info() != Eigen::Success) return false;
+    const auto& d = ldlt_->vectorD();
+    for (Eigen::Index i = 0; i < d.size(); ++i)
+      if (!(d[i] != 0.0) || !std::isfinite(d[i])) return false;
+    return true;
+  }
+  WrittenDynamic L_;
+  WrittenSeparable separable_;  // its force
+  std::shared_ptr<SparsePotentialHessian> hessian_;
+  double theta_, h_;
+  StepOptions options_;
+  std::vector<std::size_t> position_;
+  std::vector<double> mass_over_h_;
+  mutable V x_, F_, Lv_, r_, dx_, zero_;
+  mutable std::vector<double> hess_;
+  mutable Eigen::SparseMatrix<double> J_;
+  // (not copyable; copies share it: every step factors its own Jacobian before solving)
+  std::shared_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> ldlt_;
+};
+
+}  // namespace dvm

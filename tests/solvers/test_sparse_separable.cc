@@ -1,0 +1,282 @@
+// The sparse Hessian of a written potential (mechanics/sparse_hessian.h) and the theta
+// step that factors it (solvers/sparse_separable_step.h):
+//   - on chains with fixed and periodic ends, a lattice, a text with a definition read
+//     in a sum, a full mass matrix and a text without blocks, the pattern holds every
+//     nonzero entry of the dense Hessian (forward over reverse, mechanics/
+//     dynamic_system.h), the colouring gives each entry exactly, and columns of one
+//     colour share no row; a chain takes one gradient pass (at most 8 colours);
+//   - through the runtime, every theta map (alone, composed, DIRK, a theta per stage)
+//     takes the sparse step on a written separable text and gives the generic dense
+//     path's states (use_structure = false) to the Newton tolerance;
+//   - a written chain beyond the dense steps' limit runs with the midpoint map, where the
+//     dense path is refused naming its key.
+#define BOOST_TEST_MODULE sparse_separable
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/sparse_hessian.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/runtime/problem.h"
+#include "solvers/runtime/run.h"
+
+using namespace dvm;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+namespace {
+
+struct Text {
+  std::string what;
+  std::shared_ptr<WrittenSystem> system;
+};
+
+// One array q[1..n] with the given ends, or plain names when `names` is given.
+std::shared_ptr<WrittenSystem> written(int n, ExpressionSymbols::Boundary ends, const std::string& L,
+                                       std::vector<std::pair<std::string, double>> params = {},
+                                       std::vector<std::pair<std::string, std::string>> definitions = {},
+                                       std::vector<std::string> names = {}) {
+  auto s = std::make_shared<WrittenSystem>();
+  s->name = "written";
+  if (names.empty())
+    s->add_array("q", n, ends);
+  else
+    s->coordinates = std::move(names);
+  s->params = std::move(params);
+  s->definitions = std::move(definitions);
+  s->check_names();
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  return s;
+}
+
+std::vector<Text> texts() {
+  using B = ExpressionSymbols::Boundary;
+  const std::string fpu =
+      "sum(i, 1, n, m/2*q_dot[i]^2) - sum(i, 1, n + 1, k/2*(q[i] - q[i-1])^2 + alpha/3*(q[i] - q[i-1])^3"
+      " + beta/4*(q[i] - q[i-1])^4)";
+  const std::vector<std::pair<std::string, double>> fp = {{"m", 1.3}, {"k", 1.0}, {"alpha", 0.25}, {"beta", 1.0}};
+  std::vector<Text> out;
+  auto with_n = [](std::vector<std::pair<std::string, double>> p, int n) {
+    p.emplace_back("n", n);
+    return p;
+  };
+  out.push_back({"fpu chain, fixed ends, n = 40", written(40, B::fixed, fpu, with_n(fp, 40))});
+  out.push_back({"ring with on-site potential, periodic, n = 40",
+                 written(40, B::periodic,
+                         "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, (q[i+1] - q[i])^4/4 + 1 - cos(q[i]))",
+                         {{"n", 40}})});
+  // a 6 x 6 lattice in one array: neighbours along a row (i, i+1) and across rows (i, i+6)
+  out.push_back({"lattice 6 x 6",
+                 written(36, B::fixed,
+                         "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n - 1, (q[i+1] - q[i])^2/2)"
+                         " - sum(i, 1, n - a, (q[i+a] - q[i])^4/4 + q[i]^2*q[i+a]/3)",
+                         {{"n", 36}, {"a", 6}})});
+  out.push_back({"a definition read in a sum, n = 30",
+                 written(30, B::fixed, "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, (q[i] - c)^2/2 + (q[i+1] - q[i])^4)",
+                         {{"n", 30}}, {{"c", "q[3]/2 + sin(q[7])"}})});
+  out.push_back({"full mass matrix, n = 24",
+                 written(24, B::fixed,
+                         "sum(i, 1, n, q_dot[i]^2) + sum(i, 1, n - 1, q_dot[i]*q_dot[i+1]/2)"
+                         " - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^4/4)",
+                         {{"n", 24}})});
+  out.push_back({"kepler, no blocks",
+                 written(2, B::none, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)", {{"mu", 1.5}}, {}, {"x", "y"})});
+  return out;
+}
+
+VectorXd random_vector(int n, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  VectorXd x(n);
+  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
+  return x;
+}
+
+Problem written_problem(const std::shared_ptr<WrittenSystem>& w, const VectorXd& q, const VectorXd& v) {
+  Problem pr;
+  pr.system = &written_system_entry();
+  pr.written = w;
+  pr.dim = static_cast<int>(q.size());
+  pr.q.assign(q.data(), q.data() + q.size());
+  pr.v.assign(v.data(), v.data() + v.size());
+  pr.step = 0.02;
+  pr.steps = 100;
+  return pr;
+}
+
+double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
+  if (a.size() != b.size() || a.empty()) return INFINITY;
+  double d = 0.0;
+  for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+  return d;
+}
+double max_abs(const std::vector<double>& a) {
+  double d = 0.0;
+  for (double x : a) d = std::fmax(d, std::fabs(x));
+  return d;
+}
+
+RunReport run(const Problem& pr, const Method& me) { return make_run(pr, me)->execute(nullptr); }
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_pattern_holds_every_entry_of_the_hessian_and_the_colours_give_each_once) {
+  unsigned seed = 1;
+  for (const Text& t : texts()) {
+    BOOST_TEST_CONTEXT(t.what) {
+      const WrittenDynamic L(t.system);
+      BOOST_TEST_REQUIRE(L.separable());
+      const int n = L.dim();
+      const VectorXd q = random_vector(n, 0.6, seed++) + VectorXd::Constant(n, 0.1);
+      const VectorXd v = random_vector(n, 0.5, seed++);
+      const VectorXd q_kepler = (VectorXd(2) << 0.8, -0.3).finished();
+      const VectorXd& x = n == 2 ? q_kepler : q;
+      VectorXd Lq(n), Lv(n);
+      MatrixXd Lqq(n, n), Lqv(n, n), Lvv(n, n);
+      L.hessian(x, v, Lq, Lv, Lqq, Lqv, Lvv);  // Lqq = Hess U for L = T + U
+      const SparsePotentialHessian H(L.parts().potential, n, x.data());
+      std::vector<double> values(H.entries());
+      H.evaluate(x.data(), values.data());
+      MatrixXd S = MatrixXd::Zero(n, n);
+      std::vector<std::vector<bool>> in(static_cast<std::size_t>(n), std::vector<bool>(static_cast<std::size_t>(n)));
+      std::size_t k = 0;
+      for (int j = 0; j < n; ++j)
+        for (int i : H.columns()[static_cast<std::size_t>(j)]) {
+          S(i, j) = values[k++];
+          in[static_cast<std::size_t>(i)][static_cast<std::size_t>(j)] = true;
+        }
+      BOOST_TEST(k == H.entries());
+      const double scale = Lqq.cwiseAbs().maxCoeff();
+      BOOST_TEST(scale > 0.0);
+      BOOST_TEST((S - Lqq).cwiseAbs().maxCoeff() <= 1e-13 * scale);
+      int outside = 0, symmetric_misses = 0, shared_rows = 0;
+      for (int i = 0; i < n; ++i)
+        for (int j = 0; j < n; ++j) {
+          if (!in[static_cast<std::size_t>(i)][static_cast<std::size_t>(j)] && Lqq(i, j) != 0.0) ++outside;
+          if (in[static_cast<std::size_t>(i)][static_cast<std::size_t>(j)] != in[static_cast<std::size_t>(j)][static_cast<std::size_t>(i)])
+            ++symmetric_misses;
+        }
+      for (int j = 0; j < n; ++j)
+        for (int l = j + 1; l < n; ++l)
+          if (H.colour_of(j) == H.colour_of(l))
+            for (int i = 0; i < n; ++i)
+              if (in[static_cast<std::size_t>(i)][static_cast<std::size_t>(j)] && in[static_cast<std::size_t>(i)][static_cast<std::size_t>(l)])
+                ++shared_rows;
+      BOOST_TEST(outside == 0);
+      BOOST_TEST(symmetric_misses == 0);
+      BOOST_TEST(shared_rows == 0);
+      // H r by one pass equals the sparse matrix times r
+      const VectorXd r = random_vector(n, 1.0, seed++);
+      VectorXd Hr(n);
+      H.times(x.data(), r.data(), Hr.data());
+      BOOST_TEST((Hr - Lqq * r).cwiseAbs().maxCoeff() <= 1e-13 * scale * r.cwiseAbs().sum());
+      if (t.what.rfind("fpu", 0) == 0 || t.what.rfind("ring", 0) == 0) {
+        BOOST_TEST(H.colours() <= SparsePotentialHessian::kColoursPerPass);  // one gradient pass a Jacobian
+        BOOST_TEST(H.entries() <= static_cast<std::size_t>(3 * n + 4));
+      }
+    }
+  }
+  // a chain of 10^4: still a few colours and O(n) entries
+  using B = ExpressionSymbols::Boundary;
+  const auto big = written(10000, B::fixed,
+                           "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^4/4)",
+                           {{"n", 10000}});
+  const WrittenDynamic Lb(big);
+  const VectorXd qb = random_vector(10000, 0.3, 99);
+  const SparsePotentialHessian Hb(Lb.parts().potential, 10000, qb.data());
+  BOOST_TEST(Hb.colours() <= 4);
+  BOOST_TEST(Hb.entries() <= std::size_t{3 * 10000 + 4});
+}
+
+BOOST_AUTO_TEST_CASE(every_theta_map_takes_the_sparse_step_and_equals_the_generic_path) {
+  std::vector<Method> methods;
+  for (double th : {0.5, 0.3, 0.7})
+    for (const char* c : {"none", "triple-jump", "kahan-li6", "dirk", "dirk-thetas"}) {
+      Method me;
+      const std::string comp = c;
+      me.map = &find_map_entry(th == 0.5 && comp != "dirk-thetas" ? "midpoint" : "theta", "test");
+      me.theta = th;
+      me.composition = comp == "dirk-thetas" ? "dirk" : comp;
+      if (me.composition == "dirk") me.weights = {0.3, 0.4, 0.3};
+      if (comp == "dirk-thetas") {
+        me.thetas = {0.2, th, 0.8};
+        me.theta = me.map->theta;
+      }
+      methods.push_back(me);
+    }
+  int compared = 0;
+  unsigned seed = 11;
+  for (const Text& t : texts()) {
+    const int n = t.system->dim();
+    const VectorXd q = n == 2 ? (VectorXd(2) << 0.8, 0.0).finished() : random_vector(n, 0.4, seed++);
+    const VectorXd v = n == 2 ? (VectorXd(2) << 0.0, 1.2).finished() : random_vector(n, 0.3, seed++);
+    const Problem pr = written_problem(t.system, q, v);
+    for (const Method& me : methods) {
+      Method generic = me;
+      generic.use_structure = false;
+      validate(pr, me);
+      const RunReport a = run(pr, me), b = run(pr, generic);
+      BOOST_TEST_CONTEXT(t.what << ", " << me.label()) {
+        BOOST_TEST(!a.failed, a.loop.failure.message);
+        BOOST_TEST(!b.failed, b.loop.failure.message);
+        BOOST_TEST(a.structure == "separable");
+        BOOST_TEST(a.step_path == "separable-sparse-newton");
+        BOOST_TEST(a.hessian_colours >= 1);
+        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+        BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+        ++compared;
+      }
+    }
+  }
+  BOOST_TEST(compared == 90);
+  // the report says how the steps were taken
+  Method mid;
+  mid.map = &find_map_entry("midpoint", "test");
+  mid.theta = 0.5;
+  const std::string j = report_json(run(written_problem(texts()[0].system, random_vector(40, 0.4, 5),
+                                                        random_vector(40, 0.3, 6)),
+                                        mid));
+  BOOST_TEST(j.find("\"step_path\": \"separable-sparse-newton\"") != std::string::npos, j);
+  BOOST_TEST(j.find("\"hessian_colours\": ") != std::string::npos, j);
+}
+
+BOOST_AUTO_TEST_CASE(a_written_chain_beyond_the_dense_limit_runs_the_midpoint_map) {
+  using B = ExpressionSymbols::Boundary;
+  const int n = 6000;
+  const auto w = written(n, B::fixed,
+                         "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^4/4)",
+                         {{"n", n}});
+  VectorXd q(n), v = VectorXd::Zero(n);
+  for (int i = 0; i < n; ++i) q[i] = 0.3 * std::sin(0.7 * i);
+  Problem pr = written_problem(w, q, v);
+  pr.step = 0.1;
+  pr.steps = 20;
+  Method mid;
+  mid.map = &find_map_entry("midpoint", "test");
+  mid.theta = 0.5;
+  validate(pr, mid);
+  const RunReport a = run(pr, mid);
+  BOOST_TEST(!a.failed, a.loop.failure.message);
+  BOOST_TEST(a.step_path == "separable-sparse-newton");
+  BOOST_TEST(a.hessian_colours <= 4);
+  // the midpoint map keeps a quadratic-plus-quartic chain's energy to O(h^2) (bounded),
+  // and the springs, stretched at the start, set the particles moving
+  BOOST_TEST(std::fabs(a.energy_final - a.energy_initial) <= 1e-3 * std::fabs(a.energy_initial));
+  BOOST_TEST(max_abs(a.p_final) > 1e-6);
+  Method generic = mid;
+  generic.use_structure = false;
+  try {
+    (void)run(pr, generic);
+    BOOST_TEST(false, "the dense path ran beyond its limit");
+  } catch (const std::exception& e) {
+    const std::string m = e.what();
+    BOOST_TEST(m.find("integrator.map") != std::string::npos, m);
+    BOOST_TEST(m.find("4096") != std::string::npos, m);
+  }
+}
