@@ -21,9 +21,10 @@
 // row get one colour (greedy distance-2 colouring in column order). The Hessian times
 // the sum of the unit vectors of a colour has, in row i, the one entry H(i, j) of that
 // colour's columns in row i. Those products are the reverse gradient of U evaluated
-// in ceres::Jet<double, 8> seeded with 8 colours a pass: the whole Hessian costs
-// ceil(colours / 8) gradient passes (a chain of neighbour terms has 3 colours: one
-// pass), where the dense forward-over-reverse Hessian costs ceil(n / 8).
+// in ceres::Jet<double, K> seeded with K colours a pass (K = 4 for at most 4 colours,
+// else 8): the whole Hessian costs ceil(colours / K) gradient passes (a chain of
+// neighbour terms has 3 or 4 colours: one pass in Jets of 4), where the dense
+// forward-over-reverse Hessian costs ceil(n / 8).
 //
 // The pattern is symmetric and includes the diagonal. Workspace is allocated at
 // construction; an evaluation allocates nothing. The expression must outlive the
@@ -46,7 +47,6 @@ namespace dvm {
 class SparsePotentialHessian {
  public:
   static constexpr int kColoursPerPass = 8;
-  using Jet = ceres::Jet<double, kColoursPerPass>;
   // Most entries a pattern may have (as many as a dense Hessian of 4096 coordinates).
   static constexpr std::size_t kMaxEntries = std::size_t{1} << 24;
 
@@ -62,8 +62,10 @@ class SparsePotentialHessian {
     if (n < 1) throw std::invalid_argument("a sparse Hessian needs at least one coordinate");
     build_pattern();
     colour();
-    in_.resize(static_cast<std::size_t>(2 * n));
-    out_.resize(static_cast<std::size_t>(2 * n));
+    if (colours_ <= 4)
+      w4_.resize(n);
+    else
+      w8_.resize(n);
     check(q);
   }
 
@@ -78,32 +80,18 @@ class SparsePotentialHessian {
   // H(i, j) for every entry of the pattern, column by column in the order of columns():
   // values must hold entries() numbers.
   void evaluate(const double* q, double* values) const {
-    for (int c0 = 0; c0 < colours_; c0 += kColoursPerPass) {
-      pass(q, [&](int i) {
-        const int c = colour_[static_cast<std::size_t>(i)] - c0;
-        return c >= 0 && c < kColoursPerPass ? c : -1;
-      });
-      std::size_t k = 0;
-      for (int j = 0; j < n_; ++j) {
-        const auto& col = columns_[static_cast<std::size_t>(j)];
-        const int c = colour_[static_cast<std::size_t>(j)] - c0;
-        if (c < 0 || c >= kColoursPerPass) {
-          k += col.size();
-          continue;
-        }
-        for (int i : col) values[k++] = out_[static_cast<std::size_t>(i)].v[c];
-      }
-    }
+    if (colours_ <= 4)
+      evaluate(w4_, q, values);
+    else
+      evaluate(w8_, q, values);
   }
 
   // H(q) r by one forward-over-reverse pass (the check, and tests).
   void times(const double* q, const double* r, double* out) const {
-    for (int i = 0; i < n_; ++i) {
-      in_[static_cast<std::size_t>(i)] = Jet(q[i]);
-      in_[static_cast<std::size_t>(i)].v[0] = r[i];
-    }
-    gradient();
-    for (int i = 0; i < n_; ++i) out[i] = out_[static_cast<std::size_t>(i)].v[0];
+    if (colours_ <= 4)
+      times(w4_, q, r, out);
+    else
+      times(w8_, q, r, out);
   }
 
  private:
@@ -177,23 +165,58 @@ class SparsePotentialHessian {
     }
   }
 
-  // The reverse gradient of U in Jets, coordinate i seeded in slot slot_of(i) (none if < 0).
-  template <class Slot>
-  void pass(const double* q, Slot&& slot_of) const {
-    for (int i = 0; i < n_; ++i) {
-      in_[static_cast<std::size_t>(i)] = Jet(q[i]);
-      const int s = slot_of(i);
-      if (s >= 0) in_[static_cast<std::size_t>(i)].v[s] = 1.0;
+  // The inputs (q, then v = 0) and the reverse gradient of U, in Jets of K directions.
+  template <int K>
+  struct Work {
+    using Jet = ceres::Jet<double, K>;
+    std::vector<Jet> in, out;
+    void resize(int n) {
+      in.resize(static_cast<std::size_t>(2 * n));
+      out.resize(static_cast<std::size_t>(2 * n));
     }
-    gradient();
+  };
+
+  template <int K>
+  void evaluate(Work<K>& w, const double* q, double* values) const {
+    for (int c0 = 0; c0 < colours_; c0 += K) {
+      load(w, q);
+      for (int i = 0; i < n_; ++i) {
+        const int c = colour_[static_cast<std::size_t>(i)] - c0;
+        if (c >= 0 && c < K) w.in[static_cast<std::size_t>(i)].v[c] = 1.0;
+      }
+      gradient(w);
+      std::size_t k = 0;
+      for (int j = 0; j < n_; ++j) {
+        const auto& col = columns_[static_cast<std::size_t>(j)];
+        const int c = colour_[static_cast<std::size_t>(j)] - c0;
+        if (c < 0 || c >= K) {
+          k += col.size();
+          continue;
+        }
+        for (int i : col) values[k++] = w.out[static_cast<std::size_t>(i)].v[c];
+      }
+    }
   }
-  void gradient() const {
+  template <int K>
+  void times(Work<K>& w, const double* q, const double* r, double* out) const {
+    load(w, q);
+    for (int i = 0; i < n_; ++i) w.in[static_cast<std::size_t>(i)].v[0] = r[i];
+    gradient(w);
+    for (int i = 0; i < n_; ++i) out[i] = w.out[static_cast<std::size_t>(i)].v[0];
+  }
+  template <int K>
+  void load(Work<K>& w, const double* q) const {
+    using Jet = typename Work<K>::Jet;
     for (int i = 0; i < n_; ++i) {
-      in_[static_cast<std::size_t>(n_ + i)] = Jet(0.0);
-      out_[static_cast<std::size_t>(i)] = Jet(0.0);
-      out_[static_cast<std::size_t>(n_ + i)] = Jet(0.0);
+      w.in[static_cast<std::size_t>(i)] = Jet(q[i]);
+      w.in[static_cast<std::size_t>(n_ + i)] = Jet(0.0);
     }
-    U_->gradient(in_.data(), in_.data() + n_, out_.data(), out_.data() + n_);
+  }
+  template <int K>
+  void gradient(Work<K>& w) const {
+    using Jet = typename Work<K>::Jet;
+    for (auto& o : w.out) o = Jet(0.0);
+    U_->gradient(w.in.data(), w.in.data() + n_, w.out.data(), w.out.data() + n_);
   }
 
   // The sparse Hessian times a fixed pseudo-random vector against one pass with it.
@@ -241,7 +264,8 @@ class SparsePotentialHessian {
   std::size_t entries_ = 0;
   std::vector<int> colour_;
   int colours_ = 0;
-  mutable std::vector<Jet> in_, out_;
+  mutable Work<4> w4_;  // at most 4 colours
+  mutable Work<8> w8_;  // more
 };
 
 }  // namespace dvm

@@ -14,6 +14,9 @@
 // Each runs the midpoint map's position-momentum step with Newton's method, the same
 // tolerances and start, and reports ns/step, the ratio to the built-in row, and the
 // largest difference of the final state (round-off only: the equations are the same).
+// Then separable texts against the built-in closed forms: Stormer-Verlet by kicks and
+// drifts on Kepler and on the FPU chain, and the midpoint map on the chain (the sparse
+// step of a written potential against the built-in tridiagonal Newton step).
 //
 // usage: bench_written_lagrangian [--steps N] [--repeats R]
 #include <chrono>
@@ -28,9 +31,11 @@
 #include "mechanics/written_lagrangian.h"
 #include "mechanics/chain.h"
 #include "mechanics/dynamic_system.h"
+#include "solvers/chain_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/sparse_separable_step.h"
 #include "solvers/splitting_step.h"
 
 using namespace dvm;
@@ -226,6 +231,78 @@ void explicit_chain(int repeats) {
   }
 }
 
+// Any step of the integrate contract from (q0, p0) at rest, best of `repeats`.
+template <class Step>
+Result measure_step(const Step& step, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0, std::int64_t steps,
+                    int repeats) {
+  Result best;
+  for (int r = 0; r < repeats; ++r) {
+    Eigen::VectorXd q = q0, p = p0;
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunSummary run = integrate(step, 0.0, q, p, Eigen::VectorXd(Eigen::VectorXd::Zero(q0.size())), steps,
+                                     [](auto&&...) {});
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                      static_cast<double>(steps);
+    if (run.failed) {
+      std::fprintf(stderr, "chain, n = %d: run failed at step %lld: %s\n", static_cast<int>(q0.size()),
+                   static_cast<long long>(run.failed_step), run.failure.message.c_str());
+      std::exit(3);
+    }
+    if (ns < best.ns_per_step) {
+      best.ns_per_step = ns;
+      best.state.assign(q.data(), q.data() + q.size());
+      best.state.insert(best.state.end(), p.data(), p.data() + p.size());
+    }
+  }
+  return best;
+}
+
+// The midpoint map on the same chain: the built-in ChainStep (tridiagonal Newton,
+// solvers/chain_step.h) against the written text through SparseSeparableThetaStep (the
+// sparse Hessian of its potential, solvers/sparse_separable_step.h), which is what
+// `dvm run` takes for it; and, at n = 1000, the dense generic step (DynamicThetaStep,
+// `use_structure = false`), the path of a written chain without the sparse step.
+void implicit_chain(int repeats) {
+  std::printf("FPU chain between walls (the same text), midpoint map with Newton's method, h = 0.05, best of %d\n",
+              repeats);
+  std::printf("  %8s %8s %14s %14s %8s %14s %8s %14s\n", "n", "steps", "built-in ns", "written ns", "ratio",
+              "written ns/n", "colours", "|state diff|");
+  double per_particle_1000 = 0.0, dense_1000 = 0.0, sparse_1000 = 0.0;
+  for (int n : {1000, 10000, 25000}) {
+    auto w = std::make_shared<WrittenSystem>();
+    w->name = "written chain";
+    w->add_array("q", n, ExpressionSymbols::Boundary::fixed);
+    w->params = {{"n", n}};
+    w->check_names();
+    w->lagrangian = Expression::parse(
+        "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^3/12 + "
+        "(q[i] - q[i-1])^4/4)",
+        w->symbols(WrittenSystem::Kind::lagrangian));
+    const WrittenDynamic W(w);
+    Eigen::VectorXd q0(n), p0 = Eigen::VectorXd::Zero(n);
+    for (int i = 0; i < n; ++i) q0[i] = std::sin(M_PI * (i + 1) / (n + 1));
+    const std::int64_t steps = 400000 / n;
+    const ChainStep builtin(FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), ThetaMap::midpoint(), 0.05);
+    const auto H = SparseSeparableThetaStep::hessian_of(W, q0);
+    const SparseSeparableThetaStep sparse(W, H, 0.5, 0.05);
+    const Result a = measure_step(builtin, q0, p0, steps, repeats);
+    const Result b = measure_step(sparse, q0, p0, steps, repeats);
+    const double per = b.ns_per_step / n;
+    if (n == 1000) {
+      per_particle_1000 = per;
+      sparse_1000 = b.ns_per_step;
+      const Result c = measure_step(DynamicThetaStep<WrittenDynamic>(W, ThetaMap::midpoint(), 0.05), q0, p0, 3, 1);
+      dense_1000 = c.ns_per_step;
+    }
+    std::printf("  %8d %8lld %14.0f %14.0f %8.2f %14.2f %8d %14.3e\n", n, static_cast<long long>(steps), a.ns_per_step,
+                b.ns_per_step, b.ns_per_step / a.ns_per_step, per, H->colours(), state_diff(a, b));
+    if (n == 25000)
+      std::printf("  written ns per particle, n = 25000 against n = 1000: %.2f (1 is linear)\n", per / per_particle_1000);
+  }
+  std::printf("  n = 1000, the dense generic step (3 steps): %.0f ns/step, %.0f times the sparse step\n\n", dense_1000,
+              dense_1000 / sparse_1000);
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -259,5 +336,6 @@ int main(int argc, char** argv) {
           Vec<double, 2>(0.5, 0.3), Vec<double, 2>(0.0, 0.0), 0.01, steps, repeats);
   explicit_kepler(5 * steps, repeats);
   explicit_chain(repeats);
+  implicit_chain(repeats);
   return 0;
 }
