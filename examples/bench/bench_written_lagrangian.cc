@@ -197,6 +197,26 @@ void explicit_kepler(std::int64_t steps, int repeats) {
               state_diff(a, b));
 }
 
+// The FPU chain between walls written with sums (k = 1, alpha = 1/4, beta = 1), and its
+// first normal mode.
+std::shared_ptr<WrittenSystem> written_chain(int n) {
+  auto w = std::make_shared<WrittenSystem>();
+  w->name = "written chain";
+  w->add_array("q", n, ExpressionSymbols::Boundary::fixed);
+  w->params = {{"n", n}};
+  w->check_names();
+  w->lagrangian = Expression::parse(
+      "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^3/12 + "
+      "(q[i] - q[i-1])^4/4)",
+      w->symbols(WrittenSystem::Kind::lagrangian));
+  return w;
+}
+Eigen::VectorXd first_mode(int n) {
+  Eigen::VectorXd q(n);
+  for (int i = 0; i < n; ++i) q[i] = std::sin(M_PI * (i + 1) / (n + 1));
+  return q;
+}
+
 void explicit_chain(int repeats) {
   std::printf("FPU chain between walls (k = 1, alpha = 0.25, beta = 1), Stormer-Verlet by composition, h = 0.05, "
               "best of %d\n  L = sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + "
@@ -206,18 +226,8 @@ void explicit_chain(int repeats) {
               "written ns/n", "|state diff|");
   double per_particle_1000 = 0.0;
   for (int n : {1000, 10000, 25000}) {
-    auto w = std::make_shared<WrittenSystem>();
-    w->name = "written chain";
-    w->add_array("q", n, ExpressionSymbols::Boundary::fixed);
-    w->params = {{"n", n}};
-    w->check_names();
-    w->lagrangian = Expression::parse(
-        "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^3/12 + "
-        "(q[i] - q[i-1])^4/4)",
-        w->symbols(WrittenSystem::Kind::lagrangian));
-    const WrittenDynamic W(w);
-    Eigen::VectorXd q0(n), p0 = Eigen::VectorXd::Zero(n);
-    for (int i = 0; i < n; ++i) q0[i] = std::sin(M_PI * (i + 1) / (n + 1));
+    const WrittenDynamic W(written_chain(n));
+    const Eigen::VectorXd q0 = first_mode(n), p0 = Eigen::VectorXd::Zero(n);
     const std::int64_t steps = 2000000 / n;
     const Result a = measure_explicit(ChainSeparable{FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), {}}, q0, p0, 0.05, steps,
                                       repeats);
@@ -269,18 +279,8 @@ void implicit_chain(int repeats) {
               "written ns/n", "colours", "|state diff|");
   double per_particle_1000 = 0.0, dense_1000 = 0.0, sparse_1000 = 0.0;
   for (int n : {1000, 10000, 25000}) {
-    auto w = std::make_shared<WrittenSystem>();
-    w->name = "written chain";
-    w->add_array("q", n, ExpressionSymbols::Boundary::fixed);
-    w->params = {{"n", n}};
-    w->check_names();
-    w->lagrangian = Expression::parse(
-        "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^3/12 + "
-        "(q[i] - q[i-1])^4/4)",
-        w->symbols(WrittenSystem::Kind::lagrangian));
-    const WrittenDynamic W(w);
-    Eigen::VectorXd q0(n), p0 = Eigen::VectorXd::Zero(n);
-    for (int i = 0; i < n; ++i) q0[i] = std::sin(M_PI * (i + 1) / (n + 1));
+    const WrittenDynamic W(written_chain(n));
+    const Eigen::VectorXd q0 = first_mode(n), p0 = Eigen::VectorXd::Zero(n);
     const std::int64_t steps = 400000 / n;
     const ChainStep builtin(FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), ThetaMap::midpoint(), 0.05);
     const auto H = SparseSeparableThetaStep::hessian_of(W, q0);

@@ -24,6 +24,7 @@
 #include "mechanics/written_lagrangian.h"
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/run.h"
+#include "tests/solvers/theta_methods.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
@@ -194,21 +195,7 @@ BOOST_AUTO_TEST_CASE(the_pattern_holds_every_entry_of_the_hessian_and_the_colour
 }
 
 BOOST_AUTO_TEST_CASE(every_theta_map_takes_the_sparse_step_and_equals_the_generic_path) {
-  std::vector<Method> methods;
-  for (double th : {0.5, 0.3, 0.7})
-    for (const char* c : {"none", "triple-jump", "kahan-li6", "dirk", "dirk-thetas"}) {
-      Method me;
-      const std::string comp = c;
-      me.map = &find_map_entry(th == 0.5 && comp != "dirk-thetas" ? "midpoint" : "theta", "test");
-      me.theta = th;
-      me.composition = comp == "dirk-thetas" ? "dirk" : comp;
-      if (me.composition == "dirk") me.weights = {0.3, 0.4, 0.3};
-      if (comp == "dirk-thetas") {
-        me.thetas = {0.2, th, 0.8};
-        me.theta = me.map->theta;
-      }
-      methods.push_back(me);
-    }
+  const std::vector<Method> methods = implicit_theta_methods();
   int compared = 0;
   unsigned seed = 11;
   for (const Text& t : texts()) {

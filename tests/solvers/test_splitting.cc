@@ -27,6 +27,7 @@
 #include "solvers/separable_theta_step.h"
 #include "solvers/runtime/run.h"
 #include "solvers/splitting_step.h"
+#include "tests/solvers/theta_methods.h"
 
 using namespace dvm;
 
@@ -279,21 +280,7 @@ BOOST_AUTO_TEST_CASE(explicit_steps_equal_the_generic_path_on_every_separable_bu
 // runtime on FPU (the separable built-in of fixed size >= 3) and as step types on every
 // separable built-in of 1 and 2 coordinates.
 BOOST_AUTO_TEST_CASE(implicit_theta_maps_on_separable_systems_equal_the_generic_path) {
-  std::vector<Method> methods;
-  for (double th : {0.5, 0.3, 0.7})
-    for (const char* c : {"none", "triple-jump", "kahan-li6", "dirk", "dirk-thetas"}) {
-      Method me;
-      const std::string comp = c;
-      me.map = &find_map_entry(th == 0.5 && comp != "dirk-thetas" ? "midpoint" : "theta", "test");
-      me.theta = th;
-      me.composition = comp == "dirk-thetas" ? "dirk" : comp;
-      if (me.composition == "dirk") me.weights = {0.3, 0.4, 0.3};
-      if (comp == "dirk-thetas") {
-        me.thetas = {0.2, th, 0.8};
-        me.theta = me.map->theta;
-      }
-      methods.push_back(me);
-    }
+  const std::vector<Method> methods = implicit_theta_methods();
   int compared = 0;
   for (const Problem& pr : separable_problems()) {
     if (pr.dim < 3 || pr.system->name == "nbody") continue;  // small or run-time sized: the generic path
