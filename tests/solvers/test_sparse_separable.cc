@@ -24,7 +24,7 @@
 #include "mechanics/written_lagrangian.h"
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/run.h"
-#include "tests/solvers/theta_methods.h"
+#include "tests/solvers/structured_runs.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
@@ -109,20 +109,6 @@ Problem written_problem(const std::shared_ptr<WrittenSystem>& w, const VectorXd&
   pr.steps = 100;
   return pr;
 }
-
-double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  if (a.size() != b.size() || a.empty()) return INFINITY;
-  double d = 0.0;
-  for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
-  return d;
-}
-double max_abs(const std::vector<double>& a) {
-  double d = 0.0;
-  for (double x : a) d = std::fmax(d, std::fabs(x));
-  return d;
-}
-
-RunReport run(const Problem& pr, const Method& me) { return make_run(pr, me)->execute(nullptr); }
 
 }  // namespace
 

@@ -27,7 +27,7 @@
 #include "solvers/separable_theta_step.h"
 #include "solvers/runtime/run.h"
 #include "solvers/splitting_step.h"
-#include "tests/solvers/theta_methods.h"
+#include "tests/solvers/structured_runs.h"
 
 using namespace dvm;
 
@@ -142,20 +142,6 @@ std::vector<Problem> separable_problems() {
   out.push_back(nb);
   return out;
 }
-
-double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
-  if (a.size() != b.size() || a.empty()) return INFINITY;
-  double d = 0.0;
-  for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
-  return d;
-}
-double max_abs(const std::vector<double>& a) {
-  double d = 0.0;
-  for (double x : a) d = std::fmax(d, std::fabs(x));
-  return d;
-}
-
-RunReport run(const Problem& pr, const Method& me) { return make_run(pr, me)->execute(nullptr); }
 
 std::shared_ptr<WrittenSystem> written(std::vector<std::string> coordinates, const std::string& L,
                                        std::vector<std::pair<std::string, double>> params = {}) {
