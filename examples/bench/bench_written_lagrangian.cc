@@ -47,47 +47,21 @@ struct Result {
   std::vector<double> state;
 };
 
-template <class System>
-Result measure(const System& L, const Vec<double, System::dim>& q0, const Vec<double, System::dim>& p0, double h,
-               std::int64_t steps, int repeats) {
-  constexpr int N = System::dim;
-  const PositionMomentumStep<System, ThetaMap> S(L, ThetaMap::midpoint(), h);
+// The best of `repeats` runs of `steps` steps of `step` from (q0, p0) with velocity v0:
+// ns per step and the final state; a failed run ends the program with status 3.
+template <class Step, class V>
+Result time_steps(const Step& step, const V& q0, const V& p0, const V& v0, std::int64_t steps, int repeats,
+                  const std::string& what) {
   Result best;
   for (int r = 0; r < repeats; ++r) {
-    Vec<double, N> q = q0, p = p0;
-    const Vec<double, N> v0 = legendre_inverse(L, q0, p0);
+    V q = q0, p = p0;
     const auto t0 = std::chrono::steady_clock::now();
-    const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [](auto&&...) {});
+    const RunSummary run = integrate(step, 0.0, q, p, v0, steps, [](auto&&...) {});
     const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
                       static_cast<double>(steps);
     if (run.failed) {
-      std::fprintf(stderr, "%s: run failed at step %lld\n", L.name().c_str(), static_cast<long long>(run.failed_step));
-      std::exit(3);
-    }
-    if (ns < best.ns_per_step) {
-      best.ns_per_step = ns;
-      best.state.assign(q.data(), q.data() + N);
-      best.state.insert(best.state.end(), p.data(), p.data() + N);
-    }
-  }
-  return best;
-}
-
-// The run-time-sized path of the same text.
-Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::VectorXd& q0,
-                       const Eigen::VectorXd& p0, double h, std::int64_t steps, int repeats) {
-  const WrittenDynamic L(text);
-  const DynamicThetaStep<WrittenDynamic> S(L, ThetaMap::midpoint(), h);
-  Result best;
-  for (int r = 0; r < repeats; ++r) {
-    Eigen::VectorXd q = q0, p = p0;
-    const Eigen::VectorXd v0 = legendre_inverse(L, q0, p0);
-    const auto t0 = std::chrono::steady_clock::now();
-    const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [](auto&&...) {});
-    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
-                      static_cast<double>(steps);
-    if (run.failed) {
-      std::fprintf(stderr, "written, run-time sized: run failed at step %lld\n", static_cast<long long>(run.failed_step));
+      std::fprintf(stderr, "%s: run failed at step %lld: %s\n", what.c_str(), static_cast<long long>(run.failed_step),
+                   run.failure.message.c_str());
       std::exit(3);
     }
     if (ns < best.ns_per_step) {
@@ -97,6 +71,23 @@ Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::
     }
   }
   return best;
+}
+
+template <class System>
+Result measure(const System& L, const Vec<double, System::dim>& q0, const Vec<double, System::dim>& p0, double h,
+               std::int64_t steps, int repeats) {
+  const PositionMomentumStep<System, ThetaMap> S(L, ThetaMap::midpoint(), h);
+  const Vec<double, System::dim> v0 = legendre_inverse(L, q0, p0);
+  return time_steps(S, q0, p0, v0, steps, repeats, L.name());
+}
+
+// The run-time-sized path of the same text.
+Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::VectorXd& q0,
+                       const Eigen::VectorXd& p0, double h, std::int64_t steps, int repeats) {
+  const WrittenDynamic L(text);
+  const DynamicThetaStep<WrittenDynamic> S(L, ThetaMap::midpoint(), h);
+  const Eigen::VectorXd v0 = legendre_inverse(L, q0, p0);
+  return time_steps(S, q0, p0, v0, steps, repeats, "written, run-time sized");
 }
 
 std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vector<std::pair<std::string, double>> params,
@@ -160,21 +151,7 @@ struct ChainSeparable {
 template <class S, class V>
 Result measure_explicit(const S& L, const V& q0, const V& p0, double h, std::int64_t steps, int repeats) {
   const ExplicitSplittingStep<S> step(L, 0.0, h, substeps(find_composition("stormer-verlet"), false), q0);
-  Result best;
-  for (int r = 0; r < repeats; ++r) {
-    V q = q0, p = p0;
-    const auto t0 = std::chrono::steady_clock::now();
-    const RunSummary run = integrate(step, 0.0, q, p, V(V::Zero(q0.size())), steps, [](auto&&...) {});
-    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
-                      static_cast<double>(steps);
-    if (run.failed) std::exit(3);
-    if (ns < best.ns_per_step) {
-      best.ns_per_step = ns;
-      best.state.assign(q.data(), q.data() + q.size());
-      best.state.insert(best.state.end(), p.data(), p.data() + p.size());
-    }
-  }
-  return best;
+  return time_steps(step, q0, p0, V(V::Zero(q0.size())), steps, repeats, L.name() + ", Stormer-Verlet");
 }
 
 double state_diff(const Result& a, const Result& b) {
@@ -241,32 +218,6 @@ void explicit_chain(int repeats) {
   }
 }
 
-// Any step of the integrate contract from (q0, p0) at rest, best of `repeats`.
-template <class Step>
-Result measure_step(const Step& step, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0, std::int64_t steps,
-                    int repeats) {
-  Result best;
-  for (int r = 0; r < repeats; ++r) {
-    Eigen::VectorXd q = q0, p = p0;
-    const auto t0 = std::chrono::steady_clock::now();
-    const RunSummary run = integrate(step, 0.0, q, p, Eigen::VectorXd(Eigen::VectorXd::Zero(q0.size())), steps,
-                                     [](auto&&...) {});
-    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
-                      static_cast<double>(steps);
-    if (run.failed) {
-      std::fprintf(stderr, "chain, n = %d: run failed at step %lld: %s\n", static_cast<int>(q0.size()),
-                   static_cast<long long>(run.failed_step), run.failure.message.c_str());
-      std::exit(3);
-    }
-    if (ns < best.ns_per_step) {
-      best.ns_per_step = ns;
-      best.state.assign(q.data(), q.data() + q.size());
-      best.state.insert(best.state.end(), p.data(), p.data() + p.size());
-    }
-  }
-  return best;
-}
-
 // The midpoint map on the same chain: the built-in ChainStep (tridiagonal Newton,
 // solvers/chain_step.h) against the written text through SparseSeparableThetaStep (the
 // sparse Hessian of its potential, solvers/sparse_separable_step.h), which is what
@@ -285,13 +236,15 @@ void implicit_chain(int repeats) {
     const ChainStep builtin(FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), ThetaMap::midpoint(), 0.05);
     const auto H = SparseSeparableThetaStep::hessian_of(W, q0);
     const SparseSeparableThetaStep sparse(W, H, 0.5, 0.05);
-    const Result a = measure_step(builtin, q0, p0, steps, repeats);
-    const Result b = measure_step(sparse, q0, p0, steps, repeats);
+    const Eigen::VectorXd v0 = Eigen::VectorXd::Zero(n);
+    const Result a = time_steps(builtin, q0, p0, v0, steps, repeats, "built-in chain, midpoint");
+    const Result b = time_steps(sparse, q0, p0, v0, steps, repeats, "written chain, midpoint");
     const double per = b.ns_per_step / n;
     if (n == 1000) {
       per_particle_1000 = per;
       sparse_1000 = b.ns_per_step;
-      const Result c = measure_step(DynamicThetaStep<WrittenDynamic>(W, ThetaMap::midpoint(), 0.05), q0, p0, 3, 1);
+      const Result c =
+          time_steps(DynamicThetaStep<WrittenDynamic>(W, ThetaMap::midpoint(), 0.05), q0, p0, v0, 3, 1, "dense step");
       dense_1000 = c.ns_per_step;
     }
     std::printf("  %8d %8lld %14.0f %14.0f %8.2f %14.2f %8d %14.3e\n", n, static_cast<long long>(steps), a.ns_per_step,
