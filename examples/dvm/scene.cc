@@ -379,8 +379,8 @@ int resolve_dimension(const Reader& r, const toml::node* params, const SystemEnt
   }
   if (info.name == "spherical-chain") {
     const double n = values.at("n");
-    if (n != std::floor(n) || n < 1 || n > 4)
-      throw InputError(where("n") + ": got " + fmt(n) + ", expected a whole number from 1 to 4");
+    if (n != std::floor(n) || n < 1 || n > 1e6)
+      throw InputError(where("n") + ": got " + fmt(n) + ", expected a whole number of links from 1 to 1000000");
     return 3 * static_cast<int>(n);
   }
   return info.dim;

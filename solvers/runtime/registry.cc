@@ -235,7 +235,7 @@ const std::vector<SystemEntry>& system_registry() {
        "L = sum_i m |dr_i/dt|^2/2 - g sum_i m (r_i)_3,  r_i = l (x_1 + ... + x_i)   (n links, x_i unit vectors)",
        Space::sphere,
        3,
-       {{"n", 2.0, "number of links (1 to 4)"},
+       {{"n", 2.0, "number of links"},
         {"m", 1.0, "mass at the end of each link"},
         {"l", 1.0, "length of each link"},
         {"g", 1.0, "gravitational acceleration"}},

@@ -195,6 +195,8 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
         if (r.step_path == "gauss-collocation")
           how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());
+      } else if (r.step_path == "sphere-chain-banded-newton") {
+        std::fprintf(to, "  steps by Newton on the chain's equation, banded Jacobian (O(n) a step)\n");
       }
       std::fprintf(to, "  solver iterations %lld (%.2f per step, at most %d in a step); wall time %.3f s (%.3g us/step)\n",
                   static_cast<long long>(r.solver_iterations),

@@ -1,0 +1,108 @@
+// Banded linear systems A x = b by Gaussian elimination with partial pivoting, in
+// O(n kl (kl + ku)) operations: the step of a long chain couples each link with its
+// neighbours only (mechanics/spherical_chain.h), so its linear algebra is banded.
+//
+// A has kl subdiagonals and ku superdiagonals: A(i, j) = 0 unless -kl <= j - i <= ku.
+// Row interchanges widen the upper band of U to kl + ku, so each row is stored with
+// room for it (LAPACK's dgbtrf keeps the same room, by columns).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+namespace dvm {
+
+class BandedLU {
+ public:
+  BandedLU(int n, int kl, int ku) : n_(n), kl_(kl), ku_(ku), width_(2 * kl + ku + 1) {
+    if (n < 1 || kl < 0 || ku < 0) throw std::invalid_argument("BandedLU: needs n >= 1 and kl, ku >= 0");
+    a_.assign(static_cast<std::size_t>(n) * static_cast<std::size_t>(width_), 0.0);
+    pivot_.assign(static_cast<std::size_t>(n), 0);
+  }
+  int size() const { return n_; }
+  int lower() const { return kl_; }
+  int upper() const { return ku_; }
+
+  void set_zero() { std::fill(a_.begin(), a_.end(), 0.0); }
+  // The entry (i, j) of A before factor(); j - i must lie in [-kl, ku].
+  double& at(int i, int j) { return a_[index(i, j)]; }
+  double at(int i, int j) const { return a_[index(i, j)]; }
+  bool in_band(int i, int j) const { return i >= 0 && j >= 0 && i < n_ && j < n_ && j - i >= -kl_ && j - i <= ku_; }
+
+  // L U = P A in place. False if a pivot is zero or not finite, or smaller than
+  // 1e-14 times the largest entry of A (singular to working precision).
+  bool factor() {
+    double scale = 0.0;
+    bool finite = true;
+    for (double x : a_) {
+      scale = std::max(scale, std::fabs(x));  // (not fmax: this loop vectorises)
+      finite = finite && x - x == 0.0;
+    }
+    if (!finite) return false;
+    for (int k = 0; k < n_; ++k) {
+      const int last = std::min(n_ - 1, k + kl_);
+      int p = k;
+      double best = std::fabs(a_[index(k, k)]);
+      for (int i = k + 1; i <= last; ++i) {
+        const double x = std::fabs(a_[index(i, k)]);
+        if (x > best) {
+          best = x;
+          p = i;
+        }
+      }
+      pivot_[static_cast<std::size_t>(k)] = p;
+      if (!(best > 1e-14 * scale)) return false;
+      const int right = std::min(n_ - 1, k + kl_ + ku_);
+      if (p != k)
+        for (int j = k; j <= right; ++j) std::swap(a_[index(k, j)], a_[index(p, j)]);
+      const double inv = 1.0 / a_[index(k, k)];
+      for (int i = k + 1; i <= last; ++i) {
+        double& l = a_[index(i, k)];
+        if (l == 0.0) continue;
+        l *= inv;
+        const double f = l;
+        const double* rk = &a_[index(k, k)];
+        double* ri = &a_[index(i, k)];
+        for (int j = 1; j <= right - k; ++j) ri[j] -= f * rk[j];
+      }
+    }
+    return true;
+  }
+  // x = A^{-1} b, in place, after factor().
+  void solve(double* b) const {
+    for (int k = 0; k < n_; ++k) {
+      const int p = pivot_[static_cast<std::size_t>(k)];
+      if (p != k) std::swap(b[k], b[p]);
+      const int last = std::min(n_ - 1, k + kl_);
+      const double bk = b[k];
+      // column k of L: one entry per row below, a row of storage apart
+      const double* l = &a_[index(k + 1 < n_ ? k + 1 : k, k)];
+      for (int i = k + 1; i <= last; ++i, l += width_ - 1) b[i] -= *l * bk;
+    }
+    for (int k = n_ - 1; k >= 0; --k) {
+      const int right = std::min(n_ - 1, k + kl_ + ku_);
+      const double* u = &a_[index(k, k)];
+      double s = b[k];
+      for (int j = 1; j <= right - k; ++j) s -= u[j] * b[k + j];
+      b[k] = s / u[0];
+    }
+  }
+  template <class Vector>
+  void solve(Vector& b) const {
+    solve(b.data());
+  }
+
+ private:
+  // row i holds columns i - kl ... i + kl + ku
+  std::size_t index(int i, int j) const {
+    return static_cast<std::size_t>(i) * static_cast<std::size_t>(width_) + static_cast<std::size_t>(j - i + kl_);
+  }
+  int n_, kl_, ku_, width_;
+  std::vector<double> a_;
+  std::vector<int> pivot_;
+};
+
+}  // namespace dvm

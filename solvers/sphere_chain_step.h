@@ -1,0 +1,301 @@
+// The position-momentum step of a sphere map on the chain of spherical pendulums with
+// any number of links K, in O(K) operations per Newton iteration.
+//
+// It solves the equation of ManifoldStep (solvers/manifold_step.h) for the chain
+// (Sec. 5 of the paper: the discrete Legendre equations of L_d(q0, q1) = h L(R^{-1}(q0, q1)/h)
+// on Q = (S^2)^K, with the map R applied to each factor): given (q_k, p_k), find xi in
+// R^{2K}, q_{k+1} = chart(q_k, xi), with
+//   p_k + D1 L_d(q_k, q_{k+1}) = 0    (chart centred at q_k),
+//   p_{k+1} = D2 L_d(q_k, q_{k+1})    (chart centred at q_{k+1}).
+// With (X_i, U_i) = R^{-1}(q0_i, q1_i) the factors' base points and velocities times h,
+// L_d = U^T M U / (2 h) - h sum_j c_j (X_j)_3 (mechanics/spherical_chain.h), and the
+// component of D1 L_d on link i is
+//   r_i = B_i^T (M U)_i / h - h c_i (A_i)_3,   B_i = dU_i/deta_i, A_i = dX_i/deta_i,
+// eta_i moving q0_i in its chart. Only (M U)_i couples the links; the Jacobian in xi is
+//   J = D + B^T M C / h,   C_i = dU_i/dxi_i,
+//   D_i = (d^2 U_i / deta_i dxi_i) . (M U)_i / h - h c_i d^2 (X_i)_3 / deta_i dxi_i,
+// block diagonal plus the coupling through M that ChainCouplingSolve factors in O(K).
+// Each link's derivatives come from its own map inverse in Jet<Jet<double, 2>, 2>
+// (first order in eta, second in xi), with the relative position q1_i - q0_i formed
+// from xi as ManifoldStep forms it (Sphere::relative_chart), so the two steps solve the
+// same equation: they agree to round-off at K = 1 to 4 (tests/solvers/test_sphere_chain.cc).
+//
+// Newton is simplified: the Jacobian is formed and factored at the starting guess and
+// again only where an iteration fails to shrink the residual fourfold; the stopping
+// rule and the final correction are those of solve_newton (solvers/newton.h). It has
+// the contract of a manifold step for `integrate` and ComposedPointStep
+// (M = DynamicSpherePower, n = Eigen::Dynamic). Workspace is allocated at construction
+// and shared by copies: steps must not run on two threads at once.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/manifold_maps.h"
+#include "mechanics/spherical_chain.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+class SphereChainStep {
+ public:
+  using M = DynamicSpherePower;
+  static constexpr int n = Eigen::Dynamic;
+  using Point = Eigen::VectorXd;
+  using Covector = Eigen::VectorXd;
+  using V = Eigen::VectorXd;
+
+  SphereChainStep(DynamicSphericalChain L, SphereMap R, double h, StepOptions options = {})
+      : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options), work_(std::make_shared<Work>(L_)) {
+    if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
+    if (options.solver != SolverKind::newton)
+      throw std::invalid_argument("the spherical chain's step solves by Newton's method only (solver = \"newton\")");
+  }
+
+  double step_size() const { return h_; }
+  const DynamicSphericalChain& lagrangian() const { return L_; }
+  const SphereMap& map() const { return R_; }
+
+  // One step: xi holds the guess on entry and the chart coordinates of q1 on return.
+  StepSummary step(const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
+    StepSummary s;
+    const int K = L_.links();
+    if (q0.size() != 3 * K || p0.size() != 3 * K || xi.size() != 2 * K) {
+      s.message = "the state has " + std::to_string(q0.size()) + " stored coordinates; the chain has " +
+                  std::to_string(3 * K);
+      return s;
+    }
+    Work& w = *work_;
+    const V pi0 = M::covector_to_local(q0, p0);
+    const double pscale = max_abs(pi0);
+    const StepOptions& opt = options_;
+    try {
+      bool have_jacobian = false;
+      double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
+      for (int it = 0; it < opt.max_iterations; ++it) {
+        evaluate(q0, xi, !have_jacobian);
+        w.r = pi0 + w.d1;
+        s.residual = max_abs(w.r);
+        bool refresh = !have_jacobian;
+        if (!refresh && !(s.residual <= 0.25 * last)) {
+          refresh = true;
+          evaluate(q0, xi, true);  // the same point, now with the Jacobian's blocks
+          w.r = pi0 + w.d1;
+          s.residual = max_abs(w.r);
+        }
+        if (refresh) {
+          Jmax = jacobian_size();
+          have_jacobian = true;
+          ++s.iterations;
+          if (std::isfinite(Jmax) && !w.solver.factor(w.D, w.B, w.C, 1.0 / h_)) {
+            s.message = "singular step Jacobian (banded LU of the chain)";
+            return s;
+          }
+        }
+        last = s.residual;
+        s.scale = pscale + Jmax * max_abs(xi) + opt.absolute_floor;
+        if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+          s.message = "non-finite residual or Jacobian";
+          return s;
+        }
+        const NewtonVerdict verdict = newton_verdict_floored(s, dxn, max_abs(xi) + 1.0, opt, Jmax);
+        if (verdict == NewtonVerdict::failed) return s;
+        w.solver.solve(w.r, w.dx);  // J dx = r; the step is -dx
+        if (!std::isfinite(max_abs(w.dx))) {
+          s.converged = false;
+          s.message = "singular step Jacobian";
+          return s;
+        }
+        xi -= w.dx;
+        if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
+        dxn = max_abs(w.dx);
+      }
+      if (!s.converged) {
+        s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
+        return s;
+      }
+      finish(q0, xi, s, q1, p1);
+    } catch (const std::domain_error& e) {
+      s.converged = false;
+      s.message = e.what();
+    }
+    return s;
+  }
+
+ private:
+  using J2 = ceres::Jet<double, 2>;
+  using JJ = ceres::Jet<J2, 2>;
+  struct Work {
+    explicit Work(const DynamicSphericalChain& L)
+        : solver(L),
+          D(static_cast<std::size_t>(L.links())),
+          B(static_cast<std::size_t>(L.links())),
+          C(static_cast<std::size_t>(L.links())),
+          d2U(static_cast<std::size_t>(L.links())),
+          d2X(static_cast<std::size_t>(L.links())) {
+      const int K = L.links();
+      U.resize(3 * K);
+      MU.resize(3 * K);
+      d1.resize(2 * K);
+      r.resize(2 * K);
+      dx.resize(2 * K);
+      A3.resize(2 * K);
+    }
+    ChainCouplingSolve solver;
+    std::vector<Mat<double, 2, 2>> D;
+    std::vector<Mat<double, 3, 2>> B, C;
+    // per link: d^2 U_i / deta_e dxi_s (3 components x 4) and d^2 (X_i)_3 / deta_e dxi_s
+    std::vector<Mat<double, 3, 4>> d2U;
+    std::vector<Mat<double, 2, 2>> d2X;
+    V U, MU, d1, r, dx, A3;
+  };
+
+  // The map inverse of link i at its unknown xi_i, as a function of eta_i (moving
+  // q0_i in its chart): (X_i, U_i) in Jets of eta over Jets of xi.
+  ManifoldTangent<Sphere, JJ> link_inverse(const Vec<double, 3>& x0, const Vec<double, 2>& xi) const {
+    Vec<J2, 2> xj(J2(xi[0], 0), J2(xi[1], 1));
+    const Vec<J2, 3> q1 = Sphere::chart(x0, xj);
+    const Vec<J2, 3> rel = Sphere::relative_chart(x0, xj);
+    const Vec<JJ, 2> eta(seed<J2, 2>(J2(0.0), 0), seed<J2, 2>(J2(0.0), 1));
+    const Vec<JJ, 3> a = Sphere::chart(x0, eta);
+    Vec<JJ, 3> d;
+    for (int k = 0; k < 3; ++k) {
+      d[k] = JJ(q1[k]) - a[k];
+      d[k].a = rel[k];
+    }
+    return R_.inverse_relative(a, d);
+  }
+  // The same at first order in eta only (the residual without its Jacobian).
+  ManifoldTangent<Sphere, J2> link_inverse_value(const Vec<double, 3>& x0, const Vec<double, 2>& xi) const {
+    const Vec<double, 3> q1 = Sphere::chart(x0, xi);
+    const Vec<double, 3> rel = Sphere::relative_chart(x0, xi);
+    const Vec<J2, 2> eta(seed<double, 2>(0.0, 0), seed<double, 2>(0.0, 1));
+    const Vec<J2, 3> a = Sphere::chart(x0, eta);
+    Vec<J2, 3> d;
+    for (int k = 0; k < 3; ++k) {
+      d[k] = J2(q1[k]) - a[k];
+      d[k].a = rel[k];
+    }
+    return R_.inverse_relative(a, d);
+  }
+
+  // d1 = D1 L_d(q0, chart(q0, xi)) in the chart at q0; with `jacobian`, also the blocks
+  // D, B, C of its Jacobian in xi.
+  void evaluate(const V& q0, const V& xi, bool jacobian) const {
+    Work& w = *work_;
+    const int K = L_.links();
+    for (int i = 0; i < K; ++i) {
+      const std::size_t u = static_cast<std::size_t>(i);
+      const Vec<double, 3> x0 = q0.segment<3>(3 * i);
+      const Vec<double, 2> xii = xi.segment<2>(2 * i);
+      if (jacobian) {
+        const ManifoldTangent<Sphere, JJ> t = link_inverse(x0, xii);
+        for (int k = 0; k < 3; ++k) {
+          w.U[3 * i + k] = t.v[k].a.a;
+          for (int e = 0; e < 2; ++e) {
+            w.B[u](k, e) = t.v[k].v[e].a;
+            w.C[u](k, e) = t.v[k].a.v[e];
+            for (int sx = 0; sx < 2; ++sx) w.d2U[u](k, 2 * e + sx) = t.v[k].v[e].v[sx];
+          }
+        }
+        for (int e = 0; e < 2; ++e) {
+          w.A3[2 * i + e] = t.x[2].v[e].a;
+          for (int sx = 0; sx < 2; ++sx) w.d2X[u](e, sx) = t.x[2].v[e].v[sx];
+        }
+      } else {
+        const ManifoldTangent<Sphere, J2> t = link_inverse_value(x0, xii);
+        for (int k = 0; k < 3; ++k) {
+          w.U[3 * i + k] = t.v[k].a;
+          for (int e = 0; e < 2; ++e) w.B[u](k, e) = t.v[k].v[e];
+        }
+        for (int e = 0; e < 2; ++e) w.A3[2 * i + e] = t.x[2].v[e];
+      }
+    }
+    L_.mass_times(w.U, w.MU);
+    for (int i = 0; i < K; ++i) {
+      const std::size_t u = static_cast<std::size_t>(i);
+      const Vec<double, 3> mu = w.MU.segment<3>(3 * i) / h_;
+      const double ch = h_ * L_.height_coefficient(i);
+      w.d1.segment<2>(2 * i) = w.B[u].transpose() * mu - ch * w.A3.segment<2>(2 * i);
+      if (jacobian)
+        for (int e = 0; e < 2; ++e)
+          for (int sx = 0; sx < 2; ++sx)
+            w.D[u](e, sx) = w.d2U[u].col(2 * e + sx).dot(mu) - ch * w.d2X[u](e, sx);
+    }
+  }
+  // An upper bound of the Jacobian's largest entry: its diagonal blocks and the
+  // coupling's (|M_ij| <= max_i M_ii).
+  double jacobian_size() const {
+    const Work& w = *work_;
+    double d = 0.0, b = 0.0, c = 0.0;
+    for (std::size_t i = 0; i < w.D.size(); ++i) {
+      d = std::fmax(d, max_abs(w.D[i]));
+      b = std::fmax(b, max_abs(w.B[i]));
+      c = std::fmax(c, max_abs(w.C[i]));
+    }
+    const double J = d + 4.0 * b * c * L_.mass_max() / std::fabs(h_);
+    return std::isfinite(J) ? J : INFINITY;
+  }
+  // q1 = chart(q0, xi) and p1 = D2 L_d(q0, q1) in the chart at q1, stored.
+  void finish(const V& q0, const V& xi, StepSummary& s, Point& q1, Covector& p1) const {
+    Work& w = *work_;
+    const int K = L_.links();
+    q1.resize(3 * K);
+    p1.resize(3 * K);
+    // U at the solution (the Jacobian may be older than the last iterate)
+    std::vector<Vec<double, 2>> A1(static_cast<std::size_t>(K));
+    std::vector<Mat<double, 3, 2>> B1(static_cast<std::size_t>(K));
+    for (int i = 0; i < K; ++i) {
+      const std::size_t u = static_cast<std::size_t>(i);
+      const Vec<double, 3> x0 = q0.segment<3>(3 * i);
+      const Vec<double, 2> xii = xi.segment<2>(2 * i);
+      const Vec<double, 3> raw = Sphere::chart(x0, xii);
+      const double defect = Sphere::point_defect(raw);
+      if (!(defect <= 1e-12)) {
+        s.converged = false;
+        s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+        return;
+      }
+      q1.segment<3>(3 * i) = raw;
+      // eta moves q1_i in its chart; q0_i stays
+      const Vec<double, 3> rel = Sphere::relative_chart(x0, xii);
+      const Vec<J2, 2> eta(seed<double, 2>(0.0, 0), seed<double, 2>(0.0, 1));
+      const Vec<J2, 3> b = Sphere::chart(raw, eta);
+      Vec<J2, 3> a, d;
+      for (int k = 0; k < 3; ++k) {
+        a[k] = J2(x0[k]);
+        d[k] = b[k] - a[k];
+        d[k].a = rel[k];
+      }
+      const ManifoldTangent<Sphere, J2> t = R_.inverse_relative(a, d);
+      for (int k = 0; k < 3; ++k) {
+        w.U[3 * i + k] = t.v[k].a;
+        for (int e = 0; e < 2; ++e) B1[u](k, e) = t.v[k].v[e];
+      }
+      for (int e = 0; e < 2; ++e) A1[u][e] = t.x[2].v[e];
+    }
+    L_.mass_times(w.U, w.MU);
+    for (int i = 0; i < K; ++i) {
+      const std::size_t u = static_cast<std::size_t>(i);
+      const Vec<double, 2> pi1 =
+          B1[u].transpose() * (w.MU.segment<3>(3 * i) / h_) - (h_ * L_.height_coefficient(i)) * A1[u];
+      p1.segment<3>(3 * i) = Sphere::tangent(Vec<double, 3>(q1.segment<3>(3 * i)), pi1);
+    }
+    if (!std::isfinite(max_abs(p1))) {
+      s.converged = false;
+      s.message = "non-finite momentum";
+    }
+  }
+
+  DynamicSphericalChain L_;
+  SphereMap R_;
+  double h_;
+  StepOptions options_;
+  std::shared_ptr<Work> work_;
+};
+
+}  // namespace dvm
