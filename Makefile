@@ -100,8 +100,10 @@ test: test-deps
 	cmake --build $(TEST_BUILD) -j $(JOBS)
 	cd $(TEST_BUILD) && ctest --output-on-failure -j $(JOBS)
 
-# bench_chain and bench_nbody are built too and run by hand (examples/bench/README.md)
-BENCH_PROGRAMS := bench_midpoint_step bench_written_lagrangian bench_ratios bench_galerkin_kepler bench_chain bench_nbody
+# bench_chain, bench_nbody and bench_sphere_chain are built too and run by hand
+# (examples/bench/README.md)
+BENCH_PROGRAMS := bench_midpoint_step bench_written_lagrangian bench_ratios bench_galerkin_kepler bench_chain bench_nbody \
+  bench_sphere_chain
 bench: deps
 	$(call configure,ON)
 	cmake --build $(BUILD) -j $(JOBS) --target $(BENCH_PROGRAMS)
