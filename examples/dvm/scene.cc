@@ -200,14 +200,22 @@ void apply_override(toml::table& root, const std::string& spec) {
 }
 
 
-// An initial vector of `dim` numbers: an array, or on R^n a string, an expression in
-// the index i = 1 ... dim and the system's parameters (lists included, for a written
-// system), evaluated at each i: "0.1*sin(pi*i/(n+1))".
+// An initial vector of `dim` numbers: an array of numbers; on R^n a string, an
+// expression in the index i = 1 ... dim and the system's parameters (lists included,
+// for a written system), evaluated at each i: "0.1*sin(pi*i/(n+1))"; on (S^2)^n an
+// array of three such strings, the x, y and z of link i = 1 ... dim / 3.
 std::vector<double> initial_vector(const Reader& r, const std::string& path, const toml::node& n,
                                    const std::string& key, const Problem& s, Space space) {
-  if (!n.is_string()) return r.vector(n, key);
-  if (space != Space::euclidean)
-    throw InputError(r.where(&n, key) + ": an expression in the index i is taken on R^n; on S^2 give the numbers");
+  const toml::array* per_link = n.as_array();
+  const bool link_strings = per_link && !per_link->empty() && per_link->front().is_string();
+  if (!n.is_string() && !link_strings) return r.vector(n, key);
+  if (n.is_string() && space != Space::euclidean)
+    throw InputError(r.where(&n, key) + ": one expression in i is taken on R^n; on (S^2)^n give three, "
+                     "[\"x\", \"y\", \"z\"] of link i, or the numbers");
+  if (link_strings && (space != Space::sphere || per_link->size() != 3))
+    throw InputError(r.where(&n, key) + ": a list of expressions is taken on S^2 and (S^2)^n, three of them "
+                     "(x, y and z of link i); got " + std::to_string(per_link->size()) +
+                     (space == Space::sphere ? "" : " on this space (R^n takes one string, SO(3) numbers)"));
   ExpressionSymbols sym;
   sym.variables.push_back({"i", 0, 0});
   for (const auto& [name, value] : s.params) {
@@ -219,20 +227,37 @@ std::vector<double> initial_vector(const Reader& r, const std::string& path, con
   for (const auto& a : sym.constant_arrays)
     if (a.name == "i")
       throw InputError(r.where(&n, key) + ": the parameter list 'i' would hide the index i of the expression; rename it");
-  const std::string text = *n.value<std::string>();
-  Expression e;
-  try {
-    e = Expression::parse(text, sym);
-  } catch (const ExpressionError& err) {
-    throw InputError(string_location(path, n, err.offset) + ": in " + key + " (an expression in i = 1 ... " +
-                     std::to_string(s.dim) + " and the parameters): " + err.what());
-  }
+  // each expression's node and text; a string alone gives every coordinate, a list
+  // of three the components of every link
+  std::vector<const toml::node*> nodes;
+  if (link_strings)
+    for (const toml::node& e : *per_link) {
+      if (!e.is_string())
+        throw InputError(r.where(&e, key) + ": expected three strings, expressions in the link index i");
+      nodes.push_back(&e);
+    }
+  else
+    nodes.push_back(&n);
+  const int count = link_strings ? s.dim / 3 : s.dim;
+  const std::string range = std::string("i = 1 ... ") + std::to_string(count);
   std::vector<double> out(static_cast<std::size_t>(s.dim));
-  for (int i = 1; i <= s.dim; ++i) {
-    const double x = static_cast<double>(i);
-    out[static_cast<std::size_t>(i - 1)] = e(&x);
-    if (!std::isfinite(out[static_cast<std::size_t>(i - 1)]))
-      throw InputError(r.where(&n, key) + ": the expression is not finite at i = " + std::to_string(i));
+  for (std::size_t c = 0; c < nodes.size(); ++c) {
+    const toml::node& node = *nodes[c];
+    const std::string text = *node.value<std::string>();
+    Expression e;
+    try {
+      e = Expression::parse(text, sym);
+    } catch (const ExpressionError& err) {
+      throw InputError(string_location(path, node, err.offset) + ": in " + key + " (an expression in " + range +
+                       " and the parameters): " + err.what());
+    }
+    for (int i = 1; i <= count; ++i) {
+      const double x = static_cast<double>(i);
+      const std::size_t k = static_cast<std::size_t>(link_strings ? 3 * (i - 1) + static_cast<int>(c) : i - 1);
+      out[k] = e(&x);
+      if (!std::isfinite(out[k]))
+        throw InputError(r.where(&node, key) + ": the expression is not finite at i = " + std::to_string(i));
+    }
   }
   return out;
 }

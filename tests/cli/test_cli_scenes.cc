@@ -514,3 +514,50 @@ BOOST_AUTO_TEST_CASE(written_definitions_match_the_built_in_system) {
   BOOST_TEST(h.status == 2);
   BOOST_TEST(h.err.find("expected a string \"name = expression\"") != std::string::npos, h.err);
 }
+
+// The spherical chain of many links (its banded step) from an initial state written per
+// link: three expressions in the link index i (examples/scenes/rope.toml), the same run
+// to the bit as the numbers they give, and refused where the form does not apply.
+BOOST_AUTO_TEST_CASE(spherical_chain_of_many_links_from_expressions) {
+  const std::vector<std::string> brief = {"--set", "integrator.t_end=0.05"};
+  const Output e = run_json("rope.toml", brief);
+  BOOST_TEST_REQUIRE(e.status == 0, e.err);
+  BOOST_TEST(json_string(e.out, "step_path") == "sphere-chain-banded-newton");
+  BOOST_TEST(json_array(e.out, "q_final").size() == 300u);
+  BOOST_TEST(invariant_error(e.out, "vertical angular momentum") <= 1e-16);
+  BOOST_TEST(json_number(e.out, "max_abs_energy_error") <= 1e-6);
+  // the numbers of those expressions (the same libm functions), link by link
+  const int n = 100;
+  std::ostringstream q, v;
+  q.precision(17);
+  v.precision(17);
+  for (int i = 1; i <= n; ++i) {
+    const double a = 0.6 * std::sin(M_PI * i / (n + 1.0));
+    q << (i > 1 ? ", " : "") << std::sin(a) << ", 0, " << -std::cos(a);
+    v << (i > 1 ? ", " : "") << "0, " << 0.5 * i / n << ", 0";
+  }
+  const std::string numbers = write_scene(
+      "rope_numbers.toml", "[system]\nbuiltin = \"spherical-chain\"\nparams = { n = 100, m = 0.01, l = 0.01, g = 9.81 }\n"
+                           "[initial]\nq = [" + q.str() + "]\nv = [" + v.str() + "]\n[integrator]\nmap = \"sphere-exp\"\n"
+                           "step = 5e-4\nt_end = 0.05\n");
+  const Output b = dvm({"run", numbers, "--json"});
+  BOOST_TEST_REQUIRE(b.status == 0, b.err);
+  BOOST_TEST(max_diff(json_array(e.out, "q_final"), json_array(b.out, "q_final")) == 0.0);
+  BOOST_TEST(max_diff(json_array(e.out, "p_final"), json_array(b.out, "p_final")) == 0.0);
+  auto refused = [&](const std::string& set, const std::string& says) {
+    const Output o = run_json("rope.toml", {"--set", set});
+    BOOST_TEST_CONTEXT(set) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find(says) != std::string::npos, o.err);
+    }
+  };
+  refused("initial.q=\"0.1*i\"", "one expression in i is taken on R^n; on (S^2)^n give three");
+  refused("initial.q=[\"1\", \"0\"]", "three of them (x, y and z of link i); got 2");
+  refused("initial.q=[\"x\", \"0\", \"1\"]", "in initial.q (an expression in i = 1 ... 100 and the parameters): unknown name 'x'");
+  refused("initial.q=[\"1\", \"0\", \"0.5\"]", "key 'initial.q' (link 1): not a unit vector");
+  refused("initial.v=[\"0\", \"0\", \"1\"]", "(link 1): not tangent to S^2 at q");
+  // and on R^n a list of expressions is not taken
+  const Output r = run_json("chain.toml", {"--set", "initial.q=[\"1\", \"0\", \"0\"]"});
+  BOOST_TEST(r.status == 2);
+  BOOST_TEST(r.err.find("a list of expressions is taken on S^2 and (S^2)^n") != std::string::npos, r.err);
+}
