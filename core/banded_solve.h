@@ -78,9 +78,7 @@ class BandedLU {
       if (p != k) std::swap(b[k], b[p]);
       const int last = std::min(n_ - 1, k + kl_);
       const double bk = b[k];
-      // column k of L: one entry per row below, a row of storage apart
-      const double* l = &a_[index(k + 1 < n_ ? k + 1 : k, k)];
-      for (int i = k + 1; i <= last; ++i, l += width_ - 1) b[i] -= *l * bk;
+      for (int i = k + 1; i <= last; ++i) b[i] -= a_[index(i, k)] * bk;
     }
     for (int k = n_ - 1; k >= 0; --k) {
       const int right = std::min(n_ - 1, k + kl_ + ku_);

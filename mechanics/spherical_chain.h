@@ -17,7 +17,8 @@
 // keeping s and w as unknowns: per link
 //   D_i delta_i + c l_i B_i^T w_i = r_i,   s_i - s_{i-1} - l_i C_i delta_i = 0,
 //   w_i - w_{i+1} - m_i s_i = 0,
-// a banded system of 8 K unknowns (core/banded_solve.h), O(K) to factor and solve.
+// a banded system of 8 K unknowns (core/banded_solve.h), O(K) to factor and solve,
+// made dimensionless link by link (below).
 #pragma once
 
 #include <Eigen/Core>
@@ -47,8 +48,6 @@ class DynamicSphericalChain {
     mu_.resize(K);
     double tail = 0.0;
     for (int i = K - 1; i >= 0; --i) mu_[i] = tail += m_[i];
-    mass_max_ = 0.0;
-    for (int i = 0; i < K; ++i) mass_max_ = std::fmax(mass_max_, l_[i] * l_[i] * mu_[i]);
   }
   std::string name() const { return "spherical-chain"; }
   int links() const { return static_cast<int>(m_.size()); }
@@ -58,8 +57,10 @@ class DynamicSphericalChain {
   double g() const { return g_; }
   // d/d(x_i)_3 of the potential sum_j c_j (x_j)_3
   double height_coefficient(int i) const { return g_ * l_[i] * mu_[i]; }
-  // the largest entry of M in magnitude (M is positive semidefinite: max_i M_ii)
-  double mass_max() const { return mass_max_; }
+  // mu_i, the mass at and below link i
+  double mass_below(int i) const { return mu_[i]; }
+  // M_ii = l_i^2 mu_i, the diagonal 3 x 3 block of M over I_3 (|M_ij| <= sqrt(M_ii M_jj))
+  double mass_diagonal(int i) const { return l_[i] * l_[i] * mu_[i]; }
 
   // out = M u, O(K). The two running sums are compensated (Neumaier), so that their
   // round-off does not grow with the number of links: the step's residual is formed
@@ -107,7 +108,6 @@ class DynamicSphericalChain {
   }
   V m_, l_, mu_;
   double g_;
-  double mass_max_ = 0.0;
 };
 
 class ChainCouplingSolve {
@@ -116,10 +116,17 @@ class ChainCouplingSolve {
   using M2 = Mat<double, 2, 2>;
   using M32 = Mat<double, 3, 2>;
 
-  // Unknowns and equations of link i at 8 i ... 8 i + 7: delta_i (2), s_i (3), w_i (3).
+  // Unknowns and equations of link i at 8 i ... 8 i + 7: delta_i (2), s_i (3), w_i (3),
+  // each made dimensionless so that the pivots do not depend on the chain's units:
+  // with J_i = c l_i^2 mu_i (the size of the coupling's diagonal block), the unknowns
+  // s_i / l_i and w_i / (l_i mu_i) and the equations
+  //   (D_i delta_i) / J_i + B_i^T w~_i = r_i / J_i,
+  //   s~_i - (l_{i-1} / l_i) s~_{i-1} - C_i delta_i = 0,
+  //   w~_i - (l_{i+1} mu_{i+1} / (l_i mu_i)) w~_{i+1} - (m_i / mu_i) s~_i = 0.
   // The farthest couplings: s_{i-1} in the rows of s_i (8 below the diagonal), w_{i+1}
   // in the rows of w_i (8 above) and w_i in those of delta_i (up to 7 above).
-  explicit ChainCouplingSolve(const DynamicSphericalChain& chain) : chain_(chain), lu_(8 * chain.links(), 8, 8) {}
+  explicit ChainCouplingSolve(const DynamicSphericalChain& chain)
+      : chain_(chain), lu_(8 * chain.links(), 8, 8), row_scale_(chain.links()) {}
 
   int links() const { return chain_.links(); }
 
@@ -132,17 +139,19 @@ class ChainCouplingSolve {
     for (int i = 0; i < K; ++i) {
       const int o = 8 * i;
       const std::size_t u = static_cast<std::size_t>(i);
+      const double mu = chain_.mass_below(i);
+      row_scale_[i] = 1.0 / (c * l[i] * l[i] * mu);
       for (int a = 0; a < 2; ++a) {
-        for (int b = 0; b < 2; ++b) lu_.at(o + a, o + b) = D[u](a, b);
-        for (int k = 0; k < 3; ++k) lu_.at(o + a, o + 5 + k) = c * l[i] * B[u](k, a);
+        for (int b = 0; b < 2; ++b) lu_.at(o + a, o + b) = D[u](a, b) * row_scale_[i];
+        for (int k = 0; k < 3; ++k) lu_.at(o + a, o + 5 + k) = B[u](k, a);
       }
       for (int k = 0; k < 3; ++k) {
         lu_.at(o + 2 + k, o + 2 + k) = 1.0;
-        if (i > 0) lu_.at(o + 2 + k, o - 6 + k) = -1.0;
-        for (int b = 0; b < 2; ++b) lu_.at(o + 2 + k, o + b) = -l[i] * C[u](k, b);
+        if (i > 0) lu_.at(o + 2 + k, o - 6 + k) = -l[i - 1] / l[i];
+        for (int b = 0; b < 2; ++b) lu_.at(o + 2 + k, o + b) = -C[u](k, b);
         lu_.at(o + 5 + k, o + 5 + k) = 1.0;
-        if (i + 1 < K) lu_.at(o + 5 + k, o + 13 + k) = -1.0;
-        lu_.at(o + 5 + k, o + 2 + k) = -m[i];
+        if (i + 1 < K) lu_.at(o + 5 + k, o + 13 + k) = -(l[i + 1] * chain_.mass_below(i + 1)) / (l[i] * mu);
+        lu_.at(o + 5 + k, o + 2 + k) = -m[i] / mu;
       }
     }
     return lu_.factor();
@@ -151,7 +160,7 @@ class ChainCouplingSolve {
   void solve(const V& r, V& delta) const {
     const int K = links();
     work_.setZero(8 * K);
-    for (int i = 0; i < K; ++i) work_.segment<2>(8 * i) = r.segment<2>(2 * i);
+    for (int i = 0; i < K; ++i) work_.segment<2>(8 * i) = r.segment<2>(2 * i) * row_scale_[i];
     lu_.solve(work_);
     delta.resize(2 * K);
     for (int i = 0; i < K; ++i) delta.segment<2>(2 * i) = work_.segment<2>(8 * i);
@@ -160,6 +169,7 @@ class ChainCouplingSolve {
  private:
   DynamicSphericalChain chain_;
   BandedLU lu_;
+  V row_scale_;
   mutable V work_;
 };
 

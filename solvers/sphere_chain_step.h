@@ -49,8 +49,16 @@ class SphereChainStep {
   using Covector = Eigen::VectorXd;
   using V = Eigen::VectorXd;
 
-  SphereChainStep(DynamicSphericalChain L, SphereMap R, double h, StepOptions options = {})
-      : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options), work_(std::make_shared<Work>(L_)) {
+  // The workspace of a step: the per-link blocks and the banded factorisation (1.6 kB a
+  // link). The stages of a composition run one after another and each factors before
+  // it solves, so they share one (as may the run's Legendre inverse, between steps).
+  struct Work;
+  static std::shared_ptr<Work> workspace(const DynamicSphericalChain& L) { return std::make_shared<Work>(L); }
+
+  SphereChainStep(DynamicSphericalChain L, SphereMap R, double h, StepOptions options = {},
+                  std::shared_ptr<Work> work = nullptr)
+      : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options), work_(work ? std::move(work) : workspace(L_)) {
+    if (work_->solver->links() != L_.links()) throw std::invalid_argument("the workspace is another chain's");
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
     if (options.solver != SolverKind::newton)
       throw std::invalid_argument("the spherical chain's step solves by Newton's method only (solver = \"newton\")");
@@ -91,7 +99,7 @@ class SphereChainStep {
           Jmax = jacobian_size();
           have_jacobian = true;
           ++s.iterations;
-          if (std::isfinite(Jmax) && !w.solver.factor(w.D, w.B, w.C, 1.0 / h_)) {
+          if (std::isfinite(Jmax) && !w.solver->factor(w.D, w.B, w.C, 1.0 / h_)) {
             s.message = "singular step Jacobian (banded LU of the chain)";
             return s;
           }
@@ -104,7 +112,7 @@ class SphereChainStep {
         }
         const NewtonVerdict verdict = newton_verdict_floored(s, dxn, max_abs(xi) + 1.0, opt, Jmax);
         if (verdict == NewtonVerdict::failed) return s;
-        w.solver.solve(w.r, w.dx);  // J dx = r; the step is -dx
+        w.solver->solve(w.r, w.dx);  // J dx = r; the step is -dx
         if (!std::isfinite(max_abs(w.dx))) {
           s.converged = false;
           s.message = "singular step Jacobian";
@@ -126,12 +134,26 @@ class SphereChainStep {
     return s;
   }
 
- private:
-  using J2 = ceres::Jet<double, 2>;
-  using JJ = ceres::Jet<J2, 2>;
+  // For checks: the residual p0 + D1 L_d(q0, chart(q0, xi)) in the chart at q0 and its
+  // Jacobian D + B^T M C / h in xi, dense (O(K^2)).
+  void residual_and_jacobian(const Point& q0, const Covector& p0, const V& xi, V& r, Eigen::MatrixXd& J) const {
+    evaluate(q0, xi, true);
+    const Work& w = *work_;
+    const int K = L_.links();
+    r = M::covector_to_local(q0, p0) + w.d1;
+    J.setZero(2 * K, 2 * K);
+    for (int i = 0; i < K; ++i)
+      for (int j = 0; j < K; ++j) {
+        const std::size_t u = static_cast<std::size_t>(i), v = static_cast<std::size_t>(j);
+        const double Mij = L_.lengths()[i] * L_.lengths()[j] * L_.mass_below(std::max(i, j));
+        J.block<2, 2>(2 * i, 2 * j) = (Mij / h_) * w.B[u].transpose() * w.C[v];
+        if (i == j) J.block<2, 2>(2 * i, 2 * j) += w.D[u];
+      }
+  }
+
   struct Work {
     explicit Work(const DynamicSphericalChain& L)
-        : solver(L),
+        : solver(std::make_shared<ChainCouplingSolve>(L)),
           D(static_cast<std::size_t>(L.links())),
           B(static_cast<std::size_t>(L.links())),
           C(static_cast<std::size_t>(L.links())),
@@ -145,7 +167,7 @@ class SphereChainStep {
       dx.resize(2 * K);
       A3.resize(2 * K);
     }
-    ChainCouplingSolve solver;
+    std::shared_ptr<ChainCouplingSolve> solver;
     std::vector<Mat<double, 2, 2>> D;
     std::vector<Mat<double, 3, 2>> B, C;
     // per link: d^2 U_i / deta_e dxi_s (3 components x 4) and d^2 (X_i)_3 / deta_e dxi_s
@@ -153,6 +175,10 @@ class SphereChainStep {
     std::vector<Mat<double, 2, 2>> d2X;
     V U, MU, d1, r, dx, A3;
   };
+
+ private:
+  using J2 = ceres::Jet<double, 2>;
+  using JJ = ceres::Jet<J2, 2>;
 
   // The map inverse of link i at its unknown xi_i, as a function of eta_i (moving
   // q0_i in its chart): (X_i, U_i) in Jets of eta over Jets of xi.
@@ -227,17 +253,19 @@ class SphereChainStep {
             w.D[u](e, sx) = w.d2U[u].col(2 * e + sx).dot(mu) - ch * w.d2X[u](e, sx);
     }
   }
-  // An upper bound of the Jacobian's largest entry: its diagonal blocks and the
-  // coupling's (|M_ij| <= max_i M_ii).
+  // The size of the Jacobian's largest entry: its diagonal blocks exactly, and a bound of
+  // the others, |B_i^T M_ij C_j| <= sqrt(M_ii) |B_i| sqrt(M_jj) |C_j| / |h| (columns'
+  // 2-norms; M_ij = l_i l_j mu_max(i, j) <= sqrt(M_ii M_jj)).
   double jacobian_size() const {
     const Work& w = *work_;
-    double d = 0.0, b = 0.0, c = 0.0;
+    double diag = 0.0, b = 0.0, c = 0.0;
     for (std::size_t i = 0; i < w.D.size(); ++i) {
-      d = std::fmax(d, max_abs(w.D[i]));
-      b = std::fmax(b, max_abs(w.B[i]));
-      c = std::fmax(c, max_abs(w.C[i]));
+      const double Mii = L_.mass_diagonal(static_cast<int>(i));
+      diag = std::fmax(diag, max_abs(Mat<double, 2, 2>(w.D[i] + (Mii / h_) * w.B[i].transpose() * w.C[i])));
+      b = std::fmax(b, std::sqrt(Mii) * w.B[i].colwise().norm().maxCoeff());
+      c = std::fmax(c, std::sqrt(Mii) * w.C[i].colwise().norm().maxCoeff());
     }
-    const double J = d + 4.0 * b * c * L_.mass_max() / std::fabs(h_);
+    const double J = std::fmax(diag, b * c / std::fabs(h_));
     return std::isfinite(J) ? J : INFINITY;
   }
   // q1 = chart(q0, xi) and p1 = D2 L_d(q0, q1) in the chart at q1, stored.

@@ -16,10 +16,9 @@ struct SphereChainView {
   using Point = Eigen::VectorXd;
   using Covector = Eigen::VectorXd;
   DynamicSphericalChain L;
-  std::shared_ptr<ChainCouplingSolve> legendre;  // (shared by copies of the view)
-
-  explicit SphereChainView(const DynamicSphericalChain& chain)
-      : L(chain), legendre(std::make_shared<ChainCouplingSolve>(chain)) {}
+  // the banded solver of the Legendre inverse: the steps' own (the energy is evaluated
+  // between steps, and each step factors before it solves)
+  std::shared_ptr<ChainCouplingSolve> legendre;
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
     for (int i = 1; i <= L.links(); ++i)
@@ -70,7 +69,8 @@ std::unique_ptr<Run> sphere_chain_run(const Problem& pr, const Method& me, const
   const auto& P = pr.params;
   const DynamicSphericalChain L(Eigen::VectorXd::Constant(links, P.at("m")), Eigen::VectorXd::Constant(links, P.at("l")),
                                 P.at("g"));
-  const SphereChainView view(L);
+  const std::shared_ptr<SphereChainStep::Work> work = SphereChainStep::workspace(L);
+  const SphereChainView view{L, work->solver};
   RunReport base = kernels::base_report(pr, me, L.name());
   base.manifold = DynamicSpherePower::name;
   base.step_path = "sphere-chain-banded-newton";
@@ -84,15 +84,15 @@ std::unique_ptr<Run> sphere_chain_run(const Problem& pr, const Method& me, const
       v0 = Eigen::Map<const Eigen::VectorXd>(pr.v.data(), 3 * links);
       p = chain_legendre(L, q, v0);
     }
+    if (!std::isfinite(view.energy(q, p))) kernels::refuse_nonfinite_energy(pr);
   } catch (const std::domain_error& e) {
     throw InputError(pr.origin + ": system: the Lagrangian is degenerate at the initial state: " + e.what());
   }
-  if (!std::isfinite(view.energy(q, p))) kernels::refuse_nonfinite_energy(pr);
   const StepOptions opt = me.step_options();
   const std::vector<kernels::Stage<SphereMap>> stages = kernels::composition_stages(
       me, f, f.symmetric(), [](const SphereMap& m) { return adjoint_map(m); },
       [&](double th) { return kernels::at_theta(f, th); });
-  auto make = [&](double hk, const SphereMap& Rk) { return SphereChainStep(L, Rk, hk, opt); };
+  auto make = [&](double hk, const SphereMap& Rk) { return SphereChainStep(L, Rk, hk, opt, work); };
   if (me.composition == "none") return kernels::stepper_run(view, make(pr.step, f), q, p, v0, base, pr.steps);
   return kernels::stepper_run(view, kernels::compose_stages<ComposedPointStep<SphereChainStep>>(pr.step, stages, make),
                               q, p, v0, base, pr.steps);
