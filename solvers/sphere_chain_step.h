@@ -181,29 +181,18 @@ class SphereChainStep {
   using JJ = ceres::Jet<J2, 2>;
 
   // The map inverse of link i at its unknown xi_i, as a function of eta_i (moving
-  // q0_i in its chart): (X_i, U_i) in Jets of eta over Jets of xi.
-  ManifoldTangent<Sphere, JJ> link_inverse(const Vec<double, 3>& x0, const Vec<double, 2>& xi) const {
-    Vec<J2, 2> xj(J2(xi[0], 0), J2(xi[1], 1));
-    const Vec<J2, 3> q1 = Sphere::chart(x0, xj);
-    const Vec<J2, 3> rel = Sphere::relative_chart(x0, xj);
-    const Vec<JJ, 2> eta(seed<J2, 2>(J2(0.0), 0), seed<J2, 2>(J2(0.0), 1));
-    const Vec<JJ, 3> a = Sphere::chart(x0, eta);
-    Vec<JJ, 3> d;
+  // q0_i in its chart): (X_i, U_i) in Jets of eta over T, T = double for the residual
+  // alone, Jet<double, 2> (seeded in xi_i) for its Jacobian too.
+  template <class T>
+  ManifoldTangent<Sphere, ceres::Jet<T, 2>> link_inverse(const Vec<double, 3>& x0, const Vec<T, 2>& xi) const {
+    using D = ceres::Jet<T, 2>;
+    const Vec<T, 3> q1 = Sphere::chart(x0, xi);
+    const Vec<T, 3> rel = Sphere::relative_chart(x0, xi);
+    const Vec<D, 2> eta(seed<T, 2>(constant<T>(0.0), 0), seed<T, 2>(constant<T>(0.0), 1));
+    const Vec<D, 3> a = Sphere::chart(x0, eta);
+    Vec<D, 3> d;
     for (int k = 0; k < 3; ++k) {
-      d[k] = JJ(q1[k]) - a[k];
-      d[k].a = rel[k];
-    }
-    return R_.inverse_relative(a, d);
-  }
-  // The same at first order in eta only (the residual without its Jacobian).
-  ManifoldTangent<Sphere, J2> link_inverse_value(const Vec<double, 3>& x0, const Vec<double, 2>& xi) const {
-    const Vec<double, 3> q1 = Sphere::chart(x0, xi);
-    const Vec<double, 3> rel = Sphere::relative_chart(x0, xi);
-    const Vec<J2, 2> eta(seed<double, 2>(0.0, 0), seed<double, 2>(0.0, 1));
-    const Vec<J2, 3> a = Sphere::chart(x0, eta);
-    Vec<J2, 3> d;
-    for (int k = 0; k < 3; ++k) {
-      d[k] = J2(q1[k]) - a[k];
+      d[k] = D(q1[k]) - a[k];
       d[k].a = rel[k];
     }
     return R_.inverse_relative(a, d);
@@ -219,7 +208,7 @@ class SphereChainStep {
       const Vec<double, 3> x0 = q0.segment<3>(3 * i);
       const Vec<double, 2> xii = xi.segment<2>(2 * i);
       if (jacobian) {
-        const ManifoldTangent<Sphere, JJ> t = link_inverse(x0, xii);
+        const ManifoldTangent<Sphere, JJ> t = link_inverse(x0, Vec<J2, 2>(J2(xii[0], 0), J2(xii[1], 1)));
         for (int k = 0; k < 3; ++k) {
           w.U[3 * i + k] = t.v[k].a.a;
           for (int e = 0; e < 2; ++e) {
@@ -233,7 +222,7 @@ class SphereChainStep {
           for (int sx = 0; sx < 2; ++sx) w.d2X[u](e, sx) = t.x[2].v[e].v[sx];
         }
       } else {
-        const ManifoldTangent<Sphere, J2> t = link_inverse_value(x0, xii);
+        const ManifoldTangent<Sphere, J2> t = link_inverse(x0, xii);
         for (int k = 0; k < 3; ++k) {
           w.U[3 * i + k] = t.v[k].a;
           for (int e = 0; e < 2; ++e) w.B[u](k, e) = t.v[k].v[e];
