@@ -3,15 +3,14 @@
 #include "mechanics/chain.h"
 #include "solvers/chain_step.h"
 #include "solvers/runtime/factories.h"
+#include "solvers/runtime/flat_state_view.h"
 #include "solvers/runtime/kernels.h"
 
 namespace dvm::factories {
 
 namespace {
 
-struct ChainView {
-  using Point = Eigen::VectorXd;
-  using Covector = Eigen::VectorXd;
+struct ChainView : kernels::FlatStateView {
   FPUChain C;
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
@@ -40,13 +39,6 @@ struct ChainView {
     return {r};
   }
   double point_defect(const Point&) const { return -1.0; }
-  void finish_report(RunReport& r, const Point& q, const Covector& p) const {
-    r.q_final.assign(q.data(), q.data() + q.size());
-    r.p_final.assign(p.data(), p.data() + p.size());
-    r.q_embedded = r.q_final;
-  }
-  void diagnose(std::string&, const Point&, const Covector&) const {}
-  bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
 };
 
 }  // namespace
@@ -54,7 +46,7 @@ struct ChainView {
 std::unique_ptr<Run> chain(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
   const FPUChain C(static_cast<int>(P.at("n")), P.at("m"), P.at("k"), P.at("alpha"), P.at("beta"), P.at("fixed") != 0.0);
-  const ChainView view{C};
+  const ChainView view{{}, C};
   Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(pr.q.data(), C.n), p, v0;
   if (pr.momentum_given) {
     p = Eigen::Map<const Eigen::VectorXd>(pr.p.data(), C.n);

@@ -3,6 +3,7 @@
 // and Lagrangians written on (S^2)^K, K = 2..4, through one set of compiled steps per n
 // (BuiltinOrWritten<SphericalChain<K>>, solvers/runtime/kernels_manifold.h).
 #include "solvers/runtime/factories.h"
+#include "solvers/runtime/flat_state_view.h"
 #include "solvers/runtime/kernels_manifold.h"
 #include "solvers/sphere_chain_step.h"
 
@@ -12,9 +13,7 @@ namespace {
 
 // What a run of the chain at any number of links monitors and writes: the columns of
 // the compiled chain (t, x1, y1, z1, ..., p0, ..., energy, J3).
-struct SphereChainView {
-  using Point = Eigen::VectorXd;
-  using Covector = Eigen::VectorXd;
+struct SphereChainView : kernels::FlatStateView {
   DynamicSphericalChain L;
   // the banded solver of the Legendre inverse: the steps' own (the energy is evaluated
   // between steps, and each step factors before it solves)
@@ -54,13 +53,6 @@ struct SphereChainView {
     return {r};
   }
   double point_defect(const Point& q) const { return DynamicSpherePower::point_defect(q); }
-  void finish_report(RunReport& r, const Point& q, const Covector& p) const {
-    r.q_final.assign(q.data(), q.data() + q.size());
-    r.p_final.assign(p.data(), p.data() + p.size());
-    r.q_embedded = r.q_final;
-  }
-  void diagnose(std::string&, const Point&, const Covector&) const {}
-  bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
 };
 
 // The chain at any number of links by SphereChainStep: the lagrangian form, any sphere
@@ -70,7 +62,7 @@ std::unique_ptr<Run> sphere_chain_run(const Problem& pr, const Method& me, const
   const DynamicSphericalChain L(Eigen::VectorXd::Constant(links, P.at("m")), Eigen::VectorXd::Constant(links, P.at("l")),
                                 P.at("g"));
   const std::shared_ptr<SphereChainStep::Work> work = SphereChainStep::workspace(L);
-  const SphereChainView view{L, work->solver};
+  const SphereChainView view{{}, L, work->solver};
   RunReport base = kernels::base_report(pr, me, L.name());
   base.manifold = DynamicSpherePower::name;
   base.step_path = "sphere-chain-banded-newton";
