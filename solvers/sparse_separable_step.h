@@ -95,8 +95,8 @@ class SparseSeparableThetaStep {
         mass_over_h_[static_cast<std::size_t>(&m.valueRef() - J_.valuePtr())] = Mij / h_;
       }
     }
-    ldlt_ = std::make_shared<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>>();
-    ldlt_->analyzePattern(J_);
+    factorisation_ = std::make_shared<Factorisation>();
+    factorisation_->ldlt.analyzePattern(J_);
   }
 
   double step_size() const { return h_; }
@@ -104,10 +104,13 @@ class SparseSeparableThetaStep {
   int dim() const { return L_.dim(); }
 
   // One step from (q0, p0): dq holds the starting guess on entry and q1 - q0 on return,
-  // dp receives p1 - p0 = h F(q_theta). Simplified Newton as SeparableThetaStep: the
-  // Jacobian is formed and factored at the starting guess and again only where an
-  // iteration fails to shrink the residual fourfold; the stopping rule and the final
-  // correction are those of solve_newton (solvers/newton.h).
+  // dp receives p1 - p0 = h F(q_theta). Simplified Newton across steps: the Jacobian
+  // factored by an earlier step (of this step object) is kept while the iteration
+  // shrinks the residual fourfold an iteration or has reached the stopping rule, and is
+  // formed and factored again at the current iterate where neither holds (or where
+  // there is none yet). The equation
+  // and the stopping rule are solve_newton's (solvers/newton.h), so a kept Jacobian
+  // changes the iterations, not the solution.
   StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     const int n = L_.dim();
@@ -115,23 +118,33 @@ class SparseSeparableThetaStep {
     if (dp.size() != n) dp.resize(n);
     const StepOptions& opt = options_;
     const double pscale = dynamic_detail::inf_norm(p0), x0 = dynamic_detail::inf_norm(q0);
-    bool have_jacobian = false;
-    double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
+    Factorisation& f = *factorisation_;
+    double dxn = INFINITY, last = INFINITY;
     for (int it = 0; it < opt.max_iterations; ++it) {
       x_ = q0 + theta_ * dq;
       force(x_);
       mass_times(dq, r_);
       r_ = p0 - r_ / h_ + (h_ * (1.0 - theta_)) * F_;
       s.residual = dynamic_detail::inf_norm(r_);
-      if (!have_jacobian || !(s.residual <= 0.25 * last)) {
-        Jmax = jacobian(x_);
-        have_jacobian = true;
+      bool refresh = !f.valid;
+      if (!refresh && !(s.residual <= 0.25 * last)) {
+        // not shrinking fourfold: a new Jacobian, unless the residual is already where
+        // the stopping rule accepts it (at round-off it shrinks no more, whatever J is)
+        StepSummary probe = s;
+        probe.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+        refresh = newton_verdict_floored(probe, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) !=
+                  NewtonVerdict::converged;
+      }
+      if (refresh) {
+        f.Jmax = jacobian(x_);
         ++s.iterations;  // (Jacobian evaluations, as solve_newton counts them)
-        if (std::isfinite(Jmax) && !factor()) {
+        f.valid = std::isfinite(f.Jmax) && factor();
+        if (std::isfinite(f.Jmax) && !f.valid) {
           s.message = "singular step Jacobian (sparse LDL^T factorisation failed)";
           return s;
         }
       }
+      const double Jmax = f.Jmax;
       last = s.residual;
       s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
       if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
@@ -140,7 +153,7 @@ class SparseSeparableThetaStep {
       }
       const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, Jmax);
       if (verdict == NewtonVerdict::failed) return s;
-      dx_ = ldlt_->solve(r_);  // J dx = r; the Jacobian of r is -J
+      dx_ = f.ldlt.solve(r_);  // J dx = r; the Jacobian of r is -J
       if (!std::isfinite(dynamic_detail::inf_norm(dx_))) {
         s.converged = false;
         s.message = "singular step Jacobian";
@@ -186,9 +199,10 @@ class SparseSeparableThetaStep {
     return std::isfinite(m) ? m : INFINITY;
   }
   bool factor() const {
-    ldlt_->factorize(J_);
-    if (ldlt_->info() != Eigen::Success) return false;
-    const auto& d = ldlt_->vectorD();
+    auto& ldlt = factorisation_->ldlt;
+    ldlt.factorize(J_);
+    if (ldlt.info() != Eigen::Success) return false;
+    const auto& d = ldlt.vectorD();
     for (Eigen::Index i = 0; i < d.size(); ++i)
       if (!(d[i] != 0.0) || !std::isfinite(d[i])) return false;
     return true;
@@ -203,8 +217,14 @@ class SparseSeparableThetaStep {
   mutable V x_, F_, Lv_, r_, dx_, zero_;
   mutable std::vector<double> hess_;
   mutable Eigen::SparseMatrix<double> J_;
-  // (not copyable; copies share it: every step factors its own Jacobian before solving)
-  std::shared_ptr<Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>>> ldlt_;
+  // The factored Jacobian, kept from step to step (SimplicialLDLT is not copyable:
+  // copies of a step share it, and with it the Jacobian they keep).
+  struct Factorisation {
+    Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
+    bool valid = false;  // factored, and not singular
+    double Jmax = 0.0;   // the largest entry of the Jacobian factored
+  };
+  std::shared_ptr<Factorisation> factorisation_;
 };
 
 }  // namespace dvm

@@ -235,10 +235,16 @@ void implicit_chain(int repeats) {
     const std::int64_t steps = 400000 / n;
     const ChainStep builtin(FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), ThetaMap::midpoint(), 0.05);
     const auto H = SparseSeparableThetaStep::hessian_of(W, q0);
-    const SparseSeparableThetaStep sparse(W, H, 0.5, 0.05);
     const Eigen::VectorXd v0 = Eigen::VectorXd::Zero(n);
     const Result a = time_steps(builtin, q0, p0, v0, steps, repeats, "built-in chain, midpoint");
-    const Result b = time_steps(sparse, q0, p0, v0, steps, repeats, "written chain, midpoint");
+    // a new step for each repeat: each timed run pays the Jacobian of its first step,
+    // which the step keeps for the later ones, as a `dvm run` does
+    Result b;
+    for (int r = 0; r < repeats; ++r) {
+      const SparseSeparableThetaStep sparse(W, H, 0.5, 0.05);
+      const Result t = time_steps(sparse, q0, p0, v0, steps, 1, "written chain, midpoint");
+      if (t.ns_per_step < b.ns_per_step) b = t;
+    }
     const double per = b.ns_per_step / n;
     if (n == 1000) {
       per_particle_1000 = per;
