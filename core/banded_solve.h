@@ -23,14 +23,11 @@ class BandedLU {
     pivot_.assign(static_cast<std::size_t>(n), 0);
   }
   int size() const { return n_; }
-  int lower() const { return kl_; }
-  int upper() const { return ku_; }
 
   void set_zero() { std::fill(a_.begin(), a_.end(), 0.0); }
   // The entry (i, j) of A before factor(); j - i must lie in [-kl, ku].
   double& at(int i, int j) { return a_[index(i, j)]; }
   double at(int i, int j) const { return a_[index(i, j)]; }
-  bool in_band(int i, int j) const { return i >= 0 && j >= 0 && i < n_ && j < n_ && j - i >= -kl_ && j - i <= ku_; }
 
   // L U = P A in place. False if a pivot is zero or not finite, or smaller than
   // 1e-14 times the largest entry of A (singular to working precision).
