@@ -6,7 +6,8 @@
 // the theta map R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), D = q1 - q0
 // and q_theta = q0 + theta D, the discrete Legendre equations of Sec. 5.3 are
 //   p0 = M D / h - h (1 - theta) F(q_theta),   p1 - p0 = h F(q_theta),   F = grad U,
-// and the first is solved for D by simplified Newton, with the Jacobian of the residual
+// and the first is solved for D by the simplified Newton across steps of
+// solvers/separable_newton.h, with the Jacobian of the residual
 // -(M / h - h theta (1 - theta) Hess U). Hess U comes from SparsePotentialHessian
 // (mechanics/sparse_hessian.h): its pattern read off the tape and ceil(colours / 8)
 // reverse gradients in Jets, so a chain or a lattice costs O(n) per Jacobian, where
@@ -35,16 +36,12 @@
 
 #include "mechanics/dynamic_system.h"
 #include "mechanics/sparse_hessian.h"
-#include "solvers/dynamic_step.h"
-#include "solvers/newton.h"
+#include "solvers/separable_newton.h"
 
 namespace dvm {
 
-class SparseSeparableThetaStep {
+class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThetaStep> {
  public:
-  static constexpr int N = Eigen::Dynamic;
-  using V = Eigen::VectorXd;
-
   // The pattern and colouring of Hess U at the state q (mechanics/sparse_hessian.h), to
   // share between the steps of a composition.
   static std::shared_ptr<SparsePotentialHessian> hessian_of(const WrittenDynamic& L, const V& q) {
@@ -53,18 +50,11 @@ class SparseSeparableThetaStep {
 
   SparseSeparableThetaStep(const WrittenDynamic& L, std::shared_ptr<SparsePotentialHessian> hessian, double theta,
                            double h, StepOptions options = {})
-      : L_(L), separable_(L), hessian_(std::move(hessian)), theta_(theta), h_(h), options_(options) {
-    if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1]");
-    dynamic_detail::require_step(h);
-    dynamic_detail::require_newton(options);
+      : SeparableThetaNewton(L.dim(), theta, h, options), L_(L), separable_(L), hessian_(std::move(hessian)) {
     const int n = L_.dim();
     if (!hessian_ || hessian_->dim() != n) throw std::invalid_argument("the sparse Hessian is not the system's");
     const WrittenParts& w = L.parts();
-    x_.resize(n);
-    F_.resize(n);
     Lv_.resize(n);
-    r_.resize(n);
-    dx_.resize(n);
     zero_ = V::Zero(n);
     hess_.resize(hessian_->entries());
     // J's pattern: Hess U's (the diagonal included) and M's nonzero entries
@@ -99,87 +89,12 @@ class SparseSeparableThetaStep {
     factorisation_->ldlt.analyzePattern(J_);
   }
 
-  double step_size() const { return h_; }
-  double theta() const { return theta_; }
-  int dim() const { return L_.dim(); }
-
-  // One step from (q0, p0): dq holds the starting guess on entry and q1 - q0 on return,
-  // dp receives p1 - p0 = h F(q_theta). Simplified Newton across steps: the Jacobian
-  // factored by an earlier step (of this step object) is kept while the iteration
-  // shrinks the residual fourfold an iteration or has reached the stopping rule, and is
-  // formed and factored again at the current iterate where neither holds (or where
-  // there is none yet). The equation
-  // and the stopping rule are solve_newton's (solvers/newton.h), so a kept Jacobian
-  // changes the iterations, not the solution.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
-    StepSummary s;
-    const int n = L_.dim();
-    if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
-    if (dp.size() != n) dp.resize(n);
-    const StepOptions& opt = options_;
-    const double pscale = dynamic_detail::inf_norm(p0), x0 = dynamic_detail::inf_norm(q0);
-    Factorisation& f = *factorisation_;
-    double dxn = INFINITY, last = INFINITY;
-    for (int it = 0; it < opt.max_iterations; ++it) {
-      x_ = q0 + theta_ * dq;
-      force(x_);
-      mass_times(dq, r_);
-      r_ = p0 - r_ / h_ + (h_ * (1.0 - theta_)) * F_;
-      s.residual = dynamic_detail::inf_norm(r_);
-      bool refresh = !f.valid;
-      if (!refresh && !(s.residual <= 0.25 * last)) {
-        // not shrinking fourfold: a new Jacobian, unless the residual is already where
-        // the stopping rule accepts it (at round-off it shrinks no more, whatever J is)
-        StepSummary probe = s;
-        probe.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
-        refresh = newton_verdict_floored(probe, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) !=
-                  NewtonVerdict::converged;
-      }
-      if (refresh) {
-        f.Jmax = jacobian(x_);
-        ++s.iterations;  // (Jacobian evaluations, as solve_newton counts them)
-        f.valid = std::isfinite(f.Jmax) && factor();
-        if (std::isfinite(f.Jmax) && !f.valid) {
-          s.message = "singular step Jacobian (sparse LDL^T factorisation failed)";
-          return s;
-        }
-      }
-      const double Jmax = f.Jmax;
-      last = s.residual;
-      s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
-      if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
-        s.message = "non-finite residual or Jacobian";
-        return s;
-      }
-      const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, Jmax);
-      if (verdict == NewtonVerdict::failed) return s;
-      dx_ = f.ldlt.solve(r_);  // J dx = r; the Jacobian of r is -J
-      if (!std::isfinite(dynamic_detail::inf_norm(dx_))) {
-        s.converged = false;
-        s.message = "singular step Jacobian";
-        return s;
-      }
-      dq += dx_;
-      if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
-      dxn = dynamic_detail::inf_norm(dx_);
-    }
-    if (!s.converged) {
-      s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
-      return s;
-    }
-    x_ = q0 + theta_ * dq;
-    force(x_);
-    dp = h_ * F_;
-    if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-      s.converged = false;
-      s.message = "non-finite momentum";
-    }
-    return s;
-  }
+  static const char* factorisation() { return "sparse LDL^T factorisation"; }
 
  private:
+  friend class SeparableThetaNewton<SparseSeparableThetaStep>;
   // F = grad U(x): the reverse gradient of the potential's tape
-  void force(const V& x) const { separable_.gradient(x, zero_, F_, Lv_); }
+  void force(const V& x, V& F) const { separable_.gradient(x, zero_, F, Lv_); }
   void mass_times(const V& v, V& out) const {
     const WrittenParts& w = L_.parts();
     if (w.split.diagonal)
@@ -198,6 +113,8 @@ class SparseSeparableThetaStep {
     for (std::size_t k = 0; k < mass_over_h_.size(); ++k) m = std::fmax(m, std::fabs(J[k]));
     return std::isfinite(m) ? m : INFINITY;
   }
+  void solve(const V& r, V& dx) const { dx = factorisation_->ldlt.solve(r); }
+  KeptJacobian& kept() const { return *factorisation_; }
   bool factor() const {
     auto& ldlt = factorisation_->ldlt;
     ldlt.factorize(J_);
@@ -210,19 +127,15 @@ class SparseSeparableThetaStep {
   WrittenDynamic L_;
   WrittenSeparable separable_;  // its force
   std::shared_ptr<SparsePotentialHessian> hessian_;
-  double theta_, h_;
-  StepOptions options_;
   std::vector<std::size_t> position_;
   std::vector<double> mass_over_h_;
-  mutable V x_, F_, Lv_, r_, dx_, zero_;
+  mutable V Lv_, zero_;
   mutable std::vector<double> hess_;
   mutable Eigen::SparseMatrix<double> J_;
   // The factored Jacobian, kept from step to step (SimplicialLDLT is not copyable:
   // copies of a step share it, and with it the Jacobian they keep).
-  struct Factorisation {
+  struct Factorisation : KeptJacobian {
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
-    bool valid = false;  // factored, and not singular
-    double Jmax = 0.0;   // the largest entry of the Jacobian factored
   };
   std::shared_ptr<Factorisation> factorisation_;
 };
