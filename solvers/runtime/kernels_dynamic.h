@@ -7,7 +7,9 @@
 //                   bodies; a written Lagrangian whose text is separable, through
 //                   WrittenSeparable), composition included;
 //                   SparseSeparableThetaStep for the other theta maps on a written
-//                   separable Lagrangian (sparse Hessian of U, any size);
+//                   separable Lagrangian (sparse Hessian of U, any size), and
+//                   DenseSeparableThetaStep<Sys> on the other separable systems (n
+//                   bodies; a written text whose Hessian of U is not sparse);
 //                   DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
 //                   with the flat retraction R_x(v) = x + v is the theta map itself,
 //                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
@@ -30,6 +32,7 @@
 #include "mechanics/hamiltonian.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"
+#include "solvers/dense_separable_step.h"
 #include "solvers/sparse_separable_step.h"
 #include "solvers/runtime/kernels.h"
 
@@ -280,16 +283,17 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
                                                                                        h, opt, q, kMaxDenseDynamicDim),
                                q, p, v0, base, pr.steps);
   }
-  if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
-    // a theta map (composed or not, a theta per stage included) on a written separable
-    // Lagrangian: Newton on the structured equation with the sparse Hessian of U
-    if (me.form == Form::lagrangian && !me.galerkin && L.separable() && separable_newton_applies(me)) {
-      const ThetaMap R = dynamic_theta_map(me);
+  // a theta map (composed or not, a theta per stage included) on a separable system:
+  // Newton on the structured equation, with the sparse Hessian of U where the text of a
+  // written Lagrangian gives one, a dense one otherwise (n bodies)
+  if (me.form == Form::lagrangian && !me.galerkin && dynamic_separable(L) && separable_newton_applies(me)) {
+    const ThetaMap R = dynamic_theta_map(me);
+    if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
       std::shared_ptr<SparsePotentialHessian> H;
       try {
         H = SparseSeparableThetaStep::hessian_of(L, q);
       } catch (const SparsePotentialHessian::TooDense&) {
-        // terms coupling most coordinates: the dense steps below, within their limit
+        // terms coupling most coordinates: the dense Jacobian below, within its limit
       }
       if (H) {
         auto make = [&](double hk, const ThetaMap& Rk) { return SparseSeparableThetaStep(L, H, Rk.theta(), hk, opt); };
@@ -298,6 +302,12 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
       }
     }
+    dense_limit("integrator.map: map = \"" + me.map->name + "\" in the lagrangian form");
+    using Step = DenseSeparableThetaStep<Sys>;
+    const auto work = Step::workspace(L);
+    auto make = [&](double hk, const ThetaMap& Rk) { return Step(L, work, Rk.theta(), hk, opt); };
+    base.step_path = "separable-dense-newton";
+    return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
   }
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                           : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");

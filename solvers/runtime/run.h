@@ -56,7 +56,8 @@ struct RunReport {
   // "explicit-splitting" (kicks and drifts, no solve), "separable-newton" (Newton on the
   // structured equation, solvers/separable_theta_step.h), "separable-sparse-newton" (the
   // same with the sparse Hessian of a written potential, solvers/sparse_separable_step.h),
-  // "gauss-collocation" or "generic". Empty: not reported.
+  // "separable-dense-newton" (the same with a dense Hessian of U, n bodies,
+  // solvers/dense_separable_step.h), "gauss-collocation" or "generic". Empty: not reported.
   std::string structure, structure_source, step_path;
   // step_path separable-sparse-newton: the colours of the Hessian's columns, so the
   // gradient passes per Jacobian are ceil(colours / 8) (-1: not such a path)

@@ -9,7 +9,10 @@
 //     takes the sparse step on a written separable text and gives the generic dense
 //     path's states (use_structure = false) to the Newton tolerance;
 //   - a written chain beyond the dense steps' limit runs with the midpoint map, where the
-//     dense path is refused naming its key, on the Jacobian factored at its first step.
+//     dense path is refused naming its key, on the Jacobian factored at its first step;
+//   - the step that factors a dense Jacobian (solvers/dense_separable_step.h) gives the
+//     sparse step's states on every text, reports a singular Jacobian, and serves the
+//     implicit theta maps on n bodies, equal to the generic path.
 #define BOOST_TEST_MODULE sparse_separable
 #include <boost/test/unit_test.hpp>
 
@@ -22,6 +25,8 @@
 #include "mechanics/dynamic_system.h"
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_lagrangian.h"
+#include "solvers/dense_separable_step.h"
+#include "solvers/sparse_separable_step.h"
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/run.h"
 #include "tests/solvers/structured_runs.h"
@@ -255,4 +260,107 @@ BOOST_AUTO_TEST_CASE(a_written_chain_beyond_the_dense_limit_runs_the_midpoint_ma
     BOOST_TEST(m.find("integrator.map") != std::string::npos, m);
     BOOST_TEST(m.find("4096") != std::string::npos, m);
   }
+}
+
+// The dense Jacobian (solvers/dense_separable_step.h) against the sparse one, step by
+// step, on every text: the same equation, so the same states to round-off; the full mass
+// matrix of one text takes its non-diagonal branch.
+BOOST_AUTO_TEST_CASE(the_dense_jacobian_gives_the_sparse_steps) {
+  unsigned seed = 21;
+  int compared = 0;
+  for (const Text& t : texts()) {
+    const WrittenDynamic L(t.system);
+    const int n = L.dim();
+    const VectorXd q0 = n == 2 ? (VectorXd(2) << 0.8, 0.0).finished() : random_vector(n, 0.4, seed++);
+    const VectorXd v0 = n == 2 ? (VectorXd(2) << 0.0, 1.2).finished() : random_vector(n, 0.3, seed++);
+    VectorXd Lq(n), p0(n);
+    L.gradient(q0, v0, Lq, p0);
+    const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+    const auto work = DenseSeparableThetaStep<WrittenDynamic>::workspace(L);
+    for (double theta : {0.3, 0.5, 0.7}) {
+      const SparseSeparableThetaStep sparse(L, H, theta, 0.02);
+      const DenseSeparableThetaStep<WrittenDynamic> dense(L, work, theta, 0.02);
+      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, dqa = VectorXd::Zero(n), dqb = dqa, dpa(n), dpb(n);
+      int jacobians = 0;
+      for (int k = 0; k < 50; ++k) {
+        const StepSummary a = sparse.step(qa, pa, dqa, dpa), b = dense.step(qb, pb, dqb, dpb);
+        BOOST_TEST_REQUIRE(a.converged, a.message);
+        BOOST_TEST_REQUIRE(b.converged, b.message);
+        jacobians += b.iterations;
+        qa += dqa;
+        pa += dpa;
+        qb += dqb;
+        pb += dpb;
+      }
+      BOOST_TEST_CONTEXT(t.what << ", theta " << theta) {
+        BOOST_TEST((qa - qb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, qa.lpNorm<Eigen::Infinity>()));
+        BOOST_TEST((pa - pb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, pa.lpNorm<Eigen::Infinity>()));
+        // the factorisation of the first step serves most of the others
+        BOOST_TEST(jacobians <= 10, jacobians << " Jacobians in 50 steps");
+        ++compared;
+      }
+    }
+  }
+  BOOST_TEST(compared == 18);
+}
+
+// At h = 1/8 and the midpoint map, x_dot^2/2 + 128 x^2 (an inverted oscillator) makes
+// J = 1/h - h/4 * 256 exactly zero: a failed step that says so, not a run off to infinity.
+BOOST_AUTO_TEST_CASE(a_singular_dense_jacobian_is_a_failed_step_with_its_reason) {
+  const auto w = written(1, ExpressionSymbols::Boundary::none, "x_dot^2/2 + 128*x^2", {}, {}, {"x"});
+  const WrittenDynamic L(w);
+  const DenseSeparableThetaStep<WrittenDynamic> step(L, DenseSeparableThetaStep<WrittenDynamic>::workspace(L), 0.5,
+                                                      0.125);
+  VectorXd q(1), p(1), dq = VectorXd::Zero(1), dp(1);
+  q << 0.1;
+  p << 0.2;
+  const StepSummary s = step.step(q, p, dq, dp);
+  BOOST_TEST(!s.converged);
+  BOOST_TEST(s.message.find("singular step Jacobian (dense LU factorisation failed)") != std::string::npos, s.message);
+}
+
+// Built-in n bodies (declared separable, Hess U in closed form): every implicit theta map
+// takes the dense structured step and gives the generic path's states (use_structure =
+// false: the 2n x 2n Hessian of L and a dense LU at every iteration) to the Newton
+// tolerance, on a fraction of the Jacobians.
+BOOST_AUTO_TEST_CASE(n_bodies_take_the_dense_structured_step_and_equal_the_generic_path) {
+  Problem pr;
+  pr.system = &find_system_entry("nbody", "test");
+  for (const ParamEntry& e : pr.system->params) pr.params[e.name] = e.default_value;
+  const int bodies = 6;
+  pr.masses = {0.1, 0.08, 0.06, 0.04, 0.03, 0.02};
+  // bodies at least about 1 apart (the first coordinate i, jittered by 0.2)
+  VectorXd q = random_vector(3 * bodies, 0.2, 31);
+  for (int i = 0; i < bodies; ++i) q[3 * i] += i;
+  const VectorXd v = random_vector(3 * bodies, 0.3, 32);
+  pr.dim = 3 * bodies;
+  pr.q.assign(q.data(), q.data() + q.size());
+  pr.v.assign(v.data(), v.data() + v.size());
+  pr.step = 0.01;
+  pr.steps = 100;
+  int compared = 0;
+  for (const Method& me : implicit_theta_methods()) {
+    Method generic = me;
+    generic.use_structure = false;
+    validate(pr, me);
+    const RunReport a = run(pr, me), b = run(pr, generic);
+    BOOST_TEST_CONTEXT(me.label()) {
+      BOOST_TEST(!a.failed, a.loop.failure.message);
+      BOOST_TEST(!b.failed, b.loop.failure.message);
+      BOOST_TEST(a.structure == "separable");
+      BOOST_TEST(a.step_path == "separable-dense-newton");
+      BOOST_TEST(b.step_path == "generic");
+      BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+      BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+      // the generic path forms a Jacobian at every step
+      BOOST_TEST(b.solver_iterations >= b.steps);
+      ++compared;
+    }
+  }
+  BOOST_TEST(compared == 15);
+  Method mid;
+  mid.map = &find_map_entry("midpoint", "test");
+  mid.theta = 0.5;
+  const RunReport a = run(pr, mid);
+  BOOST_TEST(a.solver_iterations <= 5, a.solver_iterations << " Jacobians in " << a.steps << " steps");
 }
