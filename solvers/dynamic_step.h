@@ -38,7 +38,11 @@
 // (stall measured against |dq| + |q0|), |h| max(|H_p|, |H_q|)(q0, p0) + |J| |(dq, dp)|
 // for the Hamiltonian step (against |(dq, dp)| + max(|q0|, |p0|)). The linear solves use
 // DenseLU (a pivot not above 1e-14 max|J| is singular, as solve_dense; the fixed-size
-// Newton of dimension <= 4 refuses only an exactly singular matrix). Non-convergence,
+// Newton of dimension <= 4 refuses only an exactly singular matrix). The
+// position-momentum step may instead keep its Jacobian across steps (keep_jacobian:
+// simplified Newton, solvers/kept_newton.h), where a step then costs gradients of L and
+// triangular solves, and L's Hessian only where the iteration stops converging fourfold.
+// Non-convergence,
 // singular Jacobians, non-finite values and std::domain_error from the system (e.g. a
 // degenerate Legendre transform) are reported in the StepSummary, never thrown. Only
 // Newton's method is offered: StepOptions::solver = tiny is refused at construction.
@@ -50,11 +54,13 @@
 
 #include <Eigen/Core>
 #include <cmath>
+#include <memory>
 #include <stdexcept>
 #include <string>
 
 #include "core/discretization_map.h"
 #include "mechanics/dynamic_system.h"
+#include "solvers/kept_newton.h"
 #include "solvers/newton.h"
 
 namespace dvm {
@@ -89,8 +95,12 @@ class DynamicThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
-  DynamicThetaStep(Sys L, ThetaMap R, double h, StepOptions options = {})
+  // keep_jacobian: simplified Newton across steps (solvers/kept_newton.h), the
+  // factorisation of an earlier step kept while it serves; otherwise Newton's method with
+  // a Jacobian at every iteration.
+  DynamicThetaStep(Sys L, ThetaMap R, double h, StepOptions options = {}, bool keep_jacobian = false)
       : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options) {
+    if (keep_jacobian) kept_ = std::make_shared<Kept>();
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
     const int n = L_.dim();
@@ -104,16 +114,21 @@ class DynamicThetaStep {
     Lvv_.resize(n, n);
     J_.resize(n, n);
     lu_.resize(n);
+    if (kept_) {
+      kept_->lu.resize(n);
+      dx_.resize(n);
+    }
   }
 
   double step_size() const { return h_; }
+  bool keeps_jacobian() const { return kept_ != nullptr; }
   const Sys& lagrangian() const { return L_; }
   const ThetaMap& map() const { return R_; }
   const StepOptions& options() const { return options_; }
   int dim() const { return L_.dim(); }
 
   // The step of the adjoint map (1 - theta), of the same size.
-  DynamicThetaStep adjoint() const { return DynamicThetaStep(L_, R_.adjoint(), h_, options_); }
+  DynamicThetaStep adjoint() const { return DynamicThetaStep(L_, R_.adjoint(), h_, options_, keeps_jacobian()); }
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0.
@@ -126,6 +141,7 @@ class DynamicThetaStep {
     const double a = h_ * th * (1.0 - th), b = 1.0 - th;
     const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
     try {
+      if (kept_) return kept_jacobian_newton(KeptOps{*this}, *kept_, options_, q0, p0, dq, dp, r_, dx_);
       double dxn = INFINITY;
       bool done = false;
       for (int it = 0; it < options_.max_iterations && !done; ++it) {
@@ -184,13 +200,48 @@ class DynamicThetaStep {
     }
   }
 
+  // The equation in the terms of kept_jacobian_newton: r as above, J = -dF/ddq.
+  struct KeptOps {
+    const DynamicThetaStep& s;
+    void residual(const V& q0, const V& p0, const V& dq, V& r) const {
+      s.at(q0, dq);
+      s.L_.gradient(s.x_, s.v_, s.Lq_, s.Lv_);
+      const double b = 1.0 - s.R_.theta();
+      for (Eigen::Index i = 0; i < r.size(); ++i) r[i] = p0[i] + ((s.h_ * s.Lq_[i]) * b - s.Lv_[i]);
+    }
+    double jacobian(const V& q0, const V& dq) const {
+      s.at(q0, dq);
+      s.L_.hessian(s.x_, s.v_, s.Lq_, s.Lv_, s.Lqq_, s.Lqv_, s.Lvv_);
+      const double th = s.R_.theta(), inv_h = 1.0 / s.h_, a = s.h_ * th * (1.0 - th), b = 1.0 - th;
+      const Eigen::Index n = q0.size();
+      for (Eigen::Index j = 0; j < n; ++j)
+        for (Eigen::Index i = 0; i < n; ++i)
+          s.J_(i, j) = -(a * s.Lqq_(i, j) + b * s.Lqv_(i, j) - th * s.Lqv_(j, i) - inv_h * s.Lvv_(i, j));
+      const double m = dynamic_detail::inf_norm(s.J_);
+      return std::isfinite(m) ? m : INFINITY;
+    }
+    bool factor() const { return s.kept_->lu.factor(s.J_); }
+    void solve(const V& r, V& dx) const { s.kept_->lu.solve(r, dx); }
+    void increment(const V& q0, const V& dq, V& dp) const {
+      s.at(q0, dq);
+      s.L_.gradient(s.x_, s.v_, s.Lq_, s.Lv_);
+      for (Eigen::Index i = 0; i < dp.size(); ++i) dp[i] = s.h_ * s.Lq_[i];
+    }
+    static const char* factorisation() { return "dense LU factorisation"; }
+  };
+  // The factorisation kept across steps, shared by copies of the step.
+  struct Kept : KeptJacobian {
+    DenseLU lu;
+  };
+
   Sys L_;
   ThetaMap R_;
   double h_;
   StepOptions options_;
-  mutable V x_, v_, Lq_, Lv_, r_;
+  mutable V x_, v_, Lq_, Lv_, r_, dx_;
   mutable Eigen::MatrixXd Lqq_, Lqv_, Lvv_, J_;
   mutable DenseLU lu_;
+  std::shared_ptr<Kept> kept_;
 };
 
 // The Hamiltonian step (Eq. 5.1) of the theta map for a run-time-sized Hamiltonian Ham

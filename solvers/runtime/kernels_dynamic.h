@@ -10,7 +10,8 @@
 //                   separable Lagrangian (sparse Hessian of U, any size), and
 //                   DenseSeparableThetaStep<Sys> on the other separable systems (n
 //                   bodies; a written text whose Hessian of U is not sparse);
-//                   DynamicThetaStep<Sys>   (the theta-family maps; retraction-theta
+//                   DynamicThetaStep<Sys>   (the theta-family maps, its Jacobian
+//                   kept across steps unless use_structure = false; retraction-theta
 //                   with the flat retraction R_x(v) = x + v is the theta map itself,
 //                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
 //                   in closed form)
@@ -181,6 +182,16 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
 // left to run out of memory or time.
 constexpr int kMaxDenseDynamicDim = 4096;
 
+// From this many coordinates the position-momentum step of a Lagrangian that is not
+// separable keeps its Jacobian across steps (simplified Newton, solvers/kept_newton.h).
+// A kept Jacobian takes 7 to 8 gradients of L a step where Newton's method takes 3
+// Hessians; a written Hessian of n <= 4 coordinates is one pass of 8 forward
+// derivatives, about a gradient's cost, and there keeping it is 1.7 times slower. Measured
+// on a written chain whose mass matrix depends on q (midpoint, clang -O1), kept against
+// not: n = 2 and 4, 1.7 times slower; 6 and 8, equal; 10, 2.3 times faster; 50, 8.4
+// times; 200, 11 times (solvers/README.md).
+constexpr int kKeptJacobianMinDim = 8;
+
 // The theta of the method's map as a ThetaMap (retraction-theta: the same map).
 inline ThetaMap dynamic_theta_map(const Method& me) {
   const MapEntry& e = *me.map;
@@ -327,7 +338,12 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     return run_with(LegendreDynamicHamiltonian<Sys>(L));
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
-  auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt); };
+  // simplified Newton across steps (the Jacobian from L's Hessian kept while it serves)
+  // where L's Hessian costs several gradients; use_structure = false forms a Jacobian at
+  // every iteration, the reference path
+  const bool keep = me.use_structure && n >= kKeptJacobianMinDim;
+  if (keep) base.step_path = "kept-jacobian-newton";
+  auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt, keep); };
   return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }
 

@@ -194,6 +194,7 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
                 std::to_string(r.hessian_colours) + " colours)";
         if (r.step_path == "separable-dense-newton")
           how = "by Newton on the structured equation, dense Jacobian kept across steps";
+        if (r.step_path == "kept-jacobian-newton") how = "by Newton, the Jacobian (L's Hessian) kept across steps";
         if (r.step_path == "gauss-collocation")
           how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());

@@ -57,7 +57,9 @@ struct RunReport {
   // structured equation, solvers/separable_theta_step.h), "separable-sparse-newton" (the
   // same with the sparse Hessian of a written potential, solvers/sparse_separable_step.h),
   // "separable-dense-newton" (the same with a dense Hessian of U, n bodies,
-  // solvers/dense_separable_step.h), "gauss-collocation" or "generic". Empty: not reported.
+  // solvers/dense_separable_step.h), "kept-jacobian-newton" (a Lagrangian that is not
+  // separable, of run-time size, its Jacobian kept across steps, solvers/kept_newton.h),
+  // "gauss-collocation" or "generic". Empty: not reported.
   std::string structure, structure_source, step_path;
   // step_path separable-sparse-newton: the colours of the Hessian's columns, so the
   // gradient passes per Jacobian are ceil(colours / 8) (-1: not such a path)

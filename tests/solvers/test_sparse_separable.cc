@@ -12,7 +12,10 @@
 //     dense path is refused naming its key, on the Jacobian factored at its first step;
 //   - the step that factors a dense Jacobian (solvers/dense_separable_step.h) gives the
 //     sparse step's states on every text, reports a singular Jacobian, and serves the
-//     implicit theta maps on n bodies, equal to the generic path.
+//     implicit theta maps on n bodies, equal to the generic path;
+//   - on Lagrangians that are not separable, the run-time-sized theta step with its
+//     Jacobian kept across steps gives the Newton steps' states (a mass matrix depending
+//     on q, a term linear in v), and serves written texts from 8 coordinates on.
 #define BOOST_TEST_MODULE sparse_separable
 #include <boost/test/unit_test.hpp>
 
@@ -26,6 +29,7 @@
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/dense_separable_step.h"
+#include "solvers/dynamic_step.h"
 #include "solvers/sparse_separable_step.h"
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/run.h"
@@ -363,4 +367,97 @@ BOOST_AUTO_TEST_CASE(n_bodies_take_the_dense_structured_step_and_equal_the_gener
   mid.theta = 0.5;
   const RunReport a = run(pr, mid);
   BOOST_TEST(a.solver_iterations <= 5, a.solver_iterations << " Jacobians in " << a.steps << " steps");
+}
+
+// Lagrangians that are not separable: DynamicThetaStep with its Jacobian kept across
+// steps (simplified Newton, solvers/kept_newton.h) against the same step forming one at
+// every iteration, step by step: a mass matrix depending on q (mechanical) and a term
+// linear in v (a charge in a magnetic field, general).
+BOOST_AUTO_TEST_CASE(a_kept_jacobian_gives_the_newton_steps_on_lagrangians_that_are_not_separable) {
+  using B = ExpressionSymbols::Boundary;
+  const int n = 12;
+  const std::vector<Text> cases = {
+      {"mass matrix depending on q, n = 12",
+       written(n, B::none,
+               "sum(i, 1, n, (1 + q[i]^2/2)*q_dot[i]^2/2) - sum(i, 1, n - 1, (q[i+1] - q[i])^2/2 + (q[i+1] - q[i])^4/4)"
+               " - sum(i, 1, n, q[i]^2/2)",
+               {{"n", n}})},
+      {"charge in a magnetic field",
+       written(3, B::none,
+               "(x_dot^2 + y_dot^2 + z_dot^2)/2 + b*(1 + z^2/4)*(x*y_dot - y*x_dot)/2 - (x^2 + y^2 + z^2)/2",
+               {{"b", 1.5}}, {}, {"x", "y", "z"})}};
+  unsigned seed = 41;
+  int compared = 0;
+  for (const Text& t : cases) {
+    const WrittenDynamic L(t.system);
+    BOOST_TEST_REQUIRE(!L.separable());
+    const int m = L.dim();
+    const VectorXd q0 = random_vector(m, 0.4, seed++), v0 = random_vector(m, 0.3, seed++);
+    VectorXd Lq(m), p0(m);
+    L.gradient(q0, v0, Lq, p0);
+    for (double theta : {0.3, 0.5, 0.7}) {
+      const DynamicThetaStep<WrittenDynamic> kept(L, ThetaMap(theta), 0.02, {}, true), each(L, ThetaMap(theta), 0.02);
+      BOOST_TEST_REQUIRE(kept.keeps_jacobian());
+      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, dqa = VectorXd::Zero(m), dqb = dqa, dpa(m), dpb(m);
+      int jacobians = 0, newton = 0;
+      for (int k = 0; k < 50; ++k) {
+        const StepSummary a = kept.step(qa, pa, dqa, dpa), b = each.step(qb, pb, dqb, dpb);
+        BOOST_TEST_REQUIRE(a.converged, a.message);
+        BOOST_TEST_REQUIRE(b.converged, b.message);
+        jacobians += a.iterations;
+        newton += b.iterations;
+        qa += dqa;
+        pa += dpa;
+        qb += dqb;
+        pb += dpb;
+      }
+      BOOST_TEST_CONTEXT(t.what << ", theta " << theta) {
+        BOOST_TEST((qa - qb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, qa.lpNorm<Eigen::Infinity>()));
+        BOOST_TEST((pa - pb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, pa.lpNorm<Eigen::Infinity>()));
+        BOOST_TEST(jacobians <= 10, jacobians << " Jacobians in 50 steps");
+        BOOST_TEST(newton >= 100, newton << " Newton iterations in 50 steps");
+        ++compared;
+      }
+    }
+  }
+  BOOST_TEST(compared == 6);
+}
+
+// Through the runtime: a mechanical text of 12 coordinates takes the kept Jacobian with
+// every implicit theta map (step_path kept-jacobian-newton) and ends within 1e-11 of the
+// reference path (use_structure = false: a Jacobian at every iteration); below 8
+// coordinates, where a Hessian costs about a gradient, the step forms one every iteration.
+BOOST_AUTO_TEST_CASE(mechanical_texts_keep_their_jacobian_from_eight_coordinates) {
+  using B = ExpressionSymbols::Boundary;
+  const std::string L =
+      "sum(i, 1, n, (1 + q[i]^2/2)*q_dot[i]^2/2) - sum(i, 1, n - 1, (q[i+1] - q[i])^2/2 + (q[i+1] - q[i])^4/4)"
+      " - sum(i, 1, n, q[i]^2/2)";
+  int compared = 0;
+  for (const Method& me : implicit_theta_methods()) {
+    const Problem pr = written_problem(written(12, B::none, L, {{"n", 12}}), random_vector(12, 0.4, 51),
+                                       random_vector(12, 0.3, 52));
+    Method generic = me;
+    generic.use_structure = false;
+    validate(pr, me);
+    const RunReport a = run(pr, me), b = run(pr, generic);
+    BOOST_TEST_CONTEXT(me.label()) {
+      BOOST_TEST(!a.failed, a.loop.failure.message);
+      BOOST_TEST(!b.failed, b.loop.failure.message);
+      BOOST_TEST(a.structure == "mechanical");
+      BOOST_TEST(a.step_path == "kept-jacobian-newton");
+      BOOST_TEST(b.step_path == "generic");
+      BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+      BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+      BOOST_TEST(a.solver_iterations < b.solver_iterations / 4);
+      ++compared;
+    }
+  }
+  BOOST_TEST(compared == 15);
+  Method mid;
+  mid.map = &find_map_entry("midpoint", "test");
+  mid.theta = 0.5;
+  const RunReport small =
+      run(written_problem(written(7, B::none, L, {{"n", 7}}), random_vector(7, 0.4, 53), random_vector(7, 0.3, 54)),
+          mid);
+  BOOST_TEST(small.step_path == "generic");
 }

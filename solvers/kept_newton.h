@@ -1,0 +1,102 @@
+// Simplified Newton across steps for the position-momentum steps of a theta map on a
+// Lagrangian of run-time size: the loop shared by the separable steps that factor a
+// sparse or a dense Jacobian (solvers/sparse_separable_step.h,
+// solvers/dense_separable_step.h) and by DynamicThetaStep when it keeps its Jacobian
+// (solvers/dynamic_step.h, mechanical and general Lagrangians).
+//
+// Each step solves r(D) = 0 for the increment D = q1 - q0 (the discrete Legendre
+// equation p0 = -D1 L_d(q0, q0 + D), paper Sec. 5.3), then p1 - p0 follows from D. The
+// factorisation of the Jacobian J = -dr/dD made by an earlier step of the same step
+// object is kept while the iteration shrinks the residual fourfold an iteration or has
+// reached the stopping rule, and is made again at the current iterate where neither
+// holds (or where there is none yet). The stopping rule and the final correction are
+// solve_newton's (solvers/newton.h), so a kept Jacobian changes the iterations, not the
+// solution. StepSummary::iterations counts the Jacobians formed, as solve_newton does.
+//
+// kept_jacobian_newton(ops, ...) runs the loop; `ops` supplies
+//   void residual(const V& q0, const V& p0, const V& dq, V& r) const
+//   double jacobian(const V& q0, const V& dq) const   J formed at q0, dq; its largest
+//                                                     entry (or INFINITY)
+//   bool factor() const                               J factored; false where singular
+//   void solve(const V& r, V& dx) const               J dx = r
+//   void increment(const V& q0, const V& dq, V& dp) const   dp = p1 - p0
+//   static const char* factorisation()                named when J is singular
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <string>
+
+#include "mechanics/dynamic_system.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+// What a step keeps of its factored Jacobian between steps.
+struct KeptJacobian {
+  bool valid = false;  // factored, and not singular
+  double Jmax = 0.0;   // the largest entry of the Jacobian factored
+};
+
+// The loop; r and dx are workspace of the system's size. f: the state of the kept
+// factorisation (valid, Jmax), updated here.
+template <class Ops>
+StepSummary kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& opt, const Eigen::VectorXd& q0,
+                                 const Eigen::VectorXd& p0, Eigen::VectorXd& dq, Eigen::VectorXd& dp,
+                                 Eigen::VectorXd& r, Eigen::VectorXd& dx) {
+  StepSummary s;
+  const double pscale = dynamic_detail::inf_norm(p0), x0 = dynamic_detail::inf_norm(q0);
+  double dxn = INFINITY, last = INFINITY;
+  for (int it = 0; it < opt.max_iterations; ++it) {
+    ops.residual(q0, p0, dq, r);
+    s.residual = dynamic_detail::inf_norm(r);
+    bool refresh = !f.valid;
+    if (!refresh && !(s.residual <= 0.25 * last)) {
+      // not shrinking fourfold: a new Jacobian, unless the residual is already where
+      // the stopping rule accepts it (at round-off it shrinks no more, whatever J is)
+      StepSummary probe = s;
+      probe.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+      refresh = newton_verdict_floored(probe, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) !=
+                NewtonVerdict::converged;
+    }
+    if (refresh) {
+      f.Jmax = ops.jacobian(q0, dq);
+      ++s.iterations;
+      f.valid = std::isfinite(f.Jmax) && ops.factor();
+      if (std::isfinite(f.Jmax) && !f.valid) {
+        s.message = std::string("singular step Jacobian (") + Ops::factorisation() + " failed)";
+        return s;
+      }
+    }
+    const double Jmax = f.Jmax;
+    last = s.residual;
+    s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+    if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+      s.message = "non-finite residual or Jacobian";
+      return s;
+    }
+    const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, Jmax);
+    if (verdict == NewtonVerdict::failed) return s;
+    ops.solve(r, dx);  // J dx = r, J = -dr/dD
+    if (!std::isfinite(dynamic_detail::inf_norm(dx))) {
+      s.converged = false;
+      s.message = "singular step Jacobian";
+      return s;
+    }
+    dq += dx;
+    if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
+    dxn = dynamic_detail::inf_norm(dx);
+  }
+  if (!s.converged) {
+    s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
+    return s;
+  }
+  ops.increment(q0, dq, dp);
+  if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+    s.converged = false;
+    s.message = "non-finite momentum";
+  }
+  return s;
+}
+
+}  // namespace dvm
