@@ -23,6 +23,7 @@
 #include <memory>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
@@ -119,6 +120,50 @@ Problem written_problem(const std::shared_ptr<WrittenSystem>& w, const VectorXd&
   return pr;
 }
 
+// Runs `me` and its reference, the same method with use_structure = false (a Jacobian
+// from L's Hessian at every iteration, step_path "generic"); checks that both ran, the
+// structure and step path reported, and that the final states agree within 1e-11.
+// Returns the two reports (structured, reference).
+std::pair<RunReport, RunReport> against_reference(const Problem& pr, const Method& me, const std::string& structure,
+                                                  const std::string& path) {
+  Method generic = me;
+  generic.use_structure = false;
+  validate(pr, me);
+  RunReport a = run(pr, me), b = run(pr, generic);
+  BOOST_TEST(!a.failed, a.loop.failure.message);
+  BOOST_TEST(!b.failed, b.loop.failure.message);
+  BOOST_TEST(a.structure == structure);
+  BOOST_TEST(a.step_path == path);
+  BOOST_TEST(b.step_path == "generic");
+  BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
+  BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+  return {std::move(a), std::move(b)};
+}
+
+// Takes 50 steps of h = 0.02 with two steps of one equation from (q0, p0), each from its
+// own previous increment; checks that the states agree to 1e-13 and returns the
+// iterations each reported in all (Jacobians formed, for the kept ones).
+template <class A, class B>
+std::pair<int, int> steps_agree(const A& a, const B& b, const VectorXd& q0, const VectorXd& p0) {
+  const Eigen::Index n = q0.size();
+  VectorXd qa = q0, pa = p0, qb = q0, pb = p0, dqa = VectorXd::Zero(n), dqb = dqa, dpa(n), dpb(n);
+  int ia = 0, ib = 0;
+  for (int k = 0; k < 50; ++k) {
+    const StepSummary sa = a.step(qa, pa, dqa, dpa), sb = b.step(qb, pb, dqb, dpb);
+    BOOST_TEST_REQUIRE(sa.converged, sa.message);
+    BOOST_TEST_REQUIRE(sb.converged, sb.message);
+    ia += sa.iterations;
+    ib += sb.iterations;
+    qa += dqa;
+    pa += dpa;
+    qb += dqb;
+    pb += dpb;
+  }
+  BOOST_TEST((qa - qb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, qa.lpNorm<Eigen::Infinity>()));
+  BOOST_TEST((pa - pb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, pa.lpNorm<Eigen::Infinity>()));
+  return {ia, ib};
+}
+
 }  // namespace
 
 BOOST_AUTO_TEST_CASE(the_pattern_holds_every_entry_of_the_hessian_and_the_colours_give_each_once) {
@@ -199,19 +244,9 @@ BOOST_AUTO_TEST_CASE(every_theta_map_takes_the_sparse_step_and_equals_the_generi
     const VectorXd v = n == 2 ? (VectorXd(2) << 0.0, 1.2).finished() : random_vector(n, 0.3, seed++);
     const Problem pr = written_problem(t.system, q, v);
     for (const Method& me : methods) {
-      Method generic = me;
-      generic.use_structure = false;
-      validate(pr, me);
-      const RunReport a = run(pr, me), b = run(pr, generic);
       BOOST_TEST_CONTEXT(t.what << ", " << me.label()) {
-        BOOST_TEST(!a.failed, a.loop.failure.message);
-        BOOST_TEST(!b.failed, b.loop.failure.message);
-        BOOST_TEST(a.structure == "separable");
-        BOOST_TEST(a.step_path == "separable-sparse-newton");
-        BOOST_TEST(a.hessian_colours >= 1);
-        BOOST_TEST(b.step_path == "generic");
-        BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
-        BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+        const auto ab = against_reference(pr, me, "separable", "separable-sparse-newton");
+        BOOST_TEST(ab.first.hessian_colours >= 1);
         ++compared;
       }
     }
@@ -284,21 +319,8 @@ BOOST_AUTO_TEST_CASE(the_dense_jacobian_gives_the_sparse_steps) {
     for (double theta : {0.3, 0.5, 0.7}) {
       const SparseSeparableThetaStep sparse(L, H, theta, 0.02);
       const DenseSeparableThetaStep<WrittenDynamic> dense(L, work, theta, 0.02);
-      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, dqa = VectorXd::Zero(n), dqb = dqa, dpa(n), dpb(n);
-      int jacobians = 0;
-      for (int k = 0; k < 50; ++k) {
-        const StepSummary a = sparse.step(qa, pa, dqa, dpa), b = dense.step(qb, pb, dqb, dpb);
-        BOOST_TEST_REQUIRE(a.converged, a.message);
-        BOOST_TEST_REQUIRE(b.converged, b.message);
-        jacobians += b.iterations;
-        qa += dqa;
-        pa += dpa;
-        qb += dqb;
-        pb += dpb;
-      }
       BOOST_TEST_CONTEXT(t.what << ", theta " << theta) {
-        BOOST_TEST((qa - qb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, qa.lpNorm<Eigen::Infinity>()));
-        BOOST_TEST((pa - pb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, pa.lpNorm<Eigen::Infinity>()));
+        const int jacobians = steps_agree(sparse, dense, q0, p0).second;
         // the factorisation of the first step serves most of the others
         BOOST_TEST(jacobians <= 10, jacobians << " Jacobians in 50 steps");
         ++compared;
@@ -344,18 +366,8 @@ BOOST_AUTO_TEST_CASE(n_bodies_take_the_dense_structured_step_and_equal_the_gener
   pr.steps = 100;
   int compared = 0;
   for (const Method& me : implicit_theta_methods()) {
-    Method generic = me;
-    generic.use_structure = false;
-    validate(pr, me);
-    const RunReport a = run(pr, me), b = run(pr, generic);
     BOOST_TEST_CONTEXT(me.label()) {
-      BOOST_TEST(!a.failed, a.loop.failure.message);
-      BOOST_TEST(!b.failed, b.loop.failure.message);
-      BOOST_TEST(a.structure == "separable");
-      BOOST_TEST(a.step_path == "separable-dense-newton");
-      BOOST_TEST(b.step_path == "generic");
-      BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
-      BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
+      const RunReport b = against_reference(pr, me, "separable", "separable-dense-newton").second;
       // the generic path forms a Jacobian at every step
       BOOST_TEST(b.solver_iterations >= b.steps);
       ++compared;
@@ -398,22 +410,8 @@ BOOST_AUTO_TEST_CASE(a_kept_jacobian_gives_the_newton_steps_on_lagrangians_that_
     for (double theta : {0.3, 0.5, 0.7}) {
       const DynamicThetaStep<WrittenDynamic> kept(L, ThetaMap(theta), 0.02, {}, true), each(L, ThetaMap(theta), 0.02);
       BOOST_TEST_REQUIRE(kept.keeps_jacobian());
-      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, dqa = VectorXd::Zero(m), dqb = dqa, dpa(m), dpb(m);
-      int jacobians = 0, newton = 0;
-      for (int k = 0; k < 50; ++k) {
-        const StepSummary a = kept.step(qa, pa, dqa, dpa), b = each.step(qb, pb, dqb, dpb);
-        BOOST_TEST_REQUIRE(a.converged, a.message);
-        BOOST_TEST_REQUIRE(b.converged, b.message);
-        jacobians += a.iterations;
-        newton += b.iterations;
-        qa += dqa;
-        pa += dpa;
-        qb += dqb;
-        pb += dpb;
-      }
       BOOST_TEST_CONTEXT(t.what << ", theta " << theta) {
-        BOOST_TEST((qa - qb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, qa.lpNorm<Eigen::Infinity>()));
-        BOOST_TEST((pa - pb).lpNorm<Eigen::Infinity>() <= 1e-13 * std::fmax(1.0, pa.lpNorm<Eigen::Infinity>()));
+        const auto [jacobians, newton] = steps_agree(kept, each, q0, p0);
         BOOST_TEST(jacobians <= 10, jacobians << " Jacobians in 50 steps");
         BOOST_TEST(newton >= 100, newton << " Newton iterations in 50 steps");
         ++compared;
@@ -432,23 +430,13 @@ BOOST_AUTO_TEST_CASE(mechanical_texts_keep_their_jacobian_from_eight_coordinates
   const std::string L =
       "sum(i, 1, n, (1 + q[i]^2/2)*q_dot[i]^2/2) - sum(i, 1, n - 1, (q[i+1] - q[i])^2/2 + (q[i+1] - q[i])^4/4)"
       " - sum(i, 1, n, q[i]^2/2)";
+  const Problem pr =
+      written_problem(written(12, B::none, L, {{"n", 12}}), random_vector(12, 0.4, 51), random_vector(12, 0.3, 52));
   int compared = 0;
   for (const Method& me : implicit_theta_methods()) {
-    const Problem pr = written_problem(written(12, B::none, L, {{"n", 12}}), random_vector(12, 0.4, 51),
-                                       random_vector(12, 0.3, 52));
-    Method generic = me;
-    generic.use_structure = false;
-    validate(pr, me);
-    const RunReport a = run(pr, me), b = run(pr, generic);
     BOOST_TEST_CONTEXT(me.label()) {
-      BOOST_TEST(!a.failed, a.loop.failure.message);
-      BOOST_TEST(!b.failed, b.loop.failure.message);
-      BOOST_TEST(a.structure == "mechanical");
-      BOOST_TEST(a.step_path == "kept-jacobian-newton");
-      BOOST_TEST(b.step_path == "generic");
-      BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
-      BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
-      BOOST_TEST(a.solver_iterations < b.solver_iterations / 4);
+      const auto ab = against_reference(pr, me, "mechanical", "kept-jacobian-newton");
+      BOOST_TEST(ab.first.solver_iterations < ab.second.solver_iterations / 4);
       ++compared;
     }
   }
