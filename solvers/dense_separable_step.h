@@ -89,7 +89,7 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
         force_(L),
         mass_(dense_separable_detail::constant_mass(L)),
         work_(std::move(work)),
-        factorisation_(std::make_shared<Factorisation>()) {
+        factorisation_(std::make_shared<Factorisation>(L.dim())) {
     if (!work_ || work_->J.rows() != L.dim()) throw std::invalid_argument("the workspace is not the system's");
   }
 
@@ -137,6 +137,7 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
   std::shared_ptr<Work> work_;
   // The factored Jacobian, kept from step to step and shared by copies of the step.
   struct Factorisation : KeptJacobian {
+    explicit Factorisation(int n) : lu(n) {}  // (its storage sized here: a step allocates nothing)
     Eigen::PartialPivLU<Eigen::MatrixXd> lu;
   };
   std::shared_ptr<Factorisation> factorisation_;

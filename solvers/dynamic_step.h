@@ -122,6 +122,10 @@ class DynamicThetaStep {
 
   double step_size() const { return h_; }
   bool keeps_jacobian() const { return kept_ != nullptr; }
+  // Forgets the kept factorisation (keep_jacobian): the next step forms one.
+  void reset() const {
+    if (kept_) kept_->valid = false;
+  }
   const Sys& lagrangian() const { return L_; }
   const ThetaMap& map() const { return R_; }
   const StepOptions& options() const { return options_; }

@@ -34,6 +34,9 @@ class SeparableThetaNewton {
   double theta() const { return theta_; }
   int dim() const { return n_; }
 
+  // Forgets the kept factorisation: the next step forms and factors a Jacobian.
+  void reset() const { static_cast<const Step&>(*this).kept().valid = false; }
+
   // One step from (q0, p0): dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0 = h F(q_theta) (the contract of `integrate`).
   StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {

@@ -3,7 +3,8 @@
 // fixed-size systems and nested Jets; each step against its fixed-size counterpart;
 // adjoints and composition; written chains of 10 and 50 coordinates and 10 bodies
 // (momentum conserved to round-off, bounded energy error); measured orders; a degenerate
-// Lagrangian reported as a failure; steps that allocate nothing.
+// Lagrangian reported as a failure; steps that allocate nothing (those that keep their
+// Jacobian across steps included).
 //
 // The allocation check: Eigen's EIGEN_RUNTIME_NO_MALLOC makes every Eigen heap
 // allocation call eigen_assert, which is redefined here so that it is active in release
@@ -69,6 +70,7 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/composition.h"
+#include "solvers/dense_separable_step.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/galerkin_step.h"
@@ -902,4 +904,10 @@ BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
   BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic>(C, ThetaMap::midpoint(), 0.05), qc, pc, VectorXd(0.05 * pc), 2) == 0);
   BOOST_TEST(allocations_in_steps(DynamicGalerkinStep<WrittenDynamic>(C, QuadratureKind::gauss, 2, 0.05), qc, pc,
                                   VectorXd(0.05 * pc), 2, true) == 0);
+  // Jacobians kept across steps (solvers/kept_newton.h), formed again in every step here
+  BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic>(C, ThetaMap::midpoint(), 0.05, {}, true), qc, pc,
+                                  VectorXd(0.05 * pc), 3, true) == 0);
+  BOOST_TEST(allocations_in_steps(
+                 DenseSeparableThetaStep<NBodyDynamic>(B, DenseSeparableThetaStep<NBodyDynamic>::workspace(B), 0.5, h), q,
+                 p, g3, 5, true) == 0);
 }
