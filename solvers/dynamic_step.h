@@ -49,7 +49,8 @@
 //
 // Workspace is allocated at construction for the system's dimension; a step allocates
 // nothing (checked with Eigen's EIGEN_RUNTIME_NO_MALLOC and a count of operator new in
-// tests/solvers/test_dynamic.cc). One object must not be used from two threads at once.
+// tests/solvers/test_dynamic.cc). One object must not be used from two threads at once,
+// nor copies of a step that keeps its Jacobian (they share its factorisation).
 #pragma once
 
 #include <Eigen/Core>
@@ -113,10 +114,11 @@ class DynamicThetaStep {
     Lqv_.resize(n, n);
     Lvv_.resize(n, n);
     J_.resize(n, n);
-    lu_.resize(n);
     if (kept_) {
       kept_->lu.resize(n);
-      dx_.resize(n);
+      work_.resize(n);
+    } else {
+      lu_.resize(n);
     }
   }
 
@@ -145,7 +147,10 @@ class DynamicThetaStep {
     const double a = h_ * th * (1.0 - th), b = 1.0 - th;
     const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
     try {
-      if (kept_) return kept_jacobian_newton(KeptOps{*this}, *kept_, options_, q0, p0, dq, dp, r_, dx_);
+      if (kept_) {
+        kept_jacobian_newton(KeptOps{*this}, *kept_, options_, q0, p0, dq, dp, work_, s);
+        return s;
+      }
       double dxn = INFINITY;
       bool done = false;
       for (int it = 0; it < options_.max_iterations && !done; ++it) {
@@ -242,7 +247,8 @@ class DynamicThetaStep {
   ThetaMap R_;
   double h_;
   StepOptions options_;
-  mutable V x_, v_, Lq_, Lv_, r_, dx_;
+  mutable V x_, v_, Lq_, Lv_, r_;
+  mutable KeptNewtonWork work_;  // (keep_jacobian)
   mutable Eigen::MatrixXd Lqq_, Lqv_, Lvv_, J_;
   mutable DenseLU lu_;
   std::shared_ptr<Kept> kept_;

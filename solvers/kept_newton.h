@@ -12,8 +12,10 @@
 // holds (or where there is none yet). The stopping rule and the final correction are
 // solve_newton's (solvers/newton.h), so a kept Jacobian changes the iterations, not the
 // solution. StepSummary::iterations counts the Jacobians formed, as solve_newton does.
+// Copies of a step that share its kept factorisation must not run on two threads at once.
 //
-// kept_jacobian_newton(ops, ...) runs the loop; `ops` supplies
+// kept_jacobian_newton(ops, kept, options, q0, p0, dq, dp, work, summary) runs the loop;
+// `ops` supplies
 //   void residual(const V& q0, const V& p0, const V& dq, V& r) const
 //   double jacobian(const V& q0, const V& dq) const   J formed at q0, dq; its largest
 //                                                     entry (or INFINITY)
@@ -26,6 +28,7 @@
 #include <Eigen/Core>
 #include <cmath>
 #include <string>
+#include <utility>
 
 #include "mechanics/dynamic_system.h"
 #include "solvers/newton.h"
@@ -38,22 +41,53 @@ struct KeptJacobian {
   double Jmax = 0.0;   // the largest entry of the Jacobian factored
 };
 
-// The loop; r and dx are workspace of the system's size. f: the state of the kept
-// factorisation (valid, Jmax), updated here.
+// Workspace of the loop, sized n.
+struct KeptNewtonWork {
+  void resize(int n) {
+    r.resize(n);
+    dx.resize(n);
+    start.resize(n);
+  }
+  Eigen::VectorXd r, dx, start;  // the residual, the correction, the starting guess
+};
+
+// The loop. f: the state of the kept factorisation (valid, Jmax), updated here; s: the
+// step's summary, filled as the loop goes (so that a caller catching an exception from
+// the system keeps what it holds). Beyond solve_newton's rule, a Jacobian is also formed
+//   - where half the iteration budget has gone on a Jacobian kept from earlier steps;
+//   - at the starting guess, where an update by a kept Jacobian left the domain of the
+//     equation (a non-finite residual): the iteration starts again from there.
+// A singular Jacobian at an iterate the stopping rule accepts ends the step there, as in
+// the Newton loops that form a Jacobian at every iteration. On a failed step
+// s.iterations is at least 1.
 template <class Ops>
-StepSummary kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& opt, const Eigen::VectorXd& q0,
-                                 const Eigen::VectorXd& p0, Eigen::VectorXd& dq, Eigen::VectorXd& dp,
-                                 Eigen::VectorXd& r, Eigen::VectorXd& dx) {
-  StepSummary s;
+void kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& opt, const Eigen::VectorXd& q0,
+                          const Eigen::VectorXd& p0, Eigen::VectorXd& dq, Eigen::VectorXd& dp, KeptNewtonWork& w,
+                          StepSummary& s) {
+  s = StepSummary{};
   const double pscale = dynamic_detail::inf_norm(p0), x0 = dynamic_detail::inf_norm(q0);
   double dxn = INFINITY, last = INFINITY;
+  bool formed = false;  // a Jacobian formed in this step
+  w.start = dq;
+  auto fail = [&](std::string message) {
+    s.converged = false;
+    s.message = std::move(message);
+    if (s.iterations == 0) s.iterations = 1;
+  };
   for (int it = 0; it < opt.max_iterations; ++it) {
-    ops.residual(q0, p0, dq, r);
-    s.residual = dynamic_detail::inf_norm(r);
+    ops.residual(q0, p0, dq, w.r);
+    s.residual = dynamic_detail::inf_norm(w.r);
+    if (!std::isfinite(s.residual) && !formed && it > 0) {
+      dq = w.start;
+      f.valid = false;
+      dxn = last = INFINITY;
+      ops.residual(q0, p0, dq, w.r);
+      s.residual = dynamic_detail::inf_norm(w.r);
+    }
     bool refresh = !f.valid;
-    if (!refresh && !(s.residual <= 0.25 * last)) {
-      // not shrinking fourfold: a new Jacobian, unless the residual is already where
-      // the stopping rule accepts it (at round-off it shrinks no more, whatever J is)
+    if (!refresh && (!(s.residual <= 0.25 * last) || (!formed && 2 * (it + 1) > opt.max_iterations))) {
+      // not shrinking fourfold (or late): a new Jacobian, unless the residual is already
+      // where the stopping rule accepts it (at round-off it shrinks no more, whatever J is)
       StepSummary probe = s;
       probe.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
       refresh = newton_verdict_floored(probe, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) !=
@@ -62,41 +96,45 @@ StepSummary kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOpti
     if (refresh) {
       f.Jmax = ops.jacobian(q0, dq);
       ++s.iterations;
-      f.valid = std::isfinite(f.Jmax) && ops.factor();
+      formed = true;
+      f.valid = std::isfinite(f.Jmax) && ops.factor();  // (factor() may read f.Jmax, set above)
       if (std::isfinite(f.Jmax) && !f.valid) {
-        s.message = std::string("singular step Jacobian (") + Ops::factorisation() + " failed)";
-        return s;
+        s.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+        if (std::isfinite(s.residual) &&
+            newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) == NewtonVerdict::converged)
+          break;  // nothing more to apply
+        fail(std::string("singular step Jacobian (") + Ops::factorisation() + " failed)");
+        return;
       }
     }
     const double Jmax = f.Jmax;
     last = s.residual;
     s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
     if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
-      s.message = "non-finite residual or Jacobian";
-      return s;
+      fail("non-finite residual or Jacobian");
+      return;
     }
     const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, Jmax);
-    if (verdict == NewtonVerdict::failed) return s;
-    ops.solve(r, dx);  // J dx = r, J = -dr/dD
-    if (!std::isfinite(dynamic_detail::inf_norm(dx))) {
-      s.converged = false;
-      s.message = "singular step Jacobian";
-      return s;
+    if (verdict == NewtonVerdict::failed) {
+      if (s.iterations == 0) s.iterations = 1;
+      return;
     }
-    dq += dx;
+    ops.solve(w.r, w.dx);  // J dx = r, J = -dr/dD
+    if (!std::isfinite(dynamic_detail::inf_norm(w.dx))) {
+      fail("singular step Jacobian");
+      return;
+    }
+    dq += w.dx;
     if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
-    dxn = dynamic_detail::inf_norm(dx);
+    dxn = dynamic_detail::inf_norm(w.dx);
   }
   if (!s.converged) {
-    s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
-    return s;
+    fail("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +
+         std::to_string(s.iterations) + " Jacobians formed)");
+    return;
   }
   ops.increment(q0, dq, dp);
-  if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-    s.converged = false;
-    s.message = "non-finite momentum";
-  }
-  return s;
+  if (!std::isfinite(dynamic_detail::inf_norm(dp))) fail("non-finite momentum");
 }
 
 }  // namespace dvm

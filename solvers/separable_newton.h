@@ -44,7 +44,8 @@ class SeparableThetaNewton {
     if (!dynamic_detail::sizes_match(n_, q0, p0, dq, s)) return s;
     if (dp.size() != n_) dp.resize(n_);
     const Step& self = static_cast<const Step&>(*this);
-    return kept_jacobian_newton(Ops{self, *this}, self.kept(), options_, q0, p0, dq, dp, r_, dx_);
+    kept_jacobian_newton(Ops{self, *this}, self.kept(), options_, q0, p0, dq, dp, work_, s);
+    return s;
   }
 
  protected:
@@ -55,8 +56,7 @@ class SeparableThetaNewton {
     dynamic_detail::require_newton(options);
     x_.resize(n);
     F_.resize(n);
-    r_.resize(n);
-    dx_.resize(n);
+    work_.resize(n);
   }
 
   double theta_, h_;
@@ -87,7 +87,8 @@ class SeparableThetaNewton {
     }
     static const char* factorisation() { return Step::factorisation(); }
   };
-  mutable V x_, F_, r_, dx_;
+  mutable V x_, F_;
+  mutable KeptNewtonWork work_;
 };
 
 }  // namespace dvm

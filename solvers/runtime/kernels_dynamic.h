@@ -11,7 +11,8 @@
 //                   DenseSeparableThetaStep<Sys> on the other separable systems (n
 //                   bodies; a written text whose Hessian of U is not sparse);
 //                   DynamicThetaStep<Sys>   (the theta-family maps, its Jacobian
-//                   kept across steps unless use_structure = false; retraction-theta
+//                   kept across steps from kKeptJacobianMinDim coordinates unless
+//                   use_structure = false; retraction-theta
 //                   with the flat retraction R_x(v) = x + v is the theta map itself,
 //                   R_d(x, v) = (x - theta v, x + (1 - theta) v), and is inverted here
 //                   in closed form)
@@ -186,10 +187,11 @@ constexpr int kMaxDenseDynamicDim = 4096;
 // separable keeps its Jacobian across steps (simplified Newton, solvers/kept_newton.h).
 // A kept Jacobian takes 7 to 8 gradients of L a step where Newton's method takes 3
 // Hessians; a written Hessian of n <= 4 coordinates is one pass of 8 forward
-// derivatives, about a gradient's cost, and there keeping it is 1.7 times slower. Measured
-// on a written chain whose mass matrix depends on q (midpoint, clang -O1), kept against
-// not: n = 2 and 4, 1.7 times slower; 6 and 8, equal; 10, 2.3 times faster; 50, 8.4
-// times; 200, 11 times (solvers/README.md).
+// derivatives, about a gradient's cost, and there keeping it is 1.7 times slower.
+// Measured on a written chain whose mass matrix depends on q (midpoint), kept against a
+// Jacobian every iteration: clang -O1, n = 2 and 4, 1.7 times slower; 6 and 8, equal;
+// 10, 2.3 times faster; 50, 8.4; 200, 11; g++ -O3, n = 8, 1.4 times faster
+// (solvers/README.md has the g++ table).
 constexpr int kKeptJacobianMinDim = 8;
 
 // The theta of the method's map as a ThetaMap (retraction-theta: the same map).
