@@ -54,7 +54,8 @@ struct KeptNewtonWork {
 // The loop. f: the state of the kept factorisation (valid, Jmax), updated here; s: the
 // step's summary, filled as the loop goes (so that a caller catching an exception from
 // the system keeps what it holds). Beyond solve_newton's rule, a Jacobian is also formed
-//   - where half the iteration budget has gone on a Jacobian kept from earlier steps;
+//   - at every iteration of the second half of the iteration budget (Newton's method
+//     there, so that a small budget converges where Newton's method does);
 //   - at the starting guess, where an update by a kept Jacobian left the domain of the
 //     equation (a non-finite residual): the iteration starts again from there.
 // A singular Jacobian at an iterate the stopping rule accepts ends the step there, as in
@@ -85,9 +86,10 @@ void kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& op
       s.residual = dynamic_detail::inf_norm(w.r);
     }
     bool refresh = !f.valid;
-    if (!refresh && (!(s.residual <= 0.25 * last) || (!formed && 2 * (it + 1) > opt.max_iterations))) {
-      // not shrinking fourfold (or late): a new Jacobian, unless the residual is already
-      // where the stopping rule accepts it (at round-off it shrinks no more, whatever J is)
+    if (!refresh && (!(s.residual <= 0.25 * last) || 2 * (it + 1) > opt.max_iterations)) {
+      // not shrinking fourfold, or in the second half of the budget (Newton's method
+      // from there on): a new Jacobian, unless the residual is already where the stopping
+      // rule accepts it (at round-off it shrinks no more, whatever J is)
       StepSummary probe = s;
       probe.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
       refresh = newton_verdict_floored(probe, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) !=
