@@ -190,7 +190,7 @@ constexpr int kMaxDenseDynamicDim = 4096;
 // derivatives, about a gradient's cost, and there keeping it is 1.7 times slower.
 // Measured on a written chain whose mass matrix depends on q (midpoint), kept against a
 // Jacobian every iteration: clang -O1, n = 2 and 4, 1.7 times slower; 6 and 8, equal;
-// 10, 2.3 times faster; 50, 8.4; 200, 11; g++ -O3, n = 8, 1.4 times faster
+// 10, 2.3 times faster; 50, 8.4; 200, 11; g++ -O3, n = 8, 1.5 times faster
 // (solvers/README.md has the g++ table).
 constexpr int kKeptJacobianMinDim = 8;
 
