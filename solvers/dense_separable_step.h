@@ -36,35 +36,6 @@
 
 namespace dvm {
 
-namespace dense_separable_detail {
-
-// M, constant: its diagonal when it is diagonal, the full matrix otherwise.
-struct ConstantMass {
-  bool diagonal = true;
-  Eigen::VectorXd d;
-  Eigen::MatrixXd full;
-};
-
-inline ConstantMass constant_mass(const NBodyDynamic& L) {
-  ConstantMass m;
-  m.d.resize(L.dim());
-  for (int i = 0; i < L.bodies(); ++i) m.d.segment<3>(3 * i).setConstant(L.m(i));
-  return m;
-}
-
-inline ConstantMass constant_mass(const WrittenDynamic& L) {
-  const WrittenParts& w = L.parts();
-  ConstantMass m;
-  m.diagonal = w.split.diagonal;
-  if (m.diagonal)
-    m.d = w.mass_diagonal;
-  else
-    m.full = w.mass;
-  return m;
-}
-
-}  // namespace dense_separable_detail
-
 template <class Sys>
 class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaStep<Sys>> {
   using Base = SeparableThetaNewton<DenseSeparableThetaStep<Sys>>;
@@ -85,10 +56,9 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
 
   DenseSeparableThetaStep(const Sys& L, std::shared_ptr<Work> work, double theta, double h,
                           StepOptions options = {})
-      : Base(L.dim(), theta, h, options),
+      : Base(L.dim(), theta, h, options, constant_mass(L)),
         L_(L),
         force_(L),
-        mass_(dense_separable_detail::constant_mass(L)),
         work_(std::move(work)),
         factorisation_(std::make_shared<Factorisation>(L.dim())) {
     if (!work_ || work_->J.rows() != L.dim()) throw std::invalid_argument("the workspace is not the system's");
@@ -99,12 +69,6 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
  private:
   friend Base;
   void force(const V& x, V& F) const { force_.gradient(x, work_->zero, F, work_->Lv); }
-  void mass_times(const V& v, V& out) const {
-    if (mass_.diagonal)
-      out = v.cwiseProduct(mass_.d);
-    else
-      out.noalias() = mass_.full * v;
-  }
   // J = M / h - h theta (1 - theta) Hess U(x), Hess U = d2L/dq2 (the kinetic part does not
   // depend on q); returns its largest entry in magnitude
   double jacobian(const V& x) const {
@@ -112,11 +76,12 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
     L_.hessian(x, w.zero, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
     const double h = this->h_, c = h * this->theta_ * (1.0 - this->theta_);
     w.J = -c * w.Lqq;
-    if (mass_.diagonal)
-      w.J.diagonal() += mass_.d / h;
+    const ConstantMass& M = this->mass_;
+    if (M.is_diagonal())
+      w.J.diagonal() += M.diagonal / h;
     else
-      w.J += mass_.full / h;
-    const double m = w.J.cwiseAbs().maxCoeff();
+      w.J += *M.full / h;
+    const double m = dynamic_detail::inf_norm(w.J);
     return std::isfinite(m) ? m : INFINITY;
   }
   // Singular where a pivot is zero at round-off: below 64 eps times J's largest entry.
@@ -134,7 +99,6 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
 
   Sys L_;  // its Hessian
   ForceSys force_;
-  dense_separable_detail::ConstantMass mass_;
   std::shared_ptr<Work> work_;
   // The factored Jacobian, kept from step to step and shared by copies of the step.
   struct Factorisation : KeptJacobian {

@@ -7,9 +7,9 @@
 // R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), with q_theta = q0 + theta D,
 //   r = p0 - M D / h + h (1 - theta) F(q_theta),   dp = h F(q_theta),   F = grad U,
 //   J = M / h - h theta (1 - theta) Hess U
-// (solvers/separable_theta_step.h derives them); Step (which derives from it) supplies
+// (solvers/separable_theta_step.h derives them). The base holds M (ConstantMass); Step
+// (which derives from it) supplies
 //   void force(const V& x, V& F) const           F = grad U(x)
-//   void mass_times(const V& v, V& out) const    out = M v
 //   double jacobian(const V& x) const            J formed at x; its largest entry (or INFINITY)
 //   bool factor() const, void solve(const V& r, V& dx) const, static const char* factorisation()
 //   KeptJacobian& kept() const                   the kept factorisation's state, shared
@@ -18,11 +18,44 @@
 
 #include <Eigen/Core>
 #include <stdexcept>
+#include <utility>
 
+#include "mechanics/dynamic_system.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/kept_newton.h"
 
 namespace dvm {
+
+// M, constant: its diagonal when it is diagonal; otherwise the full matrix of a written
+// text's parts (WrittenParts::mass, held alive by the step's copy of the system).
+struct ConstantMass {
+  Eigen::VectorXd diagonal;                 // (empty when M is full)
+  const Eigen::MatrixXd* full = nullptr;
+  bool is_diagonal() const { return full == nullptr; }
+  void times(const Eigen::VectorXd& v, Eigen::VectorXd& out) const {
+    if (full)
+      out.noalias() = *full * v;
+    else
+      out = v.cwiseProduct(diagonal);
+  }
+};
+
+inline ConstantMass constant_mass(const NBodyDynamic& L) {
+  ConstantMass m;
+  m.diagonal.resize(L.dim());
+  for (int i = 0; i < L.bodies(); ++i) m.diagonal.segment<3>(3 * i).setConstant(L.m(i));
+  return m;
+}
+
+inline ConstantMass constant_mass(const WrittenDynamic& L) {
+  const WrittenParts& w = L.parts();
+  ConstantMass m;
+  if (w.split.diagonal)
+    m.diagonal = w.mass_diagonal;
+  else
+    m.full = &w.mass;
+  return m;
+}
 
 template <class Step>
 class SeparableThetaNewton {
@@ -49,8 +82,8 @@ class SeparableThetaNewton {
   }
 
  protected:
-  SeparableThetaNewton(int n, double theta, double h, StepOptions options)
-      : theta_(theta), h_(h), options_(options), n_(n) {
+  SeparableThetaNewton(int n, double theta, double h, StepOptions options, ConstantMass mass)
+      : theta_(theta), h_(h), options_(options), n_(n), mass_(std::move(mass)) {
     if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1]");
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
@@ -62,6 +95,7 @@ class SeparableThetaNewton {
   double theta_, h_;
   StepOptions options_;
   int n_;
+  ConstantMass mass_;
 
  private:
   // the separable equation, in the terms of kept_jacobian_newton
@@ -71,7 +105,7 @@ class SeparableThetaNewton {
     void residual(const V& q0, const V& p0, const V& dq, V& r) const {
       base.x_ = q0 + base.theta_ * dq;
       step.force(base.x_, base.F_);
-      step.mass_times(dq, r);
+      base.mass_.times(dq, r);
       r = p0 - r / base.h_ + (base.h_ * (1.0 - base.theta_)) * base.F_;
     }
     double jacobian(const V& q0, const V& dq) const {

@@ -50,7 +50,7 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
 
   SparseSeparableThetaStep(const WrittenDynamic& L, std::shared_ptr<SparsePotentialHessian> hessian, double theta,
                            double h, StepOptions options = {})
-      : SeparableThetaNewton(L.dim(), theta, h, options), L_(L), separable_(L), hessian_(std::move(hessian)) {
+      : SeparableThetaNewton(L.dim(), theta, h, options, constant_mass(L)), L_(L), separable_(L), hessian_(std::move(hessian)) {
     const int n = L_.dim();
     if (!hessian_ || hessian_->dim() != n) throw std::invalid_argument("the sparse Hessian is not the system's");
     const WrittenParts& w = L.parts();
@@ -95,13 +95,6 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
   friend class SeparableThetaNewton<SparseSeparableThetaStep>;
   // F = grad U(x): the reverse gradient of the potential's tape
   void force(const V& x, V& F) const { separable_.gradient(x, zero_, F, Lv_); }
-  void mass_times(const V& v, V& out) const {
-    const WrittenParts& w = L_.parts();
-    if (w.split.diagonal)
-      out = v.cwiseProduct(w.mass_diagonal);
-    else
-      out.noalias() = w.mass * v;
-  }
   // J = M / h - h theta (1 - theta) Hess U(x); returns its largest entry in magnitude
   double jacobian(const V& x) const {
     hessian_->evaluate(x.data(), hess_.data());
