@@ -53,31 +53,37 @@
 //                        number of bodies: closed-form gradient, Hessian (one 3 x 3 block
 //                        per pair) and velocity; total momentum and angular momentum.
 //   WrittenDynamic       a WrittenSystem (written_lagrangian.h) of any dimension: the value
-//                        by its tape in doubles, the gradient by reverse mode
-//                        (Expression::gradient), the Hessian by forward over reverse: the
-//                        reverse gradient evaluated in ceres::Jet<double, K>, seeded in K
-//                        of the 2n input directions per pass, ceil(2n/K) passes
-//                        (K = 2, 4 or 8: the smallest >= 2n, else 8). Forced forward
-//                        (WrittenDerivatives::forward_over_forward, for checking): the
-//                        gradient in chunks of 8 directions, the Hessian by
+//                        by its tape in doubles; the gradient and the Hessian by a
+//                        DerivativeProgram (mechanics/derivative_program.h: the tape
+//                        differentiated symbolically once, run as straight-line double
+//                        operations) where one is built: the Hessian up to 32
+//                        coordinates for tapes without blocks, the gradient for any
+//                        tape whose blocks read no definition. Otherwise the gradient by
+//                        reverse mode (Expression::gradient), the Hessian by forward over
+//                        reverse: the reverse gradient evaluated in ceres::Jet<double, K>,
+//                        seeded in K of the 2n input directions per pass, ceil(2n/K)
+//                        passes (K = 2, 4 or 8: the smallest >= 2n, else 8). Forced
+//                        forward (WrittenDerivatives::forward_over_forward, for checking):
+//                        the gradient in chunks of 8 directions, the Hessian by
 //                        Jet<Jet<double, 8>, 8> over pairs of chunks (about (2n/8)^2 / 2
 //                        passes).
+//                        Measured (bench_written_lagrangian, g++ -O3; program / tape's
+//                        forward over reverse): a Hessian with its gradient, pendulum
+//                        27 / 122 ns, Kepler 113 / 251, double pendulum 79 / 445; the
+//                        gradient alone 12 / 64, 34 / 113, 50 / 233; a written FPU
+//                        chain's explicit step 8.4 ns a particle by its block's program
+//                        against 12.5 by the tape's reverse sweeps of the block.
 //                        Its structure is read off the text (Expression::split_velocity):
 //                        when L = v^T M v / 2 + U(q) with M constant and positive definite
 //                        (separable()), the inverse Legendre map is v = M^{-1} p in closed
 //                        form (M diagonal: a division; else a Cholesky factor) and
 //                        WrittenSeparable views it as a declared separable system, whose
-//                        force is the reverse gradient of U's tape alone.
-//                        Measured (g++ -O2, one core of an AMD EPYC, one full Hessian, the
-//                        same chunk width K both ways, best of three runs):
-//                                                     forward/reverse  forward/forward
-//                          pendulum, n = 1, K = 2          100 ns          132 ns
-//                          Kepler, n = 2, K = 4            209 ns          528 ns
-//                          double pendulum, n = 2, K = 4   373 ns          783 ns
-//                          FPU, n = 6, K = 8              1635 ns        13736 ns
-//                        (K = 6 would give 1537 ns for n = 6, K = 4 2106 ns.) Forward over
-//                        reverse wins at every size measured, so it is the default
-//                        (WrittenDerivatives::automatic).
+//                        force is the gradient of U alone (U's own program, or its tape).
+//                        On the tape, forward over reverse against forward over forward
+//                        (g++ -O2, one full Hessian, the same chunk width K both ways):
+//                        pendulum (K = 2) 100 against 132 ns, Kepler (K = 4) 209 / 528,
+//                        double pendulum (K = 4) 373 / 783, FPU of 6 coordinates (K = 8)
+//                        1635 / 13736: where no program is built, forward over reverse.
 //   WrittenDynamicHamiltonian  the Hamiltonian H(q, p) written in a scene, the same way
 //                        (its text is parsed a second time with p as the second block, so
 //                        that reverse mode, which differentiates blocks 0 and 1, applies).
@@ -102,6 +108,7 @@
 
 #include "core/map_operations.h"
 #include "core/scalar.h"
+#include "mechanics/derivative_program.h"
 #include "mechanics/lagrangian.h"
 #include "mechanics/nbody_momenta.h"
 #include "mechanics/structure.h"
@@ -558,8 +565,9 @@ class NBodyDynamic {
 // ---------------------------------------------------------------------------------
 // Written expressions (mechanics/expression.h) differentiated in doubles for any n.
 
-// How a written tape is differentiated: automatic = reverse mode (forward over reverse
-// for the Hessian), which wins at every size measured; the other two force one way
+// How a written tape is differentiated: automatic = a DerivativeProgram
+// (mechanics/derivative_program.h) where one is built, else reverse mode on the tape
+// (forward over reverse for the Hessian); the other two force the tape one way
 // (forward over forward is kept to check reverse mode against).
 enum class WrittenDerivatives { automatic, forward_over_reverse, forward_over_forward };
 
@@ -573,6 +581,11 @@ class TapeDerivatives {
 
   TapeDerivatives(std::shared_ptr<const Expression> e, int n, WrittenDerivatives mode) : e_(std::move(e)), n_(n) {
     reverse_ = mode != WrittenDerivatives::forward_over_forward;
+    if (mode == WrittenDerivatives::automatic) {
+      program_ = DerivativeProgram::build(*e_, n);
+      if (!program_) program_ = DerivativeProgram::build(*e_, n, false);  // the gradient at least
+    }
+    if (program_) slots_ = program_->workspace();
     const std::size_t m = static_cast<std::size_t>(2 * n);
     if (reverse_) {
       chunk_ = 2 * n <= 2 ? 2 : (2 * n <= 4 ? 4 : 8);
@@ -588,11 +601,17 @@ class TapeDerivatives {
 
   bool reverse() const { return reverse_; }
   int chunk() const { return chunk_; }
+  // The derivative program, or null when the tape is differentiated as it runs.
+  const DerivativeProgram* program() const { return program_.get(); }
   const Expression& expression() const { return *e_; }
 
   double value(const double* a, const double* b) const { return (*e_)(a, b); }
 
   void gradient(const double* a, const double* b, DynOut ga, DynOut gb) const {
+    if (program_) {
+      program_->gradient(a, b, ga.data(), gb.data(), slots_.data());
+      return;
+    }
     if (reverse_) {
       ga.setZero();
       gb.setZero();
@@ -618,6 +637,11 @@ class TapeDerivatives {
 
   void hessian(const double* a, const double* b, DynOut ga, DynOut gb, DynMatOut Haa, DynMatOut Hab,
                DynMatOut Hbb) const {
+    if (program_ && program_->has_hessian()) {
+      program_->hessian(a, b, ga.data(), gb.data(), Haa.data(), static_cast<int>(Haa.outerStride()), Hab.data(),
+                        static_cast<int>(Hab.outerStride()), Hbb.data(), static_cast<int>(Hbb.outerStride()), slots_.data());
+      return;
+    }
     if (!reverse_) return forward_over_forward(a, b, ga, gb, Haa, Hab, Hbb);
     switch (chunk_) {
       case 2: return forward_over_reverse<2>(j2_.data(), a, b, ga, gb, Haa, Hab, Hbb);
@@ -712,6 +736,8 @@ class TapeDerivatives {
   }
 
   std::shared_ptr<const Expression> e_;
+  std::shared_ptr<const DerivativeProgram> program_;
+  mutable std::vector<double> slots_;  // the program's workspace
   int n_;
   bool reverse_ = true;
   int chunk_ = 8;
@@ -741,6 +767,9 @@ struct WrittenParts {
   Eigen::MatrixXd mass;           // M otherwise, with its Cholesky factor
   Eigen::LLT<Eigen::MatrixXd> mass_factor;
   std::vector<bool> cyclic;       // coordinates L does not depend on
+  // The potential's gradient as a DerivativeProgram (separable only; null where none
+  // is built: then its tape's reverse mode).
+  std::shared_ptr<const DerivativeProgram> potential_program;
 
   // A full M is formed from n gradients of the kinetic tape and factored; beyond this
   // size (a dense factor of 8 n^2 bytes) such a system takes the generic path.
@@ -765,6 +794,7 @@ struct WrittenParts {
     if (split.diagonal) {
       mass_times(Eigen::VectorXd::Ones(n), mass_diagonal);
       separable = (mass_diagonal.array() > 0.0).all() && mass_diagonal.allFinite();
+      if (separable) potential_program = DerivativeProgram::build(potential, n, false);
       return;
     }
     if (n > kMaxDenseMass) return;
@@ -778,6 +808,7 @@ struct WrittenParts {
     mass_factor.compute(M);
     separable = M.allFinite() && mass_factor.info() == Eigen::Success;
     mass = std::move(M);
+    if (separable) potential_program = DerivativeProgram::build(potential, n, false);
   }
   // v = M^{-1} p (separable only)
   void velocity(const DynIn& p, DynOut v) const {
@@ -815,6 +846,8 @@ class WrittenDynamic {
   const std::shared_ptr<const WrittenSystem>& system() const { return system_; }
   // Whether derivatives go through reverse mode (else the tape is differentiated forward).
   bool reverse_mode() const { return tape_.reverse(); }
+  // The derivative program the gradient and Hessian come from, or null (the tape).
+  const DerivativeProgram* derivative_program() const { return tape_.program(); }
 
   double value(const DynIn& q, const DynIn& v) const { return tape_.value(q.data(), v.data()); }
   void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
@@ -854,13 +887,18 @@ class WrittenSeparable {
   static constexpr Structure structure = Structure::separable;
   explicit WrittenSeparable(const WrittenDynamic& L) : L_(L), parts_(&L.parts()) {
     if (!L.separable()) throw std::invalid_argument(L.name() + ": the written Lagrangian is not separable");
+    if (parts_->potential_program) work_ = parts_->potential_program->workspace();
   }
   int dim() const { return L_.dim(); }
   std::string name() const { return L_.name(); }
   double value(const DynIn& q, const DynIn& v) const { return L_.value(q, v); }
   void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
-    Lq.setZero();
-    parts_->potential.gradient(q.data(), v.data(), Lq.data(), Lv.data());  // U has no v: Lv untouched
+    if (parts_->potential_program) {  // U has no v: Lv receives zeros, then M v
+      parts_->potential_program->gradient(q.data(), v.data(), Lq.data(), Lv.data(), work_.data());
+    } else {
+      Lq.setZero();
+      parts_->potential.gradient(q.data(), v.data(), Lq.data(), Lv.data());  // U has no v: Lv untouched
+    }
     if (parts_->split.diagonal)
       Lv = v.cwiseProduct(parts_->mass_diagonal);
     else if (v.isZero(0.0))  // the force alone (the explicit steps ask at v = 0)
@@ -873,6 +911,7 @@ class WrittenSeparable {
  private:
   WrittenDynamic L_;  // holds the parts alive
   const WrittenParts* parts_;
+  mutable std::vector<double> work_;  // the potential program's workspace
 };
 
 // The Hamiltonian H(q, p) written in a scene (system.hamiltonian), for the Hamiltonian

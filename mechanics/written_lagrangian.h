@@ -31,6 +31,7 @@
 #include <utility>
 #include <vector>
 
+#include "mechanics/derivative_program.h"
 #include "mechanics/expression.h"
 #include "mechanics/lagrangian.h"
 
@@ -182,11 +183,15 @@ template <int N>
 struct WrittenLagrangian {
   static constexpr int dim = N;
   std::shared_ptr<const WrittenSystem> system;
+  // dL/dq, dL/dv as a straight-line program (mechanics/derivative_program.h), or null
+  std::shared_ptr<const DerivativeProgram> program;
 
   explicit WrittenLagrangian(std::shared_ptr<const WrittenSystem> s) : system(std::move(s)) {
     if (!system || system->dim() != N) throw std::invalid_argument("WrittenLagrangian: dimension mismatch");
     if (system->space != WrittenSystem::Space::euclidean)
       throw std::invalid_argument("WrittenLagrangian: the system is written on S^2 or SO(3) (mechanics/written_manifold.h)");
+    program = DerivativeProgram::build(system->lagrangian, N, false);
+    if (program && program->has_blocks()) program = nullptr;  // (gradient_any runs no blocks)
   }
   std::string name() const { return system->name; }
 
@@ -195,10 +200,34 @@ struct WrittenLagrangian {
     return system->lagrangian(q.data(), v.data());
   }
 
-  // No `gradient` member on purpose: Expression::gradient (reverse mode) exists and is
-  // tested, but measured on 1- and 2-dof systems the engine's forward-mode nested Jets
-  // through operator() were faster (examples/bench/bench_written_lagrangian.cc, see
-  // mechanics/README.md): 2.4-2.8x the built-in closed forms against 2.8-4.5x with reverse mode.
+  // dL/dq and dL/dv for any scalar: the derivative program, evaluated in T (one Jet
+  // level through it gives the Hessian the fixed-size steps need), or forward mode
+  // through the tape where no program was built.
+  template <class T>
+  void gradient(const Vec<T, N>& q, const Vec<T, N>& v, Vec<T, N>& Lq, Vec<T, N>& Lv) const {
+    if (!program) {
+      using D = ceres::Jet<T, 2 * N>;
+      Vec<D, N> qd, vd;
+      for (int i = 0; i < N; ++i) {
+        qd[i] = seed<T, 2 * N>(q[i], i);
+        vd[i] = seed<T, 2 * N>(v[i], N + i);
+      }
+      const D l = (*this)(qd, vd);
+      Lq = l.v.template head<N>();
+      Lv = l.v.template tail<N>();
+      return;
+    }
+    constexpr std::size_t kStack = 128;
+    const std::size_t m = program->slots();
+    alignas(T) unsigned char raw[kStack * sizeof(T)];
+    T* slots = std::launder(reinterpret_cast<T*>(raw));
+    if (m > kStack) {
+      thread_local std::vector<T> buffer;
+      if (buffer.size() < m) buffer.resize(m);
+      slots = buffer.data();
+    }
+    program->gradient_any(q.data(), v.data(), Lq.data(), Lv.data(), slots);
+  }
 
   // The monitored energy: the written one if given, else E_L = <dL/dv, v> - L.
   double energy_at(const Vec<double, N>& q, const Vec<double, N>& v, const Vec<double, N>& p) const {

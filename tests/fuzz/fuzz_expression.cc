@@ -1,7 +1,9 @@
 // libFuzzer target: the expression parser of written Lagrangians
 // (mechanics/expression.h), arrays, lists, sums and definitions included. Text that parses is
 // evaluated with doubles, with Jets (first derivatives) and by the reverse-mode
-// gradient, at a fixed point, and split by its degree in the velocities.
+// gradient, at a fixed point, split by its degree in the velocities, and differentiated
+// symbolically (mechanics/derivative_program.h: the program built, then its gradient and
+// Hessian evaluated, in doubles and in Jets).
 //
 // Any input must parse or throw ExpressionError; evaluation must not crash or run
 // into undefined behaviour (non-finite values are fine: log(-1) is NaN). Run by
@@ -9,9 +11,11 @@
 #include <cstddef>
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include <ceres/jet.h>
 
+#include "mechanics/derivative_program.h"
 #include "mechanics/expression.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
@@ -47,6 +51,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   if (!momenta) {
     double g0[5] = {0, 0, 0, 0, 0}, g1[5] = {0, 0, 0, 0, 0};
     e.gradient(q, v, g0, g1);
+    // the symbolic derivatives (none are built for texts with blocks)
+    if (const auto program = dvm::DerivativeProgram::build(e, 5)) {
+      std::vector<double> work = program->workspace();
+      double h[3][25];
+      program->gradient(q, v, g0, g1, work.data());
+      program->hessian(q, v, g0, g1, h[0], 5, h[1], 5, h[2], 5, work.data());
+      std::vector<J> slots(program->slots());
+      J gj0[5], gj1[5];
+      program->gradient_any(qj, vj, gj0, gj1, slots.data());
+    }
   }
   // the velocity split reads the same text the same way
   try {

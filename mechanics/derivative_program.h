@@ -1,0 +1,905 @@
+// Derivatives of a written expression as straight-line programs in doubles.
+//
+// A tape (mechanics/expression.h) is differentiated at run time by reverse mode, and
+// its Hessian by reverse mode evaluated in ceres::Jets: every evaluation walks the
+// tape's stack, and every Jet operation carries all the directions at once, zero or
+// not. For the few-coordinate systems people write first (a pendulum, Kepler, a double
+// pendulum) that overhead is most of the cost of a step.
+//
+// A DerivativeProgram differentiates the tape once, symbolically, when it is built:
+//
+//   1. the tape becomes a graph of operations, each made once (equal operations on
+//      equal operands are one node; constants folded; x + 0, x * 1, x * 0, x - x,
+//      -(-x) simplified), with the set of inputs each node depends on;
+//   2. reverse mode on the graph: the adjoint of every node is itself a node, built by
+//      the chain rule (each operation's partial derivatives are nodes too), so the
+//      gradient entries are nodes of the same graph;
+//   3. forward mode on the gradient nodes, one input direction j at a time, skipping
+//      every node that does not depend on input j: the Hessian entries H(i, j), i >= j,
+//      are nodes as well (the upper half is their mirror);
+//   4. the nodes the outputs need are numbered in order and written out as two
+//      instruction lists, one for the gradient, one for the gradient and the Hessian
+//      (the value stays the tape's). Evaluating one is a single loop over plain double
+//      operations with their operand slots fixed: no stack, no Jets, no work on
+//      zeros; where sin x and cos x are both needed, one sincos gives them.
+//
+// The derivatives are the ones reverse mode computes, by the same formulas
+// (Expression::backward): they agree with the tape's to round-off, not to the bit
+// (a sum of adjoints may be added in another order).
+//
+// Blocks (Expression::Block: many additive terms of one shape, a chain's bonds) are
+// differentiated the same way, once for the shape: the body of a term becomes a graph
+// of its own whose inputs are the term's variables (and its constants that vary from
+// term to term), and its partial derivatives are nodes of that graph. A program runs a
+// block's graph an instruction at a time across all its terms (tight loops over arrays),
+// then adds each term's partial derivatives, times the block's adjoint, to the gradient
+// entries of the term's variables.
+//
+// Scope: two input blocks of n variables each (q and v, or q and p). The Hessian only
+// for tapes without blocks and 2n <= kMaxInputs; the gradient for any n. Definitions
+// (Let) are nodes like any other. A program that would exceed kMaxNodes nodes (in its
+// main graph or in a block's) is not built: build() returns null and the caller keeps
+// the tape. Operations on non-finite values give what the formulas give; a node proven
+// zero is not evaluated, so where the tape would compute 0 * inf = NaN in a term that
+// does not matter to the result, the program gives the finite answer.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <memory>
+#include <new>
+#include <type_traits>
+#include <unordered_map>
+#include <vector>
+
+#include "mechanics/expression.h"
+
+namespace dvm {
+
+class DerivativeProgram {
+ public:
+  static constexpr int kMaxInputs = 64;               // 2n: one bit per input in a node's dependencies
+  static constexpr std::size_t kMaxNodes = 1u << 16;  // largest graph built
+
+  // The program of `e` in blocks 0 and 1 of n variables each, or null when a graph
+  // would exceed kMaxNodes, or `hessian` is asked for a tape with blocks or with
+  // 2n > kMaxInputs. Without `hessian`, only the gradient (hessian() must not be called).
+  static std::shared_ptr<const DerivativeProgram> build(const Expression& e, int n, bool hessian = true);
+
+  int dim() const { return n_; }
+  bool has_hessian() const { return has_hessian_; }
+  // Whether the tape had blocks (then gradient_any, which runs no blocks, must not be called).
+  bool has_blocks() const { return !blocks_.empty(); }
+  // The instructions, for inspection: the gradient program, then with the Hessian.
+  struct Instr;
+  const std::vector<Instr>& gradient_code() const { return grad_code_; }
+  const std::vector<Instr>& hessian_code() const { return hess_code_; }
+  // Instructions of the two programs (the gradient; the gradient and the Hessian).
+  std::size_t gradient_size() const { return grad_code_.size(); }
+  std::size_t hessian_size() const { return hess_code_.size(); }
+
+  // The slots an evaluation works in, constants filled in (and the arrays of the
+  // blocks): one per caller (a program is shared by the copies of a system; its
+  // workspace is not).
+  std::vector<double> workspace() const {
+    std::vector<double> w = constants_;
+    for (const BlockProgram& B : blocks_) {
+      w.resize(B.offset + B.slots * B.terms, 0.0);
+      for (const auto& c : B.constants)
+        std::fill_n(w.begin() + static_cast<std::ptrdiff_t>(B.offset + static_cast<std::size_t>(c.first) * B.terms),
+                    B.terms, c.second);
+      for (const auto& in : B.inputs)  // the constants that vary from term to term
+        if (!in.values.empty() && in.slot >= 0)
+          std::copy(in.values.begin(), in.values.end(),
+                    w.begin() + static_cast<std::ptrdiff_t>(B.offset + static_cast<std::size_t>(in.slot) * B.terms));
+    }
+    return w;
+  }
+
+  // ga, gb receive dL/da and dL/db (n each, overwritten); v: a workspace().
+  void gradient(const double* a, const double* b, double* ga, double* gb, double* v) const {
+    load(a, b, v);
+    run(grad_code_, v, a, b);
+    for (int i = 0; i < n_; ++i) {
+      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
+      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
+    }
+    for (const BlockProgram& B : blocks_) {
+      if (B.adjoint < 0) continue;
+      const double w = v[B.adjoint];
+      const double* arrays = v + B.offset;
+      for (const auto& d : B.partials) {
+        const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
+        double* g = in.block == 0 ? ga : gb;
+        const std::int32_t* ix = in.index.data();
+        const double* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
+        for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
+      }
+    }
+  }
+  // The gradient in any scalar type T (a ceres::Jet gives derivatives of the gradient:
+  // the fixed-size steps take one Jet level through a Lagrangian's gradient). v: slots()
+  // values of T, written here before they are read (raw storage will do).
+  std::size_t slots() const { return constants_.size(); }
+  template <class T>
+  void gradient_any(const T* a, const T* b, T* ga, T* gb, T* v) const {
+    for (const auto& c : constant_slots_) new (&v[c.first]) T(constant<T>(c.second));
+    for (const auto& in : inputs_) new (&v[in.first]) T(in.second < n_ ? a[in.second] : b[in.second - n_]);
+    run_any(grad_code_, v);
+    for (int i = 0; i < n_; ++i) {
+      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
+      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
+    }
+  }
+
+  // The gradient and the Hessian's blocks Haa, Hab (Hab(i, j) = d2/da_i db_j) and Hbb,
+  // column-major with leading dimensions lda, ldab, ldb.
+  void hessian(const double* a, const double* b, double* ga, double* gb, double* Haa, int lda, double* Hab, int ldab,
+               double* Hbb, int ldb, double* v) const {
+    load(a, b, v);
+    run(hess_code_, v, a, b);
+    const int n = n_;
+    for (int i = 0; i < n; ++i) {
+      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
+      gb[i] = v[grad_out_[static_cast<std::size_t>(n + i)]];
+    }
+    // H(r, c) of the 2n inputs, stored for r >= c
+    auto H = [&](int r, int c) { return v[hess_out_[static_cast<std::size_t>(r * (r + 1) / 2 + c)]]; };
+    for (int j = 0; j < n; ++j)
+      for (int i = j; i < n; ++i) {
+        Haa[i + j * lda] = Haa[j + i * lda] = H(i, j);
+        Hbb[i + j * ldb] = Hbb[j + i * ldb] = H(n + i, n + j);
+      }
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) Hab[i + j * ldab] = H(n + j, i);
+  }
+
+  // One operation of a program: slots[out] = op(slots[a], slots[b]) (c and k: the
+  // constant and the integer power of the one-operand forms). Sin with `sign` set is
+  // sin and cos of one operand at once: slots[out] = sin, slots[k] = cos.
+  struct Instr {
+    Expression::Op op;
+    bool sign = false;  // Abs: the sign of the operand (the derivative of |x|); Sin: and cos
+    std::int32_t a = 0, b = 0, out = 0, k = 0;
+    double c = 0.0;
+  };
+
+ private:
+  friend class DerivativeProgramBuilder;
+  // A block's program: its body's graph over arrays of `terms` values per slot.
+  struct BlockProgram {
+    std::size_t terms = 0, slots = 0;
+    std::size_t offset = 0;  // where its arrays start in the workspace
+    std::vector<Instr> code;
+    // the term's inputs: a variable (block 0 or 1, its index in each term) or a
+    // constant that varies from term to term (values); slot -1 where none is needed
+    struct Input {
+      std::int32_t slot = -1;
+      int block = 0;
+      std::vector<std::int32_t> index;
+      std::vector<double> values;
+    };
+    std::vector<Input> inputs;
+    std::vector<std::pair<std::int32_t, double>> constants;  // slots filled with one constant
+    struct Partial {
+      std::int32_t input, slot;  // d(term)/d(input) in the array of `slot`
+    };
+    std::vector<Partial> partials;
+    std::int32_t root = -1;     // the terms' values (-1: the block's value is not needed)
+    std::int32_t adjoint = -1;  // the block's adjoint, a slot of the main program (-1: none)
+  };
+  // Runs block B's program into its arrays; returns the block's value (0 when unneeded).
+  double run_block(const BlockProgram& B, double* v, const double* a, const double* b) const;
+  void load(const double* a, const double* b, double* v) const {
+    for (const auto& in : inputs_) v[in.first] = in.second < n_ ? a[in.second] : b[in.second - n_];
+  }
+  void run(const std::vector<Instr>& code, double* v, const double* a, const double* b) const;
+  template <class T>
+  static void run_any(const std::vector<Instr>& code, T* v);
+
+  int n_ = 0;
+  std::vector<Instr> grad_code_, hess_code_;
+  std::vector<std::pair<std::int32_t, std::int32_t>> inputs_;  // {slot, input}: input < n in a, else b
+  std::vector<std::int32_t> grad_out_, hess_out_;
+  std::vector<double> constants_;  // the slots with the constants in place (the rest 0)
+  std::vector<std::pair<std::int32_t, double>> constant_slots_;
+  std::vector<BlockProgram> blocks_;
+  bool has_hessian_ = false;
+};
+
+namespace derivative_program_detail {
+
+// Every operation, for doubles and Jets: Expression's own (unary and binary), and the
+// sign of x, which only a program has (the derivative of |x|).
+template <class T>
+T apply(const DerivativeProgram::Instr& in, const T& x, const T& y) {
+  using Op = Expression::Op;
+  switch (in.op) {
+    case Op::Abs:
+      if (in.sign) return constant<T>(value(x) < 0.0 ? -1.0 : 1.0);
+      return expression_detail::absolute(x);
+    case Op::Add: case Op::Sub: case Op::Mul: case Op::Div: case Op::Pow: case Op::Atan2:
+      return Expression::binary(in.op, x, y);
+    default: {
+      Expression::Instr e;
+      e.op = in.op;
+      e.index = in.k;
+      e.c = in.c;
+      return Expression::unary(in.op, x, e);
+    }
+  }
+}
+
+}  // namespace derivative_program_detail
+
+template <class T>
+void DerivativeProgram::run_any(const std::vector<Instr>& code, T* v) {
+  using Op = Expression::Op;
+  for (const Instr& in : code) {
+    const T& x = v[in.a];
+    T& z = v[in.out];
+    switch (in.op) {  // the common operations inline
+      case Op::Add: z = x + v[in.b]; break;
+      case Op::Sub: z = x - v[in.b]; break;
+      case Op::Mul: z = x * v[in.b]; break;
+      case Op::Div: z = x / v[in.b]; break;
+      case Op::Neg: z = -x; break;
+      case Op::AddC: z = x + in.c; break;
+      case Op::MulC: z = x * in.c; break;
+      case Op::PowI: z = in.k == 2 ? T(x * x) : expression_detail::power_int(x, in.k); break;
+      case Op::Sin:
+        if constexpr (std::is_same_v<T, double>) {
+          if (in.sign) {
+            ::sincos(x, &z, &v[in.k]);
+            break;
+          }
+        } else {
+          using std::cos;
+          if (in.sign) v[in.k] = cos(x);
+        }
+        z = derivative_program_detail::apply(in, x, x);
+        break;
+      default: z = derivative_program_detail::apply(in, x, v[in.b]); break;
+    }
+  }
+}
+
+// In doubles: direct threading (each operation jumps to the next one's code through a
+// table, a GNU extension that GCC and Clang have), which lets the branch predictor
+// learn the sequence where one shared switch jump would not.
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpedantic"
+inline void DerivativeProgram::run(const std::vector<Instr>& code, double* v, const double* a,
+                                   const double* b) const {
+  static_assert(static_cast<int>(Expression::Op::Block) == 30 && static_cast<int>(Expression::Op::Let) == 31,
+                "the table follows Expression::Op");
+  static void* const table[] = {&&other, &&other, &&neg, &&add, &&sub, &&mul, &&div, &&addc, &&mulc, &&divc, &&rsubc,
+                                &&rdivc, &&powi, &&other, &&other, &&sin, &&cos, &&other, &&other, &&other, &&other,
+                                &&other, &&other, &&sqrt, &&other, &&other, &&other, &&other, &&other, &&other, &&block,
+                                &&other};
+  const Instr* in = code.data();
+  const Instr* const end = in + code.size();
+  if (in == end) return;
+#define DVM_NEXT                                   \
+  do {                                             \
+    if (++in == end) return;                       \
+    goto* table[static_cast<int>(in->op)];         \
+  } while (0)
+  goto* table[static_cast<int>(in->op)];
+neg: v[in->out] = -v[in->a]; DVM_NEXT;
+add: v[in->out] = v[in->a] + v[in->b]; DVM_NEXT;
+sub: v[in->out] = v[in->a] - v[in->b]; DVM_NEXT;
+mul: v[in->out] = v[in->a] * v[in->b]; DVM_NEXT;
+div: v[in->out] = v[in->a] / v[in->b]; DVM_NEXT;
+addc: v[in->out] = v[in->a] + in->c; DVM_NEXT;
+mulc: v[in->out] = v[in->a] * in->c; DVM_NEXT;
+divc: v[in->out] = v[in->a] / in->c; DVM_NEXT;
+rsubc: v[in->out] = in->c - v[in->a]; DVM_NEXT;
+rdivc: v[in->out] = in->c / v[in->a]; DVM_NEXT;
+powi: {
+  const double x = v[in->a];
+  v[in->out] = in->k == 2 ? x * x : expression_detail::power_int(x, in->k);
+  DVM_NEXT;
+}
+sin:
+  if (in->sign)
+    ::sincos(v[in->a], &v[in->out], &v[in->k]);
+  else
+    v[in->out] = std::sin(v[in->a]);
+  DVM_NEXT;
+cos: v[in->out] = std::cos(v[in->a]); DVM_NEXT;
+sqrt: v[in->out] = std::sqrt(v[in->a]); DVM_NEXT;
+other: v[in->out] = derivative_program_detail::apply(*in, v[in->a], v[in->b]); DVM_NEXT;
+block: v[in->out] = run_block(blocks_[static_cast<std::size_t>(in->k)], v, a, b); DVM_NEXT;
+#undef DVM_NEXT
+}
+#pragma GCC diagnostic pop
+
+inline double DerivativeProgram::run_block(const BlockProgram& B, double* v, const double* a, const double* b) const {
+  using Op = Expression::Op;
+  const std::size_t m = B.terms;
+  double* w = v + B.offset;
+  for (const auto& in : B.inputs) {
+    if (in.slot < 0 || !in.values.empty()) continue;  // (varying constants: in place already)
+    const double* src = in.block == 0 ? a : b;
+    const std::int32_t* ix = in.index.data();
+    double* dst = w + static_cast<std::size_t>(in.slot) * m;
+    for (std::size_t k = 0; k < m; ++k) dst[k] = src[ix[k]];
+  }
+  for (const Instr& in : B.code) {
+    const double* x = w + static_cast<std::size_t>(in.a) * m;
+    const double* y = w + static_cast<std::size_t>(in.b) * m;
+    double* z = w + static_cast<std::size_t>(in.out) * m;
+    switch (in.op) {  // the common operations as plain loops (vectorised)
+      case Op::Add: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + y[k]; break;
+      case Op::Sub: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] - y[k]; break;
+      case Op::Mul: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * y[k]; break;
+      case Op::Div: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] / y[k]; break;
+      case Op::Neg: for (std::size_t k = 0; k < m; ++k) z[k] = -x[k]; break;
+      case Op::AddC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + in.c; break;
+      case Op::MulC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * in.c; break;
+      case Op::PowI:
+        if (in.k == 2) {
+          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k];
+          break;
+        }
+        if (in.k == 3) {
+          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k] * x[k];
+          break;
+        }
+        [[fallthrough]];
+      default:
+        for (std::size_t k = 0; k < m; ++k) z[k] = derivative_program_detail::apply(in, x[k], y[k]);
+    }
+  }
+  if (B.root < 0) return 0.0;
+  const double* r = w + static_cast<std::size_t>(B.root) * m;
+  double sum = r[0];
+  for (std::size_t k = 1; k < m; ++k) sum += r[k];
+  return sum;
+}
+
+// Builds a DerivativeProgram (the steps of the header comment).
+class DerivativeProgramBuilder {
+  using Op = Expression::Op;
+  using Instr = DerivativeProgram::Instr;
+
+ public:
+  DerivativeProgramBuilder(int n, bool hessian) : n_(n), hessian_(hessian) {}
+
+  bool build(const Expression& e, DerivativeProgram& out) {
+    if (e.empty()) return false;
+    if (hessian_ && (!e.blocks().empty() || 2 * n_ > DerivativeProgram::kMaxInputs)) return false;
+    try {
+      const int value = read(e);
+      const int m = 2 * n_;
+      // 2. reverse mode
+      std::vector<int> adj(nodes_.size(), -1);
+      adj[static_cast<std::size_t>(value)] = one();
+      for (int i = value; i >= 0; --i) {
+        const int w = adj[static_cast<std::size_t>(i)];
+        const Node nd = nodes_[static_cast<std::size_t>(i)];
+        if (nd.op == Op::Block) block_adjoint_[static_cast<std::size_t>(nd.k)] = w;
+        if (w < 0 || nd.deps == 0 || nd.op == Op::Var || nd.op == Op::Block) continue;
+        const auto d = partials(i);
+        auto push = [&](int operand, int partial) {
+          const int t = mul(w, partial);
+          int& slot = adj[static_cast<std::size_t>(operand)];
+          slot = slot < 0 ? t : add(slot, t);
+        };
+        if (nodes_[static_cast<std::size_t>(nd.a)].deps) push(nd.a, d.first);
+        if (nd.b >= 0 && nodes_[static_cast<std::size_t>(nd.b)].deps) push(nd.b, d.second);
+      }
+      std::vector<int> grad(static_cast<std::size_t>(m), zero());
+      for (int j = 0; j < m; ++j) {
+        const int var = find_var(j);
+        if (var >= 0 && var < static_cast<int>(adj.size()) && adj[static_cast<std::size_t>(var)] >= 0)
+          grad[static_cast<std::size_t>(j)] = adj[static_cast<std::size_t>(var)];
+      }
+      // 3. forward mode on the gradient, one direction at a time: H(i, j) for i >= j
+      const std::size_t before = nodes_.size();
+      std::vector<int> hess(hessian_ ? static_cast<std::size_t>(m * (m + 1) / 2) : 0, zero());
+      std::vector<int> tangent(hessian_ ? before : 0);
+      for (int j = 0; j < (hessian_ ? m : 0); ++j) {
+        const std::uint64_t bit = std::uint64_t{1} << j;
+        int top = 0;  // the highest node a gradient entry i >= j needs
+        for (int i = j; i < m; ++i) top = std::max(top, grad[static_cast<std::size_t>(i)]);
+        for (int i = 0; i <= top; ++i) {
+          const Node nd = nodes_[static_cast<std::size_t>(i)];
+          int& t = tangent[static_cast<std::size_t>(i)];
+          t = -1;
+          if (!(nd.deps & bit)) continue;
+          if (nd.op == Op::Var) {
+            t = one();
+            continue;
+          }
+          const auto d = partials(i);
+          const int ta = tangent[static_cast<std::size_t>(nd.a)];
+          const int tb = nd.b >= 0 ? tangent[static_cast<std::size_t>(nd.b)] : -1;
+          if (ta >= 0) t = mul(d.first, ta);
+          if (tb >= 0) t = t < 0 ? mul(d.second, tb) : add(t, mul(d.second, tb));
+        }
+        for (int i = j; i < m; ++i) {
+          const int t = tangent[static_cast<std::size_t>(grad[static_cast<std::size_t>(i)])];
+          if (t >= 0) hess[static_cast<std::size_t>(i * (i + 1) / 2 + j)] = t;
+        }
+      }
+      emit(grad, hess, out);
+      out.has_hessian_ = hessian_;
+      // the blocks' programs, with their arrays after the main program's slots
+      std::size_t offset = out.constants_.size();
+      for (std::size_t k = 0; k < blocks_.size(); ++k) {
+        DerivativeProgram::BlockProgram B;
+        if (blocks_[k] && !block_program(*blocks_[k], block_value_[k], B)) return false;
+        const int w = block_adjoint_[k];
+        B.adjoint = w >= 0 ? emitted_slot_[static_cast<std::size_t>(w)] : -1;
+        B.offset = offset;
+        offset += B.slots * B.terms;
+        out.blocks_.push_back(std::move(B));
+      }
+      return true;
+    } catch (const TooLarge&) {
+      return false;
+    }
+  }
+
+ private:
+  struct TooLarge {};
+  struct Node {
+    Op op;
+    bool sign;
+    std::int32_t a, b, k;
+    double c;
+    std::uint64_t deps;  // the inputs it depends on
+  };
+  struct Key {
+    Op op;
+    bool sign;
+    std::int32_t a, b, k;
+    std::uint64_t cbits;
+    bool operator==(const Key& o) const {
+      return op == o.op && sign == o.sign && a == o.a && b == o.b && k == o.k && cbits == o.cbits;
+    }
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      std::uint64_t h = static_cast<std::uint64_t>(k.op) * 0x9E3779B97F4A7C15ull;
+      for (std::uint64_t x : {std::uint64_t(k.sign), std::uint64_t(std::uint32_t(k.a)), std::uint64_t(std::uint32_t(k.b)),
+                              std::uint64_t(std::uint32_t(k.k)), k.cbits})
+        h = (h ^ x) * 0x100000001B3ull + (h >> 29);
+      return static_cast<std::size_t>(h);
+    }
+  };
+  static std::uint64_t bits(double c) {
+    std::uint64_t u;
+    std::memcpy(&u, &c, sizeof u);
+    return u;
+  }
+
+  // A node made once: equal keys give the same node.
+  int make(Op op, int a, int b = -1, double c = 0.0, int k = 0, bool sign = false) {
+    const Key key{op, sign, a, b, k, bits(c)};
+    auto it = memo_.find(key);
+    if (it != memo_.end()) return it->second;
+    if (nodes_.size() >= DerivativeProgram::kMaxNodes) throw TooLarge{};
+    std::uint64_t deps = 0;
+    if (op == Op::Var && k == 0) deps = std::uint64_t{1} << std::min(a, 63);  // (k = 1: a constant input)
+    if (op == Op::Block) deps = ~std::uint64_t{0};
+    if (op != Op::Var && op != Op::Const && op != Op::Block) {
+      deps = nodes_[static_cast<std::size_t>(a)].deps;
+      if (b >= 0) deps |= nodes_[static_cast<std::size_t>(b)].deps;
+    }
+    nodes_.push_back({op, sign, a, b, k, c, deps});
+    const int id = static_cast<int>(nodes_.size()) - 1;
+    memo_.emplace(key, id);
+    return id;
+  }
+  int constant(double c) { return make(Op::Const, -1, -1, c); }
+  int zero() { return constant(0.0); }
+  int one() { return constant(1.0); }
+  bool is_const(int i) const { return nodes_[static_cast<std::size_t>(i)].op == Op::Const; }
+  double cval(int i) const { return nodes_[static_cast<std::size_t>(i)].c; }
+  bool is(int i, double c) const { return is_const(i) && cval(i) == c; }
+  int find_var(int input) const {
+    auto it = memo_.find(Key{Op::Var, false, input, -1, 0, bits(0.0)});
+    return it == memo_.end() ? -1 : it->second;
+  }
+
+  // An operation with constants folded and the trivial cases simplified.
+  int op1(Op op, int a, double c = 0.0, int k = 0, bool sign = false) {
+    if (is_const(a)) {
+      Instr in{op, sign, 0, 0, 0, k, c};
+      return constant(derivative_program_detail::apply<double>(in, cval(a), 0.0));
+    }
+    switch (op) {
+      case Op::Neg: {  // -(-x) = x, -(c x) = (-c) x, -(x - y) = y - x: exact
+        const Node u = nodes_[static_cast<std::size_t>(a)];
+        if (u.op == Op::Neg) return u.a;
+        if (u.op == Op::MulC) return op1(Op::MulC, u.a, -u.c);
+        if (u.op == Op::Sub) return op2(Op::Sub, u.b, u.a);
+        break;
+      }
+      case Op::MulC: {
+        if (c == 1.0) return a;
+        if (c == 0.0) return zero();
+        if (c == -1.0) return op1(Op::Neg, a);
+        const Node u = nodes_[static_cast<std::size_t>(a)];
+        if (u.op == Op::Neg) return op1(Op::MulC, u.a, -c);
+        if (u.op == Op::MulC) return op1(Op::MulC, u.a, u.c * c);  // (x d) c = x (d c), to round-off
+        break;
+      }
+      case Op::AddC:
+        if (c == 0.0) return a;
+        break;
+      case Op::DivC:
+        if (c == 1.0) return a;
+        break;
+      case Op::PowI:
+        if (k == 1) return a;
+        if (k == 0) return one();
+        break;
+      default: break;
+    }
+    return make(op, a, -1, c, k, sign);
+  }
+  int op2(Op op, int a, int b) {
+    if (is_const(a) && is_const(b)) {
+      Instr in{op, false, 0, 0, 0, 0, 0.0};
+      return constant(derivative_program_detail::apply<double>(in, cval(a), cval(b)));
+    }
+    if ((op == Op::Add || op == Op::Mul) && a > b) std::swap(a, b);  // commutative: one order
+    return make(op, a, b);
+  }
+  int add(int a, int b) {
+    if (is(a, 0.0)) return b;
+    if (is(b, 0.0)) return a;
+    if (is_const(a)) return op1(Op::AddC, b, cval(a));
+    if (is_const(b)) return op1(Op::AddC, a, cval(b));
+    if (nodes_[static_cast<std::size_t>(b)].op == Op::Neg) return sub(a, nodes_[static_cast<std::size_t>(b)].a);
+    if (nodes_[static_cast<std::size_t>(a)].op == Op::Neg) return sub(b, nodes_[static_cast<std::size_t>(a)].a);
+    return op2(Op::Add, a, b);
+  }
+  int sub(int a, int b) {
+    if (is(b, 0.0)) return a;
+    if (is(a, 0.0)) return op1(Op::Neg, b);
+    if (a == b) return zero();
+    if (is_const(a) && !is_const(b)) return op1(Op::RSubC, b, cval(a));
+    if (is_const(b) && !is_const(a)) return op1(Op::AddC, a, -cval(b));
+    if (nodes_[static_cast<std::size_t>(b)].op == Op::Neg) return add(a, nodes_[static_cast<std::size_t>(b)].a);
+    return op2(Op::Sub, a, b);
+  }
+  int mul(int a, int b) {
+    if (is(a, 0.0) || is(b, 0.0)) return zero();
+    // signs outward, where they cancel or turn a sum into a difference
+    const bool na = nodes_[static_cast<std::size_t>(a)].op == Op::Neg, nb = nodes_[static_cast<std::size_t>(b)].op == Op::Neg;
+    if (na && nb) return mul(nodes_[static_cast<std::size_t>(a)].a, nodes_[static_cast<std::size_t>(b)].a);
+    if (na) return neg(mul(nodes_[static_cast<std::size_t>(a)].a, b));
+    if (nb) return neg(mul(a, nodes_[static_cast<std::size_t>(b)].a));
+    if (is_const(a) && !is_const(b)) return op1(Op::MulC, b, cval(a));
+    if (is_const(b) && !is_const(a)) return op1(Op::MulC, a, cval(b));
+    return op2(Op::Mul, a, b);
+  }
+  int div(int a, int b) {
+    if (is(a, 0.0) && !is(b, 0.0)) return zero();
+    if (is_const(b) && !is_const(a)) return op1(Op::DivC, a, cval(b));
+    if (is_const(a) && !is_const(b)) return op1(Op::RDivC, b, cval(a));
+    return op2(Op::Div, a, b);
+  }
+  int neg(int a) { return op1(Op::Neg, a); }
+
+  // The tape as a graph (step 1); returns the node of its value.
+  int read(const Expression& e) {
+    std::vector<int> stack, defs(static_cast<std::size_t>(Expression::kMaxDefinitions), -1);
+    for (const auto& in : e.tape()) {
+      switch (in.op) {
+        case Op::Const: stack.push_back(constant(in.c)); break;
+        case Op::Var:
+          if (in.block == 3)
+            stack.push_back(defs[static_cast<std::size_t>(in.index)]);
+          else if (in.block == 0 || in.block == 1)
+            stack.push_back(make(Op::Var, in.block * n_ + in.index));
+          else
+            throw TooLarge{};  // block 2 (momenta) is not an input of a program
+          break;
+        case Op::Let:
+          defs[static_cast<std::size_t>(in.index)] = stack.back();
+          stack.pop_back();
+          break;
+        case Op::Add: case Op::Sub: case Op::Mul: case Op::Div: case Op::Pow: case Op::Atan2: {
+          const int b = stack.back();
+          stack.pop_back();
+          const int a = stack.back();
+          stack.back() = in.op == Op::Add ? add(a, b)
+                         : in.op == Op::Sub ? sub(a, b)
+                         : in.op == Op::Mul ? mul(a, b)
+                         : in.op == Op::Div ? div(a, b)
+                                            : op2(in.op, a, b);
+          break;
+        }
+        case Op::Block: {
+          const std::size_t k = static_cast<std::size_t>(in.index);
+          if (blocks_.size() <= k) {
+            blocks_.resize(k + 1, nullptr);
+            block_adjoint_.resize(k + 1, -1);
+            block_value_.resize(k + 1, false);
+          }
+          blocks_[k] = &e.blocks()[k];
+          stack.push_back(make(Op::Block, -1, -1, 0.0, in.index));
+          break;
+        }
+        default: stack.back() = op1(in.op, stack.back(), in.c, in.index); break;
+      }
+    }
+    return stack.back();
+  }
+
+  // The partial derivatives of node i with respect to its operands (the formulas of
+  // Expression::backward), as nodes; the second is unused for one-operand nodes.
+  std::pair<int, int> partials(int i) {
+    const Node nd = nodes_[static_cast<std::size_t>(i)];
+    const int x = nd.a, y = nd.b;
+    auto sq = [&](int u) { return op1(Op::PowI, u, 0.0, 2); };
+    switch (nd.op) {
+      case Op::Neg: return {constant(-1.0), -1};
+      case Op::Add: return {one(), one()};
+      case Op::Sub: return {one(), constant(-1.0)};
+      case Op::Mul: return {y, x};
+      case Op::Div: return {div(one(), y), neg(div(i, y))};
+      case Op::AddC: return {one(), -1};
+      case Op::MulC: return {constant(nd.c), -1};
+      case Op::DivC: return {constant(1.0 / nd.c), -1};
+      case Op::RSubC: return {constant(-1.0), -1};
+      case Op::RDivC: return {neg(div(i, x)), -1};
+      case Op::PowI:
+        return {nd.k == 0 ? zero() : op1(Op::MulC, op1(Op::PowI, x, 0.0, nd.k - 1), static_cast<double>(nd.k)), -1};
+      case Op::PowC: return {op1(Op::MulC, op1(Op::PowC, x, nd.c - 1.0), nd.c), -1};
+      case Op::Pow: return {div(mul(i, y), x), mul(i, op1(Op::Log, x))};
+      case Op::Sin: return {op1(Op::Cos, x), -1};
+      case Op::Cos: return {neg(op1(Op::Sin, x)), -1};
+      case Op::Tan: return {add(one(), sq(i)), -1};
+      case Op::Asin: return {div(one(), op1(Op::Sqrt, sub(one(), sq(x)))), -1};
+      case Op::Acos: return {neg(div(one(), op1(Op::Sqrt, sub(one(), sq(x))))), -1};
+      case Op::Atan: return {div(one(), add(one(), sq(x))), -1};
+      case Op::Exp: return {i, -1};
+      case Op::Log: return {div(one(), x), -1};
+      case Op::Sqrt: return {div(constant(0.5), i), -1};
+      case Op::Cbrt: return {div(i, op1(Op::MulC, x, 3.0)), -1};
+      case Op::Abs: return {nd.sign ? zero() : op1(Op::Abs, x, 0.0, 0, true), -1};
+      case Op::Sinh: return {op1(Op::Cosh, x), -1};
+      case Op::Cosh: return {op1(Op::Sinh, x), -1};
+      case Op::Tanh: return {sub(one(), sq(i)), -1};
+      case Op::Atan2: {
+        const int r2 = add(sq(x), sq(y));
+        return {div(y, r2), neg(div(x, r2))};
+      }
+      default: return {zero(), zero()};
+    }
+  }
+
+  // Step 4: number the nodes the outputs need and write the two programs. Where a
+  // program needs both sin x and cos x, one instruction computes them (sincos).
+  void emit(const std::vector<int>& grad, const std::vector<int>& hess, DerivativeProgram& out) {
+    const std::size_t count = nodes_.size();
+    std::vector<char> need_grad(count, 0), need_all(count, 0);
+    auto mark = [&](std::vector<char>& need, int root) {
+      std::vector<int> work{root};
+      while (!work.empty()) {
+        const int i = work.back();
+        work.pop_back();
+        if (need[static_cast<std::size_t>(i)]) continue;
+        need[static_cast<std::size_t>(i)] = 1;
+        const Node& nd = nodes_[static_cast<std::size_t>(i)];
+        if (nd.op == Op::Var || nd.op == Op::Const || nd.op == Op::Block) continue;
+        work.push_back(nd.a);
+        if (nd.b >= 0) work.push_back(nd.b);
+      }
+    };
+    for (int g : grad) mark(need_grad, g);
+    // every block with an adjoint runs (its partial derivatives), and its adjoint is an
+    // output; a block computes its value where these need it
+    for (int w : block_adjoint_)
+      if (w >= 0) mark(need_grad, w);
+    for (std::size_t i = 0; i < count; ++i)
+      if (nodes_[i].op == Op::Block) block_value_[static_cast<std::size_t>(nodes_[i].k)] = need_grad[i] != 0;
+    for (std::size_t k = 0; k < block_adjoint_.size(); ++k)
+      if (block_adjoint_[k] >= 0) need_grad[static_cast<std::size_t>(find_block(static_cast<int>(k)))] = 1;
+    need_all = need_grad;
+    for (int h : hess) mark(need_all, h);
+    std::vector<std::int32_t> slot(count, -1);
+    std::vector<double> slots;
+    out.n_ = n_;
+    for (std::size_t i = 0; i < count; ++i) {
+      if (!need_all[i]) continue;
+      const Node& nd = nodes_[i];
+      slot[i] = static_cast<std::int32_t>(slots.size());
+      slots.push_back(nd.op == Op::Const ? nd.c : 0.0);
+      if (nd.op == Op::Var) out.inputs_.push_back({slot[i], nd.a});
+      if (nd.op == Op::Const) out.constant_slots_.push_back({slot[i], nd.c});
+    }
+    // the cos node of each operand whose sin is a node too
+    std::unordered_map<int, int> cos_of;
+    for (std::size_t i = 0; i < count; ++i)
+      if (need_all[i] && nodes_[i].op == Op::Cos) cos_of[nodes_[i].a] = static_cast<int>(i);
+    auto write = [&](const std::vector<char>& need, std::vector<Instr>& code) {
+      std::vector<char> done(count, 0);
+      for (std::size_t i = 0; i < count; ++i) {
+        const Node& nd = nodes_[i];
+        if (!need[i] || done[i] || nd.op == Op::Var || nd.op == Op::Const) continue;
+        if (nd.op == Op::Block) {
+          code.push_back(Instr{Op::Block, false, 0, 0, slot[i], nd.k, 0.0});
+          continue;
+        }
+        Instr in{nd.op, nd.sign, slot[static_cast<std::size_t>(nd.a)],
+                 nd.b >= 0 ? slot[static_cast<std::size_t>(nd.b)] : 0, slot[i], nd.k, nd.c};
+        auto partner = [&](int operand) {  // the cos node of a sin node's operand, if this program needs it
+          auto it = cos_of.find(operand);
+          return it != cos_of.end() && need[static_cast<std::size_t>(it->second)] ? it->second : -1;
+        };
+        if (nd.op == Op::Sin && partner(nd.a) >= 0) {
+          in.sign = true;
+          in.k = slot[static_cast<std::size_t>(partner(nd.a))];
+          done[static_cast<std::size_t>(partner(nd.a))] = 1;
+        }
+        if (nd.op == Op::Cos) {  // its sin later in the order: computed together here
+          auto it = memo_.find(Key{Op::Sin, false, nd.a, -1, 0, bits(0.0)});
+          if (it != memo_.end() && need[static_cast<std::size_t>(it->second)]) {
+            in = Instr{Op::Sin, true, slot[static_cast<std::size_t>(nd.a)], 0,
+                       slot[static_cast<std::size_t>(it->second)], slot[i], 0.0};
+            done[static_cast<std::size_t>(it->second)] = 1;
+          }
+        }
+        code.push_back(in);
+      }
+    };
+    write(need_grad, out.grad_code_);
+    write(need_all, out.hess_code_);
+    for (int g : grad) out.grad_out_.push_back(slot[static_cast<std::size_t>(g)]);
+    for (int h : hess) out.hess_out_.push_back(slot[static_cast<std::size_t>(h)]);
+    out.constants_ = std::move(slots);
+    emitted_slot_ = std::move(slot);
+  }
+
+  int find_block(int k) const {
+    auto it = memo_.find(Key{Op::Block, false, -1, -1, k, bits(0.0)});
+    return it == memo_.end() ? -1 : it->second;
+  }
+
+  // A block's program (see the header comment): its body read into a graph of a fresh
+  // builder, inputs the term's variables (equal index lists are one input) and its
+  // varying constants; the partial derivatives by reverse mode from the term's value.
+  static bool block_program(const Expression::Block& b, bool value, DerivativeProgram::BlockProgram& out) {
+    DerivativeProgramBuilder g(0, false);
+    using Input = DerivativeProgram::BlockProgram::Input;
+    std::vector<Input> inputs;
+    auto variable = [&](int block, const std::vector<std::int32_t>& index) {
+      for (std::size_t i = 0; i < inputs.size(); ++i)
+        if (inputs[i].values.empty() && inputs[i].block == block && inputs[i].index == index)
+          return g.make(Op::Var, static_cast<int>(i));
+      inputs.push_back(Input{-1, block, index, {}});
+      return g.make(Op::Var, static_cast<int>(inputs.size()) - 1);
+    };
+    auto varying = [&](const std::vector<double>& values) {
+      inputs.push_back(Input{-1, 0, {}, values});
+      return g.make(Op::Var, static_cast<int>(inputs.size()) - 1, -1, 0.0, 1);
+    };
+    try {
+      std::vector<int> node(b.body.size());
+      for (std::size_t j = 0; j < b.body.size(); ++j) {
+        const Expression::Instr& in = b.body[j];
+        const std::vector<double>& cs = b.c[j];
+        if (in.op == Op::Var) {
+          if (in.block != 0 && in.block != 1) return false;
+          node[j] = variable(in.block, b.index[j]);
+          continue;
+        }
+        if (in.op == Op::Const) {
+          node[j] = cs.empty() ? g.constant(in.c) : varying(cs);
+          continue;
+        }
+        const int x = node[static_cast<std::size_t>(b.arg_a[j])];
+        if (b.arg_b[j] >= 0) {
+          const int y = node[static_cast<std::size_t>(b.arg_b[j])];
+          node[j] = in.op == Op::Add ? g.add(x, y)
+                    : in.op == Op::Sub ? g.sub(x, y)
+                    : in.op == Op::Mul ? g.mul(x, y)
+                    : in.op == Op::Div ? g.div(x, y)
+                                       : g.op2(in.op, x, y);
+          continue;
+        }
+        if (cs.empty()) {
+          node[j] = g.op1(in.op, x, in.c, in.index);
+          continue;
+        }
+        const int c = varying(cs);  // a constant operand that varies: two operands
+        switch (in.op) {
+          case Op::AddC: node[j] = g.add(x, c); break;
+          case Op::MulC: node[j] = g.mul(x, c); break;
+          case Op::DivC: node[j] = g.div(x, c); break;
+          case Op::RSubC: node[j] = g.sub(c, x); break;
+          case Op::RDivC: node[j] = g.div(c, x); break;
+          case Op::PowC: node[j] = g.op2(Op::Pow, x, c); break;
+          default: return false;
+        }
+      }
+      const int root = node.back();
+      std::vector<int> adj(g.nodes_.size(), -1);
+      adj[static_cast<std::size_t>(root)] = g.one();
+      for (int i = root; i >= 0; --i) {
+        const int w = adj[static_cast<std::size_t>(i)];
+        const Node nd = g.nodes_[static_cast<std::size_t>(i)];
+        if (w < 0 || nd.deps == 0 || nd.op == Op::Var) continue;
+        const auto d = g.partials(i);
+        auto push = [&](int operand, int partial) {
+          const int t = g.mul(w, partial);
+          int& s = adj[static_cast<std::size_t>(operand)];
+          s = s < 0 ? t : g.add(s, t);
+        };
+        if (g.nodes_[static_cast<std::size_t>(nd.a)].deps) push(nd.a, d.first);
+        if (nd.b >= 0 && g.nodes_[static_cast<std::size_t>(nd.b)].deps) push(nd.b, d.second);
+      }
+      // the outputs: each variable's partial derivative (unless it is zero), the value
+      std::vector<std::pair<int, int>> partial;  // {input, node}
+      for (std::size_t i = 0; i < inputs.size(); ++i) {
+        if (!inputs[i].values.empty()) continue;
+        const int var = g.make(Op::Var, static_cast<int>(i));
+        const int d = var < static_cast<int>(adj.size()) ? adj[static_cast<std::size_t>(var)] : -1;
+        if (d >= 0 && !g.is(d, 0.0)) partial.push_back({static_cast<int>(i), d});
+      }
+      const std::size_t count = g.nodes_.size();
+      std::vector<char> need(count, 0);
+      std::vector<int> work;
+      for (const auto& d : partial) work.push_back(d.second);
+      if (value) work.push_back(root);
+      while (!work.empty()) {
+        const int i = work.back();
+        work.pop_back();
+        if (need[static_cast<std::size_t>(i)]) continue;
+        need[static_cast<std::size_t>(i)] = 1;
+        const Node& nd = g.nodes_[static_cast<std::size_t>(i)];
+        if (nd.op == Op::Var || nd.op == Op::Const) continue;
+        work.push_back(nd.a);
+        if (nd.b >= 0) work.push_back(nd.b);
+      }
+      std::vector<std::int32_t> slot(count, -1);
+      std::int32_t slots = 0;
+      for (std::size_t i = 0; i < count; ++i) {
+        if (!need[i]) continue;
+        const Node& nd = g.nodes_[i];
+        slot[i] = slots++;
+        if (nd.op == Op::Const) out.constants.push_back({slot[i], nd.c});
+        if (nd.op == Op::Var) inputs[static_cast<std::size_t>(nd.a)].slot = slot[i];
+        if (nd.op == Op::Var || nd.op == Op::Const) continue;
+        out.code.push_back(Instr{nd.op, nd.sign, slot[static_cast<std::size_t>(nd.a)],
+                                 nd.b >= 0 ? slot[static_cast<std::size_t>(nd.b)] : 0, slot[i], nd.k, nd.c});
+      }
+      for (const auto& d : partial) out.partials.push_back({d.first, slot[static_cast<std::size_t>(d.second)]});
+      out.root = value ? slot[static_cast<std::size_t>(root)] : -1;
+      out.slots = static_cast<std::size_t>(slots);
+      out.terms = static_cast<std::size_t>(b.terms);
+      out.inputs = std::move(inputs);
+      return true;
+    } catch (const TooLarge&) {
+      return false;
+    }
+  }
+
+  int n_;
+  bool hessian_;
+  std::vector<const Expression::Block*> blocks_;  // the tape's blocks, by index
+  std::vector<int> block_adjoint_;                // each block's adjoint node (-1: none)
+  std::vector<bool> block_value_;                 // whether the outputs need its value
+  std::vector<std::int32_t> emitted_slot_;        // the main program's slot of each node
+  std::vector<Node> nodes_;
+  std::unordered_map<Key, int, KeyHash> memo_;
+};
+
+inline std::shared_ptr<const DerivativeProgram> DerivativeProgram::build(const Expression& e, int n, bool hessian) {
+  auto p = std::make_shared<DerivativeProgram>();
+  DerivativeProgramBuilder b(n, hessian);
+  if (!b.build(e, *p)) return nullptr;
+  return p;
+}
+
+}  // namespace dvm

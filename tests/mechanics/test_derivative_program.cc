@@ -1,0 +1,268 @@
+// Derivative programs (mechanics/derivative_program.h): the gradient and Hessian of a
+// written expression differentiated symbolically once, against the tape's own reverse
+// mode (forward over reverse for the Hessian) and against nested Jets through the
+// text, on texts that use every operation, definitions and constant folding.
+#define BOOST_TEST_MODULE derivative_program
+#include <boost/test/unit_test.hpp>
+
+#include <random>
+
+#include <ceres/jet.h>
+
+#include "mechanics/derivative_program.h"
+#include "mechanics/dynamic_system.h"
+#include "mechanics/written_lagrangian.h"
+
+using namespace dvm;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+namespace {
+
+std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, const std::string& L,
+                                       std::vector<std::pair<std::string, std::string>> definitions = {},
+                                       bool blocks = true) {
+  auto s = std::make_shared<WrittenSystem>();
+  s->name = "written";
+  s->coordinates = std::move(coords);
+  s->params = {{"m", 1.3}, {"g", 9.81}, {"k", 0.7}};
+  s->definitions = std::move(definitions);
+  s->check_names();
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian), blocks);
+  return s;
+}
+
+VectorXd random_vector(int n, double scale, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  VectorXd x(n);
+  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
+  return x;
+}
+
+struct Derivatives {
+  VectorXd Lq, Lv;
+  MatrixXd Lqq, Lqv, Lvv;
+};
+Derivatives derivatives(const WrittenDynamic& L, const VectorXd& q, const VectorXd& v) {
+  const int n = L.dim();
+  Derivatives d{VectorXd(n), VectorXd(n), MatrixXd(n, n), MatrixXd(n, n), MatrixXd(n, n)};
+  L.hessian(q, v, d.Lq, d.Lv, d.Lqq, d.Lqv, d.Lvv);
+  VectorXd gq(n), gv(n);
+  L.gradient(q, v, gq, gv);  // the gradient alone, to round-off the same
+  const double scale = std::fmax(1.0, std::fmax(d.Lq.cwiseAbs().maxCoeff(), d.Lv.cwiseAbs().maxCoeff()));
+  BOOST_TEST((gq - d.Lq).cwiseAbs().maxCoeff() <= 1e-15 * scale);
+  BOOST_TEST((gv - d.Lv).cwiseAbs().maxCoeff() <= 1e-15 * scale);
+  return d;
+}
+double largest(const Derivatives& d) {
+  return std::max({d.Lq.cwiseAbs().maxCoeff(), d.Lv.cwiseAbs().maxCoeff(), d.Lqq.cwiseAbs().maxCoeff(),
+                   d.Lqv.cwiseAbs().maxCoeff(), d.Lvv.cwiseAbs().maxCoeff()});
+}
+// Largest difference over all blocks, relative to the largest entry of b.
+double difference(const Derivatives& a, const Derivatives& b) {
+  const double m = std::max({(a.Lq - b.Lq).cwiseAbs().maxCoeff(), (a.Lv - b.Lv).cwiseAbs().maxCoeff(),
+                             (a.Lqq - b.Lqq).cwiseAbs().maxCoeff(), (a.Lqv - b.Lqv).cwiseAbs().maxCoeff(),
+                             (a.Lvv - b.Lvv).cwiseAbs().maxCoeff()});
+  return m / std::fmax(1e-300, largest(b));
+}
+
+// Texts of two and three coordinates that use every operation the parser has.
+struct Text {
+  std::vector<std::string> coords;
+  std::string L;
+  std::vector<std::pair<std::string, std::string>> definitions;
+};
+std::vector<Text> texts() {
+  return {
+      {{"a", "b"},
+       "(m + 1)/2*a_dot^2 + m/2*b_dot^2 + m*a_dot*b_dot*cos(a - b) + (m + 1)*g*cos(a) + m*g*cos(b)",
+       {}},
+      {{"x", "y"}, "(x_dot^2 + y_dot^2)/2 + k/sqrt(x^2 + y^2)", {}},
+      {{"x", "y", "z"},
+       "exp(x)*sin(y_dot) + log(2 + cos(z))*tan(x_dot/3) + atan2(y, z + 3) + sqrt(4 + x^2)*cbrt(2 + y^2)"
+       " + pow(2 + y_dot^2, z/5) + abs(x + 5)*asin(x/9) + acos(y/9) + atan(z) + sinh(x)*cosh(z_dot) + tanh(y)"
+       " + (x + y + 3)^2.5/(3 + z_dot^2) + 1/(x*y + 7) - (z - x_dot)^3 + x^-2 + 2^y - (y - 4)^-3",
+       {}},
+      // definitions, used several times, and a definition of a definition
+      {{"x", "y"},
+       "m/2*(x_dot^2 + y_dot^2) + k/r + r*s - s^2 + sin(s)*cos(s)",
+       {{"r", "sqrt(x^2 + y^2 + 1)"}, {"s", "r*x_dot - y*y_dot"}}},
+      // a term that is constant, a coordinate L does not use, and cancelling terms
+      {{"x", "y", "z"}, "3 + x_dot^2/2 + z_dot^2/2 + (x - x)*y + cos(z) - cos(z) + y_dot*z", {}},
+  };
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(programs_equal_reverse_mode_on_the_tape) {
+  // every text at three random points: the program (the default where one is built)
+  // against the tape's reverse mode, and against forward over forward
+  int t = 0;
+  for (const Text& text : texts()) {
+    const auto s = written(text.coords, text.L, text.definitions);
+    const WrittenDynamic P(s), R(s, WrittenDerivatives::forward_over_reverse),
+        F(s, WrittenDerivatives::forward_over_forward);
+    BOOST_TEST_REQUIRE(P.derivative_program() != nullptr);
+    BOOST_TEST(R.derivative_program() == nullptr);
+    BOOST_TEST(F.derivative_program() == nullptr);
+    const int n = s->dim();
+    for (int k = 0; k < 3; ++k) {
+      const VectorXd q = random_vector(n, 0.8, 10 * t + k), v = random_vector(n, 1.2, 100 + 10 * t + k);
+      BOOST_TEST_CONTEXT(text.L << " at point " << k) {
+        const Derivatives p = derivatives(P, q, v), r = derivatives(R, q, v), f = derivatives(F, q, v);
+        BOOST_TEST(largest(r) > 0.1);
+        BOOST_TEST(difference(p, r) <= 1e-14);
+        BOOST_TEST(difference(p, f) <= 1e-14);
+      }
+    }
+    ++t;
+  }
+}
+
+BOOST_AUTO_TEST_CASE(fixed_size_gradient_through_the_program_in_jets) {
+  // WrittenLagrangian<N>::gradient is the program evaluated in any scalar: in doubles it
+  // is the reverse gradient, in Jets seeded in the 2N inputs its derivative is the
+  // Hessian, which nested Jets through the text itself give independently
+  const auto s = written({"a", "b"}, texts()[0].L);
+  const WrittenLagrangian<2> L(s);
+  BOOST_TEST_REQUIRE(L.program != nullptr);
+  static_assert(has_gradient<WrittenLagrangian<2>>::value);
+  const VectorXd q = random_vector(2, 0.8, 3), v = random_vector(2, 1.2, 4);
+  using D = ceres::Jet<double, 4>;
+  using DD = ceres::Jet<D, 4>;
+  Vec<D, 2> qd, vd, gq, gv;
+  Vec<DD, 2> qdd, vdd;
+  for (int i = 0; i < 2; ++i) {
+    qd[i] = D(q[i], i);
+    vd[i] = D(v[i], 2 + i);
+    qdd[i] = DD(D(q[i], i));
+    qdd[i].v[i] = D(1.0);
+    vdd[i] = DD(D(v[i], 2 + i));
+    vdd[i].v[2 + i] = D(1.0);
+  }
+  L.gradient(qd, vd, gq, gv);
+  const DD y = L(qdd, vdd);  // the tape in nested Jets: y.v[j].v[i] = d2L/dx_i dx_j
+  for (int i = 0; i < 4; ++i) {
+    const D& g = i < 2 ? gq[i] : gv[i - 2];
+    BOOST_TEST(std::fabs(g.a - y.a.v[i]) <= 1e-14 * std::fabs(y.a.v[i]) + 1e-15);
+    for (int j = 0; j < 4; ++j) BOOST_TEST(std::fabs(g.v[j] - y.v[j].v[i]) <= 1e-13);
+  }
+  // in doubles: the program's double path
+  Vec<double, 2> aq, av;
+  L.gradient(Vec<double, 2>(q), Vec<double, 2>(v), aq, av);
+  for (int i = 0; i < 2; ++i) {
+    BOOST_TEST(aq[i] == gq[i].a);
+    BOOST_TEST(av[i] == gv[i].a);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(what_a_program_computes) {
+  // the double pendulum's program: sin and cos of each of a - b, a and b computed
+  // together (one sincos each), nothing computed twice, zeros not computed
+  const auto s = written({"a", "b"}, texts()[0].L);
+  const auto p = DerivativeProgram::build(s->lagrangian, 2);
+  BOOST_TEST_REQUIRE(p != nullptr);
+  int fused = 0, sin = 0, cos = 0;
+  for (const auto& in : p->hessian_code()) {
+    if (in.op == Expression::Op::Sin) (in.sign ? fused : sin) += 1;
+    if (in.op == Expression::Op::Cos) ++cos;
+  }
+  BOOST_TEST(fused == 3);
+  BOOST_TEST(sin == 0);
+  BOOST_TEST(cos == 0);
+  BOOST_TEST(p->gradient_size() < p->hessian_size());
+  // a Lagrangian with constant derivatives: nothing to run
+  const auto quadratic = DerivativeProgram::build(written({"x"}, "x_dot^2/2 - 3*x + 2")->lagrangian, 1);
+  BOOST_TEST_REQUIRE(quadratic != nullptr);
+  BOOST_TEST(quadratic->hessian_size() == 0u);
+  auto w = quadratic->workspace();
+  double x = 0.4, v = -1.5, gq, gv, Hqq, Hqv, Hvv;
+  quadratic->hessian(&x, &v, &gq, &gv, &Hqq, 1, &Hqv, 1, &Hvv, 1, w.data());
+  BOOST_TEST(gq == -3.0);
+  BOOST_TEST(gv == -1.5);
+  BOOST_TEST(Hqq == 0.0);
+  BOOST_TEST(Hqv == 0.0);
+  BOOST_TEST(Hvv == 1.0);
+}
+
+BOOST_AUTO_TEST_CASE(blocks_are_differentiated_once_for_their_shape) {
+  // texts whose sums become blocks (Expression::Block): their gradient programs against
+  // the tape's reverse mode, with fixed and periodic ends, a list of parameters (a
+  // constant that varies from term to term), a block whose value the gradient needs
+  // (a product with another term), and a block next to plain terms and a definition
+  struct Case {
+    ExpressionSymbols::Boundary ends;
+    std::string L;
+  };
+  using B = ExpressionSymbols::Boundary;
+  const std::vector<Case> cases = {
+      {B::fixed,
+       "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^2/2 + (q[i] - q[i-1])^3/12 + "
+       "(q[i] - q[i-1])^4/4)"},
+      {B::periodic, "sum(i, 1, n, k[i]*q_dot[i]^2/2) - sum(i, 1, n, k[i]*(1 - cos(q[i+1] - q[i])))"},
+      {B::fixed, "sum(i, 1, n, q_dot[i]^2/2)*(1 + q[1]^2) - sum(i, 1, n, q[i]*q_dot[i]*sin(q[i+1]) + exp(q[i]/k[i]))"},
+      {B::fixed, "sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, q[i]^2/2 + q[i]^4/(k[i] + q[i]^2)) + c*q_dot[3]"},
+  };
+  const int n = 40;
+  std::vector<double> k(n);
+  for (int i = 0; i < n; ++i) k[static_cast<std::size_t>(i)] = 1.0 + 0.05 * i;
+  int t = 0;
+  for (const Case& c : cases) {
+    auto s = std::make_shared<WrittenSystem>();
+    s->add_array("q", n, c.ends);
+    s->params = {{"n", n}};
+    s->param_arrays = {{"k", k}};
+    s->definitions = {{"c", "q[3]/2 + sin(q[7])"}};
+    s->check_names();
+    s->lagrangian = Expression::parse(c.L, s->symbols(WrittenSystem::Kind::lagrangian));
+    BOOST_TEST_CONTEXT(c.L) {
+      BOOST_TEST(!s->lagrangian.blocks().empty());
+      BOOST_TEST(DerivativeProgram::build(s->lagrangian, n) == nullptr);  // no Hessian program with blocks
+      const WrittenDynamic P(s), R(s, WrittenDerivatives::forward_over_reverse);
+      BOOST_TEST_REQUIRE(P.derivative_program() != nullptr);
+      BOOST_TEST(P.derivative_program()->has_blocks());
+      BOOST_TEST(!P.derivative_program()->has_hessian());
+      for (int point = 0; point < 2; ++point) {
+        const VectorXd q = random_vector(n, 0.6, 50 + 10 * t + point), v = random_vector(n, 0.8, 90 + 10 * t + point);
+        // the Hessian is the tape's either way, the gradient the program's
+        const Derivatives p = derivatives(P, q, v), r = derivatives(R, q, v);
+        BOOST_TEST(largest(r) > 0.1);
+        BOOST_TEST(difference(p, r) <= 1e-14);
+      }
+    }
+    ++t;
+  }
+}
+
+BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
+  // more than 32 coordinates (64 inputs): a gradient program, no Hessian program
+  std::string L33;
+  std::vector<std::string> c33;
+  for (int i = 0; i < 33; ++i) {
+    c33.push_back("y" + std::to_string(i));
+    L33 += (i ? " + " : "") + c33.back() + "_dot^2/2 - cos(" + c33.back() + ")*" + c33.back() + "_dot";
+  }
+  const auto wide = written(c33, L33, {}, false);
+  BOOST_TEST(DerivativeProgram::build(wide->lagrangian, 33) == nullptr);
+  const WrittenDynamic P(wide), R(wide, WrittenDerivatives::forward_over_reverse);
+  BOOST_TEST_REQUIRE(P.derivative_program() != nullptr);
+  BOOST_TEST(!P.derivative_program()->has_hessian());
+  const VectorXd q = random_vector(33, 0.5, 1), v = random_vector(33, 0.5, 2);
+  BOOST_TEST(difference(derivatives(P, q, v), derivatives(R, q, v)) <= 1e-14);
+  // a graph beyond kMaxNodes (30000 terms of different shapes, each on the tape): the tape
+  const auto large = written({"x"}, "x_dot^2/2 + sum(i, 1, 30000, sin(x*i))", {}, false);
+  BOOST_TEST(DerivativeProgram::build(large->lagrangian, 1) == nullptr);
+  BOOST_TEST(DerivativeProgram::build(large->lagrangian, 1, false) == nullptr);
+  BOOST_TEST(WrittenDynamic(large).derivative_program() == nullptr);
+  // a definition read inside a block (its value one for all the terms): the tape
+  auto s = std::make_shared<WrittenSystem>();
+  s->add_array("q", 30, ExpressionSymbols::Boundary::fixed);
+  s->params = {{"n", 30}};
+  s->definitions = {{"c", "q[3]/2 + sin(q[7])"}};
+  s->check_names();
+  s->lagrangian = Expression::parse("sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, (q[i] - c)^2/2)",
+                                    s->symbols(WrittenSystem::Kind::lagrangian));
+  BOOST_TEST(!s->lagrangian.blocks().empty());
+  BOOST_TEST(WrittenDynamic(s).derivative_program() == nullptr);
+}
