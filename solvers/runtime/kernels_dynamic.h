@@ -176,7 +176,17 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
   r.structure = structure_name(s);
   r.structure_source = "expression";
   r.step_path = "generic";
+  const DerivativeProgram* d = L.derivative_program();
+  r.derivatives = !d ? "tape" : d->has_hessian() ? "program" : "gradient-program";
 }
+
+// From this many coordinates an implicit theta map on a separable system solves the
+// structured equation (sparse or dense, its Jacobian kept across steps); below, the
+// generic step forms L's Hessian at each iteration, which costs as little there: a
+// written pendulum's midpoint step 184 ns against 249 by the sparse step, Kepler's 494
+// against 489 (bench_written_lagrangian, g++ -O3). The fixed-size built-ins draw the
+// line at the same place (solvers/runtime/kernels_rn.h).
+constexpr int kStructuredNewtonMinDim = 3;
 
 // The dense steps of a run-time-sized system form n x n matrices (the Newton Jacobian,
 // the velocity Hessian); beyond this many coordinates they are refused rather than
@@ -299,7 +309,8 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   // a theta map (composed or not, a theta per stage included) on a separable system:
   // Newton on the structured equation, with the sparse Hessian of U where the text of a
   // written Lagrangian gives one, a dense one otherwise (n bodies)
-  if (me.form == Form::lagrangian && !me.galerkin && dynamic_separable(L) && separable_newton_applies(me)) {
+  if (me.form == Form::lagrangian && !me.galerkin && dynamic_separable(L) && separable_newton_applies(me) &&
+      n >= kStructuredNewtonMinDim) {
     const ThetaMap R = dynamic_theta_map(me);
     if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
       std::shared_ptr<SparsePotentialHessian> H;

@@ -117,6 +117,7 @@ std::string report_json(const RunReport& r) {
   j.str("problem", r.boundary_value ? "boundary-value" : "initial-value");
   if (!r.structure.empty()) j.str("structure", r.structure).str("structure_source", r.structure_source);
   if (!r.step_path.empty()) j.str("step_path", r.step_path);
+  if (!r.derivatives.empty()) j.str("derivatives", r.derivatives);
   if (r.newton_steps >= 0) j.num("newton_steps", static_cast<double>(r.newton_steps));
   if (r.hessian_colours >= 0) j.num("hessian_colours", r.hessian_colours);
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
@@ -197,6 +198,9 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
         if (r.step_path == "kept-jacobian-newton") how = "by Newton, the Jacobian (L's Hessian) kept across steps";
         if (r.step_path == "gauss-collocation")
           how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
+        if (r.derivatives == "program") how += "; derivatives by a program differentiated once";
+        if (r.derivatives == "gradient-program") how += "; gradient by a program differentiated once";
+        if (r.derivatives == "tape") how += "; derivatives by reverse mode on the tape";
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());
       } else if (r.step_path == "sphere-chain-banded-newton") {
         std::fprintf(to, "  steps by Newton on the chain's equation, banded Jacobian (O(n) a step)\n");

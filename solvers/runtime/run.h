@@ -61,6 +61,13 @@ struct RunReport {
   // separable, of run-time size, its Jacobian kept across steps, solvers/kept_newton.h),
   // "gauss-collocation" or "generic". Empty: not reported.
   std::string structure, structure_source, step_path;
+  // How a Lagrangian written on R^n is differentiated: "program" (gradient and Hessian
+  // differentiated symbolically once, mechanics/derivative_program.h),
+  // "gradient-program" (the gradient so, the Hessian by forward over reverse mode on the
+  // tape: texts with blocks of terms, or of more than 32 coordinates) or "tape" (both on
+  // the tape: a definition read inside a block, or a graph beyond the program's size).
+  // Empty: not a written Lagrangian on R^n.
+  std::string derivatives;
   // step_path separable-sparse-newton: the colours of the Hessian's columns, so the
   // gradient passes per Jacobian are ceil(colours / 8) (-1: not such a path)
   int hessian_colours = -1;

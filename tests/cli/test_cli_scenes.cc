@@ -409,9 +409,16 @@ BOOST_AUTO_TEST_CASE(written_arrays_and_sums_match_the_built_in_systems) {
   }
   // the structure of each shipped written scene on R^n, and of a charged particle written
   // with its magnetic term (linear in v)
-  BOOST_TEST(json_string(run_json("pendulum_written.toml").out, "structure") == "separable");
-  BOOST_TEST(json_string(run_json("double_pendulum_written.toml", {"--set", "integrator.t_end=1.0"}).out,
-                         "structure") == "mechanical");
+  // and how each is differentiated: the small texts by programs of their gradient and
+  // Hessian, the chain (sums as blocks) by a program of its gradient
+  const Output pw = run_json("pendulum_written.toml");
+  BOOST_TEST(json_string(pw.out, "structure") == "separable");
+  BOOST_TEST(json_string(pw.out, "derivatives") == "program");
+  const Output dw = run_json("double_pendulum_written.toml", {"--set", "integrator.t_end=1.0"});
+  BOOST_TEST(json_string(dw.out, "structure") == "mechanical");
+  BOOST_TEST(json_string(dw.out, "derivatives") == "program");
+  BOOST_TEST(json_string(run_json("fpu_chain_written.toml", {"--set", "integrator.t_end=1.0"}).out, "derivatives") ==
+             "gradient-program");
   const std::string charged = write_scene(
       "charged_written.toml",
       "[system]\ncoordinates = [\"x\", \"y\"]\nparams = { m = 1.0, B = 4.0 }\n"
@@ -422,6 +429,8 @@ BOOST_AUTO_TEST_CASE(written_arrays_and_sums_match_the_built_in_systems) {
   BOOST_TEST(json_string(c.out, "structure") == "general");
   BOOST_TEST(json_string(c.out, "structure_source") == "expression");
   BOOST_TEST(json_string(c.out, "step_path") == "generic");
+  BOOST_TEST(json_string(c.out, "derivatives") == "program");
+  BOOST_TEST(json_string(b.out, "derivatives") == "");  // a built-in system: not reported
 }
 
 BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {

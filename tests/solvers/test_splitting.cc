@@ -469,7 +469,14 @@ BOOST_AUTO_TEST_CASE(structure_is_reported_for_every_system_on_rn) {
   const RunReport ws = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 - x^2*y"), {0.3, 0.1}, {0.0, 0.2}), me);
   BOOST_TEST(ws.structure == "separable");
   BOOST_TEST(ws.structure_source == "expression");
-  BOOST_TEST(ws.step_path == "separable-sparse-newton");  // midpoint: Newton with the sparse Hess V
+  BOOST_TEST(ws.step_path == "generic");  // midpoint on 2 coordinates: L's Hessian each iteration
+  BOOST_TEST(ws.derivatives == "program");
+  // from 3 coordinates: Newton on the structured equation with the sparse Hess V
+  const RunReport w3 =
+      run(written_problem(written({"x", "y", "z"}, "(x_dot^2 + y_dot^2 + z_dot^2)/2 - x^2*y - z^4"), {0.3, 0.1, 0.2},
+                          {0.0, 0.2, 0.1}),
+          me);
+  BOOST_TEST(w3.step_path == "separable-sparse-newton");
   const RunReport wm = run(
       written_problem(written({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a) + cos(b)"),
                       {0.5, 1.0}, {0.1, -0.3}),
