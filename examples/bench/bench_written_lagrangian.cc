@@ -5,11 +5,17 @@
 //                      inverse Legendre map (the path the engine takes by default);
 //   built-in, autodiff the same struct with its closed forms hidden (GenericOnly):
 //                      derivatives by nested Jets, exactly as for a written one;
-//   written            the Lagrangian parsed from text, derivatives by nested Jets
-//                      (WrittenLagrangian<N>, its size fixed at compile time);
-//   written, run-time  the same text through the run-time-sized kernel that `dvm run`
-//                      uses for every written system (WrittenDynamic: gradient by
-//                      reverse mode, Hessian by forward over reverse; DynamicThetaStep).
+//   written            the Lagrangian parsed from text, its size fixed at compile time
+//                      (WrittenLagrangian<N>): its gradient by the derivative program
+//                      (mechanics/derivative_program.h), one Jet level through it for
+//                      the Jacobian, as the built-in's closed-form gradient;
+//   written, run-time  the same text through the run-time-sized generic step
+//                      (WrittenDynamic: gradient and Hessian by the derivative program;
+//                      DynamicThetaStep);
+//   dvm run            the built-in system and the text through the runtime API, exactly
+//                      as `dvm run` runs a scene (make_run, execute; the energy monitored
+//                      at the end only), whatever step each takes (its step_path shown):
+//                      the figure a user sees.
 //
 // Each runs the midpoint map's position-momentum step with Newton's method, the same
 // tolerances and start, and reports ns/step, the ratio to the built-in row, and the
@@ -23,8 +29,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <map>
 #include <memory>
 #include <string>
+#include <vector>
 
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
@@ -35,6 +43,9 @@
 #include "solvers/dynamic_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/runtime/recorder.h"
+#include "solvers/runtime/registry.h"
+#include "solvers/runtime/run.h"
 #include "solvers/sparse_separable_step.h"
 #include "solvers/splitting_step.h"
 
@@ -90,6 +101,57 @@ Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::
   return time_steps(S, q0, p0, v0, steps, repeats, "written, run-time sized");
 }
 
+// A run through the runtime API as `dvm run` runs a scene: the built-in `system` with
+// `params`, or the written text; the midpoint map; the energy monitored at the last step
+// only (what is timed is the steps). The best of `repeats`, and the step path taken.
+struct RunResult {
+  Result timing;
+  std::string step_path;
+};
+RunResult measure_run(const std::string& system, const std::map<std::string, double>& params,
+                      const std::shared_ptr<WrittenSystem>& text, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0,
+                      double h, std::int64_t steps, int repeats) {
+  Problem pr;
+  if (text) {
+    pr.system = &written_system_entry();
+    pr.written = text;
+  } else {
+    pr.system = &find_system_entry(system, "bench_written_lagrangian");
+    pr.params = params;
+  }
+  pr.dim = static_cast<int>(q0.size());
+  pr.q.assign(q0.data(), q0.data() + q0.size());
+  pr.p.assign(p0.data(), p0.data() + p0.size());
+  pr.momentum_given = true;
+  pr.step = h;
+  pr.steps = steps;
+  dvm::Method me;
+  me.map = &find_map_entry("midpoint", "bench_written_lagrangian");
+  validate(pr, me);
+  RunResult best;
+  for (int r = 0; r < repeats; ++r) {
+    OutputSpec out;
+    out.monitor_every = steps;
+    Recorder rec(out);
+    auto run = make_run(pr, me);
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunReport rep = run->execute(&rec);
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                      static_cast<double>(steps);
+    if (rep.failed) {
+      std::fprintf(stderr, "dvm run of %s failed: %s\n", system.c_str(), rep.loop.failure.message.c_str());
+      std::exit(3);
+    }
+    if (ns < best.timing.ns_per_step) {
+      best.timing.ns_per_step = ns;
+      best.timing.state = rep.q_final;
+      best.timing.state.insert(best.timing.state.end(), rep.p_final.begin(), rep.p_final.end());
+      best.step_path = rep.step_path.empty() ? "generic" : rep.step_path;
+    }
+  }
+  return best;
+}
+
 std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vector<std::pair<std::string, double>> params,
                                        const std::string& L) {
   auto s = std::make_shared<WrittenSystem>();
@@ -102,13 +164,16 @@ std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vec
 }
 
 template <class S>
-void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenSystem>& text,
+void compare(const char* title, const S& builtin, const std::string& registry_name,
+             const std::map<std::string, double>& params, const std::shared_ptr<WrittenSystem>& text,
              const Vec<double, S::dim>& q0, const Vec<double, S::dim>& p0, double h, std::int64_t steps, int repeats) {
   constexpr int N = S::dim;
   const Result a = measure(builtin, q0, p0, h, steps, repeats);
   const Result b = measure(GenericOnly<S>{builtin}, q0, p0, h, steps, repeats);
   const Result c = measure(WrittenLagrangian<N>(text), q0, p0, h, steps, repeats);
   const Result d = measure_dynamic(text, q0, p0, h, steps, repeats);
+  const RunResult e = measure_run(registry_name, params, nullptr, q0, p0, h, steps, repeats);
+  const RunResult f = measure_run(registry_name, params, text, q0, p0, h, steps, repeats);
   auto diff = [&](const Result& r) {
     double m = 0;
     for (std::size_t i = 0; i < r.state.size(); ++i) m = std::fmax(m, std::fabs(r.state[i] - a.state[i]));
@@ -124,7 +189,46 @@ void compare(const char* title, const S& builtin, const std::shared_ptr<WrittenS
               diff(c));
   std::printf("  %-28s %10.1f %8.2f %14.3e\n", "written, run-time sized", d.ns_per_step, d.ns_per_step / a.ns_per_step,
               diff(d));
-  std::printf("  written / built-in autodiff = %.2f\n\n", c.ns_per_step / b.ns_per_step);
+  std::printf("  %-28s %10.1f %8.2f %14.3e   step path %s\n", "dvm run, built-in", e.timing.ns_per_step,
+              e.timing.ns_per_step / a.ns_per_step, diff(e.timing), e.step_path.c_str());
+  std::printf("  %-28s %10.1f %8.2f %14.3e   step path %s\n", "dvm run, written", f.timing.ns_per_step,
+              f.timing.ns_per_step / a.ns_per_step, diff(f.timing), f.step_path.c_str());
+  std::printf("  written / built-in autodiff = %.2f; dvm run, written / built-in = %.2f\n\n", c.ns_per_step / b.ns_per_step,
+              f.timing.ns_per_step / e.timing.ns_per_step);
+}
+
+// ---- derivatives alone ------------------------------------------------------------------
+// One gradient, and one Hessian with its gradient, of the same text through
+// WrittenDynamic: by its derivative program (the default) and by the tape (reverse mode,
+// forward over reverse for the Hessian), at one state, best of `repeats` runs of `calls`.
+void derivative_costs(const std::vector<std::pair<std::string, std::shared_ptr<WrittenSystem>>>& texts,
+                      std::int64_t calls, int repeats) {
+  std::printf("Derivatives of the texts above, one call, best of %d runs of %lld\n", repeats,
+              static_cast<long long>(calls));
+  std::printf("  %-18s %14s %14s %8s %14s %14s %8s\n", "text", "grad program", "grad tape", "ratio", "Hess program",
+              "Hess tape", "ratio");
+  for (const auto& t : texts) {
+    const WrittenDynamic P(t.second), R(t.second, WrittenDerivatives::forward_over_reverse);
+    const int n = P.dim();
+    const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(n, 0.3, 0.7), v = Eigen::VectorXd::LinSpaced(n, -0.2, 0.4);
+    Eigen::VectorXd gq(n), gv(n);
+    Eigen::MatrixXd A(n, n), B(n, n), C(n, n);
+    auto best = [&](auto&& f) {
+      double b = INFINITY;
+      for (int r = 0; r < repeats; ++r) {
+        const auto t0 = std::chrono::steady_clock::now();
+        for (std::int64_t k = 0; k < calls; ++k) f();
+        b = std::fmin(b, std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                             static_cast<double>(calls));
+      }
+      return b;
+    };
+    const double gp = best([&] { P.gradient(q, v, gq, gv); }), gt = best([&] { R.gradient(q, v, gq, gv); });
+    const double hp = best([&] { P.hessian(q, v, gq, gv, A, B, C); }), ht = best([&] { R.hessian(q, v, gq, gv, A, B, C); });
+    std::printf("  %-18s %11.1f ns %11.1f ns %8.2f %11.1f ns %11.1f ns %8.2f\n", t.first.c_str(), gp, gt, gt / gp, hp, ht,
+                ht / hp);
+  }
+  std::printf("\n");
 }
 
 // ---- explicit steps on separable systems ------------------------------------------------
@@ -282,17 +386,26 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "bench_written_lagrangian: steps and repeats must be positive\n");
     return 2;
   }
-  compare("pendulum (m = l = g = 1), q0 = 2, p0 = 0", Pendulum(1.0, 1.0, 1.0),
+  compare("pendulum (m = l = g = 1), q0 = 2, p0 = 0", Pendulum(1.0, 1.0, 1.0), "pendulum",
+          {{"m", 1.0}, {"l", 1.0}, {"g", 1.0}},
           written({"theta"}, {{"m", 1.0}, {"l", 1.0}, {"g", 1.0}}, "0.5*m*l^2*theta_dot^2 + m*g*l*cos(theta)"),
           Vec<double, 1>(2.0), Vec<double, 1>(0.0), 0.01, steps, repeats);
-  compare("Kepler, e = 0.6", Kepler(1.0),
+  compare("Kepler, e = 0.6", Kepler(1.0), "kepler", {{"mu", 1.0}},
           written({"x", "y"}, {{"mu", 1.0}}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)"), Vec<double, 2>(0.4, 0.0),
           Vec<double, 2>(0.0, 2.0), 0.005, steps, repeats);
   compare("double pendulum (all parameters 1), q0 = (0.5, 0.3), p0 = 0 (regular motion)", DoublePendulum(),
+          "double-pendulum", {{"m1", 1.0}, {"m2", 1.0}, {"l1", 1.0}, {"l2", 1.0}, {"g", 1.0}},
           written({"a", "b"}, {{"m1", 1.0}, {"m2", 1.0}, {"l1", 1.0}, {"l2", 1.0}, {"g", 1.0}},
                   "(m1 + m2)/2*l1^2*a_dot^2 + m2/2*l2^2*b_dot^2 + m2*l1*l2*a_dot*b_dot*cos(a - b)"
                   " + (m1 + m2)*g*l1*cos(a) + m2*g*l2*cos(b)"),
           Vec<double, 2>(0.5, 0.3), Vec<double, 2>(0.0, 0.0), 0.01, steps, repeats);
+  derivative_costs({{"pendulum", written({"theta"}, {{"m", 1.0}, {"l", 1.0}, {"g", 1.0}},
+                                          "0.5*m*l^2*theta_dot^2 + m*g*l*cos(theta)")},
+                    {"Kepler", written({"x", "y"}, {{"mu", 1.0}}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)")},
+                    {"double pendulum", written({"a", "b"}, {{"m1", 1.0}, {"m2", 1.0}, {"l1", 1.0}, {"l2", 1.0}, {"g", 1.0}},
+                                                "(m1 + m2)/2*l1^2*a_dot^2 + m2/2*l2^2*b_dot^2 + m2*l1*l2*a_dot*b_dot*cos(a - b)"
+                                                " + (m1 + m2)*g*l1*cos(a) + m2*g*l2*cos(b)")}},
+                   steps, repeats);
   explicit_kepler(5 * steps, repeats);
   explicit_chain(repeats);
   implicit_chain(repeats);
