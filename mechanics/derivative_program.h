@@ -38,8 +38,9 @@
 // Scope: two input blocks of n variables each (q and v, or q and p). The Hessian only
 // for tapes without blocks and 2n <= kMaxInputs; the gradient for any n. Definitions
 // (Let) are nodes like any other. A program that would exceed kMaxNodes nodes (in its
-// main graph or in a block's) is not built: build() returns null and the caller keeps
-// the tape. Operations on non-finite values give what the formulas give; a node proven
+// main graph or in a block's), or whose blocks read a definition or raise to a power
+// that varies from term to term, is not built: build() returns null and the caller
+// keeps the tape. Operations on non-finite values give what the formulas give; a node proven
 // zero is not evaluated, so where the tape would compute 0 * inf = NaN in a term that
 // does not matter to the result, the program gives the finite answer.
 #pragma once
@@ -819,7 +820,8 @@ class DerivativeProgramBuilder {
           case Op::DivC: node[j] = g.div(x, c); break;
           case Op::RSubC: node[j] = g.sub(c, x); break;
           case Op::RDivC: node[j] = g.div(c, x); break;
-          case Op::PowC: node[j] = g.op2(Op::Pow, x, c); break;
+          // x^c with c varying (pow(x, c) on the tape, finite at x = 0 where
+          // exp(c log x) and its derivative are not): such a block stays on the tape
           default: return false;
         }
       }

@@ -265,4 +265,22 @@ BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
                                     s->symbols(WrittenSystem::Kind::lagrangian));
   BOOST_TEST(!s->lagrangian.blocks().empty());
   BOOST_TEST(WrittenDynamic(s).derivative_program() == nullptr);
+  // a power whose exponent varies from term to term inside a block: the tape, whose
+  // pow(x, c) and c pow(x, c - 1) are finite at x = 0
+  auto p = std::make_shared<WrittenSystem>();
+  p->add_array("q", 20, ExpressionSymbols::Boundary::none);
+  std::vector<double> e;
+  for (int i = 0; i < 20; ++i) e.push_back(1.5 + i);
+  p->params = {{"n", 20}};
+  p->param_arrays = {{"e", e}};
+  p->check_names();
+  p->lagrangian = Expression::parse("sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, q[i]^e[i])",
+                                    p->symbols(WrittenSystem::Kind::lagrangian));
+  BOOST_TEST(!p->lagrangian.blocks().empty());
+  const WrittenDynamic W(p);
+  BOOST_TEST(W.derivative_program() == nullptr);
+  VectorXd gq(20), gv(20);
+  W.gradient(VectorXd::Zero(20), VectorXd::Zero(20), gq, gv);
+  BOOST_TEST(gq.allFinite());
+  BOOST_TEST(gq.cwiseAbs().maxCoeff() == 0.0);
 }
