@@ -237,32 +237,26 @@ T apply(const DerivativeProgram::Instr& in, const T& x, const T& y) {
 
 template <class T>
 void DerivativeProgram::run_any(const std::vector<Instr>& code, T* v) {
+  // each result constructed in its slot (the slots may be raw storage, see gradient_any)
   using Op = Expression::Op;
+  using std::cos;
   for (const Instr& in : code) {
     const T& x = v[in.a];
-    T& z = v[in.out];
+    T* z = &v[in.out];
     switch (in.op) {  // the common operations inline
-      case Op::Add: z = x + v[in.b]; break;
-      case Op::Sub: z = x - v[in.b]; break;
-      case Op::Mul: z = x * v[in.b]; break;
-      case Op::Div: z = x / v[in.b]; break;
-      case Op::Neg: z = -x; break;
-      case Op::AddC: z = x + in.c; break;
-      case Op::MulC: z = x * in.c; break;
-      case Op::PowI: z = in.k == 2 ? T(x * x) : expression_detail::power_int(x, in.k); break;
+      case Op::Add: new (z) T(x + v[in.b]); break;
+      case Op::Sub: new (z) T(x - v[in.b]); break;
+      case Op::Mul: new (z) T(x * v[in.b]); break;
+      case Op::Div: new (z) T(x / v[in.b]); break;
+      case Op::Neg: new (z) T(-x); break;
+      case Op::AddC: new (z) T(x + in.c); break;
+      case Op::MulC: new (z) T(x * in.c); break;
+      case Op::PowI: new (z) T(in.k == 2 ? T(x * x) : expression_detail::power_int(x, in.k)); break;
       case Op::Sin:
-        if constexpr (std::is_same_v<T, double>) {
-          if (in.sign) {
-            ::sincos(x, &z, &v[in.k]);
-            break;
-          }
-        } else {
-          using std::cos;
-          if (in.sign) v[in.k] = cos(x);
-        }
-        z = derivative_program_detail::apply(in, x, x);
+        if (in.sign) new (&v[in.k]) T(cos(x));  // sin and cos of one operand (see Instr)
+        new (z) T(derivative_program_detail::apply(in, x, x));
         break;
-      default: z = derivative_program_detail::apply(in, x, v[in.b]); break;
+      default: new (z) T(derivative_program_detail::apply(in, x, v[in.b])); break;
     }
   }
 }
