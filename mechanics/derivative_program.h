@@ -77,9 +77,6 @@ class DerivativeProgram {
   struct Instr;
   const std::vector<Instr>& gradient_code() const { return grad_code_; }
   const std::vector<Instr>& hessian_code() const { return hess_code_; }
-  // Instructions of the two programs (the gradient; the gradient and the Hessian).
-  std::size_t gradient_size() const { return grad_code_.size(); }
-  std::size_t hessian_size() const { return hess_code_.size(); }
 
   // The slots an evaluation works in, constants filled in (and the arrays of the
   // blocks): one per caller (a program is shared by the copies of a system; its
@@ -370,23 +367,7 @@ class DerivativeProgramBuilder {
     try {
       const int value = read(e);
       const int m = 2 * n_;
-      // 2. reverse mode
-      std::vector<int> adj(nodes_.size(), -1);
-      adj[static_cast<std::size_t>(value)] = one();
-      for (int i = value; i >= 0; --i) {
-        const int w = adj[static_cast<std::size_t>(i)];
-        const Node nd = nodes_[static_cast<std::size_t>(i)];
-        if (nd.op == Op::Block) block_adjoint_[static_cast<std::size_t>(nd.k)] = w;
-        if (w < 0 || nd.deps == 0 || nd.op == Op::Var || nd.op == Op::Block) continue;
-        const auto d = partials(i);
-        auto push = [&](int operand, int partial) {
-          const int t = mul(w, partial);
-          int& slot = adj[static_cast<std::size_t>(operand)];
-          slot = slot < 0 ? t : add(slot, t);
-        };
-        if (nodes_[static_cast<std::size_t>(nd.a)].deps) push(nd.a, d.first);
-        if (nd.b >= 0 && nodes_[static_cast<std::size_t>(nd.b)].deps) push(nd.b, d.second);
-      }
+      const std::vector<int> adj = adjoints(value);  // 2. reverse mode
       std::vector<int> grad(static_cast<std::size_t>(m), zero());
       for (int j = 0; j < m; ++j) {
         const int var = find_var(j);
@@ -673,24 +654,49 @@ class DerivativeProgramBuilder {
     }
   }
 
+  // Reverse mode from `root` (step 2): the adjoint node of every node up to it (-1:
+  // none), each a sum of products of adjoints and partial derivatives; a block's
+  // adjoint is kept in block_adjoint_ (its terms' partials are its own program's).
+  std::vector<int> adjoints(int root) {
+    std::vector<int> adj(nodes_.size(), -1);
+    adj[static_cast<std::size_t>(root)] = one();
+    for (int i = root; i >= 0; --i) {
+      const int w = adj[static_cast<std::size_t>(i)];
+      const Node nd = nodes_[static_cast<std::size_t>(i)];
+      if (nd.op == Op::Block) block_adjoint_[static_cast<std::size_t>(nd.k)] = w;
+      if (w < 0 || nd.deps == 0 || nd.op == Op::Var || nd.op == Op::Block) continue;
+      const auto d = partials(i);
+      auto push = [&](int operand, int partial) {
+        const int t = mul(w, partial);
+        int& slot = adj[static_cast<std::size_t>(operand)];
+        slot = slot < 0 ? t : add(slot, t);
+      };
+      if (nodes_[static_cast<std::size_t>(nd.a)].deps) push(nd.a, d.first);
+      if (nd.b >= 0 && nodes_[static_cast<std::size_t>(nd.b)].deps) push(nd.b, d.second);
+    }
+    return adj;
+  }
+
+  // Marks `root` and every node it reads, transitively.
+  void mark(std::vector<char>& need, int root) const {
+    std::vector<int> work{root};
+    while (!work.empty()) {
+      const int i = work.back();
+      work.pop_back();
+      if (need[static_cast<std::size_t>(i)]) continue;
+      need[static_cast<std::size_t>(i)] = 1;
+      const Node& nd = nodes_[static_cast<std::size_t>(i)];
+      if (nd.op == Op::Var || nd.op == Op::Const || nd.op == Op::Block) continue;
+      work.push_back(nd.a);
+      if (nd.b >= 0) work.push_back(nd.b);
+    }
+  }
+
   // Step 4: number the nodes the outputs need and write the two programs. Where a
   // program needs both sin x and cos x, one instruction computes them (sincos).
   void emit(const std::vector<int>& grad, const std::vector<int>& hess, DerivativeProgram& out) {
     const std::size_t count = nodes_.size();
     std::vector<char> need_grad(count, 0), need_all(count, 0);
-    auto mark = [&](std::vector<char>& need, int root) {
-      std::vector<int> work{root};
-      while (!work.empty()) {
-        const int i = work.back();
-        work.pop_back();
-        if (need[static_cast<std::size_t>(i)]) continue;
-        need[static_cast<std::size_t>(i)] = 1;
-        const Node& nd = nodes_[static_cast<std::size_t>(i)];
-        if (nd.op == Op::Var || nd.op == Op::Const || nd.op == Op::Block) continue;
-        work.push_back(nd.a);
-        if (nd.b >= 0) work.push_back(nd.b);
-      }
-    };
     for (int g : grad) mark(need_grad, g);
     // every block with an adjoint runs (its partial derivatives), and its adjoint is an
     // output; a block computes its value where these need it
@@ -820,21 +826,7 @@ class DerivativeProgramBuilder {
         }
       }
       const int root = node.back();
-      std::vector<int> adj(g.nodes_.size(), -1);
-      adj[static_cast<std::size_t>(root)] = g.one();
-      for (int i = root; i >= 0; --i) {
-        const int w = adj[static_cast<std::size_t>(i)];
-        const Node nd = g.nodes_[static_cast<std::size_t>(i)];
-        if (w < 0 || nd.deps == 0 || nd.op == Op::Var) continue;
-        const auto d = g.partials(i);
-        auto push = [&](int operand, int partial) {
-          const int t = g.mul(w, partial);
-          int& s = adj[static_cast<std::size_t>(operand)];
-          s = s < 0 ? t : g.add(s, t);
-        };
-        if (g.nodes_[static_cast<std::size_t>(nd.a)].deps) push(nd.a, d.first);
-        if (nd.b >= 0 && g.nodes_[static_cast<std::size_t>(nd.b)].deps) push(nd.b, d.second);
-      }
+      const std::vector<int> adj = g.adjoints(root);
       // the outputs: each variable's partial derivative (unless it is zero), the value
       std::vector<std::pair<int, int>> partial;  // {input, node}
       for (std::size_t i = 0; i < inputs.size(); ++i) {
@@ -845,19 +837,8 @@ class DerivativeProgramBuilder {
       }
       const std::size_t count = g.nodes_.size();
       std::vector<char> need(count, 0);
-      std::vector<int> work;
-      for (const auto& d : partial) work.push_back(d.second);
-      if (value) work.push_back(root);
-      while (!work.empty()) {
-        const int i = work.back();
-        work.pop_back();
-        if (need[static_cast<std::size_t>(i)]) continue;
-        need[static_cast<std::size_t>(i)] = 1;
-        const Node& nd = g.nodes_[static_cast<std::size_t>(i)];
-        if (nd.op == Op::Var || nd.op == Op::Const) continue;
-        work.push_back(nd.a);
-        if (nd.b >= 0) work.push_back(nd.b);
-      }
+      for (const auto& d : partial) g.mark(need, d.second);
+      if (value) g.mark(need, root);
       std::vector<std::int32_t> slot(count, -1);
       std::int32_t slots = 0;
       for (std::size_t i = 0; i < count; ++i) {
