@@ -205,16 +205,8 @@ struct WrittenLagrangian {
   // through the tape where no program was built.
   template <class T>
   void gradient(const Vec<T, N>& q, const Vec<T, N>& v, Vec<T, N>& Lq, Vec<T, N>& Lv) const {
-    if (!program) {
-      using D = ceres::Jet<T, 2 * N>;
-      Vec<D, N> qd, vd;
-      for (int i = 0; i < N; ++i) {
-        qd[i] = seed<T, 2 * N>(q[i], i);
-        vd[i] = seed<T, 2 * N>(v[i], N + i);
-      }
-      const D l = (*this)(qd, vd);
-      Lq = l.v.template head<N>();
-      Lv = l.v.template tail<N>();
+    if (!program) {  // forward mode through the text, as for a Lagrangian without a gradient
+      lagrangian_gradient(GenericOnly<WrittenLagrangian>{*this}, q, v, Lq, Lv);
       return;
     }
     constexpr std::size_t kStack = 128;
