@@ -19,6 +19,7 @@
 #include <boost/test/unit_test.hpp>
 
 #include <array>
+#include <utility>
 #include <cmath>
 #include <random>
 #include <string>
@@ -127,19 +128,25 @@ BOOST_AUTO_TEST_CASE(mass_matrix_and_lagrangian) {
 
 BOOST_AUTO_TEST_CASE(banded_lu_against_dense) {
   std::mt19937 g(3);
-  const int n = 40, kl = 3, ku = 5;
-  BandedLU B(n, kl, ku);
-  MatrixXd A = MatrixXd::Zero(n, n);
-  for (int i = 0; i < n; ++i)
-    for (int j = std::max(0, i - kl); j <= std::min(n - 1, i + ku); ++j) A(i, j) = B.at(i, j) = random_vector(1, g)[0];
-  for (int i = 0; i < n; i += 3) A(i, i) = B.at(i, i) = 0.0;  // every third pivot needs a row exchange
-  const VectorXd b = random_vector(n, g);
-  VectorXd x = b;
-  BOOST_TEST_REQUIRE(B.factor());
-  B.solve(x);
-  const VectorXd y = A.partialPivLu().solve(b);
-  BOOST_TEST((x - y).cwiseAbs().maxCoeff() <= 1e-11 * y.cwiseAbs().maxCoeff());
-  BOOST_TEST((A * x - b).cwiseAbs().maxCoeff() <= 1e-12);
+  // a general band, and the bands with solves of fixed length (tridiagonal, pentadiagonal)
+  for (const auto& band : {std::pair<int, int>{3, 5}, {1, 1}, {2, 2}}) {
+    const int n = 40, kl = band.first, ku = band.second;
+    BOOST_TEST_CONTEXT("kl = " << kl << ", ku = " << ku) {
+      BandedLU B(n, kl, ku);
+      MatrixXd A = MatrixXd::Zero(n, n);
+      for (int i = 0; i < n; ++i)
+        for (int j = std::max(0, i - kl); j <= std::min(n - 1, i + ku); ++j)
+          A(i, j) = B.at(i, j) = random_vector(1, g)[0];
+      for (int i = 0; i < n; i += 3) A(i, i) = B.at(i, i) = 0.0;  // every third pivot needs a row exchange
+      const VectorXd b = random_vector(n, g);
+      VectorXd x = b;
+      BOOST_TEST_REQUIRE(B.factor());
+      B.solve(x);
+      const VectorXd y = A.partialPivLu().solve(b);
+      BOOST_TEST((x - y).cwiseAbs().maxCoeff() <= 1e-11 * y.cwiseAbs().maxCoeff());
+      BOOST_TEST((A * x - b).cwiseAbs().maxCoeff() <= 1e-12);
+    }
+  }
   // a singular matrix is reported, not solved
   BandedLU S(4, 1, 1);
   S.at(0, 0) = 1.0;
