@@ -33,7 +33,9 @@
 // term to term), and its partial derivatives are nodes of that graph. A program runs a
 // block's graph an instruction at a time across all its terms (tight loops over arrays),
 // then adds each term's partial derivatives, times the block's adjoint, to the gradient
-// entries of the term's variables.
+// entries of the term's variables. The gradient also runs in any scalar type: in Jets
+// (gradient_any without blocks, gradient_blocks_any with them) it gives derivatives of
+// the gradient, as the fixed-size steps and the sparse Hessian of a potential take them.
 //
 // Scope: two input blocks of n variables each (q and v, or q and p). The Hessian only
 // for tapes without blocks and 2n <= kMaxInputs; the gradient for any n. Definitions
@@ -132,6 +134,39 @@ class DerivativeProgram {
     }
   }
 
+  // The gradient in any scalar type T with the blocks run too: v, a workspace_any<T>()
+  // (the blocks' arrays in T). The sparse Hessian of a chain's potential runs it in Jets
+  // (mechanics/sparse_hessian.h).
+  template <class T>
+  std::vector<T> workspace_any() const {
+    const std::vector<double> w = workspace();
+    std::vector<T> out;
+    out.reserve(w.size());
+    for (double x : w) out.push_back(constant<T>(x));
+    return out;
+  }
+  template <class T>
+  void gradient_blocks_any(const T* a, const T* b, T* ga, T* gb, T* v) const {
+    for (const auto& in : inputs_) v[in.first] = in.second < n_ ? a[in.second] : b[in.second - n_];
+    run_any(grad_code_, v, a, b);
+    for (int i = 0; i < n_; ++i) {
+      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
+      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
+    }
+    for (const BlockProgram& B : blocks_) {
+      if (B.adjoint < 0) continue;
+      const T w = v[B.adjoint];
+      const T* arrays = v + B.offset;
+      for (const auto& d : B.partials) {
+        const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
+        T* g = in.block == 0 ? ga : gb;
+        const std::int32_t* ix = in.index.data();
+        const T* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
+        for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
+      }
+    }
+  }
+
   // The gradient and the Hessian's blocks Haa, Hab (Hab(i, j) = d2/da_i db_j) and Hbb,
   // column-major with leading dimensions lda, ldab, ldb.
   void hessian(const double* a, const double* b, double* ga, double* gb, double* Haa, int lda, double* Hab, int ldab,
@@ -194,8 +229,11 @@ class DerivativeProgram {
     for (const auto& in : inputs_) v[in.first] = in.second < n_ ? a[in.second] : b[in.second - n_];
   }
   void run(const std::vector<Instr>& code, double* v, const double* a, const double* b) const;
+  // (a, b: the inputs, read by the blocks; none where the code has no block)
   template <class T>
-  static void run_any(const std::vector<Instr>& code, T* v);
+  void run_any(const std::vector<Instr>& code, T* v, const T* a = nullptr, const T* b = nullptr) const;
+  template <class T>
+  T run_block_any(const BlockProgram& B, T* v, const T* a, const T* b) const;
 
   int n_ = 0;
   std::vector<Instr> grad_code_, hess_code_;
@@ -233,7 +271,7 @@ T apply(const DerivativeProgram::Instr& in, const T& x, const T& y) {
 }  // namespace derivative_program_detail
 
 template <class T>
-void DerivativeProgram::run_any(const std::vector<Instr>& code, T* v) {
+void DerivativeProgram::run_any(const std::vector<Instr>& code, T* v, const T* a, const T* b) const {
   // each result constructed in its slot (the slots may be raw storage, see gradient_any)
   using Op = Expression::Op;
   using std::cos;
@@ -253,9 +291,52 @@ void DerivativeProgram::run_any(const std::vector<Instr>& code, T* v) {
         if (in.sign) new (&v[in.k]) T(cos(x));  // sin and cos of one operand (see Instr)
         new (z) T(derivative_program_detail::apply(in, x, x));
         break;
+      case Op::Block: new (z) T(run_block_any(blocks_[static_cast<std::size_t>(in.k)], v, a, b)); break;
       default: new (z) T(derivative_program_detail::apply(in, x, v[in.b])); break;
     }
   }
+}
+
+// run_block in any scalar type.
+template <class T>
+T DerivativeProgram::run_block_any(const BlockProgram& B, T* v, const T* a, const T* b) const {
+  using Op = Expression::Op;
+  const std::size_t m = B.terms;
+  T* w = v + B.offset;
+  for (const auto& in : B.inputs) {
+    if (in.slot < 0 || !in.values.empty()) continue;  // (varying constants: in place already)
+    const T* src = in.block == 0 ? a : b;
+    const std::int32_t* ix = in.index.data();
+    T* dst = w + static_cast<std::size_t>(in.slot) * m;
+    for (std::size_t k = 0; k < m; ++k) dst[k] = src[ix[k]];
+  }
+  for (const Instr& in : B.code) {
+    const T* x = w + static_cast<std::size_t>(in.a) * m;
+    const T* y = w + static_cast<std::size_t>(in.b) * m;
+    T* z = w + static_cast<std::size_t>(in.out) * m;
+    switch (in.op) {  // the common operations inline, as in run_block
+      case Op::Add: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + y[k]; break;
+      case Op::Sub: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] - y[k]; break;
+      case Op::Mul: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * y[k]; break;
+      case Op::Div: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] / y[k]; break;
+      case Op::Neg: for (std::size_t k = 0; k < m; ++k) z[k] = -x[k]; break;
+      case Op::AddC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + in.c; break;
+      case Op::MulC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * in.c; break;
+      case Op::PowI:
+        if (in.k == 2) {
+          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k];
+          break;
+        }
+        [[fallthrough]];
+      default:
+        for (std::size_t k = 0; k < m; ++k) z[k] = derivative_program_detail::apply(in, x[k], y[k]);
+    }
+  }
+  if (B.root < 0) return constant<T>(0.0);
+  const T* r = w + static_cast<std::size_t>(B.root) * m;
+  T sum = r[0];
+  for (std::size_t k = 1; k < m; ++k) sum += r[k];
+  return sum;
 }
 
 // In doubles: direct threading (each operation jumps to the next one's code through a
