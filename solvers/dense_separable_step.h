@@ -64,7 +64,7 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
     if (!work_ || work_->J.rows() != L.dim()) throw std::invalid_argument("the workspace is not the system's");
   }
 
-  static const char* factorisation() { return "dense LU factorisation"; }
+  const char* factorisation() const { return "dense LU factorisation"; }
 
  private:
   friend Base;

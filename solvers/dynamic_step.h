@@ -236,7 +236,7 @@ class DynamicThetaStep {
       s.L_.gradient(s.x_, s.v_, s.Lq_, s.Lv_);
       for (Eigen::Index i = 0; i < dp.size(); ++i) dp[i] = s.h_ * s.Lq_[i];
     }
-    static const char* factorisation() { return "dense LU factorisation"; }
+    const char* factorisation() const { return "dense LU factorisation"; }
   };
   // The factorisation kept across steps, shared by copies of the step.
   struct Kept : KeptJacobian {

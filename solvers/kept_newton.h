@@ -22,7 +22,7 @@
 //   bool factor() const                               J factored; false where singular
 //   void solve(const V& r, V& dx) const               J dx = r
 //   void increment(const V& q0, const V& dq, V& dp) const   dp = p1 - p0
-//   static const char* factorisation()                named when J is singular
+//   const char* factorisation() const                 named when J is singular
 #pragma once
 
 #include <Eigen/Core>
@@ -85,14 +85,15 @@ void kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& op
       ops.residual(q0, p0, dq, w.r);
       s.residual = dynamic_detail::inf_norm(w.r);
     }
+    const double dqn = dynamic_detail::inf_norm(dq);  // (dq is this until the correction below)
     bool refresh = !f.valid;
     if (!refresh && (!(s.residual <= 0.25 * last) || 2 * (it + 1) > opt.max_iterations)) {
       // not shrinking fourfold, or in the second half of the budget (Newton's method
       // from there on): a new Jacobian, unless the residual is already where the stopping
       // rule accepts it (at round-off it shrinks no more, whatever J is)
       StepSummary probe = s;
-      probe.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
-      refresh = newton_verdict_floored(probe, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) !=
+      probe.scale = pscale + f.Jmax * dqn + opt.absolute_floor;
+      refresh = newton_verdict_floored(probe, dxn, dqn + x0, opt, f.Jmax) !=
                 NewtonVerdict::converged;
     }
     if (refresh) {
@@ -101,34 +102,35 @@ void kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& op
       formed = true;
       f.valid = std::isfinite(f.Jmax) && ops.factor();  // (factor() may read f.Jmax, set above)
       if (std::isfinite(f.Jmax) && !f.valid) {
-        s.scale = pscale + f.Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+        s.scale = pscale + f.Jmax * dqn + opt.absolute_floor;
         if (std::isfinite(s.residual) &&
-            newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, f.Jmax) == NewtonVerdict::converged)
+            newton_verdict_floored(s, dxn, dqn + x0, opt, f.Jmax) == NewtonVerdict::converged)
           break;  // nothing more to apply
-        fail(std::string("singular step Jacobian (") + Ops::factorisation() + " failed)");
+        fail(std::string("singular step Jacobian (") + ops.factorisation() + " failed)");
         return;
       }
     }
     const double Jmax = f.Jmax;
     last = s.residual;
-    s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + opt.absolute_floor;
+    s.scale = pscale + Jmax * dqn + opt.absolute_floor;
     if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
       fail("non-finite residual or Jacobian");
       return;
     }
-    const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dynamic_detail::inf_norm(dq) + x0, opt, Jmax);
+    const NewtonVerdict verdict = newton_verdict_floored(s, dxn, dqn + x0, opt, Jmax);
     if (verdict == NewtonVerdict::failed) {
       if (s.iterations == 0) s.iterations = 1;
       return;
     }
     ops.solve(w.r, w.dx);  // J dx = r, J = -dr/dD
-    if (!std::isfinite(dynamic_detail::inf_norm(w.dx))) {
+    const double dx_norm = dynamic_detail::inf_norm(w.dx);
+    if (!std::isfinite(dx_norm)) {
       fail("singular step Jacobian");
       return;
     }
     dq += w.dx;
     if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
-    dxn = dynamic_detail::inf_norm(w.dx);
+    dxn = dx_norm;
   }
   if (!s.converged) {
     fail("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +

@@ -11,7 +11,7 @@
 // (which derives from it) supplies
 //   void force(const V& x, V& F) const           F = grad U(x)
 //   double jacobian(const V& x) const            J formed at x; its largest entry (or INFINITY)
-//   bool factor() const, void solve(const V& r, V& dx) const, static const char* factorisation()
+//   bool factor() const, void solve(const V& r, V& dx) const, const char* factorisation() const
 //   KeptJacobian& kept() const                   the kept factorisation's state, shared
 //                                                by copies of a step
 #pragma once
@@ -119,7 +119,7 @@ class SeparableThetaNewton {
       step.force(base.x_, base.F_);
       dp = base.h_ * base.F_;
     }
-    static const char* factorisation() { return Step::factorisation(); }
+    const char* factorisation() const { return step.factorisation(); }
   };
   mutable V x_, F_;
   mutable KeptNewtonWork work_;
