@@ -5,6 +5,8 @@
 #define BOOST_TEST_MODULE derivative_program
 #include <boost/test/unit_test.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <random>
 
 #include <ceres/jet.h>
@@ -229,6 +231,33 @@ BOOST_AUTO_TEST_CASE(blocks_are_differentiated_once_for_their_shape) {
         const Derivatives p = derivatives(P, q, v), r = derivatives(R, q, v);
         BOOST_TEST(largest(r) > 0.1);
         BOOST_TEST(difference(p, r) <= 1e-14);
+        // the program in Jets, blocks included (what the sparse Hessian of a potential
+        // runs): seeded with a direction (dq, dv), the derivative parts of its gradient
+        // are the tape's Hessian times that direction
+        using J2 = ceres::Jet<double, 2>;
+        const DerivativeProgram& prog = *P.derivative_program();
+        const VectorXd dq = random_vector(n, 1.0, 130 + 10 * t + point), dv = random_vector(n, 1.0, 170 + 10 * t + point);
+        std::vector<J2> a(static_cast<std::size_t>(n)), b(a), ga(a), gb(a);
+        for (int i = 0; i < n; ++i) {
+          a[static_cast<std::size_t>(i)] = J2(q[i]);
+          a[static_cast<std::size_t>(i)].v << dq[i], 1.0;
+          b[static_cast<std::size_t>(i)] = J2(v[i]);
+          b[static_cast<std::size_t>(i)].v << dv[i], 0.0;
+        }
+        std::vector<J2> slots = prog.workspace_any<J2>();
+        prog.gradient_blocks_any(a.data(), b.data(), ga.data(), gb.data(), slots.data());
+        const VectorXd Hq = r.Lqq * dq + r.Lqv * dv, Hv = r.Lqv.transpose() * dq + r.Lvv * dv;
+        const VectorXd sq = r.Lqq.rowwise().sum(), sv = r.Lqv.colwise().sum().transpose();
+        const double scale = largest(r) * (dq.cwiseAbs().sum() + dv.cwiseAbs().sum());
+        double worst = 0.0;
+        for (int i = 0; i < n; ++i) {
+          const auto& x = ga[static_cast<std::size_t>(i)];
+          const auto& y = gb[static_cast<std::size_t>(i)];
+          worst = std::max({worst, std::fabs(x.a - r.Lq[i]) / largest(r), std::fabs(y.a - r.Lv[i]) / largest(r),
+                            std::fabs(x.v[0] - Hq[i]) / scale, std::fabs(y.v[0] - Hv[i]) / scale,
+                            std::fabs(x.v[1] - sq[i]) / scale, std::fabs(y.v[1] - sv[i]) / scale});
+        }
+        BOOST_TEST(worst <= 1e-14);
       }
     }
     ++t;
