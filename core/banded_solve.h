@@ -96,6 +96,28 @@ class BandedLU {
   void solve_band(double* b) const {
     const int kl = KL > 0 ? KL : kl_, ku = KU > 0 ? KU : ku_, w = width_, n = n_;
     const double* a = a_.data();
+    if constexpr (KL == 1 && KU == 1) {
+      // tridiagonal: the values each row passes to the next held in registers rather
+      // than stored and read back (U's two superdiagonals past the last row are the
+      // zeros the storage was made with: nothing writes there)
+      double x = b[0];
+      for (int k = 0; k + 1 < n; ++k) {
+        double next = b[k + 1];
+        if (pivot_[static_cast<std::size_t>(k)] != k) std::swap(x, next);
+        b[k] = x;
+        x = next - a[(k + 1) * w] * x;  // L(k + 1, k)
+      }
+      b[n - 1] = x;
+      double x1 = 0.0, x2 = 0.0;  // x_{k+1}, x_{k+2}
+      for (int k = n - 1; k >= 0; --k) {
+        const double* u = a + k * w + 1;  // U(k, k), U(k, k + 1), U(k, k + 2)
+        const double xk = (b[k] - u[2] * x2 - u[1] * x1) * inverse_pivot_[static_cast<std::size_t>(k)];
+        b[k] = xk;
+        x2 = x1;
+        x1 = xk;
+      }
+      return;
+    }
     // L: row i holds L(i, k) at i w + k - i + kl
     for (int k = 0; k < n; ++k) {
       const int p = pivot_[static_cast<std::size_t>(k)];
