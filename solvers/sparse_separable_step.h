@@ -129,7 +129,7 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
   // rows of w particles has b = w. Beyond, the fill-reducing sparse LDL^T. A band costs
   // about 3 b^2 n to factor and 4 b n to solve with no ordering to follow and no
   // indices to read: on a tridiagonal matrix of n = 10000, 125 against 175 to 230 us to
-  // factor and 69 against 108 us to solve (g++ -O3).
+  // factor and 44 against 104 us to solve (g++ -O3).
   static constexpr int kMaxBand = 8;
 
  private:
