@@ -102,22 +102,7 @@ class DerivativeProgram {
   void gradient(const double* a, const double* b, double* ga, double* gb, double* v) const {
     load(a, b, v);
     run(grad_code_, v, a, b);
-    for (int i = 0; i < n_; ++i) {
-      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
-      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
-    }
-    for (const BlockProgram& B : blocks_) {
-      if (B.adjoint < 0) continue;
-      const double w = v[B.adjoint];
-      const double* arrays = v + B.offset;
-      for (const auto& d : B.partials) {
-        const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
-        double* g = in.block == 0 ? ga : gb;
-        const std::int32_t* ix = in.index.data();
-        const double* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
-        for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
-      }
-    }
+    gradient_out(v, ga, gb);
   }
   // The gradient in any scalar type T (a ceres::Jet gives derivatives of the gradient:
   // the fixed-size steps take one Jet level through a Lagrangian's gradient). v: slots()
@@ -128,10 +113,7 @@ class DerivativeProgram {
     for (const auto& c : constant_slots_) new (&v[c.first]) T(constant<T>(c.second));
     for (const auto& in : inputs_) new (&v[in.first]) T(in.second < n_ ? a[in.second] : b[in.second - n_]);
     run_any(grad_code_, v);
-    for (int i = 0; i < n_; ++i) {
-      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
-      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
-    }
+    gradient_out(v, ga, gb);  // (no blocks)
   }
 
   // The gradient in any scalar type T with the blocks run too: v, a workspace_any<T>()
@@ -149,22 +131,7 @@ class DerivativeProgram {
   void gradient_blocks_any(const T* a, const T* b, T* ga, T* gb, T* v) const {
     for (const auto& in : inputs_) v[in.first] = in.second < n_ ? a[in.second] : b[in.second - n_];
     run_any(grad_code_, v, a, b);
-    for (int i = 0; i < n_; ++i) {
-      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
-      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
-    }
-    for (const BlockProgram& B : blocks_) {
-      if (B.adjoint < 0) continue;
-      const T w = v[B.adjoint];
-      const T* arrays = v + B.offset;
-      for (const auto& d : B.partials) {
-        const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
-        T* g = in.block == 0 ? ga : gb;
-        const std::int32_t* ix = in.index.data();
-        const T* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
-        for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
-      }
-    }
+    gradient_out(v, ga, gb);
   }
 
   // The gradient and the Hessian's blocks Haa, Hab (Hab(i, j) = d2/da_i db_j) and Hbb,
@@ -225,6 +192,27 @@ class DerivativeProgram {
   };
   // Runs block B's program into its arrays; returns the block's value (0 when unneeded).
   double run_block(const BlockProgram& B, double* v, const double* a, const double* b) const;
+  // The gradient from a run's slots v: the main program's entries, then each block's
+  // partial derivatives times its adjoint added to its terms' variables.
+  template <class T>
+  void gradient_out(const T* v, T* ga, T* gb) const {
+    for (int i = 0; i < n_; ++i) {
+      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
+      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
+    }
+    for (const BlockProgram& B : blocks_) {
+      if (B.adjoint < 0) continue;
+      const T w = v[B.adjoint];
+      const T* arrays = v + B.offset;
+      for (const auto& d : B.partials) {
+        const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
+        T* g = in.block == 0 ? ga : gb;
+        const std::int32_t* ix = in.index.data();
+        const T* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
+        for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
+      }
+    }
+  }
   void load(const double* a, const double* b, double* v) const {
     for (const auto& in : inputs_) v[in.first] = in.second < n_ ? a[in.second] : b[in.second - n_];
   }
