@@ -190,8 +190,6 @@ class DerivativeProgram {
     std::int32_t root = -1;     // the terms' values (-1: the block's value is not needed)
     std::int32_t adjoint = -1;  // the block's adjoint, a slot of the main program (-1: none)
   };
-  // Runs block B's program into its arrays; returns the block's value (0 when unneeded).
-  double run_block(const BlockProgram& B, double* v, const double* a, const double* b) const;
   // The gradient from a run's slots v: the main program's entries, then each block's
   // partial derivatives times its adjoint added to its terms' variables.
   template <class T>
@@ -220,8 +218,10 @@ class DerivativeProgram {
   // (a, b: the inputs, read by the blocks; none where the code has no block)
   template <class T>
   void run_any(const std::vector<Instr>& code, T* v, const T* a = nullptr, const T* b = nullptr) const;
+  // Runs block B's program into its arrays (in doubles or any scalar type); returns the
+  // block's value (0 where unneeded).
   template <class T>
-  T run_block_any(const BlockProgram& B, T* v, const T* a, const T* b) const;
+  T run_block(const BlockProgram& B, T* v, const T* a, const T* b) const;
 
   int n_ = 0;
   std::vector<Instr> grad_code_, hess_code_;
@@ -279,15 +279,16 @@ void DerivativeProgram::run_any(const std::vector<Instr>& code, T* v, const T* a
         if (in.sign) new (&v[in.k]) T(cos(x));  // sin and cos of one operand (see Instr)
         new (z) T(derivative_program_detail::apply(in, x, x));
         break;
-      case Op::Block: new (z) T(run_block_any(blocks_[static_cast<std::size_t>(in.k)], v, a, b)); break;
+      case Op::Block: new (z) T(run_block(blocks_[static_cast<std::size_t>(in.k)], v, a, b)); break;
       default: new (z) T(derivative_program_detail::apply(in, x, v[in.b])); break;
     }
   }
 }
 
-// run_block in any scalar type.
+// A block an instruction at a time across all its terms; the common operations as plain
+// loops (vectorised in doubles).
 template <class T>
-T DerivativeProgram::run_block_any(const BlockProgram& B, T* v, const T* a, const T* b) const {
+T DerivativeProgram::run_block(const BlockProgram& B, T* v, const T* a, const T* b) const {
   using Op = Expression::Op;
   const std::size_t m = B.terms;
   T* w = v + B.offset;
@@ -302,7 +303,7 @@ T DerivativeProgram::run_block_any(const BlockProgram& B, T* v, const T* a, cons
     const T* x = w + static_cast<std::size_t>(in.a) * m;
     const T* y = w + static_cast<std::size_t>(in.b) * m;
     T* z = w + static_cast<std::size_t>(in.out) * m;
-    switch (in.op) {  // the common operations inline, as in run_block
+    switch (in.op) {
       case Op::Add: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + y[k]; break;
       case Op::Sub: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] - y[k]; break;
       case Op::Mul: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * y[k]; break;
@@ -313,6 +314,10 @@ T DerivativeProgram::run_block_any(const BlockProgram& B, T* v, const T* a, cons
       case Op::PowI:
         if (in.k == 2) {
           for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k];
+          break;
+        }
+        if (in.k == 3) {
+          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k] * x[k];
           break;
         }
         [[fallthrough]];
@@ -377,50 +382,6 @@ block: v[in->out] = run_block(blocks_[static_cast<std::size_t>(in->k)], v, a, b)
 #undef DVM_NEXT
 }
 #pragma GCC diagnostic pop
-
-inline double DerivativeProgram::run_block(const BlockProgram& B, double* v, const double* a, const double* b) const {
-  using Op = Expression::Op;
-  const std::size_t m = B.terms;
-  double* w = v + B.offset;
-  for (const auto& in : B.inputs) {
-    if (in.slot < 0 || !in.values.empty()) continue;  // (varying constants: in place already)
-    const double* src = in.block == 0 ? a : b;
-    const std::int32_t* ix = in.index.data();
-    double* dst = w + static_cast<std::size_t>(in.slot) * m;
-    for (std::size_t k = 0; k < m; ++k) dst[k] = src[ix[k]];
-  }
-  for (const Instr& in : B.code) {
-    const double* x = w + static_cast<std::size_t>(in.a) * m;
-    const double* y = w + static_cast<std::size_t>(in.b) * m;
-    double* z = w + static_cast<std::size_t>(in.out) * m;
-    switch (in.op) {  // the common operations as plain loops (vectorised)
-      case Op::Add: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + y[k]; break;
-      case Op::Sub: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] - y[k]; break;
-      case Op::Mul: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * y[k]; break;
-      case Op::Div: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] / y[k]; break;
-      case Op::Neg: for (std::size_t k = 0; k < m; ++k) z[k] = -x[k]; break;
-      case Op::AddC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + in.c; break;
-      case Op::MulC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * in.c; break;
-      case Op::PowI:
-        if (in.k == 2) {
-          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k];
-          break;
-        }
-        if (in.k == 3) {
-          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k] * x[k];
-          break;
-        }
-        [[fallthrough]];
-      default:
-        for (std::size_t k = 0; k < m; ++k) z[k] = derivative_program_detail::apply(in, x[k], y[k]);
-    }
-  }
-  if (B.root < 0) return 0.0;
-  const double* r = w + static_cast<std::size_t>(B.root) * m;
-  double sum = r[0];
-  for (std::size_t k = 1; k < m; ++k) sum += r[k];
-  return sum;
-}
 
 // Builds a DerivativeProgram (the steps of the header comment).
 class DerivativeProgramBuilder {
