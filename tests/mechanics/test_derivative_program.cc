@@ -14,6 +14,7 @@
 #include "mechanics/derivative_program.h"
 #include "mechanics/dynamic_system.h"
 #include "mechanics/written_lagrangian.h"
+#include "tests/random_vector.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
@@ -32,14 +33,6 @@ std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, const st
   s->check_names();
   s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian), blocks);
   return s;
-}
-
-VectorXd random_vector(int n, double scale, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  VectorXd x(n);
-  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
-  return x;
 }
 
 struct Derivatives {

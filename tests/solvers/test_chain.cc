@@ -12,21 +12,10 @@
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "tests/random_vector.h"
 
 using namespace dvm;
 using Eigen::VectorXd;
-
-namespace {
-
-VectorXd random_vector(int n, double scale, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  VectorXd x(n);
-  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
-  return x;
-}
-
-}  // namespace
 
 BOOST_AUTO_TEST_CASE(gradient_and_hessian_match_automatic_differentiation) {
   for (bool fixed : {true, false}) {

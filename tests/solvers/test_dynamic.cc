@@ -78,6 +78,7 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 #include "tests/verification/common.h"
+#include "tests/random_vector.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
@@ -140,14 +141,6 @@ std::shared_ptr<WrittenSystem> written_chain(int n, bool blocks = true) {
     pot += (i ? " + " : "") + std::string("k/2*") + r + "^2 + beta/4*" + r + "^4";
   }
   return written(c, {{"k", 1.0}, {"beta", 0.5}}, "(" + kin + ")/2 - (" + pot + ")", "", blocks);
-}
-
-VectorXd random_vector(int n, double scale, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  VectorXd x(n);
-  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
-  return x;
 }
 
 double rel_diff(const MatrixXd& a, const MatrixXd& b) {

@@ -37,6 +37,7 @@
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/run.h"
 #include "tests/solvers/structured_runs.h"
+#include "tests/random_vector.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
@@ -100,14 +101,6 @@ std::vector<Text> texts() {
   out.push_back({"kepler, no blocks",
                  written(2, B::none, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)", {{"mu", 1.5}}, {}, {"x", "y"})});
   return out;
-}
-
-VectorXd random_vector(int n, double scale, unsigned seed) {
-  std::mt19937 rng(seed);
-  std::uniform_real_distribution<double> U(-1.0, 1.0);
-  VectorXd x(n);
-  for (int i = 0; i < n; ++i) x[i] = scale * U(rng);
-  return x;
 }
 
 Problem written_problem(const std::shared_ptr<WrittenSystem>& w, const VectorXd& q, const VectorXd& v) {
