@@ -77,15 +77,14 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
       // banded: J's entries as offsets into the band's storage, refilled at each Jacobian
       auto& B = factorisation_->band;
       B = std::make_unique<BandedLU>(n, band, band);
-      auto offset = [&](int i, int j) { return B->offset(i, j); };
       position_.resize(hessian_->entries());
       std::size_t k = 0;
       for (int j = 0; j < n; ++j)
-        for (int i : cols[static_cast<std::size_t>(j)]) position_[k++] = offset(i, j);
+        for (int i : cols[static_cast<std::size_t>(j)]) position_[k++] = B->offset(i, j);
       for (int j = 0; j < n; ++j)
         for (int i = std::max(0, j - band); i <= std::min(n - 1, j + band); ++i) {
           const double Mij = w.split.diagonal ? (i == j ? w.mass_diagonal[j] : 0.0) : w.mass(i, j);
-          if (Mij != 0.0) mass_entries_.emplace_back(offset(i, j), Mij / h_);
+          if (Mij != 0.0) mass_entries_.emplace_back(B->offset(i, j), Mij / h_);
         }
       return;
     }
@@ -117,7 +116,7 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
     factorisation_->ldlt.analyzePattern(J_);
   }
 
-  // Whether J is factored in its band (else by the sparse LDL^T), and that band.
+  // Whether J is factored in its band (else by the sparse LDL^T).
   bool banded() const { return factorisation_->band != nullptr; }
 
   const char* factorisation() const {
