@@ -156,8 +156,23 @@ namespace dynamic_detail {
 // max |x_i| over a vector or matrix of doubles, NaN if any entry is NaN (as max_abs of
 // core/scalar.h, in plain loops over the storage: four running maxima, which do not
 // wait on each other, 0.41 against 0.55 ns an entry with one at n = 10000, g++ -O3).
+// (fixed sizes: one pass over a few entries, inlined)
+template <class Derived>
+[[gnu::always_inline]] inline double inf_norm_fixed(const Eigen::PlainObjectBase<Derived>& x) {
+  const double* d = x.data();
+  double m = 0.0;
+  bool nan = false;
+  for (Eigen::Index i = 0; i < Derived::SizeAtCompileTime; ++i) {
+    const double a = std::fabs(d[i]);
+    nan |= a != a;
+    m = a > m ? a : m;
+  }
+  return nan ? NAN : m;
+}
 template <class Derived>
 double inf_norm(const Eigen::PlainObjectBase<Derived>& x) {
+  if constexpr (Derived::SizeAtCompileTime != Eigen::Dynamic && Derived::SizeAtCompileTime <= 16)
+    return inf_norm_fixed(x);
   const double* d = x.data();
   const Eigen::Index n = x.size();
   double m[4] = {0.0, 0.0, 0.0, 0.0};
@@ -184,26 +199,32 @@ double inf_norm(const Eigen::PlainObjectBase<Derived>& x) {
 // size, in storage sized once: factor() and solve() allocate nothing. Singular to
 // working precision means a pivot not above 1e-14 max|A| (the rule of solve_dense,
 // core/dense_solve.h) or not finite. Unblocked, column oriented: meant for the dense
-// step matrices of a few to a few hundred unknowns.
-class DenseLU {
+// step matrices of a few to a few hundred unknowns. K: the size where it is known at
+// compile time (the loops then have fixed lengths; DenseLU is the run-time-sized one).
+template <int K = Eigen::Dynamic>
+class DenseLUOf {
  public:
-  DenseLU() = default;
-  explicit DenseLU(int n) { resize(n); }
+  DenseLUOf() = default;
+  explicit DenseLUOf(int n) { resize(n); }
   void resize(int n) {
+    if (K != Eigen::Dynamic && n != K)
+      throw std::invalid_argument("DenseLUOf<" + std::to_string(K) + ">: a matrix of size " + std::to_string(n));
     lu_.resize(n, n);
-    piv_.resize(static_cast<std::size_t>(n));
+    piv_.resize(n);
+    inverse_pivot_.resize(n);
   }
   int size() const { return static_cast<int>(lu_.rows()); }
 
-  // Factors A (size() x size()); false if A is singular to working precision.
-  bool factor(const Eigen::Ref<const Eigen::MatrixXd>& A) {
+  // Factors A (size() x size()); false if A is singular to working precision. amax:
+  // max |A_ij| (NaN if A holds a NaN) where the caller has it already.
+  bool factor(const Eigen::Ref<const Eigen::MatrixXd>& A, double amax = -1.0) {
     if (A.rows() != size()) resize(static_cast<int>(A.rows()));  // allocates only here
     const int n = size();
     if (A.outerStride() == A.rows())
       std::copy(A.data(), A.data() + A.size(), lu_.data());
     else
       lu_ = A;
-    const double tiny = 1e-14 * dynamic_detail::inf_norm(lu_);  // NaN if A holds a NaN
+    const double tiny = 1e-14 * (amax >= 0.0 || amax != amax ? amax : dynamic_detail::inf_norm(lu_));
     if (!std::isfinite(tiny)) return false;
     for (int k = 0; k < n; ++k) {
       int p = k;
@@ -215,10 +236,11 @@ class DenseLU {
           p = i;
         }
       }
-      piv_[static_cast<std::size_t>(k)] = p;
+      piv_[k] = p;
       if (!(best > tiny) || !std::isfinite(best)) return false;
       if (p != k) lu_.row(k).swap(lu_.row(p));
       const double inv = 1.0 / lu_(k, k);
+      inverse_pivot_[k] = inv;  // (the solves multiply: no division on their path)
       for (int i = k + 1; i < n; ++i) lu_(i, k) *= inv;
       for (int j = k + 1; j < n; ++j) {
         const double u = lu_(k, j);
@@ -236,7 +258,7 @@ class DenseLU {
     const int n = size();
     if (x.data() != b.data()) x = b;
     for (int k = 0; k < n; ++k) {
-      const int p = piv_[static_cast<std::size_t>(k)];
+      const int p = piv_[k];
       if (p != k) std::swap(x[k], x[p]);
     }
     for (int k = 0; k < n; ++k) {
@@ -246,7 +268,7 @@ class DenseLU {
       for (int i = k + 1; i < n; ++i) x[i] -= l[i] * xk;
     }
     for (int k = n - 1; k >= 0; --k) {
-      x[k] /= lu_(k, k);
+      x[k] *= inverse_pivot_[k];
       const double xk = x[k];
       const double* u = lu_.col(k).data();
       for (int i = 0; i < k; ++i) x[i] -= u[i] * xk;
@@ -260,9 +282,11 @@ class DenseLU {
   }
 
  private:
-  Eigen::MatrixXd lu_;
-  std::vector<int> piv_;
+  Eigen::Matrix<double, K, K> lu_;
+  Eigen::Matrix<int, K, 1> piv_;
+  Eigen::Matrix<double, K, 1> inverse_pivot_;
 };
+using DenseLU = DenseLUOf<>;
 
 namespace dynamic_detail {
 
