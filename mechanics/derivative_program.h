@@ -10,7 +10,15 @@
 //
 //   1. the tape becomes a graph of operations, each made once (equal operations on
 //      equal operands are one node; constants folded; x + 0, x * 1, x * 0, x - x,
-//      -(-x) simplified), with the set of inputs each node depends on;
+//      -(-x) simplified), with the set of inputs each node depends on. The chain rule
+//      multiplies partial derivatives that carry constant factors and signs, so these
+//      move outward through products and quotients and fold ((c x)(d y) = (c d)(x y),
+//      c x + d x = (c + d) x, x + x = 2 x, -x - y = -(x + y)); c / x is c (1 / x), and
+//      a / x is a product where 1 / x is a node already (one division for all the
+//      powers of 1/r in the derivatives of k/r); a product of up to 8 factors is made
+//      in one order, so that equal products are one node and products that share
+//      their first factors share their partial products. These regroup products and
+//      sums, so they hold to round-off, like the rest;
 //   2. reverse mode on the graph: the adjoint of every node is itself a node, built by
 //      the chain rule (each operation's partial derivatives are nodes too), so the
 //      gradient entries are nodes of the same graph;
@@ -21,7 +29,8 @@
 //      instruction lists, one for the gradient, one for the gradient and the Hessian
 //      (the value stays the tape's). Evaluating one is a single loop over plain double
 //      operations with their operand slots fixed: no stack, no Jets, no work on
-//      zeros; where sin x and cos x are both needed, one sincos gives them.
+//      zeros; where sin x and cos x are both needed, one sincos gives them; an output
+//      -x or c x is read as x times its factor.
 //
 // The derivatives are the ones reverse mode computes, by the same formulas
 // (Expression::backward): they agree with the tape's to round-off, not to the bit
@@ -51,6 +60,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <functional>
 #include <memory>
 #include <new>
 #include <type_traits>
@@ -142,11 +152,14 @@ class DerivativeProgram {
     run(hess_code_, v, a, b);
     const int n = n_;
     for (int i = 0; i < n; ++i) {
-      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
-      gb[i] = v[grad_out_[static_cast<std::size_t>(n + i)]];
+      ga[i] = grad_factor_[static_cast<std::size_t>(i)] * v[grad_out_[static_cast<std::size_t>(i)]];
+      gb[i] = grad_factor_[static_cast<std::size_t>(n + i)] * v[grad_out_[static_cast<std::size_t>(n + i)]];
     }
     // H(r, c) of the 2n inputs, stored for r >= c
-    auto H = [&](int r, int c) { return v[hess_out_[static_cast<std::size_t>(r * (r + 1) / 2 + c)]]; };
+    auto H = [&](int r, int c) {
+      const auto k = static_cast<std::size_t>(r * (r + 1) / 2 + c);
+      return hess_factor_[k] * v[hess_out_[k]];
+    };
     for (int j = 0; j < n; ++j)
       for (int i = j; i < n; ++i) {
         Haa[i + j * lda] = Haa[j + i * lda] = H(i, j);
@@ -195,8 +208,8 @@ class DerivativeProgram {
   template <class T>
   void gradient_out(const T* v, T* ga, T* gb) const {
     for (int i = 0; i < n_; ++i) {
-      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]];
-      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]];
+      ga[i] = v[grad_out_[static_cast<std::size_t>(i)]] * grad_factor_[static_cast<std::size_t>(i)];
+      gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]] * grad_factor_[static_cast<std::size_t>(n_ + i)];
     }
     for (const BlockProgram& B : blocks_) {
       if (B.adjoint < 0) continue;
@@ -226,7 +239,9 @@ class DerivativeProgram {
   int n_ = 0;
   std::vector<Instr> grad_code_, hess_code_;
   std::vector<std::pair<std::int32_t, std::int32_t>> inputs_;  // {slot, input}: input < n in a, else b
+  // the outputs' slots, each read times its factor (an output -x or c x is read as x)
   std::vector<std::int32_t> grad_out_, hess_out_;
+  std::vector<double> grad_factor_, hess_factor_;
   std::vector<double> constants_;  // the slots with the constants in place (the rest 0)
   std::vector<std::pair<std::int32_t, double>> constant_slots_;
   std::vector<BlockProgram> blocks_;
@@ -459,6 +474,7 @@ class DerivativeProgramBuilder {
     std::int32_t a, b, k;
     double c;
     std::uint64_t deps;  // the inputs it depends on
+    int factors;         // a product's factors (1 for any other node; see mul)
   };
   struct Key {
     Op op;
@@ -497,7 +513,8 @@ class DerivativeProgramBuilder {
       deps = nodes_[static_cast<std::size_t>(a)].deps;
       if (b >= 0) deps |= nodes_[static_cast<std::size_t>(b)].deps;
     }
-    nodes_.push_back({op, sign, a, b, k, c, deps});
+    const int factors = op == Op::Mul ? nodes_[static_cast<std::size_t>(a)].factors + nodes_[static_cast<std::size_t>(b)].factors : 1;
+    nodes_.push_back({op, sign, a, b, k, c, deps, factors});
     const int id = static_cast<int>(nodes_.size()) - 1;
     memo_.emplace(key, id);
     return id;
@@ -520,11 +537,14 @@ class DerivativeProgramBuilder {
       return constant(derivative_program_detail::apply<double>(in, cval(a), 0.0));
     }
     switch (op) {
-      case Op::Neg: {  // -(-x) = x, -(c x) = (-c) x, -(x - y) = y - x: exact
+      case Op::Neg: {  // -(-x) = x, -(c x) = (-c) x, -(x - y) = y - x where that is a node: exact
         const Node u = nodes_[static_cast<std::size_t>(a)];
         if (u.op == Op::Neg) return u.a;
         if (u.op == Op::MulC) return op1(Op::MulC, u.a, -u.c);
-        if (u.op == Op::Sub) return op2(Op::Sub, u.b, u.a);
+        if (u.op == Op::Sub) {  // (otherwise the sign stays outward, where it may fold)
+          const auto reversed = memo_.find(Key{Op::Sub, false, u.b, u.a, 0, bits(0.0)});
+          if (reversed != memo_.end()) return reversed->second;
+        }
         break;
       }
       case Op::MulC: {
@@ -541,6 +561,9 @@ class DerivativeProgramBuilder {
         break;
       case Op::DivC:
         if (c == 1.0) return a;
+        break;
+      case Op::RDivC:  // c / x = c (1 / x): one reciprocal for every constant over x
+        if (c != 1.0) return op1(Op::MulC, make(Op::RDivC, a, -1, 1.0), c);
         break;
       case Op::PowI:
         if (k == 1) return a;
@@ -565,6 +588,10 @@ class DerivativeProgramBuilder {
     if (is_const(b)) return op1(Op::AddC, a, cval(b));
     if (nodes_[static_cast<std::size_t>(b)].op == Op::Neg) return sub(a, nodes_[static_cast<std::size_t>(b)].a);
     if (nodes_[static_cast<std::size_t>(a)].op == Op::Neg) return sub(b, nodes_[static_cast<std::size_t>(a)].a);
+    if (a == b) return op1(Op::MulC, a, 2.0);  // x + x = 2 x, exact: a factor that may fold
+    const auto [ca, xa] = coefficient(a);
+    const auto [cb, xb] = coefficient(b);
+    if (xa == xb) return op1(Op::MulC, xa, ca + cb);  // c x + d x = (c + d) x, to round-off
     return op2(Op::Add, a, b);
   }
   int sub(int a, int b) {
@@ -574,6 +601,13 @@ class DerivativeProgramBuilder {
     if (is_const(a) && !is_const(b)) return op1(Op::RSubC, b, cval(a));
     if (is_const(b) && !is_const(a)) return op1(Op::AddC, a, -cval(b));
     if (nodes_[static_cast<std::size_t>(b)].op == Op::Neg) return add(a, nodes_[static_cast<std::size_t>(b)].a);
+    if (op(a) == Op::Neg) return neg(add(arg(a), b));  // -x - y = -(x + y): the sign outward
+    // y - x where x - y is a node: its negation (the sign outward, one difference)
+    const auto reversed = memo_.find(Key{Op::Sub, false, b, a, 0, bits(0.0)});
+    if (reversed != memo_.end()) return neg(reversed->second);
+    const auto [ca, xa] = coefficient(a);
+    const auto [cb, xb] = coefficient(b);
+    if (xa == xb) return op1(Op::MulC, xa, ca - cb);  // c x - d x = (c - d) x, to round-off
     return op2(Op::Sub, a, b);
   }
   int mul(int a, int b) {
@@ -585,14 +619,58 @@ class DerivativeProgramBuilder {
     if (nb) return neg(mul(a, nodes_[static_cast<std::size_t>(b)].a));
     if (is_const(a) && !is_const(b)) return op1(Op::MulC, b, cval(a));
     if (is_const(b) && !is_const(a)) return op1(Op::MulC, a, cval(b));
+    // constant factors outward, where they meet and fold: (c x) (d y) = (c d) (x y), to
+    // round-off (a reverse pass makes such products at every chain rule)
+    if (op(a) == Op::MulC) return op1(Op::MulC, mul(arg(a), b), cval_of(a));
+    if (op(b) == Op::MulC) return op1(Op::MulC, mul(a, arg(b)), cval_of(b));
+    // a product of few factors in one order (the latest made first), so that equal
+    // products are one node and products sharing their first factors share their
+    // partial products: x^2 y r^-3 and y r^-3 and r^-3 are one chain (the
+    // derivatives of a potential of r multiply powers of 1/r by coordinates)
+    const int fa = nodes_[static_cast<std::size_t>(a)].factors, fb = nodes_[static_cast<std::size_t>(b)].factors;
+    if (fa + fb <= kMaxFactors) {
+      int f[kMaxFactors], m = 0;
+      factors_of(a, f, m);
+      factors_of(b, f, m);
+      std::sort(f, f + m, std::greater<int>());
+      int p = f[0];
+      for (int i = 1; i < m; ++i) p = op2(Op::Mul, p, f[i]);
+      return p;
+    }
     return op2(Op::Mul, a, b);
+  }
+  static constexpr int kMaxFactors = 8;
+  // x as c y: (c, y) where x = c y is a node, (1, x) otherwise
+  std::pair<double, int> coefficient(int x) const {
+    if (op(x) == Op::MulC) return {cval_of(x), arg(x)};
+    return {1.0, x};
+  }
+  void factors_of(int i, int* f, int& m) const {
+    const Node& nd = nodes_[static_cast<std::size_t>(i)];
+    if (nd.op != Op::Mul) {
+      f[m++] = i;
+      return;
+    }
+    factors_of(nd.a, f, m);
+    factors_of(nd.b, f, m);
   }
   int div(int a, int b) {
     if (is(a, 0.0) && !is(b, 0.0)) return zero();
     if (is_const(b) && !is_const(a)) return op1(Op::DivC, a, cval(b));
-    if (is_const(a) && !is_const(b)) return op1(Op::RDivC, b, cval(a));
+    if (is_const(a) && !is_const(b)) return op1(Op::RDivC, b, cval(a));  // c / x
+    // signs and constant factors outward, as in mul
+    if (op(a) == Op::Neg) return neg(div(arg(a), b));
+    if (op(b) == Op::Neg) return neg(div(a, arg(b)));
+    if (op(a) == Op::MulC) return op1(Op::MulC, div(arg(a), b), cval_of(a));
+    // a / x = a (1 / x) where 1 / x is a node already: a product in place of a division
+    // (the derivatives of c / x, a / x and sqrt(x) all divide by x again)
+    const auto recip = memo_.find(Key{Op::RDivC, false, b, -1, 0, bits(1.0)});
+    if (recip != memo_.end()) return mul(a, recip->second);
     return op2(Op::Div, a, b);
   }
+  Op op(int i) const { return nodes_[static_cast<std::size_t>(i)].op; }
+  int arg(int i) const { return nodes_[static_cast<std::size_t>(i)].a; }
+  double cval_of(int i) const { return nodes_[static_cast<std::size_t>(i)].c; }
   int neg(int a) { return op1(Op::Neg, a); }
 
   // The tape as a graph (step 1); returns the node of its value.
@@ -724,8 +802,21 @@ class DerivativeProgramBuilder {
 
   // Step 4: number the nodes the outputs need and write the two programs. Where a
   // program needs both sin x and cos x, one instruction computes them (sincos).
-  void emit(const std::vector<int>& grad, const std::vector<int>& hess, DerivativeProgram& out) {
+  void emit(std::vector<int> grad, std::vector<int> hess, DerivativeProgram& out) {
     const std::size_t count = nodes_.size();
+    // an output -x or c x is x read times its factor: no instruction for the product
+    auto outward = [&](std::vector<int>& roots, std::vector<double>& factor) {
+      factor.assign(roots.size(), 1.0);
+      for (std::size_t i = 0; i < roots.size(); ++i) {
+        const Node& nd = nodes_[static_cast<std::size_t>(roots[i])];
+        if (nd.op == Op::Neg || nd.op == Op::MulC) {
+          factor[i] = nd.op == Op::Neg ? -1.0 : nd.c;
+          roots[i] = nd.a;
+        }
+      }
+    };
+    outward(grad, out.grad_factor_);
+    outward(hess, out.hess_factor_);
     std::vector<char> need_grad(count, 0), need_all(count, 0);
     for (int g : grad) mark(need_grad, g);
     // every block with an adjoint runs (its partial derivatives), and its adjoint is an

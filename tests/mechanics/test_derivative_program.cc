@@ -85,6 +85,12 @@ std::vector<Text> texts() {
        {{"r", "sqrt(x^2 + y^2 + 1)"}, {"s", "r*x_dot - y*y_dot"}}},
       // a term that is constant, a coordinate L does not use, and cancelling terms
       {{"x", "y", "z"}, "3 + x_dot^2/2 + z_dot^2/2 + (x - x)*y + cos(z) - cos(z) + y_dot*z", {}},
+      // constant factors and signs inside products and quotients, multiples of one term
+      // added and subtracted, constants over an expression, 2x as x + x
+      {{"x", "y"},
+       "m*x_dot^2/2 + y_dot^2/2 + 3*x*y_dot - 2*(y_dot*x) + (x + x)*y^2 - x*y^2*k + x/(2*y + 5) - 3/(y + 4)"
+       " + (-x)/(y^2 + 1)*k - (2*x)/(-(y^2 + 3)) + k/sqrt(x^2 + y^2 + 1)/sqrt(x^2 + y^2 + 1)",
+       {}},
   };
 }
 
@@ -179,6 +185,41 @@ BOOST_AUTO_TEST_CASE(what_a_program_computes) {
   BOOST_TEST(Hqq == 0.0);
   BOOST_TEST(Hqv == 0.0);
   BOOST_TEST(Hvv == 1.0);
+}
+
+BOOST_AUTO_TEST_CASE(products_and_quotients_are_simplified) {
+  // Kepler, L = |v|^2/2 + k/r: the derivatives of k/r are powers of 1/r times
+  // coordinates, so one square root and one reciprocal serve every entry, and no
+  // negation is computed (an output -x is read as x with its sign); the values are the
+  // closed forms dL/dq = -k q/r^3, d2L/dq2 = k (3 q q^T/r^5 - I/r^3)
+  const auto s = written({"x", "y"}, texts()[1].L);
+  const auto p = DerivativeProgram::build(s->lagrangian, 2);
+  BOOST_TEST_REQUIRE(p != nullptr);
+  using Op = Expression::Op;
+  int divisions = 0, negations = 0, roots = 0;
+  for (const auto& in : p->hessian_code()) {
+    if (in.op == Op::Div || in.op == Op::DivC || in.op == Op::RDivC) ++divisions;
+    if (in.op == Op::Neg) ++negations;
+    if (in.op == Op::Sqrt) ++roots;
+  }
+  BOOST_TEST(divisions == 1);
+  BOOST_TEST(negations == 0);
+  BOOST_TEST(roots == 1);
+  const double k = 0.7, q[2] = {0.8, -0.5}, v[2] = {0.3, -1.1};
+  const double r = std::sqrt(q[0] * q[0] + q[1] * q[1]);
+  auto w = p->workspace();
+  double gq[2], gv[2], Hqq[4], Hqv[4], Hvv[4];
+  p->hessian(q, v, gq, gv, Hqq, 2, Hqv, 2, Hvv, 2, w.data());
+  for (int i = 0; i < 2; ++i) {
+    BOOST_TEST(std::fabs(gq[i] + k * q[i] / (r * r * r)) <= 1e-15);
+    BOOST_TEST(gv[i] == v[i]);
+    for (int j = 0; j < 2; ++j) {
+      const double H = k * (3 * q[i] * q[j] / std::pow(r, 5) - (i == j ? 1.0 : 0.0) / (r * r * r));
+      BOOST_TEST(std::fabs(Hqq[i + 2 * j] - H) <= 1e-14);
+      BOOST_TEST(Hqv[i + 2 * j] == 0.0);
+      BOOST_TEST(Hvv[i + 2 * j] == (i == j ? 1.0 : 0.0));
+    }
+  }
 }
 
 BOOST_AUTO_TEST_CASE(blocks_are_differentiated_once_for_their_shape) {
