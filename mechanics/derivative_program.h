@@ -42,9 +42,13 @@
 // term to term), and its partial derivatives are nodes of that graph. A program runs a
 // block's graph an instruction at a time across all its terms (tight loops over arrays),
 // then adds each term's partial derivatives, times the block's adjoint, to the gradient
-// entries of the term's variables. The gradient also runs in any scalar type: in Jets
-// (gradient_any without blocks, gradient_blocks_any with them) it gives derivatives of
-// the gradient, as the fixed-size steps and the sparse Hessian of a potential take them.
+// entries of the term's variables. It runs kBlockRun terms at a time (the arrays a run
+// touches stay in the first-level cache); a variable whose terms read consecutive
+// coordinates (q[i], q[i-1]) is copied and added as a range, not index by index; a
+// partial derivative -x or c x adds x times its factor. The gradient also runs in any
+// scalar type: in Jets (gradient_any without blocks, gradient_blocks_any with them) it
+// gives derivatives of the gradient, as the fixed-size steps and the sparse Hessian of
+// a potential take them.
 //
 // Scope: two input blocks of n variables each (q and v, or q and p). The Hessian only
 // for tapes without blocks and 2n <= kMaxInputs; the gradient for any n. Definitions
@@ -75,6 +79,7 @@ class DerivativeProgram {
  public:
   static constexpr int kMaxInputs = 64;               // 2n: one bit per input in a node's dependencies
   static constexpr std::size_t kMaxNodes = 1u << 16;  // largest graph built
+  static constexpr std::size_t kBlockRun = 256;        // terms of a block run at a time
 
   // The program of `e` in blocks 0 and 1 of n variables each, or null when a graph
   // would exceed kMaxNodes, or `hessian` is asked for a tape with blocks or with
@@ -193,11 +198,15 @@ class DerivativeProgram {
       int block = 0;
       std::vector<std::int32_t> index;
       std::vector<double> values;
+      // index[k] = first + k for every term (a chain's neighbours): copied and added as
+      // ranges; -1 otherwise
+      std::int32_t first = -1;
     };
     std::vector<Input> inputs;
     std::vector<std::pair<std::int32_t, double>> constants;  // slots filled with one constant
     struct Partial {
-      std::int32_t input, slot;  // d(term)/d(input) in the array of `slot`
+      std::int32_t input, slot;  // d(term)/d(input) is factor times the array of `slot`
+      double factor = 1.0;
     };
     std::vector<Partial> partials;
     std::int32_t root = -1;     // the terms' values (-1: the block's value is not needed)
@@ -213,14 +222,19 @@ class DerivativeProgram {
     }
     for (const BlockProgram& B : blocks_) {
       if (B.adjoint < 0) continue;
-      const T w = v[B.adjoint];
       const T* arrays = v + B.offset;
       for (const auto& d : B.partials) {
+        const T w = v[B.adjoint] * d.factor;
         const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
         T* g = in.block == 0 ? ga : gb;
-        const std::int32_t* ix = in.index.data();
         const T* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
-        for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
+        if (in.first >= 0) {
+          T* gk = g + in.first;
+          for (std::size_t k = 0; k < B.terms; ++k) gk[k] += w * dk[k];
+        } else {
+          const std::int32_t* ix = in.index.data();
+          for (std::size_t k = 0; k < B.terms; ++k) g[ix[k]] += w * dk[k];
+        }
       }
     }
   }
@@ -307,37 +321,46 @@ T DerivativeProgram::run_block(const BlockProgram& B, T* v, const T* a, const T*
   using Op = Expression::Op;
   const std::size_t m = B.terms;
   T* w = v + B.offset;
-  for (const auto& in : B.inputs) {
-    if (in.slot < 0 || !in.values.empty()) continue;  // (varying constants: in place already)
-    const T* src = in.block == 0 ? a : b;
-    const std::int32_t* ix = in.index.data();
-    T* dst = w + static_cast<std::size_t>(in.slot) * m;
-    for (std::size_t k = 0; k < m; ++k) dst[k] = src[ix[k]];
-  }
-  for (const Instr& in : B.code) {
-    const T* x = w + static_cast<std::size_t>(in.a) * m;
-    const T* y = w + static_cast<std::size_t>(in.b) * m;
-    T* z = w + static_cast<std::size_t>(in.out) * m;
-    switch (in.op) {
-      case Op::Add: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + y[k]; break;
-      case Op::Sub: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] - y[k]; break;
-      case Op::Mul: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * y[k]; break;
-      case Op::Div: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] / y[k]; break;
-      case Op::Neg: for (std::size_t k = 0; k < m; ++k) z[k] = -x[k]; break;
-      case Op::AddC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] + in.c; break;
-      case Op::MulC: for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * in.c; break;
-      case Op::PowI:
-        if (in.k == 2) {
-          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k];
-          break;
-        }
-        if (in.k == 3) {
-          for (std::size_t k = 0; k < m; ++k) z[k] = x[k] * x[k] * x[k];
-          break;
-        }
-        [[fallthrough]];
-      default:
-        for (std::size_t k = 0; k < m; ++k) z[k] = derivative_program_detail::apply(in, x[k], y[k]);
+  // by runs of kBlockRun terms: a run's operands stay in the first-level cache from one
+  // instruction to the next, however many terms the block has
+  for (std::size_t k0 = 0; k0 < m; k0 += kBlockRun) {
+    const std::size_t k1 = std::min(m, k0 + kBlockRun);
+    for (const auto& in : B.inputs) {
+      if (in.slot < 0 || !in.values.empty()) continue;  // (varying constants: in place already)
+      const T* src = in.block == 0 ? a : b;
+      T* dst = w + static_cast<std::size_t>(in.slot) * m;
+      if (in.first >= 0) {
+        std::copy(src + in.first + k0, src + in.first + k1, dst + k0);
+        continue;
+      }
+      const std::int32_t* ix = in.index.data();
+      for (std::size_t k = k0; k < k1; ++k) dst[k] = src[ix[k]];
+    }
+    for (const Instr& in : B.code) {
+      const T* x = w + static_cast<std::size_t>(in.a) * m;
+      const T* y = w + static_cast<std::size_t>(in.b) * m;
+      T* z = w + static_cast<std::size_t>(in.out) * m;
+      switch (in.op) {
+        case Op::Add: for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] + y[k]; break;
+        case Op::Sub: for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] - y[k]; break;
+        case Op::Mul: for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] * y[k]; break;
+        case Op::Div: for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] / y[k]; break;
+        case Op::Neg: for (std::size_t k = k0; k < k1; ++k) z[k] = -x[k]; break;
+        case Op::AddC: for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] + in.c; break;
+        case Op::MulC: for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] * in.c; break;
+        case Op::PowI:
+          if (in.k == 2) {
+            for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] * x[k];
+            break;
+          }
+          if (in.k == 3) {
+            for (std::size_t k = k0; k < k1; ++k) z[k] = x[k] * x[k] * x[k];
+            break;
+          }
+          [[fallthrough]];
+        default:
+          for (std::size_t k = k0; k < k1; ++k) z[k] = derivative_program_detail::apply(in, x[k], y[k]);
+      }
     }
   }
   if (B.root < 0) return constant<T>(0.0);
@@ -949,16 +972,26 @@ class DerivativeProgramBuilder {
       const int root = node.back();
       const std::vector<int> adj = g.adjoints(root);
       // the outputs: each variable's partial derivative (unless it is zero), the value
-      std::vector<std::pair<int, int>> partial;  // {input, node}
+      struct Partial {
+        int input, node;
+        double factor;  // a partial -x or c x is x added times its factor: no array pass for it
+      };
+      std::vector<Partial> partial;
       for (std::size_t i = 0; i < inputs.size(); ++i) {
         if (!inputs[i].values.empty()) continue;
         const int var = g.make(Op::Var, static_cast<int>(i));
         const int d = var < static_cast<int>(adj.size()) ? adj[static_cast<std::size_t>(var)] : -1;
-        if (d >= 0 && !g.is(d, 0.0)) partial.push_back({static_cast<int>(i), d});
+        if (d < 0 || g.is(d, 0.0)) continue;
+        if (g.op(d) == Op::Neg)
+          partial.push_back({static_cast<int>(i), g.arg(d), -1.0});
+        else if (g.op(d) == Op::MulC)
+          partial.push_back({static_cast<int>(i), g.arg(d), g.cval_of(d)});
+        else
+          partial.push_back({static_cast<int>(i), d, 1.0});
       }
       const std::size_t count = g.nodes_.size();
       std::vector<char> need(count, 0);
-      for (const auto& d : partial) g.mark(need, d.second);
+      for (const auto& d : partial) g.mark(need, d.node);
       if (value) g.mark(need, root);
       std::vector<std::int32_t> slot(count, -1);
       std::int32_t slots = 0;
@@ -972,10 +1005,16 @@ class DerivativeProgramBuilder {
         out.code.push_back(Instr{nd.op, nd.sign, slot[static_cast<std::size_t>(nd.a)],
                                  nd.b >= 0 ? slot[static_cast<std::size_t>(nd.b)] : 0, slot[i], nd.k, nd.c});
       }
-      for (const auto& d : partial) out.partials.push_back({d.first, slot[static_cast<std::size_t>(d.second)]});
+      for (const auto& d : partial) out.partials.push_back({d.input, slot[static_cast<std::size_t>(d.node)], d.factor});
       out.root = value ? slot[static_cast<std::size_t>(root)] : -1;
       out.slots = static_cast<std::size_t>(slots);
       out.terms = static_cast<std::size_t>(b.terms);
+      for (Input& in : inputs) {
+        bool contiguous = !in.index.empty() && in.values.empty();
+        for (std::size_t k = 1; contiguous && k < in.index.size(); ++k)
+          contiguous = in.index[k] == in.index[0] + static_cast<std::int32_t>(k);
+        in.first = contiguous ? in.index[0] : -1;
+      }
       out.inputs = std::move(inputs);
       return true;
     } catch (const TooLarge&) {
