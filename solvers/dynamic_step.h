@@ -88,7 +88,10 @@ inline bool sizes_match(int n, const Eigen::VectorXd& q0, const Eigen::VectorXd&
 }  // namespace dynamic_detail
 
 // The position-momentum step of the theta map for a run-time-sized Lagrangian Sys.
-template <class Sys>
+// K: the number of coordinates where it is known when the step is compiled (the runtime
+// makes K = 1 and 2 for a written Lagrangian of so few): the same step, its workspace and
+// its loops of fixed size; the state stays run-time sized. Sys::dim() must equal K.
+template <class Sys, int K = Eigen::Dynamic>
 class DynamicThetaStep {
   static_assert(is_dynamic_system_v<Sys>, "DynamicThetaStep needs a run-time-sized system (dynamic_system.h)");
 
@@ -105,6 +108,9 @@ class DynamicThetaStep {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
     const int n = L_.dim();
+    if (K != Eigen::Dynamic && n != K)
+      throw std::invalid_argument("DynamicThetaStep<" + std::to_string(K) + ">: a system of " + std::to_string(n) +
+                                  " coordinates");
     x_.resize(n);
     v_.resize(n);
     Lq_.resize(n);
@@ -140,57 +146,20 @@ class DynamicThetaStep {
   // dp receives p1 - p0.
   StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
-    const int n = L_.dim();
+    const int n = K == Eigen::Dynamic ? L_.dim() : K;
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
     if (dp.size() != n) dp.resize(n);
-    const double th = R_.theta(), inv_h = 1.0 / h_;
-    const double a = h_ * th * (1.0 - th), b = 1.0 - th;
-    const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
     try {
       if (kept_) {
         kept_jacobian_newton(KeptOps{*this}, *kept_, options_, q0, p0, dq, dp, work_, s);
-        return s;
-      }
-      double dxn = INFINITY;
-      bool done = false;
-      for (int it = 0; it < options_.max_iterations && !done; ++it) {
-        at(q0, dq);
-        L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
-        // F = p0 + D1 L_d, written as PositionMomentumStep evaluates it
-        for (int i = 0; i < n; ++i) r_[i] = p0[i] + ((h_ * Lq_[i]) * b - Lv_[i]);
-        for (int j = 0; j < n; ++j)
-          for (int i = 0; i < n; ++i) J_(i, j) = a * Lqq_(i, j) + b * Lqv_(i, j) - th * Lqv_(j, i) - inv_h * Lvv_(i, j);
-        s.iterations = it + 1;
-        s.residual = dynamic_detail::inf_norm(r_);
-        const double Jmax = dynamic_detail::inf_norm(J_);
-        s.scale = pscale + Jmax * dynamic_detail::inf_norm(dq) + options_.absolute_floor;
-        if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
-          s.message = "non-finite residual or Jacobian";
-          return s;
-        }
-        const NewtonVerdict verdict = newton_verdict(s, dxn, dynamic_detail::inf_norm(dq) + q0size, options_);
-        if (verdict == NewtonVerdict::failed) return s;
-        if (!lu_.factor(J_)) {
-          if (verdict == NewtonVerdict::converged) break;  // nothing more to apply
-          s.message = "singular step Jacobian";
-          return s;
-        }
-        lu_.solve(r_, r_);  // r_ is now the Newton correction
-        dq -= r_;
-        dxn = dynamic_detail::inf_norm(r_);
-        // on convergence the correction already paid for is applied (see solve_newton)
-        done = verdict == NewtonVerdict::converged;
-      }
-      if (!s.converged) {
-        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-        return s;
-      }
-      at(q0, dq);
-      L_.gradient(x_, v_, Lq_, Lv_);
-      for (int i = 0; i < n; ++i) dp[i] = h_ * Lq_[i];
-      if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-        s.converged = false;
-        s.message = "non-finite momentum";
+      } else if constexpr (K == Eigen::Dynamic) {
+        newton(q0, p0, dq, dp, s);
+      } else {  // the state in storage of fixed size: every loop and norm below of length K
+        const SV a = q0, b = p0;
+        SV d = dq, e = dp;
+        newton(a, b, d, e, s);
+        dq = d;
+        dp = e;
       }
     } catch (const std::domain_error& e) {
       s.converged = false;
@@ -200,10 +169,108 @@ class DynamicThetaStep {
   }
 
  private:
-  // x = q0 + theta dq, v = dq / h (as ThetaMap::inverse_increment and DiscreteLagrangian)
-  void at(const V& q0, const V& dq) const {
+  using SV = Eigen::Matrix<double, K, 1>;
+  static constexpr bool kChord = K != Eigen::Dynamic;
+
+  // Newton's method on vectors of type W (V, or SV where K is known). Where K is known
+  // (kChord), the Jacobian of the first iteration serves the next ones while each
+  // shrinks the residual fourfold (the rule of solvers/kept_newton.h, within a step): a
+  // step that converges in two iterations costs one Hessian of L and two gradients
+  // instead of two Hessians and a gradient. Otherwise a Jacobian at every iteration.
+  template <class W>
+  void newton(const W& q0, const W& p0, W& dq, W& dp, StepSummary& s) const {
+    const int n = static_cast<int>(x_.size());
     const double th = R_.theta(), inv_h = 1.0 / h_;
-    for (Eigen::Index i = 0; i < q0.size(); ++i) {
+    const double a = h_ * th * (1.0 - th), b = 1.0 - th;
+    const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
+    // F = p0 + D1 L_d, written as PositionMomentumStep evaluates it
+    auto residual = [&] {
+      for (int i = 0; i < n; ++i) r_[i] = p0[i] + ((h_ * Lq_[i]) * b - Lv_[i]);
+      s.residual = dynamic_detail::inf_norm(r_);
+    };
+    double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
+    bool factored = false, done = false, corrected = false;
+    for (int it = 0; it < options_.max_iterations && !done; ++it) {
+      at(q0, dq);
+      const double dqn = dynamic_detail::inf_norm(dq);
+      corrected = false;
+      bool fresh = !factored;
+      if (factored) {  // (kChord) the residual alone, and a Jacobian where it did not shrink
+        L_.gradient(x_, v_, Lq_, Lv_);
+        residual();
+        if (!(s.residual <= 0.25 * last) || 2 * (it + 1) > options_.max_iterations) {
+          StepSummary probe = s;  // (a residual at round-off shrinks no more, whatever J is)
+          probe.scale = pscale + Jmax * dqn + options_.absolute_floor;
+          fresh = newton_verdict(probe, dxn, dqn + q0size, options_) != NewtonVerdict::converged;
+        }
+      }
+      if (fresh) {
+        L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
+        residual();
+        for (int j = 0; j < n; ++j)
+          for (int i = 0; i < n; ++i)
+            J_(i, j) = a * Lqq_(i, j) + b * Lqv_(i, j) - th * Lqv_(j, i) - inv_h * Lvv_(i, j);
+        Jmax = dynamic_detail::inf_norm(J_);
+        ++s.iterations;
+      }
+      s.scale = pscale + Jmax * dqn + options_.absolute_floor;
+      if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+        s.message = "non-finite residual or Jacobian";
+        return;
+      }
+      const NewtonVerdict verdict = newton_verdict(s, dxn, dqn + q0size, options_);
+      if (verdict == NewtonVerdict::failed) return;
+      if (fresh) {
+        if (!lu_.factor(J_, Jmax)) {
+          if (verdict == NewtonVerdict::converged) break;  // nothing more to apply
+          s.message = "singular step Jacobian";
+          return;
+        }
+        factored = kChord;
+      }
+      lu_.solve(r_, r_);  // r_ is now the Newton correction
+      dq -= r_;
+      corrected = true;
+      dxn = dynamic_detail::inf_norm(r_);
+      last = s.residual;
+      // on convergence the correction already paid for is applied (see solve_newton)
+      done = verdict == NewtonVerdict::converged;
+    }
+    if (!s.converged) {
+      s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+      return;
+    }
+    // (the correction is at round-off where the residual met its tolerance; where the
+    // iteration was accepted as stalled above it, the gradient at the solution instead)
+    if (kChord && s.residual <= options_.residual_tolerance * s.scale) {
+      // dp = h L_q at the solution, from L_q at the last iterate and the correction c
+      // applied since (x moved by -theta c, v by -c / h): L_q + L_qq (-theta c) + L_qv (-c / h),
+      // with the blocks of the Jacobian's Hessian. The correction is the converged one, at
+      // the residual's tolerance, so what this leaves out (c times the change of the
+      // Hessian, and c^2) lies below the round-off of dp: one gradient less a step.
+      // (Where the loop ended at a singular Jacobian no correction was applied: c = 0.)
+      for (int i = 0; i < n; ++i) {
+        double d = Lq_[i];
+        if (corrected)
+          for (int j = 0; j < n; ++j) d -= (th * Lqq_(i, j) + inv_h * Lqv_(i, j)) * r_[j];
+        dp[i] = h_ * d;
+      }
+    } else {
+      at(q0, dq);
+      L_.gradient(x_, v_, Lq_, Lv_);
+      for (int i = 0; i < n; ++i) dp[i] = h_ * Lq_[i];
+    }
+    if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+      s.converged = false;
+      s.message = "non-finite momentum";
+    }
+  }
+
+  // x = q0 + theta dq, v = dq / h (as ThetaMap::inverse_increment and DiscreteLagrangian)
+  template <class W>
+  void at(const W& q0, const W& dq) const {
+    const double th = R_.theta(), inv_h = 1.0 / h_;
+    for (Eigen::Index i = 0; i < x_.size(); ++i) {
       x_[i] = q0[i] + th * dq[i];
       v_[i] = dq[i] * inv_h;
     }
@@ -222,7 +289,7 @@ class DynamicThetaStep {
       s.at(q0, dq);
       s.L_.hessian(s.x_, s.v_, s.Lq_, s.Lv_, s.Lqq_, s.Lqv_, s.Lvv_);
       const double th = s.R_.theta(), inv_h = 1.0 / s.h_, a = s.h_ * th * (1.0 - th), b = 1.0 - th;
-      const Eigen::Index n = q0.size();
+      const Eigen::Index n = s.J_.rows();
       for (Eigen::Index j = 0; j < n; ++j)
         for (Eigen::Index i = 0; i < n; ++i)
           s.J_(i, j) = -(a * s.Lqq_(i, j) + b * s.Lqv_(i, j) - th * s.Lqv_(j, i) - inv_h * s.Lvv_(i, j));
@@ -240,17 +307,17 @@ class DynamicThetaStep {
   };
   // The factorisation kept across steps, shared by copies of the step.
   struct Kept : KeptJacobian {
-    DenseLU lu;
+    DenseLUOf<K> lu;
   };
 
   Sys L_;
   ThetaMap R_;
   double h_;
   StepOptions options_;
-  mutable V x_, v_, Lq_, Lv_, r_;
+  mutable Eigen::Matrix<double, K, 1> x_, v_, Lq_, Lv_, r_;
   mutable KeptNewtonWork work_;  // (keep_jacobian)
-  mutable Eigen::MatrixXd Lqq_, Lqv_, Lvv_, J_;
-  mutable DenseLU lu_;
+  mutable Eigen::Matrix<double, K, K> Lqq_, Lqv_, Lvv_, J_;
+  mutable DenseLUOf<K> lu_;
   std::shared_ptr<Kept> kept_;
 };
 

@@ -182,10 +182,10 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
 
 // From this many coordinates an implicit theta map on a separable system solves the
 // structured equation (sparse or dense, its Jacobian kept across steps); below, the
-// generic step forms L's Hessian at each iteration, which costs as little there: a
-// written pendulum's midpoint step 184 ns against 249 by the sparse step, Kepler's 494
-// against 489 (bench_written_lagrangian, g++ -O3). The fixed-size built-ins draw the
-// line at the same place (solvers/runtime/kernels_rn.h).
+// generic step of fixed size (kFixedWrittenMaxDim) costs less: a written pendulum's
+// midpoint step about 95 ns, Kepler's about 210, where the sparse step took 249 and 489
+// (bench_written_lagrangian, g++ -O3). The fixed-size built-ins draw the line at the
+// same place (solvers/runtime/kernels_rn.h).
 constexpr int kStructuredNewtonMinDim = 3;
 
 // The dense steps of a run-time-sized system form n x n matrices (the Newton Jacobian,
@@ -203,6 +203,13 @@ constexpr int kMaxDenseDynamicDim = 4096;
 // 10, 2.3 times faster; 50, 8.4; 200, 11; g++ -O3, n = 8, 1.5 times faster
 // (solvers/README.md has the g++ table).
 constexpr int kKeptJacobianMinDim = 8;
+
+// Up to this many coordinates the position-momentum step of a written Lagrangian is
+// compiled for its size (DynamicThetaStep<WrittenDynamic, K>, K = 1, 2): loops, norms
+// and LU of fixed length, one Hessian of L a step where its first Jacobian serves
+// (solvers/dynamic_step.h). Keeping the Jacobian across steps instead (the loop of
+// solvers/kept_newton.h) took 2.0 times as long for the pendulum, 1.6 for Kepler.
+constexpr int kFixedWrittenMaxDim = 2;
 
 // The theta of the method's map as a ThetaMap (retraction-theta: the same map).
 inline ThetaMap dynamic_theta_map(const Method& me) {
@@ -355,6 +362,18 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   // where L's Hessian costs several gradients; use_structure = false forms a Jacobian at
   // every iteration, the reference path
   const bool keep = me.use_structure && n >= kKeptJacobianMinDim;
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
+    // (use_structure = false: the run-time-sized step, a Jacobian at every iteration)
+    if (n <= kFixedWrittenMaxDim && me.use_structure) {
+      auto run_fixed = [&](auto k) {
+        constexpr int K = decltype(k)::value;
+        auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys, K>(L, Rk, hk, opt); };
+        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      };
+      if (n == 1) return run_fixed(std::integral_constant<int, 1>());
+      return run_fixed(std::integral_constant<int, 2>());
+    }
+  }
   if (keep) base.step_path = "kept-jacobian-newton";
   auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt, keep); };
   return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);

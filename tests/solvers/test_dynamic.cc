@@ -454,6 +454,80 @@ BOOST_AUTO_TEST_CASE(theta_step_equals_the_position_momentum_step) {
   }
 }
 
+BOOST_AUTO_TEST_CASE(steps_of_fixed_size_equal_the_fixed_size_steps) {
+  // DynamicThetaStep<Sys, K> (K = 1, 2: the runtime's step for written Lagrangians of so
+  // few coordinates) keeps the first iteration's Jacobian while the residual shrinks
+  // fourfold and forms dp from the last gradient and the Hessian's blocks: the same
+  // equation and stopping rule, so the same trajectory to round-off (measured: below
+  // 4e-16 relative over 100 steps), for one Jacobian a step where Newton's method forms two
+  const double tol = 1e-14;
+  for (double theta : {0.0, 0.3, 0.5, 1.0}) {
+    const ThetaMap R(theta);
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      {  // the written pendulum and the built-in one (K = 1)
+        const auto text = written({"a"}, {{"m", 1.3}, {"l", 0.8}, {"g", 9.81}},
+                                  "m/2*l^2*a_dot^2 + m*g*l*cos(a)");
+        const Pendulum P(1.3, 0.8, 9.81);
+        const Vec<double, 1> q0(2.0), p0(0.3);
+        const Vec<double, 1> v0 = legendre_inverse(P, q0, p0);
+        const double h = 0.02;
+        RunSummary fixed_run, newton_run;
+        const auto a = trajectory(PositionMomentumStep<Pendulum, ThetaMap>(P, R, h), q0, p0, v0, 100, &newton_run);
+        const auto b = trajectory(DynamicThetaStep<WrittenDynamic, 1>(WrittenDynamic(text), R, h), VectorXd(q0),
+                                  VectorXd(p0), VectorXd(v0), 100, &fixed_run);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+        if (theta > 0.0 && theta < 1.0) BOOST_TEST(fixed_run.solver_iterations < newton_run.solver_iterations);
+      }
+      {  // Kepler, e = 0.6, written and built-in (K = 2)
+        Vec<double, 2> q0, p0;
+        verification::kepler_initial(0.6, q0, p0);
+        const Vec<double, 2> v0 = legendre_inverse(kKepler, q0, p0);
+        const double h = 0.01;
+        const auto a = trajectory(PositionMomentumStep<Kepler, ThetaMap>(kKepler, R, h), q0, p0, v0, 100);
+        const auto b = trajectory(DynamicThetaStep<WrittenDynamic, 2>(WrittenDynamic(written_kepler()), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        const auto c = trajectory(DynamicThetaStep<FixedAsDynamic<Kepler>, 2>(FixedAsDynamic<Kepler>(kKepler), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+        BOOST_TEST(trajectory_difference(c, a) <= tol);
+      }
+      {  // the written double pendulum (a mass matrix that depends on q)
+        const Vec<double, 2> q0(0.5, 0.3), p0(0.2, -0.1);
+        const Vec<double, 2> v0 = legendre_inverse(kPendulum2, q0, p0);
+        const double h = 0.01;
+        const auto a = trajectory(PositionMomentumStep<DoublePendulum, ThetaMap>(kPendulum2, R, h), q0, p0, v0, 100);
+        const auto b = trajectory(DynamicThetaStep<WrittenDynamic, 2>(WrittenDynamic(written_double_pendulum()), R, h),
+                                  VectorXd(q0), VectorXd(p0), VectorXd(v0), 100);
+        BOOST_TEST(trajectory_difference(b, a) <= tol);
+      }
+    }
+  }
+  {  // long steps (h = 0.3, a pendulum turning over): from the starting guess 0 the first
+     // Jacobian is too far from the solution to serve and a second one is formed; each
+     // step equals Newton's with a Jacobian every iteration to round-off (measured: 1e-16
+     // relative), from either guess
+    const auto text = written({"a"}, {{"m", 1.0}, {"l", 1.0}, {"g", 9.81}}, "m/2*l^2*a_dot^2 + m*g*l*cos(a)");
+    const WrittenDynamic L(text);
+    const DynamicThetaStep<WrittenDynamic> newton(L, ThetaMap::midpoint(), 0.3);
+    const DynamicThetaStep<WrittenDynamic, 1> fixed(L, ThetaMap::midpoint(), 0.3);
+    int refreshed = 0;
+    for (double q0 : {0.0, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0})
+      for (double guess : {0.0, 1.95}) {
+        const VectorXd q = VectorXd::Constant(1, q0), p = VectorXd::Constant(1, 6.5);
+        VectorXd da = VectorXd::Constant(1, guess), db = da, ea(1), eb(1);
+        const StepSummary sa = newton.step(q, p, da, ea), sb = fixed.step(q, p, db, eb);
+        BOOST_TEST_REQUIRE((sa.converged && sb.converged));
+        BOOST_TEST(std::fabs(da[0] - db[0]) <= 1e-14 * 6.5);
+        BOOST_TEST(std::fabs(ea[0] - eb[0]) <= 1e-14 * 6.5);
+        refreshed += sb.iterations >= 2;
+      }
+    BOOST_TEST(refreshed >= 1);
+  }
+  // a system of another size is refused
+  using OneCoordinate = DynamicThetaStep<WrittenDynamic, 1>;
+  BOOST_CHECK_THROW(OneCoordinate(WrittenDynamic(written_kepler()), ThetaMap::midpoint(), 0.1), std::invalid_argument);
+}
+
 BOOST_AUTO_TEST_CASE(hamiltonian_theta_step_equals_the_hamiltonian_step) {
   const double tol = 1e-14;
   for (double theta : {0.0, 0.3, 0.5, 1.0}) {
@@ -785,8 +859,7 @@ BOOST_AUTO_TEST_CASE(a_degenerate_written_lagrangian_is_reported_not_crashed) {
   }
   // the Lagrangian form with theta = 0 or 1: the step Jacobian (1 - theta) L_qv -
   // theta L_qv^T - L_vv / h + h theta (1 - theta) L_qq vanishes
-  for (double theta : {0.0, 1.0}) {
-    const DynamicThetaStep<WrittenDynamic> S(L, ThetaMap(theta), 0.1);
+  auto singular = [&](const auto& S) {
     VectorXd dq = VectorXd::Zero(2), dp = VectorXd::Zero(2);
     StepSummary s;
     BOOST_CHECK_NO_THROW(s = S.step(q, p, dq, dp));
@@ -796,6 +869,10 @@ BOOST_AUTO_TEST_CASE(a_degenerate_written_lagrangian_is_reported_not_crashed) {
     RunSummary run;
     BOOST_CHECK_NO_THROW(run = integrate(S, 0.0, qq, pp, v, 10, [](auto&&...) {}));
     BOOST_TEST(run.failed);
+  };
+  for (double theta : {0.0, 1.0}) {
+    singular(DynamicThetaStep<WrittenDynamic>(L, ThetaMap(theta), 0.1));
+    singular(DynamicThetaStep<WrittenDynamic, 2>(L, ThetaMap(theta), 0.1));
   }
   // (For 0 < theta < 1 the step equation p0 + h (1 - theta) L_q(x) = 0 of such an L is
   // solvable where L_qq is invertible: only the Legendre map, checked at the initial
@@ -882,6 +959,7 @@ BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
   verification::kepler_initial(0.5, qf, pf);
   const VectorXd qk = qf, pk = pf, gk = h * pk;
   BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic>(WrittenDynamic(text), ThetaMap(0.3), h), qk, pk, gk, 5) == 0);
+  BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic, 2>(WrittenDynamic(text), ThetaMap(0.3), h), qk, pk, gk, 5) == 0);
   BOOST_TEST(allocations_in_steps(DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian>(WrittenDynamicHamiltonian(text),
                                                                                         ThetaMap::midpoint(), h),
                                   qk, pk, gk, 5) == 0);
