@@ -497,7 +497,7 @@ class DerivativeProgramBuilder {
     std::int32_t a, b, k;
     double c;
     std::uint64_t deps;  // the inputs it depends on
-    int factors;         // a product's factors (1 for any other node; see mul)
+    int factors;         // a product's factors, up to kMaxFactors + 1 (1 for any other node; see mul)
   };
   struct Key {
     Op op;
@@ -536,7 +536,11 @@ class DerivativeProgramBuilder {
       deps = nodes_[static_cast<std::size_t>(a)].deps;
       if (b >= 0) deps |= nodes_[static_cast<std::size_t>(b)].deps;
     }
-    const int factors = op == Op::Mul ? nodes_[static_cast<std::size_t>(a)].factors + nodes_[static_cast<std::size_t>(b)].factors : 1;
+    // (counted up to kMaxFactors + 1 only: products of products double it at each level)
+    const int factors = op == Op::Mul ? std::min(nodes_[static_cast<std::size_t>(a)].factors +
+                                                     nodes_[static_cast<std::size_t>(b)].factors,
+                                                 kMaxFactors + 1)
+                                      : 1;
     nodes_.push_back({op, sign, a, b, k, c, deps, factors});
     const int id = static_cast<int>(nodes_.size()) - 1;
     memo_.emplace(key, id);

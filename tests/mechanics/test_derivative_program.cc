@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <random>
+#include <string>
 
 #include <ceres/jet.h>
 
@@ -220,6 +221,26 @@ BOOST_AUTO_TEST_CASE(products_and_quotients_are_simplified) {
       BOOST_TEST(Hvv[i + 2 * j] == (i == j ? 1.0 : 0.0));
     }
   }
+}
+
+BOOST_AUTO_TEST_CASE(products_of_products_many_levels_deep) {
+  // d1 = x y, d_k = d_{k-1} d_{k-1}, 40 levels: d40 = (x y)^(2^39), whose count of
+  // factors would pass any integer's range (the builder stops counting past the few it
+  // reorders); at x y = 1 every value is exact: dL/dx = 2^39 y, dL/dy = 2^39 x
+  std::vector<std::pair<std::string, std::string>> defs = {{"d1", "x*y"}};
+  for (int k = 2; k <= 40; ++k)
+    defs.push_back({"d" + std::to_string(k), "d" + std::to_string(k - 1) + "*d" + std::to_string(k - 1)});
+  const auto s = written({"x", "y"}, "x_dot^2/2 + y_dot^2/2 + d40", defs);
+  const auto p = DerivativeProgram::build(s->lagrangian, 2);
+  BOOST_TEST_REQUIRE(p != nullptr);
+  const double q[2] = {1.0, 1.0}, v[2] = {0.5, -0.25};
+  auto w = p->workspace();
+  double gq[2], gv[2];
+  p->gradient(q, v, gq, gv, w.data());
+  BOOST_TEST(gq[0] == std::ldexp(1.0, 39));
+  BOOST_TEST(gq[1] == std::ldexp(1.0, 39));
+  BOOST_TEST(gv[0] == 0.5);
+  BOOST_TEST(gv[1] == -0.25);
 }
 
 BOOST_AUTO_TEST_CASE(blocks_are_differentiated_once_for_their_shape) {
