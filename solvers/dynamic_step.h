@@ -42,7 +42,9 @@
 // position-momentum step may instead keep its Jacobian across steps (keep_jacobian:
 // simplified Newton, solvers/kept_newton.h), where a step then costs gradients of L and
 // triangular solves, and L's Hessian only where the iteration stops converging fourfold.
-// Non-convergence,
+// Compiled for a number of coordinates K known in advance (DynamicThetaStep<Sys, K>),
+// it keeps the first iteration's Jacobian within each step by the same rule and forms dp
+// from the last gradient (newton() below). Non-convergence,
 // singular Jacobians, non-finite values and std::domain_error from the system (e.g. a
 // degenerate Legendre transform) are reported in the StepSummary, never thrown. Only
 // Newton's method is offered: StepOptions::solver = tiny is refused at construction.
