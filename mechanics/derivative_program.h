@@ -67,6 +67,7 @@
 #include <functional>
 #include <memory>
 #include <new>
+#include <tuple>
 #include <type_traits>
 #include <unordered_map>
 #include <vector>
@@ -648,8 +649,8 @@ class DerivativeProgramBuilder {
     if (is_const(b) && !is_const(a)) return op1(Op::MulC, a, cval(b));
     // constant factors outward, where they meet and fold: (c x) (d y) = (c d) (x y), to
     // round-off (a reverse pass makes such products at every chain rule)
-    if (op(a) == Op::MulC) return op1(Op::MulC, mul(arg(a), b), cval_of(a));
-    if (op(b) == Op::MulC) return op1(Op::MulC, mul(a, arg(b)), cval_of(b));
+    if (op(a) == Op::MulC) return op1(Op::MulC, mul(arg(a), b), cval(a));
+    if (op(b) == Op::MulC) return op1(Op::MulC, mul(a, arg(b)), cval(b));
     // a product of few factors in one order (the latest made first), so that equal
     // products are one node and products sharing their first factors share their
     // partial products: x^2 y r^-3 and y r^-3 and r^-3 are one chain (the
@@ -667,9 +668,11 @@ class DerivativeProgramBuilder {
     return op2(Op::Mul, a, b);
   }
   static constexpr int kMaxFactors = 8;
-  // x as c y: (c, y) where x = c y is a node, (1, x) otherwise
+  // x as c y: (c, y) where x = c y or (c = -1) x = -y is a node, (1, x) otherwise
+  // (add and sub meet no negation here: they turn it into a difference or a sum first)
   std::pair<double, int> coefficient(int x) const {
-    if (op(x) == Op::MulC) return {cval_of(x), arg(x)};
+    if (op(x) == Op::MulC) return {cval(x), arg(x)};
+    if (op(x) == Op::Neg) return {-1.0, arg(x)};
     return {1.0, x};
   }
   void factors_of(int i, int* f, int& m) const {
@@ -688,7 +691,7 @@ class DerivativeProgramBuilder {
     // signs and constant factors outward, as in mul
     if (op(a) == Op::Neg) return neg(div(arg(a), b));
     if (op(b) == Op::Neg) return neg(div(a, arg(b)));
-    if (op(a) == Op::MulC) return op1(Op::MulC, div(arg(a), b), cval_of(a));
+    if (op(a) == Op::MulC) return op1(Op::MulC, div(arg(a), b), cval(a));
     // a / x = a (1 / x) where 1 / x is a node already: a product in place of a division
     // (the derivatives of c / x, a / x and sqrt(x) all divide by x again)
     const auto recip = memo_.find(Key{Op::RDivC, false, b, -1, 0, bits(1.0)});
@@ -697,7 +700,6 @@ class DerivativeProgramBuilder {
   }
   Op op(int i) const { return nodes_[static_cast<std::size_t>(i)].op; }
   int arg(int i) const { return nodes_[static_cast<std::size_t>(i)].a; }
-  double cval_of(int i) const { return nodes_[static_cast<std::size_t>(i)].c; }
   int neg(int a) { return op1(Op::Neg, a); }
 
   // The tape as a graph (step 1); returns the node of its value.
@@ -833,14 +835,8 @@ class DerivativeProgramBuilder {
     const std::size_t count = nodes_.size();
     // an output -x or c x is x read times its factor: no instruction for the product
     auto outward = [&](std::vector<int>& roots, std::vector<double>& factor) {
-      factor.assign(roots.size(), 1.0);
-      for (std::size_t i = 0; i < roots.size(); ++i) {
-        const Node& nd = nodes_[static_cast<std::size_t>(roots[i])];
-        if (nd.op == Op::Neg || nd.op == Op::MulC) {
-          factor[i] = nd.op == Op::Neg ? -1.0 : nd.c;
-          roots[i] = nd.a;
-        }
-      }
+      factor.resize(roots.size());
+      for (std::size_t i = 0; i < roots.size(); ++i) std::tie(factor[i], roots[i]) = coefficient(roots[i]);
     };
     outward(grad, out.grad_factor_);
     outward(hess, out.hess_factor_);
@@ -986,12 +982,8 @@ class DerivativeProgramBuilder {
         const int var = g.make(Op::Var, static_cast<int>(i));
         const int d = var < static_cast<int>(adj.size()) ? adj[static_cast<std::size_t>(var)] : -1;
         if (d < 0 || g.is(d, 0.0)) continue;
-        if (g.op(d) == Op::Neg)
-          partial.push_back({static_cast<int>(i), g.arg(d), -1.0});
-        else if (g.op(d) == Op::MulC)
-          partial.push_back({static_cast<int>(i), g.arg(d), g.cval_of(d)});
-        else
-          partial.push_back({static_cast<int>(i), d, 1.0});
+        const auto [c, x] = g.coefficient(d);
+        partial.push_back({static_cast<int>(i), x, c});
       }
       const std::size_t count = g.nodes_.size();
       std::vector<char> need(count, 0);

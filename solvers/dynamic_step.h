@@ -197,14 +197,13 @@ class DynamicThetaStep {
       const double dqn = dynamic_detail::inf_norm(dq);
       corrected = false;
       bool fresh = !factored;
-      if (factored) {  // (kChord) the residual alone, and a Jacobian where it did not shrink
+      if (factored) {  // (kChord) the residual alone; a Jacobian where the kept one no longer serves
         L_.gradient(x_, v_, Lq_, Lv_);
         residual();
-        if (!(s.residual <= 0.25 * last) || 2 * (it + 1) > options_.max_iterations) {
-          StepSummary probe = s;  // (a residual at round-off shrinks no more, whatever J is)
-          probe.scale = pscale + Jmax * dqn + options_.absolute_floor;
-          fresh = newton_verdict(probe, dxn, dqn + q0size, options_) != NewtonVerdict::converged;
-        }
+        fresh = !kept_jacobian_serves(s, last, it, pscale + Jmax * dqn + options_.absolute_floor, options_,
+                                      [&](StepSummary& probe) {
+                                        return newton_verdict(probe, dxn, dqn + q0size, options_);
+                                      });
       }
       if (fresh) {
         L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);

@@ -51,6 +51,20 @@ struct KeptNewtonWork {
   Eigen::VectorXd r, dx, start;  // the residual, the correction, the starting guess
 };
 
+// Whether a factorisation formed at an earlier iterate still serves at this one: the
+// residual shrank fourfold since the last iterate, within the first half of the
+// iteration budget (Newton's method from there on), or it already meets the stopping
+// rule (a residual at round-off shrinks no more, whatever J is). scale: the residual's
+// scale with that Jacobian; verdict(probe): the caller's stopping rule on a copy of s.
+template <class Verdict>
+bool kept_jacobian_serves(const StepSummary& s, double last, int it, double scale, const StepOptions& opt,
+                          Verdict&& verdict) {
+  if (s.residual <= 0.25 * last && 2 * (it + 1) <= opt.max_iterations) return true;
+  StepSummary probe = s;
+  probe.scale = scale;
+  return verdict(probe) == NewtonVerdict::converged;
+}
+
 // The loop. f: the state of the kept factorisation (valid, Jmax), updated here; s: the
 // step's summary, filled as the loop goes (so that a caller catching an exception from
 // the system keeps what it holds). Beyond solve_newton's rule, a Jacobian is also formed
@@ -86,16 +100,11 @@ void kept_jacobian_newton(const Ops& ops, KeptJacobian& f, const StepOptions& op
       s.residual = dynamic_detail::inf_norm(w.r);
     }
     const double dqn = dynamic_detail::inf_norm(dq);  // (dq is this until the correction below)
-    bool refresh = !f.valid;
-    if (!refresh && (!(s.residual <= 0.25 * last) || 2 * (it + 1) > opt.max_iterations)) {
-      // not shrinking fourfold, or in the second half of the budget (Newton's method
-      // from there on): a new Jacobian, unless the residual is already where the stopping
-      // rule accepts it (at round-off it shrinks no more, whatever J is)
-      StepSummary probe = s;
-      probe.scale = pscale + f.Jmax * dqn + opt.absolute_floor;
-      refresh = newton_verdict_floored(probe, dxn, dqn + x0, opt, f.Jmax) !=
-                NewtonVerdict::converged;
-    }
+    const bool refresh =
+        !f.valid || !kept_jacobian_serves(s, last, it, pscale + f.Jmax * dqn + opt.absolute_floor, opt,
+                                          [&](StepSummary& probe) {
+                                            return newton_verdict_floored(probe, dxn, dqn + x0, opt, f.Jmax);
+                                          });
     if (refresh) {
       f.Jmax = ops.jacobian(q0, dq);
       ++s.iterations;
