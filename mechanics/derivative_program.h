@@ -63,11 +63,13 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 #include <functional>
 #include <memory>
 #include <new>
 #include <tuple>
+#include <string>
 #include <type_traits>
 #include <unordered_map>
 #include <vector>
@@ -114,8 +116,10 @@ class DerivativeProgram {
     return w;
   }
 
-  // ga, gb receive dL/da and dL/db (n each, overwritten); v: a workspace().
+  // ga, gb receive dL/da and dL/db (n each, overwritten; gb may be null: dL/db is not
+  // wanted, the force of a potential); v: a workspace().
   void gradient(const double* a, const double* b, double* ga, double* gb, double* v) const {
+    if (gradient_fn_) return gradient_fn_(a, b, ga, gb);
     load(a, b, v);
     run(grad_code_, v, a, b);
     gradient_out(v, ga, gb);
@@ -154,6 +158,7 @@ class DerivativeProgram {
   // column-major with leading dimensions lda, ldab, ldb.
   void hessian(const double* a, const double* b, double* ga, double* gb, double* Haa, int lda, double* Hab, int ldab,
                double* Hbb, int ldb, double* v) const {
+    if (hessian_fn_) return hessian_fn_(a, b, ga, gb, Haa, lda, Hab, ldab, Hbb, ldb);
     load(a, b, v);
     run(hess_code_, v, a, b);
     const int n = n_;
@@ -174,6 +179,33 @@ class DerivativeProgram {
     for (int j = 0; j < n; ++j)
       for (int i = 0; i < n; ++i) Hab[i + j * ldab] = H(n + j, i);
   }
+
+  // ---- machine code (mechanics/native_code.h compiles it) ----
+  // The program as one C translation unit's functions
+  //   void <prefix>_gradient(const double* a, const double* b, double* ga, double* gb)
+  //   void <prefix>_hessian(a, b, ga, gb, double* Haa, int lda, double* Hab, int ldab,
+  //                         double* Hbb, int ldb)   (with the Hessian only)
+  // with the contracts of gradient() and hessian(). They perform the interpreter's
+  // operations in its order, on the same libm functions, so compiled without
+  // contraction into fused multiply-adds and without value-changing optimizations they
+  // give its results to the bit. Every input is read before any output is written (a
+  // caller may pass overlapping arrays). Empty where the program has blocks (sums over
+  // arrays, whose loops are not written out).
+  std::string c_source(const std::string& prefix) const;
+  using GradientFn = void (*)(const double*, const double*, double*, double*);
+  using HessianFn = void (*)(const double*, const double*, double*, double*, double*, int, double*, int, double*, int);
+  // A copy whose gradient() and hessian() call compiled functions (code: what keeps them
+  // loaded; hessian_fn may be null only for a program without the Hessian).
+  std::shared_ptr<const DerivativeProgram> with_native(GradientFn gradient_fn, HessianFn hessian_fn,
+                                                       std::shared_ptr<const void> code) const {
+    auto p = std::make_shared<DerivativeProgram>(*this);
+    p->gradient_fn_ = gradient_fn;
+    p->hessian_fn_ = hessian_fn;
+    p->native_ = std::move(code);
+    return p;
+  }
+  // Whether gradient() and hessian() run compiled code.
+  bool compiled() const { return gradient_fn_ != nullptr; }
 
   // One operation of a program: slots[out] = op(slots[a], slots[b]) (c and k: the
   // constant and the integer power of the one-operand forms). Sin with `sign` set is
@@ -217,10 +249,10 @@ class DerivativeProgram {
   // partial derivatives times its adjoint added to its terms' variables.
   template <class T>
   void gradient_out(const T* v, T* ga, T* gb) const {
-    for (int i = 0; i < n_; ++i) {
+    for (int i = 0; i < n_; ++i)
       ga[i] = v[grad_out_[static_cast<std::size_t>(i)]] * grad_factor_[static_cast<std::size_t>(i)];
+    for (int i = 0; gb && i < n_; ++i)
       gb[i] = v[grad_out_[static_cast<std::size_t>(n_ + i)]] * grad_factor_[static_cast<std::size_t>(n_ + i)];
-    }
     for (const BlockProgram& B : blocks_) {
       if (B.adjoint < 0) continue;
       const T* arrays = v + B.offset;
@@ -228,6 +260,7 @@ class DerivativeProgram {
         const T w = v[B.adjoint] * d.factor;
         const auto& in = B.inputs[static_cast<std::size_t>(d.input)];
         T* g = in.block == 0 ? ga : gb;
+        if (!g) continue;
         const T* dk = arrays + static_cast<std::size_t>(d.slot) * B.terms;
         if (in.first >= 0) {
           T* gk = g + in.first;
@@ -261,6 +294,9 @@ class DerivativeProgram {
   std::vector<std::pair<std::int32_t, double>> constant_slots_;
   std::vector<BlockProgram> blocks_;
   bool has_hessian_ = false;
+  GradientFn gradient_fn_ = nullptr;  // compiled code (with_native), or null
+  HessianFn hessian_fn_ = nullptr;
+  std::shared_ptr<const void> native_;
 };
 
 namespace derivative_program_detail {
@@ -1027,6 +1063,137 @@ class DerivativeProgramBuilder {
   std::vector<Node> nodes_;
   std::unordered_map<Key, int, KeyHash> memo_;
 };
+
+inline std::string DerivativeProgram::c_source(const std::string& prefix) const {
+  using Op = Expression::Op;
+  if (!blocks_.empty()) return {};
+  auto literal = [](double c) -> std::string {
+    if (std::isnan(c)) return "NAN";
+    if (std::isinf(c)) return c > 0.0 ? "HUGE_VAL" : "(-HUGE_VAL)";
+    char buf[48];
+    std::snprintf(buf, sizeof buf, "(%a)", c);  // exact
+    return buf;
+  };
+  auto slot = [](std::int32_t k) { return "v" + std::to_string(k); };
+  std::vector<int> input(constants_.size(), -1);
+  for (const auto& in : inputs_) input[static_cast<std::size_t>(in.first)] = in.second;
+  // Every slot a local: the inputs and constants initialised, the rest assigned by the code.
+  auto declare = [&]() {
+    std::string d;
+    for (std::size_t k = 0; k < constants_.size(); ++k) {
+      const int i = input[k];
+      d += "  double " + slot(static_cast<std::int32_t>(k)) + " = " +
+           (i < 0 ? literal(constants_[k]) : i < n_ ? "a[" + std::to_string(i) + "]" : "b[" + std::to_string(i - n_) + "]") +
+           ";\n";
+    }
+    return d;
+  };
+  int temps = 0;
+  std::string body;
+  // x^k as power_int forms it (expression.h), into temporaries; the name of the result
+  std::function<std::string(const std::string&, long long)> power = [&](const std::string& x, long long k) -> std::string {
+    if (k == 0) return "1.0";
+    auto temp = [&](const std::string& e) {
+      const std::string t = "t" + std::to_string(temps++);
+      body += "  const double " + t + " = " + e + ";\n";
+      return t;
+    };
+    if (k < 0) return temp("1.0 / " + power(x, -k));
+    if (k == 1) return x;
+    if (k == 2) return temp(x + " * " + x);
+    const std::string half = power(x, k / 2), sq = temp(half + " * " + half);
+    return k % 2 ? temp(sq + " * " + x) : sq;
+  };
+  auto code = [&](const std::vector<Instr>& instrs) -> bool {
+    body.clear();
+    for (const Instr& in : instrs) {
+      const std::string z = "  " + slot(in.out) + " = ", x = slot(in.a), y = slot(in.b), c = literal(in.c);
+      auto call = [&](const char* f) { body += z + f + "(" + x + ");\n"; };
+      switch (in.op) {
+        case Op::Neg: body += z + "-" + x + ";\n"; break;
+        case Op::Add: body += z + x + " + " + y + ";\n"; break;
+        case Op::Sub: body += z + x + " - " + y + ";\n"; break;
+        case Op::Mul: body += z + x + " * " + y + ";\n"; break;
+        case Op::Div: body += z + x + " / " + y + ";\n"; break;
+        case Op::AddC: body += z + x + " + " + c + ";\n"; break;
+        case Op::MulC: body += z + x + " * " + c + ";\n"; break;
+        case Op::DivC: body += z + x + " / " + c + ";\n"; break;
+        case Op::RSubC: body += z + c + " - " + x + ";\n"; break;
+        case Op::RDivC: body += z + c + " / " + x + ";\n"; break;
+        case Op::PowI: {
+          const std::string r = power(x, in.k);
+          body += z + r + ";\n";
+          break;
+        }
+        case Op::PowC: body += z + "pow(" + x + ", " + c + ");\n"; break;
+        case Op::Pow: body += z + "exp(" + y + " * log(" + x + "));\n"; break;
+        case Op::Atan2: body += z + "atan2(" + x + ", " + y + ");\n"; break;
+        case Op::Abs:
+          body += z + "(" + x + " < 0.0 ? " + (in.sign ? "-1.0 : 1.0" : "-" + x + " : " + x) + ");\n";
+          break;
+        case Op::Sin:
+          if (in.sign)
+            body += "  sincos(" + x + ", &" + slot(in.out) + ", &" + slot(in.k) + ");\n";
+          else
+            call("sin");
+          break;
+        case Op::Cos: call("cos"); break;
+        case Op::Tan: call("tan"); break;
+        case Op::Asin: call("asin"); break;
+        case Op::Acos: call("acos"); break;
+        case Op::Atan: call("atan"); break;
+        case Op::Exp: call("exp"); break;
+        case Op::Log: call("log"); break;
+        case Op::Sqrt: call("sqrt"); break;
+        case Op::Cbrt: call("cbrt"); break;
+        case Op::Sinh: call("sinh"); break;
+        case Op::Cosh: call("cosh"); break;
+        case Op::Tanh: call("tanh"); break;
+        default: return false;  // Const, Var, Let, Block: not in a program without blocks
+      }
+    }
+    return true;
+  };
+  const int n = n_;
+  // an output: its slot times its factor (a product commutes exactly, so the order of
+  // gradient_out and hessian() does not matter)
+  auto out = [&](std::int32_t s, double f) { return slot(s) + " * " + literal(f); };
+  auto gradient_outputs = [&]() {
+    std::string g;
+    for (int i = 0; i < 2 * n; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      if (i == n) g += "  if (gb) {\n";
+      g += std::string(i < n ? "  ga[" : "    gb[") + std::to_string(i < n ? i : i - n) +
+           "] = " + out(grad_out_[k], grad_factor_[k]) + ";\n";
+    }
+    return g + "  }\n";
+  };
+  std::string src = "void " + prefix + "_gradient(const double* a, const double* b, double* ga, double* gb) {\n" +
+                    declare();
+  if (!code(grad_code_)) return {};
+  src += body + gradient_outputs() + "}\n";
+  if (!has_hessian_) return src;
+  src += "void " + prefix +
+         "_hessian(const double* a, const double* b, double* ga, double* gb, double* Haa, int lda, double* Hab, "
+         "int ldab, double* Hbb, int ldb) {\n" + declare();
+  if (!code(hess_code_)) return {};
+  src += body + gradient_outputs();
+  auto H = [&](int r, int c) {
+    const auto k = static_cast<std::size_t>(r * (r + 1) / 2 + c);
+    return out(hess_out_[k], hess_factor_[k]);
+  };
+  auto at = [](const char* m, int i, int j, const char* ld) {
+    return std::string(m) + "[" + std::to_string(i) + " + " + std::to_string(j) + " * " + ld + "]";
+  };
+  for (int j = 0; j < n; ++j)
+    for (int i = j; i < n; ++i) {
+      src += "  " + at("Haa", i, j, "lda") + " = " + at("Haa", j, i, "lda") + " = " + H(i, j) + ";\n";
+      src += "  " + at("Hbb", i, j, "ldb") + " = " + at("Hbb", j, i, "ldb") + " = " + H(n + i, n + j) + ";\n";
+    }
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) src += "  " + at("Hab", i, j, "ldab") + " = " + H(n + j, i) + ";\n";
+  return src + "}\n";
+}
 
 inline std::shared_ptr<const DerivativeProgram> DerivativeProgram::build(const Expression& e, int n, bool hessian) {
   auto p = std::make_shared<DerivativeProgram>();

@@ -66,7 +66,12 @@
 //                        forward (WrittenDerivatives::forward_over_forward, for checking):
 //                        the gradient in chunks of 8 directions, the Hessian by
 //                        Jet<Jet<double, 8>, 8> over pairs of chunks (about (2n/8)^2 / 2
-//                        passes).
+//                        passes). WrittenDerivatives::compiled: the programs (L's and,
+//                        for a separable L, its potential's) compiled to machine code
+//                        by the machine's C compiler in one run (mechanics/native_code.h),
+//                        the same results to the bit; NativeCodeError where a program
+//                        cannot be (blocks; a graph too large to build) or the compiler
+//                        fails.
 //                        Measured (bench_written_lagrangian, g++ -O3; program / tape's
 //                        forward over reverse): a Hessian with its gradient, pendulum
 //                        27 / 122 ns, Kepler 113 / 251, double pendulum 79 / 445; the
@@ -76,7 +81,7 @@
 //                        Its structure is read off the text (Expression::split_velocity):
 //                        when L = v^T M v / 2 + U(q) with M constant and positive definite
 //                        (separable()), the inverse Legendre map is v = M^{-1} p in closed
-//                        form (M diagonal: a division; else a Cholesky factor) and
+//                        form (M diagonal: a product by 1/m; else a Cholesky factor) and
 //                        WrittenSeparable views it as a declared separable system, whose
 //                        force is the gradient of U alone (U's own program, or its tape).
 //                        On the tape, forward over reverse against forward over forward
@@ -109,6 +114,7 @@
 #include "core/map_operations.h"
 #include "core/scalar.h"
 #include "mechanics/derivative_program.h"
+#include "mechanics/native_code.h"
 #include "mechanics/lagrangian.h"
 #include "mechanics/nbody_momenta.h"
 #include "mechanics/structure.h"
@@ -603,7 +609,11 @@ class NBodyDynamic {
 // (mechanics/derivative_program.h) where one is built, else reverse mode on the tape
 // (forward over reverse for the Hessian); the other two force the tape one way
 // (forward over forward is kept to check reverse mode against).
-enum class WrittenDerivatives { automatic, forward_over_reverse, forward_over_forward };
+// How a written Lagrangian is differentiated: automatic, its derivative program where one
+// is built (else the tape, reverse mode); compiled, that program compiled to machine code
+// (mechanics/native_code.h; throws NativeCodeError where there is none to compile); the
+// tape forced (forward over reverse, forward over forward), for checking.
+enum class WrittenDerivatives { automatic, forward_over_reverse, forward_over_forward, compiled };
 
 namespace dynamic_detail {
 
@@ -615,7 +625,7 @@ class TapeDerivatives {
 
   TapeDerivatives(std::shared_ptr<const Expression> e, int n, WrittenDerivatives mode) : e_(std::move(e)), n_(n) {
     reverse_ = mode != WrittenDerivatives::forward_over_forward;
-    if (mode == WrittenDerivatives::automatic) {
+    if (mode == WrittenDerivatives::automatic || mode == WrittenDerivatives::compiled) {
       program_ = DerivativeProgram::build(*e_, n);
       if (!program_) program_ = DerivativeProgram::build(*e_, n, false);  // the gradient at least
     }
@@ -637,6 +647,13 @@ class TapeDerivatives {
   int chunk() const { return chunk_; }
   // The derivative program, or null when the tape is differentiated as it runs.
   const DerivativeProgram* program() const { return program_.get(); }
+  // The same program compiled (DerivativeProgram::with_native) in its place, and the
+  // seconds compiling it took.
+  void use_compiled(std::shared_ptr<const DerivativeProgram> p, double seconds) {
+    program_ = std::move(p);
+    compile_seconds_ = seconds;
+  }
+  double compile_seconds() const { return compile_seconds_; }
   const Expression& expression() const { return *e_; }
 
   double value(const double* a, const double* b) const { return (*e_)(a, b); }
@@ -779,6 +796,7 @@ class TapeDerivatives {
   mutable std::vector<ceres::Jet<double, 4>> j4_;
   mutable std::vector<ceres::Jet<double, 8>> j8_;
   mutable std::vector<ceres::Jet<ceres::Jet<double, kForwardChunk>, kForwardChunk>> jj_;
+  double compile_seconds_ = 0.0;
 };
 
 inline const WrittenSystem& checked_written(const std::shared_ptr<const WrittenSystem>& s) {
@@ -787,6 +805,22 @@ inline const WrittenSystem& checked_written(const std::shared_ptr<const WrittenS
     throw std::invalid_argument(s->name + ": a Lagrangian written on S^2 or SO(3) runs on its manifold's steps");
   if (s->lagrangian.empty()) throw std::invalid_argument(s->name + ": the written system has no Lagrangian");
   return *s;
+}
+
+// WrittenDerivatives::compiled: the tape's program and `also` (a second program, or
+// null) compiled in one run of the compiler; the tape takes its compiled program and
+// the second compiled program is returned (null if none was given).
+inline std::shared_ptr<const DerivativeProgram> compile_programs_of(TapeDerivatives& tape, const std::string& name,
+                                                                   const std::shared_ptr<const DerivativeProgram>& also) {
+  if (!tape.program())
+    throw NativeCodeError(name + ": compiled derivatives: the text's derivative graph exceeds 2^16 operations; it is "
+                                 "differentiated on the tape");
+  std::vector<const DerivativeProgram*> p{tape.program()};
+  if (also) p.push_back(also.get());
+  double seconds = 0.0;
+  auto c = compile_programs(p, default_c_compiler(), &seconds);
+  tape.use_compiled(c[0], seconds);
+  return also ? c[1] : nullptr;
 }
 
 }  // namespace dynamic_detail
@@ -798,6 +832,11 @@ struct WrittenParts {
   Expression kinetic, potential;  // when split.constant_mass: L = kinetic + potential
   bool separable = false;         // constant_mass and M positive definite
   Eigen::VectorXd mass_diagonal;  // M when split.diagonal
+  Eigen::VectorXd inverse_mass;   // and its reciprocals (v = p * (1/m): the explicit steps
+                                  // carry v in their chain from force to force, where a
+                                  // division would cost 3 to 4 times a product's latency)
+  double uniform_inverse_mass = 0.0;  // 1/m when every diagonal entry is m (else 0): a
+                                      // scalar product, no array of reciprocals read
   Eigen::MatrixXd mass;           // M otherwise, with its Cholesky factor
   Eigen::LLT<Eigen::MatrixXd> mass_factor;
   std::vector<bool> cyclic;       // coordinates L does not depend on
@@ -828,6 +867,8 @@ struct WrittenParts {
     if (split.diagonal) {
       mass_times(Eigen::VectorXd::Ones(n), mass_diagonal);
       separable = (mass_diagonal.array() > 0.0).all() && mass_diagonal.allFinite();
+      inverse_mass = mass_diagonal.cwiseInverse();
+      if (separable && (mass_diagonal.array() == mass_diagonal[0]).all()) uniform_inverse_mass = inverse_mass[0];
       if (separable) potential_program = DerivativeProgram::build(potential, n, false);
       return;
     }
@@ -846,8 +887,10 @@ struct WrittenParts {
   }
   // v = M^{-1} p (separable only)
   void velocity(const DynIn& p, DynOut v) const {
-    if (split.diagonal)
-      v = p.cwiseQuotient(mass_diagonal);
+    if (uniform_inverse_mass != 0.0)
+      v = p * uniform_inverse_mass;
+    else if (split.diagonal)
+      v = p.cwiseProduct(inverse_mass);
     else
       v = mass_factor.solve(p);
   }
@@ -861,7 +904,7 @@ class WrittenDynamic {
       : system_(std::move(s)),
         tape_(std::shared_ptr<const Expression>(system_, &dynamic_detail::checked_written(system_).lagrangian),
               dynamic_detail::checked_written(system_).dim(), mode),
-        parts_(std::make_shared<const WrittenParts>(*system_)),
+        parts_(parts_of(*system_, mode, tape_)),
         Lq_(system_->dim()),
         Lv_(system_->dim()) {}
 
@@ -882,6 +925,10 @@ class WrittenDynamic {
   bool reverse_mode() const { return tape_.reverse(); }
   // The derivative program the gradient and Hessian come from, or null (the tape).
   const DerivativeProgram* derivative_program() const { return tape_.program(); }
+  // Whether its derivatives run compiled code (WrittenDerivatives::compiled), and the
+  // seconds the compiler took.
+  bool compiled() const { return tape_.program() && tape_.program()->compiled(); }
+  double compile_seconds() const { return tape_.compile_seconds(); }
 
   double value(const DynIn& q, const DynIn& v) const { return tape_.value(q.data(), v.data()); }
   void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
@@ -906,6 +953,14 @@ class WrittenDynamic {
   bool cyclic(int i) const { return parts_->cyclic[static_cast<std::size_t>(i)]; }
 
  private:
+  // The parts read off the text; compiled: L's program and the potential's in one run.
+  static std::shared_ptr<const WrittenParts> parts_of(const WrittenSystem& s, WrittenDerivatives mode,
+                                                      dynamic_detail::TapeDerivatives& tape) {
+    auto parts = std::make_shared<WrittenParts>(s);
+    if (mode == WrittenDerivatives::compiled)
+      parts->potential_program = dynamic_detail::compile_programs_of(tape, s.name, parts->potential_program);
+    return parts;
+  }
   std::shared_ptr<const WrittenSystem> system_;
   dynamic_detail::TapeDerivatives tape_;
   std::shared_ptr<const WrittenParts> parts_;
@@ -941,11 +996,78 @@ class WrittenSeparable {
       Lv.noalias() = parts_->mass * v;
   }
   void velocity(const DynIn&, const DynIn& p, DynOut v) const { parts_->velocity(p, v); }
+  // dL/dq at v = 0, the force of the explicit steps: U's gradient alone, nothing of v
+  // read or formed
+  void force(const DynIn& q, DynOut F) const {
+    if (parts_->potential_program) {
+      parts_->potential_program->gradient(q.data(), zero_.data(), F.data(), nullptr, work_.data());
+    } else {
+      F.setZero();
+      parts_->potential.gradient(q.data(), zero_.data(), F.data(), lv_.data());  // U has no v: lv_ untouched
+    }
+  }
 
  private:
   WrittenDynamic L_;  // holds the parts alive
   const WrittenParts* parts_;
   mutable std::vector<double> work_;  // the potential program's workspace
+  Eigen::VectorXd zero_ = Eigen::VectorXd::Zero(L_.dim());  // v = 0 (U reads none of it)
+  mutable Eigen::VectorXd lv_ = Eigen::VectorXd::Zero(L_.dim());
+};
+
+// The same separable view at a size known when it is compiled, K coordinates (the
+// runtime makes K = 1 and 2): a system of fixed size (S::dim) for the explicit steps,
+// whose force and velocity work on vectors of length K. dL/dq is the potential
+// program's gradient (compiled where L was built with WrittenDerivatives::compiled) or
+// the potential tape's reverse gradient; dL/dv = M v; v = M^{-1} p by M's diagonal or
+// the Cholesky factor of M (2 x 2). L.dim() must be K and L separable.
+template <int K>
+class WrittenSeparableOf {
+ public:
+  static constexpr int dim = K;
+  static constexpr Structure structure = Structure::separable;
+  using V = Vec<double, K>;
+  explicit WrittenSeparableOf(const WrittenDynamic& L) : L_(L), parts_(&L.parts()), program_(parts_->potential_program.get()) {
+    if (L.dim() != K)
+      throw std::invalid_argument(L.name() + ": " + std::to_string(L.dim()) + " coordinates, a step compiled for " +
+                                  std::to_string(K));
+    if (!L.separable()) throw std::invalid_argument(L.name() + ": the written Lagrangian is not separable");
+    if (program_) work_ = program_->workspace();
+    diagonal_ = parts_->split.diagonal;
+    if (diagonal_) {
+      mass_diagonal_ = parts_->mass_diagonal;
+      inverse_mass_ = parts_->inverse_mass;
+    } else {
+      mass_ = parts_->mass;
+      factor_.compute(mass_);
+    }
+  }
+  std::string name() const { return L_.name(); }
+  void gradient(const V& q, const V& v, V& Lq, V& Lv) const {
+    if (program_) {
+      program_->gradient(q.data(), v.data(), Lq.data(), Lv.data(), work_.data());
+    } else {
+      Lq.setZero();
+      parts_->potential.gradient(q.data(), v.data(), Lq.data(), Lv.data());
+    }
+    Lv = diagonal_ ? V(v.cwiseProduct(mass_diagonal_)) : V(mass_ * v);
+  }
+  // dL/dq at v = 0 (as WrittenSeparable::force)
+  void force(const V& q, V& F) const {
+    V lv;
+    gradient(q, V::Zero(), F, lv);
+  }
+  V velocity(const V&, const V& p) const { return diagonal_ ? V(p.cwiseProduct(inverse_mass_)) : V(factor_.solve(p)); }
+
+ private:
+  WrittenDynamic L_;  // holds the parts alive
+  const WrittenParts* parts_;
+  const DerivativeProgram* program_;
+  mutable std::vector<double> work_;
+  bool diagonal_ = true;
+  V mass_diagonal_, inverse_mass_;
+  Mat<double, K, K> mass_;
+  Eigen::LLT<Mat<double, K, K>> factor_;
 };
 
 // The Hamiltonian H(q, p) written in a scene (system.hamiltonian), for the Hamiltonian
@@ -954,7 +1076,13 @@ class WrittenDynamicHamiltonian {
  public:
   explicit WrittenDynamicHamiltonian(std::shared_ptr<const WrittenSystem> s,
                                      WrittenDerivatives mode = WrittenDerivatives::automatic)
-      : system_(std::move(s)), tape_(reparse(system_), system_->dim(), mode) {}
+      : system_(std::move(s)), tape_(reparse(system_), system_->dim(), mode) {
+    if (mode == WrittenDerivatives::compiled) dynamic_detail::compile_programs_of(tape_, name(), nullptr);
+  }
+  // Whether its derivatives run compiled code (WrittenDerivatives::compiled), and the
+  // seconds the compiler took.
+  bool compiled() const { return tape_.program() && tape_.program()->compiled(); }
+  double compile_seconds() const { return tape_.compile_seconds(); }
 
   int dim() const { return system_->dim(); }
   std::string name() const { return system_->name.empty() ? "hamiltonian" : system_->name; }

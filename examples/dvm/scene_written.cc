@@ -108,6 +108,10 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     space = *v == "S^2" || power ? Space::sphere : *v == "SO(3)" ? Space::rotation : Space::euclidean;
     if (power) w->factors = (*v)[6] - '0';
   }
+  if (const toml::node* n = sys.get("compile")) {
+    if (!n->is_boolean()) throw InputError(key_where(path, *n, "system.compile") + ": expected true or false");
+    pr.compile = *n->value<bool>();
+  }
   w->space = space == Space::sphere     ? WrittenSystem::Space::sphere
              : space == Space::rotation ? WrittenSystem::Space::rotation
                                         : WrittenSystem::Space::euclidean;

@@ -86,10 +86,12 @@ inline double dynamic_energy(const WrittenDynamic& L, const Eigen::VectorXd& q, 
   return L.energy_at(q, v, p);
 }
 
-template <class Sys>
+// The run's view of a run-time-sized system; K: the number of coordinates where the
+// runtime compiles the run for it (the state then of fixed size), else Dynamic.
+template <class Sys, int K = Eigen::Dynamic>
 struct DynamicView {
-  using Point = Eigen::VectorXd;
-  using Covector = Eigen::VectorXd;
+  using Point = Vec<double, K>;
+  using Covector = Vec<double, K>;
   Sys L;
   std::vector<std::string> names;  // coordinate names of the columns (empty: q0.., p0..)
   Vec<double, 2> sigma0 = Vec<double, 2>::Zero();  // the scale of d2L/dv2 at the initial state
@@ -178,6 +180,8 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
   r.step_path = "generic";
   const DerivativeProgram* d = L.derivative_program();
   r.derivatives = !d ? "tape" : d->has_hessian() ? "program" : "gradient-program";
+  r.compiled = L.compiled();
+  r.compile_seconds = L.compile_seconds();
 }
 
 // From this many coordinates an implicit theta map on a separable system solves the
@@ -210,6 +214,18 @@ constexpr int kKeptJacobianMinDim = 8;
 // (solvers/dynamic_step.h). Keeping the Jacobian across steps instead (the loop of
 // solvers/kept_newton.h) took 2.0 times as long for the pendulum, 1.6 for Kepler.
 constexpr int kFixedWrittenMaxDim = 2;
+
+// A written system's derivatives: compiled where the scene asks (system.compile), the
+// compiler's failure an input error naming the key. make(mode) builds the system.
+template <class Make>
+auto compiled_or_not(const Make& make, const Problem& pr) {
+  if (!pr.compile) return make(WrittenDerivatives::automatic);
+  try {
+    return make(WrittenDerivatives::compiled);
+  } catch (const NativeCodeError& e) {
+    throw InputError(pr.origin + ": system.compile: " + e.what());
+  }
+}
 
 // The theta of the method's map as a ThetaMap (retraction-theta: the same map).
 inline ThetaMap dynamic_theta_map(const Method& me) {
@@ -297,8 +313,24 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     if (splitting_applies(me, R)) {
       if constexpr (is_separable_v<Sys>)
         return splitting_run(view, L, R, me, h, q, p, v0, base, pr.steps);
-      if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+      if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
+        if (L.separable() && n <= kFixedWrittenMaxDim && me.use_structure) {
+          // compiled for its size, the run's state too (kFixedWrittenMaxDim)
+          auto run_fixed = [&](auto k) {
+            constexpr int K = decltype(k)::value;
+            using Step = ExplicitSplittingStep<WrittenSeparableOf<K>>;
+            base.step_path = "explicit-splitting";
+            const Vec<double, K> qk = q, pk = p, vk = v0;
+            const DynamicView<Sys, K> fixed{view.L, view.names, view.sigma0, view.constant_hessian};
+            return stepper_run(
+                fixed, Step(WrittenSeparableOf<K>(L), R.theta(), h, method_substeps(me, R.symmetric()), qk), qk, pk,
+                vk, base, pr.steps);
+          };
+          if (n == 1) return run_fixed(std::integral_constant<int, 1>());
+          return run_fixed(std::integral_constant<int, 2>());
+        }
         if (L.separable()) return splitting_run(view, WrittenSeparable(L), R, me, h, q, p, v0, base, pr.steps);
+      }
     }
   }
   if (collocation_applies(me)) {
@@ -354,7 +386,11 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
     };
     if constexpr (std::is_same_v<Sys, WrittenDynamic>)
-      if (hamiltonian) return run_with(WrittenDynamicHamiltonian(hamiltonian));
+      if (hamiltonian) {
+        const auto H = compiled_or_not([&](WrittenDerivatives m) { return WrittenDynamicHamiltonian(hamiltonian, m); }, pr);
+        base.compile_seconds += H.compile_seconds();
+        return run_with(H);
+      }
     return run_with(LegendreDynamicHamiltonian<Sys>(L));
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()

@@ -6,7 +6,8 @@
 namespace dvm::factories {
 
 std::unique_ptr<Run> written(const Problem& pr, const Method& me) {
-  const WrittenDynamic L(pr.written);
+  const WrittenDynamic L = kernels::compiled_or_not(
+      [&](WrittenDerivatives mode) { return WrittenDynamic(pr.written, mode); }, pr);
   return kernels::make_dynamic_run(L, pr, me, pr.written->coordinates,
                                    L.has_hamiltonian() ? pr.written : std::shared_ptr<const WrittenSystem>());
 }

@@ -124,6 +124,11 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError("problem.steps: got " + std::to_string(pr.steps) + ", expected a whole number from 2 to 100000000");
   }
 
+  if (pr.compile && (!pr.written || pr.written->space != WrittenSystem::Space::euclidean))
+    throw InputError("system.compile: compiled derivatives are for Lagrangians written on R^n (system.lagrangian "
+                     "without system.space, or space = \"R^n\"); " +
+                     std::string(pr.written ? "on S^2 and SO(3) a written Lagrangian is differentiated in Jets"
+                                            : "a built-in system's derivatives are compiled with dvm"));
   // [system] written on a space: the entry of that space
   if (pr.written) {
     const Space space = pr.written->space == WrittenSystem::Space::sphere     ? Space::sphere

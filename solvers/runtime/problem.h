@@ -34,6 +34,9 @@ struct Problem {
   std::map<std::string, double> params;            // every parameter, defaults filled in
   std::vector<double> masses;                      // nbody: one per body
   std::shared_ptr<const WrittenSystem> written;    // the written system ("lagrangian")
+  // system.compile: a Lagrangian (and Hamiltonian) written on R^n differentiated by
+  // compiled code (WrittenDerivatives::compiled, mechanics/native_code.h)
+  bool compile = false;
   int dim = 0;                                     // length of q as stored (see SystemEntry::dim)
 
   // The initial state. R^n: q, and p or v. S^2: the unit vector(s) q and a tangent p

@@ -118,6 +118,8 @@ std::string report_json(const RunReport& r) {
   if (!r.structure.empty()) j.str("structure", r.structure).str("structure_source", r.structure_source);
   if (!r.step_path.empty()) j.str("step_path", r.step_path);
   if (!r.derivatives.empty()) j.str("derivatives", r.derivatives);
+  if (!r.derivatives.empty()) j.boolean("compiled", r.compiled);
+  if (r.compiled) j.num("compile_seconds", r.compile_seconds);
   if (r.newton_steps >= 0) j.num("newton_steps", static_cast<double>(r.newton_steps));
   if (r.hessian_colours >= 0) j.num("hessian_colours", r.hessian_colours);
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
@@ -201,6 +203,11 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
         if (r.derivatives == "program") how += "; derivatives by a program differentiated once";
         if (r.derivatives == "gradient-program") how += "; gradient by a program differentiated once";
         if (r.derivatives == "tape") how += "; derivatives by reverse mode on the tape";
+        if (r.compiled) {
+          char c[64];
+          std::snprintf(c, sizeof c, ", compiled to machine code in %.3f s", r.compile_seconds);
+          how += c;
+        }
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());
       } else if (r.step_path == "sphere-chain-banded-newton") {
         std::fprintf(to, "  steps by Newton on the chain's equation, banded Jacobian (O(n) a step)\n");

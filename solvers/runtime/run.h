@@ -69,6 +69,10 @@ struct RunReport {
   // or a graph beyond the program's size).
   // Empty: not a written Lagrangian on R^n.
   std::string derivatives;
+  // system.compile: whether those derivatives run compiled code, and the seconds the
+  // C compiler took (before the run; not in wall_seconds)
+  bool compiled = false;
+  double compile_seconds = 0.0;
   // step_path separable-sparse-newton: the colours of the Hessian's columns, so the
   // gradient passes per Jacobian are ceil(colours / 8) (-1: not such a path)
   int hessian_colours = -1;

@@ -433,6 +433,55 @@ BOOST_AUTO_TEST_CASE(written_arrays_and_sums_match_the_built_in_systems) {
   BOOST_TEST(json_string(b.out, "derivatives") == "");  // a built-in system: not reported
 }
 
+BOOST_AUTO_TEST_CASE(system_compile_runs_compiled_derivatives_or_is_refused) {
+  // system.compile = true: the same run to the bit (Newton's midpoint step on the
+  // pendulum and the double pendulum, Stormer-Verlet on the pendulum), reported as
+  // "compiled" with the compiler's time
+  const std::vector<std::vector<std::string>> runs = {
+      {"pendulum_written.toml"},
+      {"pendulum_written.toml", "--set", "integrator.map=\"explicit-euler\"", "--set",
+       "integrator.composition=\"stormer-verlet\""},
+      {"double_pendulum_written.toml", "--set", "integrator.t_end=1.0"}};
+  for (const auto& r : runs) {
+    std::vector<std::string> extra(r.begin() + 1, r.end()), compiled = extra;
+    compiled.insert(compiled.end(), {"--set", "system.compile=true"});
+    const Output a = run_json(r[0], extra), b = run_json(r[0], compiled);
+    BOOST_TEST_CONTEXT(r[0] << " " << extra.size() << "\n" << a.err << b.err) {
+      BOOST_TEST_REQUIRE(a.status == 0);
+      BOOST_TEST_REQUIRE(b.status == 0);
+      BOOST_TEST(a.out.find("\"compiled\": false") != std::string::npos);
+      BOOST_TEST(b.out.find("\"compiled\": true") != std::string::npos);
+      BOOST_TEST(json_number(b.out, "compile_seconds") > 0.0);
+      BOOST_TEST(json_string(b.out, "derivatives") == "program");
+      BOOST_TEST(max_diff(json_array(a.out, "q_final"), json_array(b.out, "q_final")) == 0.0);
+      BOOST_TEST(max_diff(json_array(a.out, "p_final"), json_array(b.out, "p_final")) == 0.0);
+    }
+  }
+  // refused, exit 2, naming the key: a built-in system, a Lagrangian written on S^2, a
+  // text with sums over arrays, a compiler that fails ($DVM_CC)
+  const std::vector<std::pair<std::string, std::string>> refused = {
+      {"pendulum.toml", "system.compile"},
+      {"spherical_pendulum_written.toml", "on S^2 and SO(3)"},
+      {"fpu_chain_written.toml", "blocks"}};
+  for (const auto& [name, says] : refused) {
+    const Output o = run_json(name, {"--set", "system.compile=true"});
+    BOOST_TEST_CONTEXT(name << ": " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(o.err.find("system.compile") != std::string::npos);
+      BOOST_TEST(o.err.find(says) != std::string::npos);
+    }
+  }
+  ::setenv("DVM_CC", "false", 1);
+  const Output f = run_json("pendulum_written.toml", {"--set", "system.compile=true"});
+  ::unsetenv("DVM_CC");
+  BOOST_TEST(f.status == 2);
+  BOOST_TEST(f.err.find("system.compile") != std::string::npos, f.err);
+  BOOST_TEST(f.err.find("exited with status 1") != std::string::npos, f.err);
+  const Output n = run_json("pendulum_written.toml", {"--set", "system.compile=1"});
+  BOOST_TEST(n.status == 2);
+  BOOST_TEST(n.err.find("system.compile") != std::string::npos, n.err);
+}
+
 BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
   const std::string base =
       "[system]\ncoordinates = [\"q[n]\"]\nparams = { n = 4 }\n"

@@ -1,12 +1,15 @@
 // Derivative programs (mechanics/derivative_program.h): the gradient and Hessian of a
 // written expression differentiated symbolically once, against the tape's own reverse
 // mode (forward over reverse for the Hessian) and against nested Jets through the
-// text, on texts that use every operation, definitions and constant folding.
+// text, on texts that use every operation, definitions and constant folding; and the
+// programs compiled to machine code (mechanics/native_code.h) against the interpreter.
 #define BOOST_TEST_MODULE derivative_program
 #include <boost/test/unit_test.hpp>
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
 #include <random>
 #include <string>
 
@@ -14,6 +17,7 @@
 
 #include "mechanics/derivative_program.h"
 #include "mechanics/dynamic_system.h"
+#include "mechanics/native_code.h"
 #include "mechanics/written_lagrangian.h"
 #include "tests/random_vector.h"
 
@@ -367,4 +371,139 @@ BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
   W.gradient(VectorXd::Zero(20), VectorXd::Zero(20), gq, gv);
   BOOST_TEST(gq.allFinite());
   BOOST_TEST(gq.cwiseAbs().maxCoeff() == 0.0);
+}
+
+// ---- compiled programs (mechanics/native_code.h) -----------------------------------------
+
+namespace {
+
+// Exactly equal, bit for bit (NaN equal to NaN).
+bool same_bits(const double* a, const double* b, int n) { return std::memcmp(a, b, sizeof(double) * n) == 0; }
+
+// Whether the machine's C compiler runs (these tests need it; a build machine has one).
+bool compiler_runs() {
+  static const bool ok = [] {
+    try {
+      compile_programs({});
+      return true;
+    } catch (const NativeCodeError& e) {
+      BOOST_TEST_MESSAGE("no C compiler: " << e.what());
+      return false;
+    }
+  }();
+  return ok;
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(compiled_programs_give_the_interpreters_results_to_the_bit) {
+  // every text, and powers the interpreter forms by repeated squaring (x^13, x^-7),
+  // |x| on both sides of 0, sin and cos of one argument (one sincos): the compiled
+  // gradient and Hessian equal the interpreted ones bit for bit at 5 random points,
+  // written into matrices with leading dimensions larger than n
+  BOOST_TEST_REQUIRE(compiler_runs());
+  std::vector<Text> all = texts();
+  all.push_back({{"x", "y"}, "x_dot^2/2 + y_dot^2/2 + x^13*y - y^-7 + abs(x - 0.5)*y^2 + sin(x)*cos(x)*y_dot", {}});
+  int t = 0;
+  for (const Text& text : all) {
+    const auto s = written(text.coords, text.L, text.definitions);
+    const int n = s->dim();
+    const auto P = DerivativeProgram::build(s->lagrangian, n);
+    BOOST_TEST_REQUIRE(P != nullptr);
+    const auto C = compile_programs({P.get()})[0];
+    BOOST_TEST(C->compiled());
+    BOOST_TEST(!P->compiled());
+    std::vector<double> w = P->workspace();
+    const int ld = n + 2;
+    for (int k = 0; k < 5; ++k) {
+      const VectorXd a = random_vector(n, 0.8, 500 + 10 * t + k), b = random_vector(n, 1.2, 900 + 10 * t + k);
+      std::vector<double> gi(2 * n, -1.0), gc(2 * n, -2.0), hi(2 * n), hc(2 * n);
+      std::vector<double> Hi(3 * ld * n, 7.0), Hc(3 * ld * n, 7.0);  // untouched padding must stay equal
+      P->gradient(a.data(), b.data(), gi.data(), gi.data() + n, w.data());
+      C->gradient(a.data(), b.data(), gc.data(), gc.data() + n, nullptr);
+      P->hessian(a.data(), b.data(), hi.data(), hi.data() + n, Hi.data(), ld, Hi.data() + ld * n, ld,
+                 Hi.data() + 2 * ld * n, ld, w.data());
+      C->hessian(a.data(), b.data(), hc.data(), hc.data() + n, Hc.data(), ld, Hc.data() + ld * n, ld,
+                 Hc.data() + 2 * ld * n, ld, nullptr);
+      BOOST_TEST_CONTEXT(text.L << " at point " << k) {
+        BOOST_TEST(same_bits(gi.data(), gc.data(), 2 * n));
+        BOOST_TEST(same_bits(hi.data(), hc.data(), 2 * n));
+        BOOST_TEST(same_bits(Hi.data(), Hc.data(), 3 * ld * n));
+        BOOST_TEST(std::isfinite(gi[0]));
+      }
+    }
+    ++t;
+  }
+}
+
+BOOST_AUTO_TEST_CASE(written_systems_with_compiled_derivatives) {
+  BOOST_TEST_REQUIRE(compiler_runs());
+  // Kepler: L's program and its potential's, compiled in one run, give the interpreted
+  // gradient, Hessian and force to the bit
+  const auto s = written({"x", "y"}, "m/2*(x_dot^2 + y_dot^2) + k/sqrt(x^2 + y^2)");
+  const WrittenDynamic P(s), C(s, WrittenDerivatives::compiled);
+  BOOST_TEST(!P.compiled());
+  BOOST_TEST(C.compiled());
+  BOOST_TEST(C.compile_seconds() > 0.0);
+  BOOST_TEST_REQUIRE(C.separable());
+  BOOST_TEST(C.parts().potential_program->compiled());
+  const VectorXd q = random_vector(2, 0.8, 3), v = random_vector(2, 1.2, 4);
+  const Derivatives p = derivatives(P, q, v), c = derivatives(C, q, v);
+  BOOST_TEST(difference(p, c) == 0.0);
+  VectorXd Fp(2), Fc(2), Lv(2);
+  WrittenSeparable(P).gradient(q, VectorXd::Zero(2), Fp, Lv);
+  WrittenSeparable(C).gradient(q, VectorXd::Zero(2), Fc, Lv);
+  BOOST_TEST(same_bits(Fp.data(), Fc.data(), 2));
+  BOOST_TEST(std::fabs(Fp[0] + 0.7 * q[0] / std::pow(q.squaredNorm(), 1.5)) <= 1e-15);  // -k q / |q|^3
+  // a written Hamiltonian
+  auto h = written({"x", "y"}, "m/2*(x_dot^2 + y_dot^2) + k/sqrt(x^2 + y^2)");
+  h->hamiltonian = Expression::parse("(p_x^2 + p_y^2)/(2*m) - k/sqrt(x^2 + y^2)",
+                                     h->symbols(WrittenSystem::Kind::hamiltonian));
+  const WrittenDynamicHamiltonian Hp(h), Hc(h, WrittenDerivatives::compiled);
+  BOOST_TEST(Hc.compiled());
+  VectorXd a(2), b(2), c2(2), d(2);
+  Hp.gradient(q, v, a, b);
+  Hc.gradient(q, v, c2, d);
+  BOOST_TEST(same_bits(a.data(), c2.data(), 2));
+  BOOST_TEST(same_bits(b.data(), d.data(), 2));
+}
+
+BOOST_AUTO_TEST_CASE(what_cannot_be_compiled_is_refused) {
+  // a text with sums over arrays (blocks) has no C source
+  auto chain = std::make_shared<WrittenSystem>();
+  chain->name = "chain";
+  chain->add_array("q", 64, ExpressionSymbols::Boundary::fixed);
+  chain->params = {{"n", 64}};
+  chain->check_names();
+  chain->lagrangian = Expression::parse("sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n + 1, (q[i] - q[i-1])^4/4)",
+                                        chain->symbols(WrittenSystem::Kind::lagrangian));
+  const auto P = DerivativeProgram::build(chain->lagrangian, 64, false);
+  BOOST_TEST_REQUIRE(P != nullptr);
+  BOOST_TEST_REQUIRE(P->has_blocks());
+  BOOST_TEST(P->c_source("f").empty());
+  try {
+    const WrittenDynamic L(chain, WrittenDerivatives::compiled);
+    BOOST_FAIL("a text with blocks was compiled");
+  } catch (const NativeCodeError& e) {
+    BOOST_TEST(std::string(e.what()).find("blocks") != std::string::npos, e.what());
+  }
+  // a compiler that fails or does not exist: its command and status in the message
+  const auto s = written({"x"}, "x_dot^2/2 - x^4");
+  const auto K = DerivativeProgram::build(s->lagrangian, 1);
+  for (const std::string cc : {"false", "dvm-no-such-compiler"}) {
+    try {
+      compile_programs({K.get()}, cc);
+      BOOST_FAIL("compiled with " + cc);
+    } catch (const NativeCodeError& e) {
+      const std::string m = e.what();
+      BOOST_TEST(m.find(cc) != std::string::npos, m);
+      BOOST_TEST(m.find(cc == "false" ? "status 1" : "status 127") != std::string::npos, m);
+    }
+  }
+  // $DVM_CC names the compiler
+  ::setenv("DVM_CC", "false", 1);
+  BOOST_TEST(default_c_compiler() == "false");
+  BOOST_CHECK_THROW(WrittenDynamic(s, WrittenDerivatives::compiled), NativeCodeError);
+  ::unsetenv("DVM_CC");
+  BOOST_TEST(default_c_compiler() == "cc");
 }
