@@ -16,7 +16,8 @@
 // -ffp-contract=off keeps a*b + c two roundings (no fused multiply-add), and nothing
 // else changes a value (-fno-math-errno only stops libm setting errno), so compiled code
 // gives the interpreter's results to the bit (tests/mechanics/test_native_code.cc).
-// A run of the compiler takes about 40 ms for a small system (gcc 12).
+// A run of the compiler takes 50 to 90 ms for the small texts of bench_written_lagrangian
+// (gcc 12; compile_seconds in the run report).
 //
 // Programs with blocks (sums over arrays) have no C source: their loops over the terms
 // are interpreted already at array speed. compile_programs throws NativeCodeError

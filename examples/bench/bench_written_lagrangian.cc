@@ -15,7 +15,9 @@
 //   dvm run            the built-in system and the text through the runtime API, exactly
 //                      as `dvm run` runs a scene (make_run, execute; the energy monitored
 //                      at the end only), whatever step each takes (its step_path shown):
-//                      the figure a user sees.
+//                      the figure a user sees; and the text again with
+//                      system.compile (its derivative programs compiled to machine
+//                      code, mechanics/native_code.h; needs the C compiler cc or $DVM_CC).
 //
 // Each runs the midpoint map's position-momentum step with Newton's method, the same
 // tolerances and start, and reports ns/step, the ratio to the built-in row, and the
@@ -101,20 +103,30 @@ Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::
   return time_steps(S, q0, p0, v0, steps, repeats, "written, run-time sized");
 }
 
+// The largest difference between two final states (q, p).
+double state_diff(const Result& a, const Result& b) {
+  double m = 0;
+  for (std::size_t i = 0; i < a.state.size(); ++i) m = std::fmax(m, std::fabs(a.state[i] - b.state[i]));
+  return m;
+}
+
 // A run through the runtime API as `dvm run` runs a scene: the built-in `system` with
-// `params`, or the written text; the midpoint map; the energy monitored at the last step
-// only (what is timed is the steps). The best of `repeats`, and the step path taken.
+// `params`, or the written text (its derivatives compiled with `compile`, system.compile);
+// the midpoint map, or Stormer-Verlet by composition of the explicit Euler maps with
+// `stormer_verlet`; the energy monitored at the last step only (what is timed is the
+// steps). The best of `repeats`, and the step path taken.
 struct RunResult {
   Result timing;
   std::string step_path;
 };
 RunResult measure_run(const std::string& system, const std::map<std::string, double>& params,
                       const std::shared_ptr<WrittenSystem>& text, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0,
-                      double h, std::int64_t steps, int repeats) {
+                      double h, std::int64_t steps, int repeats, bool compile = false, bool stormer_verlet = false) {
   Problem pr;
   if (text) {
     pr.system = &written_system_entry();
     pr.written = text;
+    pr.compile = compile;
   } else {
     pr.system = &find_system_entry(system, "bench_written_lagrangian");
     pr.params = params;
@@ -126,7 +138,11 @@ RunResult measure_run(const std::string& system, const std::map<std::string, dou
   pr.step = h;
   pr.steps = steps;
   dvm::Method me;
-  me.map = &find_map_entry("midpoint", "bench_written_lagrangian");
+  me.map = &find_map_entry(stormer_verlet ? "explicit-euler" : "midpoint", "bench_written_lagrangian");
+  if (stormer_verlet) {
+    me.theta = 0.0;
+    me.composition = "stormer-verlet";
+  }
   validate(pr, me);
   RunResult best;
   for (int r = 0; r < repeats; ++r) {
@@ -174,6 +190,7 @@ void compare(const char* title, const S& builtin, const std::string& registry_na
   const Result d = measure_dynamic(text, q0, p0, h, steps, repeats);
   const RunResult e = measure_run(registry_name, params, nullptr, q0, p0, h, steps, repeats);
   const RunResult f = measure_run(registry_name, params, text, q0, p0, h, steps, repeats);
+  const RunResult g = measure_run(registry_name, params, text, q0, p0, h, steps, repeats, true);
   auto diff = [&](const Result& r) {
     double m = 0;
     for (std::size_t i = 0; i < r.state.size(); ++i) m = std::fmax(m, std::fabs(r.state[i] - a.state[i]));
@@ -193,26 +210,32 @@ void compare(const char* title, const S& builtin, const std::string& registry_na
               e.timing.ns_per_step / a.ns_per_step, diff(e.timing), e.step_path.c_str());
   std::printf("  %-28s %10.1f %8.2f %14.3e   step path %s\n", "dvm run, written", f.timing.ns_per_step,
               f.timing.ns_per_step / a.ns_per_step, diff(f.timing), f.step_path.c_str());
-  std::printf("  written / built-in autodiff = %.2f; dvm run, written / built-in = %.2f\n\n", c.ns_per_step / b.ns_per_step,
-              f.timing.ns_per_step / e.timing.ns_per_step);
+  std::printf("  %-28s %10.1f %8.2f %14.3e   step path %s, |against interpreted| %.3e\n", "dvm run, written, compiled",
+              g.timing.ns_per_step, g.timing.ns_per_step / a.ns_per_step, diff(g.timing), g.step_path.c_str(),
+              state_diff(f.timing, g.timing));
+  std::printf("  written / built-in autodiff = %.2f; dvm run, written / built-in = %.2f, compiled %.2f\n\n",
+              c.ns_per_step / b.ns_per_step, f.timing.ns_per_step / e.timing.ns_per_step,
+              g.timing.ns_per_step / e.timing.ns_per_step);
 }
 
 // ---- derivatives alone ------------------------------------------------------------------
 // One gradient, and one Hessian with its gradient, of the same text through
-// WrittenDynamic: by its derivative program (the default) and by the tape (reverse mode,
-// forward over reverse for the Hessian), at one state, best of `repeats` runs of `calls`.
+// WrittenDynamic: by its derivative program (the default), by the tape (reverse mode,
+// forward over reverse for the Hessian) and by the program compiled
+// (mechanics/native_code.h), at one state, best of `repeats` runs of `calls`.
 void derivative_costs(const std::vector<std::pair<std::string, std::shared_ptr<WrittenSystem>>>& texts,
                       std::int64_t calls, int repeats) {
   std::printf("Derivatives of the texts above, one call, best of %d runs of %lld\n", repeats,
               static_cast<long long>(calls));
-  std::printf("  %-18s %14s %14s %8s %14s %14s %8s\n", "text", "grad program", "grad tape", "ratio", "Hess program",
-              "Hess tape", "ratio");
+  std::printf("  %-18s %14s %14s %8s %14s %14s %8s %14s %14s\n", "text", "grad program", "grad tape", "ratio",
+              "Hess program", "Hess tape", "ratio", "grad compiled", "Hess compiled");
   for (const auto& t : texts) {
-    const WrittenDynamic P(t.second), R(t.second, WrittenDerivatives::forward_over_reverse);
+    const WrittenDynamic P(t.second), R(t.second, WrittenDerivatives::forward_over_reverse),
+        C(t.second, WrittenDerivatives::compiled);
     const int n = P.dim();
     const Eigen::VectorXd q = Eigen::VectorXd::LinSpaced(n, 0.3, 0.7), v = Eigen::VectorXd::LinSpaced(n, -0.2, 0.4);
     Eigen::VectorXd gq(n), gv(n);
-    Eigen::MatrixXd A(n, n), B(n, n), C(n, n);
+    Eigen::MatrixXd A(n, n), B(n, n), D(n, n);
     auto best = [&](auto&& f) {
       double b = INFINITY;
       for (int r = 0; r < repeats; ++r) {
@@ -224,9 +247,10 @@ void derivative_costs(const std::vector<std::pair<std::string, std::shared_ptr<W
       return b;
     };
     const double gp = best([&] { P.gradient(q, v, gq, gv); }), gt = best([&] { R.gradient(q, v, gq, gv); });
-    const double hp = best([&] { P.hessian(q, v, gq, gv, A, B, C); }), ht = best([&] { R.hessian(q, v, gq, gv, A, B, C); });
-    std::printf("  %-18s %11.1f ns %11.1f ns %8.2f %11.1f ns %11.1f ns %8.2f\n", t.first.c_str(), gp, gt, gt / gp, hp, ht,
-                ht / hp);
+    const double hp = best([&] { P.hessian(q, v, gq, gv, A, B, D); }), ht = best([&] { R.hessian(q, v, gq, gv, A, B, D); });
+    const double gc = best([&] { C.gradient(q, v, gq, gv); }), hc = best([&] { C.hessian(q, v, gq, gv, A, B, D); });
+    std::printf("  %-18s %11.1f ns %11.1f ns %8.2f %11.1f ns %11.1f ns %8.2f %11.1f ns %11.1f ns\n", t.first.c_str(), gp,
+                gt, gt / gp, hp, ht, ht / hp, gc, hc);
   }
   std::printf("\n");
 }
@@ -258,24 +282,30 @@ Result measure_explicit(const S& L, const V& q0, const V& p0, double h, std::int
   return time_steps(step, q0, p0, V(V::Zero(q0.size())), steps, repeats, L.name() + ", Stormer-Verlet");
 }
 
-double state_diff(const Result& a, const Result& b) {
-  double m = 0;
-  for (std::size_t i = 0; i < a.state.size(); ++i) m = std::fmax(m, std::fabs(a.state[i] - b.state[i]));
-  return m;
-}
-
 void explicit_kepler(std::int64_t steps, int repeats) {
   const auto text = written({"x", "y"}, {{"mu", 1.0}}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)");
   const WrittenDynamic W(text);
   const Vec<double, 2> q0(0.4, 0.0), p0(0.0, 2.0);
   const Result a = measure_explicit(Kepler(1.0), q0, p0, 0.005, steps, repeats);
   const Result b = measure_explicit(WrittenSeparable(W), Eigen::VectorXd(q0), Eigen::VectorXd(p0), 0.005, steps, repeats);
+  const RunResult e = measure_run("kepler", {{"mu", 1.0}}, nullptr, q0, p0, 0.005, steps, repeats, false, true);
+  const RunResult f = measure_run("kepler", {{"mu", 1.0}}, text, q0, p0, 0.005, steps, repeats, false, true);
+  const RunResult g = measure_run("kepler", {{"mu", 1.0}}, text, q0, p0, 0.005, steps, repeats, true, true);
   std::printf("Kepler, e = 0.6, Stormer-Verlet by composition (kicks and drifts), h = 0.005, %lld steps, best of %d\n",
               static_cast<long long>(steps), repeats);
   std::printf("  %-28s %10s %8s %14s\n", "Lagrangian", "ns/step", "ratio", "|state diff|");
   std::printf("  %-28s %10.1f %8.2f %14s\n", "built-in (closed forms)", a.ns_per_step, 1.0, "-");
-  std::printf("  %-28s %10.1f %8.2f %14.3e\n\n", "written, run-time sized", b.ns_per_step, b.ns_per_step / a.ns_per_step,
+  std::printf("  %-28s %10.1f %8.2f %14.3e\n", "written, run-time sized", b.ns_per_step, b.ns_per_step / a.ns_per_step,
               state_diff(a, b));
+  std::printf("  %-28s %10.1f %8.2f %14.3e   step path %s\n", "dvm run, built-in", e.timing.ns_per_step,
+              e.timing.ns_per_step / a.ns_per_step, state_diff(a, e.timing), e.step_path.c_str());
+  std::printf("  %-28s %10.1f %8.2f %14.3e   step path %s\n", "dvm run, written", f.timing.ns_per_step,
+              f.timing.ns_per_step / a.ns_per_step, state_diff(a, f.timing), f.step_path.c_str());
+  std::printf("  %-28s %10.1f %8.2f %14.3e   |against interpreted| %.3e\n", "dvm run, written, compiled",
+              g.timing.ns_per_step, g.timing.ns_per_step / a.ns_per_step, state_diff(a, g.timing),
+              state_diff(f.timing, g.timing));
+  std::printf("  dvm run, written / built-in = %.2f, compiled %.2f\n\n", f.timing.ns_per_step / e.timing.ns_per_step,
+              g.timing.ns_per_step / e.timing.ns_per_step);
 }
 
 // The FPU chain between walls written with sums (k = 1, alpha = 1/4, beta = 1), and its
