@@ -621,6 +621,15 @@ BOOST_AUTO_TEST_CASE(inputs_beyond_the_limits_are_refused_with_what_was_wrong) {
       {"a --set key of 100 parts", {"run", h, "--set", many_parts + "=1"}, 2, {"--set", "has 100 parts; at most 64"}},
   };
   for (const auto& c : cases) check(c);
+  // a scene of exactly 16 MiB (a whole number of the reader's chunks) is read whole and
+  // runs: only what is over the limit is refused
+  {
+    const std::string head = kHarmonic + std::string("# ");
+    std::ofstream(dir + "/exact.toml") << head << std::string((16u << 20) - head.size() - 1, 'x') << "\n";
+    BOOST_REQUIRE(std::filesystem::file_size(dir + "/exact.toml") == (16u << 20));
+    const Output o = dvm({"run", dir + "/exact.toml", "--quiet"});
+    BOOST_TEST(o.status == 0, o.err.substr(0, 300));
+  }
   // a 1 MB value is echoed in 80 bytes with its length, not whole
   for (const std::string key : {"integrator.map", "integrator.form", "integrator.composition", "integrator.method",
                                 "integrator.solver", "problem.kind", "system.builtin", "integrator.step"}) {
