@@ -9,6 +9,8 @@
 // and which of the two is decided by what the registry says the system runs (the
 // capabilities `dvm systems --json` lists) and the rules of dvm::validate (written out
 // below as the specification). No combination may do something else and exit 0.
+// ctest runs it as two processes (`-- --shard=1/2` and `2/2`), each walking half of the
+// systems; run by hand without the argument, it walks them all.
 #define BOOST_TEST_MODULE cli_combinations
 #include <boost/test/unit_test.hpp>
 
@@ -137,6 +139,24 @@ std::vector<SystemCaps> registry_systems() {
   return out;
 }
 
+// The systems this process walks: every one, or with `-- --shard=k/n` after the test
+// program's own arguments, the k-th of each n in registry order (ctest runs the suite as
+// n processes, which share the cores with the other suites).
+std::vector<SystemCaps> shard_of(const std::vector<SystemCaps>& all) {
+  int k = 1, n = 1;
+  const auto& master = boost::unit_test::framework::master_test_suite();
+  for (int i = 1; i < master.argc; ++i) {
+    const std::string a = master.argv[i];
+    if (a.rfind("--shard=", 0) != 0) continue;
+    const bool ok = std::sscanf(a.c_str() + 8, "%d/%d", &k, &n) == 2 && n >= 1 && k >= 1 && k <= n;
+    BOOST_REQUIRE_MESSAGE(ok, "bad argument '" << a << "': --shard=k/n with 1 <= k <= n");
+  }
+  std::vector<SystemCaps> out;
+  for (std::size_t i = 0; i < all.size(); ++i)
+    if (static_cast<int>(i % static_cast<std::size_t>(n)) == k - 1) out.push_back(all[i]);
+  return out;
+}
+
 std::vector<std::pair<std::string, std::string>> registry_maps() {  // (name, space)
   const Output o = dvm({"maps", "--json"});
   BOOST_REQUIRE(o.status == 0);
@@ -222,7 +242,7 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
   const auto maps = registry_maps();
   BOOST_REQUIRE(systems.size() >= 15);
   BOOST_REQUIRE(maps.size() >= 13);
-  for (const SystemCaps& sys : systems) {
+  for (const SystemCaps& sys : shard_of(systems)) {
     BOOST_TEST_CONTEXT("system " << sys.name) {
       const auto h = heads().find(sys.name);
       BOOST_REQUIRE_MESSAGE(h != heads().end(), "no initial state for system " << sys.name << " in this test");
@@ -312,7 +332,7 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
 // hamiltonian form, with an Euler map; every other case is refused naming a key.
 BOOST_AUTO_TEST_CASE(every_splitting_runs_or_is_refused) {
   const std::set<std::string> not_separable = {"double-pendulum", "charged-particle", "lagrangian"};
-  for (const SystemCaps& sys : registry_systems()) {
+  for (const SystemCaps& sys : shard_of(registry_systems())) {
     const std::string head = heads().at(sys.name);
     const Output ref =
         dvm({"run", write_scene("ref.toml", head + integrator("map = \"" + midpoint_map(sys.space) + "\"\n")),
@@ -351,7 +371,7 @@ BOOST_AUTO_TEST_CASE(every_lift_and_theta_per_stage_runs_or_is_refused) {
   BOOST_REQUIRE(listed.status == 0);
   for (const auto& [lift, forms] : lift_forms) BOOST_TEST(listed.out.find("  " + lift + " ") != std::string::npos);
   const int runs_before = g_runs;
-  for (const SystemCaps& sys : registry_systems()) {
+  for (const SystemCaps& sys : shard_of(registry_systems())) {
     const std::string head = heads().at(sys.name);
     const std::string theta_map = sys.space == "S^2" ? "sphere-exp-theta" : sys.space == "SO(3)" ? "so3-exp-theta" : "theta";
     for (const std::string& map : {midpoint_map(sys.space), theta_map})
@@ -379,7 +399,7 @@ BOOST_AUTO_TEST_CASE(every_lift_and_theta_per_stage_runs_or_is_refused) {
 // dvm converge on every form, on every space, composed: a table whose runs used the
 // method asked for (the order measured is the method's), or exit 2 naming the keys.
 BOOST_AUTO_TEST_CASE(converge_runs_every_combination_or_refuses_it) {
-  for (const SystemCaps& sys : registry_systems()) {
+  for (const SystemCaps& sys : shard_of(registry_systems())) {
     const std::string head = heads().at(sys.name);
     for (const char* form : kForms)
       for (const char* comp : {"none", "stormer-verlet"}) {
