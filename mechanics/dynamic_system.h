@@ -1052,10 +1052,16 @@ class WrittenSeparableOf {
     }
     Lv = diagonal_ ? V(v.cwiseProduct(mass_diagonal_)) : V(mass_ * v);
   }
-  // dL/dq at v = 0 (as WrittenSeparable::force)
+  // dL/dq at v = 0 (as WrittenSeparable::force): U's gradient alone, no dL/dv formed
   void force(const V& q, V& F) const {
-    V lv;
-    gradient(q, V::Zero(), F, lv);
+    const V zero = V::Zero();
+    if (program_) {
+      program_->gradient(q.data(), zero.data(), F.data(), nullptr, work_.data());
+    } else {
+      V lv;  // U has no v: untouched
+      F.setZero();
+      parts_->potential.gradient(q.data(), zero.data(), F.data(), lv.data());
+    }
   }
   V velocity(const V&, const V& p) const { return diagonal_ ? V(p.cwiseProduct(inverse_mass_)) : V(factor_.solve(p)); }
 

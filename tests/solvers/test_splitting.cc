@@ -549,6 +549,15 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
   };
   std::vector<Twin> twins;
   {
+    Problem b = builtin("pendulum", {2.0}, {0.0});
+    const auto& P = b.params;
+    twins.push_back({"pendulum",
+                     written_problem(written({"th"}, "m*l^2/2*th_dot^2 + m*g*l*cos(th)",
+                                             {{"m", P.at("m")}, {"l", P.at("l")}, {"g", P.at("g")}}),
+                                     b.q, b.v),
+                     b, true});
+  }
+  {
     Problem b = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
     twins.push_back({"kepler", written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 + mu/sqrt(x^2 + y^2)",
                                                        {{"mu", b.params.at("mu")}}),
@@ -637,28 +646,38 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
   BOOST_TEST(ind.structure == "general");
   BOOST_TEST(ind.step_path == "generic");
 
-  // Kepler and the full mass matrix have 2 coordinates: their explicit steps and runs are
-  // compiled for that size (WrittenSeparableOf<2>). Stormer-Verlet by them equals the
-  // run-time-sized step (WrittenSeparable) to the bit over 1000 steps; with
+  // The pendulum has 1 coordinate, Kepler and the full mass matrix 2: their explicit steps
+  // and runs are compiled for that size (WrittenSeparableOf<K>). Stormer-Verlet by them
+  // equals the run-time-sized step (WrittenSeparable) to the bit over 1000 steps; with
   // system.compile (the force compiled to machine code) every explicit method's run
   // equals the interpreted run to the bit.
+  int fixed_sizes_seen[3] = {0, 0, 0};
   for (const Twin& t : twins) {
-    if (t.written.dim != 2) continue;
+    if (t.written.dim > 2) continue;
+    ++fixed_sizes_seen[t.written.dim];
     const WrittenDynamic L(t.written.written);
     const auto sv = substeps(find_composition("stormer-verlet"), false);
-    const Eigen::VectorXd q0 = Eigen::Map<const Eigen::VectorXd>(t.written.q.data(), 2);
-    const Eigen::VectorXd p0 = legendre(L, q0, Eigen::Map<const Eigen::VectorXd>(t.written.v.data(), 2));
-    const ExplicitSplittingStep<WrittenSeparableOf<2>> fixed(WrittenSeparableOf<2>(L), 0.0, 0.01, sv, Vec<double, 2>(q0));
-    const ExplicitSplittingStep<WrittenSeparable> dynamic(WrittenSeparable(L), 0.0, 0.01, sv, q0);
-    Vec<double, 2> qa = q0, pa = p0;
-    Eigen::VectorXd qb = q0, pb = p0;
-    BOOST_TEST(!integrate(fixed, 0.0, qa, pa, Vec<double, 2>::Zero(), 1000, [](auto&&...) {}).failed);
-    BOOST_TEST(!integrate(dynamic, 0.0, qb, pb, Eigen::VectorXd::Zero(2), 1000, [](auto&&...) {}).failed);
-    BOOST_TEST_CONTEXT(t.name) {
-      BOOST_TEST((qa - qb).cwiseAbs().maxCoeff() == 0.0);
-      BOOST_TEST((pa - pb).cwiseAbs().maxCoeff() == 0.0);
-      BOOST_TEST(qa.cwiseAbs().maxCoeff() > 0.1);
-    }
+    auto compare = [&](auto k) {
+      constexpr int K = decltype(k)::value;
+      const Eigen::VectorXd q0 = Eigen::Map<const Eigen::VectorXd>(t.written.q.data(), K);
+      const Eigen::VectorXd p0 = legendre(L, q0, Eigen::Map<const Eigen::VectorXd>(t.written.v.data(), K));
+      const ExplicitSplittingStep<WrittenSeparableOf<K>> fixed(WrittenSeparableOf<K>(L), 0.0, 0.01, sv,
+                                                               Vec<double, K>(q0));
+      const ExplicitSplittingStep<WrittenSeparable> dynamic(WrittenSeparable(L), 0.0, 0.01, sv, q0);
+      Vec<double, K> qa = q0, pa = p0;
+      Eigen::VectorXd qb = q0, pb = p0;
+      BOOST_TEST(!integrate(fixed, 0.0, qa, pa, Vec<double, K>::Zero(), 1000, [](auto&&...) {}).failed);
+      BOOST_TEST(!integrate(dynamic, 0.0, qb, pb, Eigen::VectorXd::Zero(K), 1000, [](auto&&...) {}).failed);
+      BOOST_TEST_CONTEXT(t.name) {
+        BOOST_TEST((qa - qb).cwiseAbs().maxCoeff() == 0.0);
+        BOOST_TEST((pa - pb).cwiseAbs().maxCoeff() == 0.0);
+        BOOST_TEST(qa.cwiseAbs().maxCoeff() > 0.1);
+      }
+    };
+    if (t.written.dim == 1)
+      compare(std::integral_constant<int, 1>());
+    else
+      compare(std::integral_constant<int, 2>());
     for (const Method& me : explicit_methods({})) {
       Problem c = t.written;
       c.compile = true;
@@ -672,6 +691,8 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
       }
     }
   }
+  BOOST_TEST(fixed_sizes_seen[1] >= 1);  // both compiled sizes were compared
+  BOOST_TEST(fixed_sizes_seen[2] >= 1);
 }
 
 // A written ring (an array with periodic ends) of 10, 100 and 1000 coordinates runs with
