@@ -5,10 +5,16 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <cerrno>
+#include <cfenv>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
+#if defined(__x86_64__) || defined(__i386__)
+#include <xmmintrin.h>
+#endif
 
 namespace dvm {
 
@@ -25,9 +31,12 @@ class ScratchDirectory {
   ScratchDirectory() {
     const char* t = std::getenv("TMPDIR");
     std::string pattern = std::string(t && *t ? t : "/tmp") + "/dvm-native-XXXXXX";
+    if (pattern[0] != '/') pattern = "./" + pattern;  // a relative TMPDIR "-x" is no option
     if (pattern.find('\'') != std::string::npos)
       throw NativeCodeError("compiled derivatives: TMPDIR contains a quote: " + pattern);
-    if (!::mkdtemp(pattern.data())) throw NativeCodeError("compiled derivatives: cannot create a directory " + pattern);
+    if (!::mkdtemp(pattern.data()))
+      throw NativeCodeError("compiled derivatives: cannot create a directory " + pattern + " (" +
+                            std::strerror(errno) + "); set TMPDIR to a writable directory");
     path_ = pattern;
   }
   ~ScratchDirectory() {
@@ -46,6 +55,29 @@ class ScratchDirectory {
   std::vector<std::string> files_;
 };
 
+// The floating-point control modes: the rounding mode and, on x86, the SSE control and
+// status register (compared without its status flags, bits 0 to 5: flush-to-zero,
+// denormals-are-zero, rounding and the exception masks).
+struct FpControls {
+  int round = 0;
+  unsigned csr = 0;
+  static FpControls now() {
+    FpControls c;
+    c.round = std::fegetround();
+#if defined(__x86_64__) || defined(__i386__)
+    c.csr = _mm_getcsr();
+#endif
+    return c;
+  }
+  bool same_modes(const FpControls& o) const { return round == o.round && (csr & ~0x3Fu) == (o.csr & ~0x3Fu); }
+  void restore() const {
+    std::fesetround(round);
+#if defined(__x86_64__) || defined(__i386__)
+    _mm_setcsr(csr);
+#endif
+  }
+};
+
 }  // namespace
 
 std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std::vector<const DerivativeProgram*>& programs,
@@ -55,8 +87,8 @@ std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std
   for (std::size_t k = 0; k < programs.size(); ++k) {
     const std::string s = programs[k]->c_source("dvm_program" + std::to_string(k));
     if (s.empty())
-      throw NativeCodeError("compiled derivatives: a program with sums over arrays (blocks) has no C source; their "
-                            "loops run interpreted");
+      throw NativeCodeError("compiled derivatives: the text has blocks (a sum over an array, or 16 or more terms "
+                            "of one shape written out), which have no C source; their loops run interpreted");
     src += s;
   }
   ScratchDirectory dir;
@@ -66,8 +98,13 @@ std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std
     f << src;
     if (!f.flush()) throw NativeCodeError("compiled derivatives: cannot write " + c);
   }
-  const std::string command =
-      compiler + " -O2 -fPIC -shared -fno-math-errno -ffp-contract=off -o '" + so + "' '" + c + "' -lm 2>&1";
+  // Our flags come after the compiler's own (a $DVM_CC of "gcc -ffast-math" is undone):
+  // -fno-fast-math also keeps crtfastmath.o (flush-to-zero for the whole process) out
+  // of the link, and -fno-builtin-pow keeps pow(x, -1.0) and pow(x, 2.0) calls to libm,
+  // as the interpreter makes them, where gcc would write 1/x and x*x.
+  const std::string command = compiler +
+                              " -O2 -fPIC -shared -fno-math-errno -ffp-contract=off -fno-fast-math -fno-builtin-pow -o '" +
+                              so + "' '" + c + "' -lm 2>&1";
   std::string output;
   FILE* pipe = ::popen(command.c_str(), "r");
   if (!pipe) throw NativeCodeError("compiled derivatives: cannot run the C compiler: " + command);
@@ -77,17 +114,30 @@ std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std
   const int status = ::pclose(pipe);
   if (status != 0) {
     std::string why = status == -1 ? "could not be waited for"
-                      : WIFEXITED(status) ? "exited with status " + std::to_string(WEXITSTATUS(status))
-                                          : "was stopped by a signal";
+                      : WIFEXITED(status)   ? "exited with status " + std::to_string(WEXITSTATUS(status))
+                      : WIFSIGNALED(status) ? "was killed by signal " + std::to_string(WTERMSIG(status))
+                                            : "did not exit";
     throw NativeCodeError("compiled derivatives: the C compiler (" + compiler + ", from $DVM_CC or cc) " + why +
                           (output.empty() ? std::string() : ":\n" + output));
   }
+  // Loading runs the object's initialisers; one that changes the floating-point control
+  // modes (crtfastmath.o's flush-to-zero, linked by flags of $DVM_CC) would change every
+  // later operation of the process, interpreted or not: such code is refused and the
+  // modes restored.
+  const FpControls controls = FpControls::now();
   void* handle = ::dlopen(so.c_str(), RTLD_NOW | RTLD_LOCAL);
   if (!handle) {
     const char* e = ::dlerror();
-    throw NativeCodeError(std::string("compiled derivatives: cannot load the compiled code: ") + (e ? e : "?"));
+    throw NativeCodeError(std::string("compiled derivatives: cannot load the compiled code: ") + (e ? e : "?") +
+                          " (a TMPDIR mounted noexec cannot load code; set TMPDIR to another directory)");
   }
   const std::shared_ptr<const void> code(handle, [](const void* h) { ::dlclose(const_cast<void*>(h)); });
+  if (!FpControls::now().same_modes(controls)) {
+    controls.restore();
+    throw NativeCodeError("compiled derivatives: loading the compiled code changed the floating-point control modes "
+                          "(flush-to-zero or rounding; from flags such as -ffast-math in the compiler command '" +
+                          compiler + "'); refused, and the modes restored");
+  }
   auto symbol = [&](const std::string& name) {
     void* f = ::dlsym(handle, name.c_str());
     if (!f) throw NativeCodeError("compiled derivatives: the compiled code has no " + name);

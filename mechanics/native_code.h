@@ -11,11 +11,17 @@
 // (DerivativeProgram::c_source), runs the machine's C compiler on it once, loads the
 // shared object (dlopen) and returns copies of the programs that call its functions.
 // The compiler is $DVM_CC when set (a command, flags allowed), else `cc`; it runs as
-//   <compiler> -O2 -fPIC -shared -fno-math-errno -ffp-contract=off -o <so> <c> -lm
+//   <compiler> -O2 -fPIC -shared -fno-math-errno -ffp-contract=off -fno-fast-math
+//              -fno-builtin-pow -o <so> <c> -lm
 // in a fresh directory under $TMPDIR (else /tmp), removed once the object is loaded.
-// -ffp-contract=off keeps a*b + c two roundings (no fused multiply-add), and nothing
-// else changes a value (-fno-math-errno only stops libm setting errno), so compiled code
-// gives the interpreter's results to the bit (tests/mechanics/test_native_code.cc).
+// -ffp-contract=off keeps a*b + c two roundings (no fused multiply-add); -fno-fast-math
+// undoes value-changing flags given with the compiler (and keeps gcc's crtfastmath.o,
+// flush-to-zero for the whole process, out of the link); -fno-builtin-pow keeps
+// pow(x, -1.0) and pow(x, 2.0) the libm calls the interpreter makes (gcc writes 1/x
+// and x*x, which differ from glibc's pow in the last bit on some inputs);
+// -fno-math-errno only stops libm setting errno. So compiled code gives the
+// interpreter's results to the bit (tests/mechanics/test_derivative_program.cc). Code
+// whose loading changes the floating-point control modes is refused.
 // A run of the compiler takes 50 to 90 ms for the small texts of bench_written_lagrangian
 // (gcc 12; compile_seconds in the run report).
 //

@@ -182,6 +182,7 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
   r.derivatives = !d ? "tape" : d->has_hessian() ? "program" : "gradient-program";
   r.compiled = L.compiled();
   r.compile_seconds = L.compile_seconds();
+  if (r.compiled && !d->has_hessian()) r.interpreted = "L's Hessian (on the tape: over 32 coordinates)";
 }
 
 // From this many coordinates an implicit theta map on a separable system solves the
@@ -324,6 +325,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
             constexpr int K = decltype(k)::value;
             using Step = ExplicitSplittingStep<WrittenSeparableOf<K>>;
             base.step_path = "explicit-splitting";
+            base.interpreted.clear();  // the force alone (U's program, compiled with L's)
             const Vec<double, K> qk = q, pk = p, vk = v0;
             const DynamicView<Sys, K> fixed{view.L, view.names, view.sigma0, view.constant_hessian};
             return stepper_run(
@@ -333,7 +335,10 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
           if (n == 1) return run_fixed(std::integral_constant<int, 1>());
           return run_fixed(std::integral_constant<int, 2>());
         }
-        if (L.separable()) return splitting_run(view, WrittenSeparable(L), R, me, h, q, p, v0, base, pr.steps);
+        if (L.separable()) {
+          base.interpreted.clear();  // the force alone (U's program, compiled with L's)
+          return splitting_run(view, WrittenSeparable(L), R, me, h, q, p, v0, base, pr.steps);
+        }
       }
     }
   }
@@ -366,6 +371,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         auto make = [&](double hk, const ThetaMap& Rk) { return SparseSeparableThetaStep(L, H, Rk.theta(), hk, opt); };
         base.step_path = "separable-sparse-newton";
         base.hessian_colours = H->colours();
+        if (base.compiled) base.interpreted = "the sparse Hessian of U (in Jets, by colours)";
         return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
       }
     }

@@ -119,7 +119,7 @@ std::string report_json(const RunReport& r) {
   if (!r.step_path.empty()) j.str("step_path", r.step_path);
   if (!r.derivatives.empty()) j.str("derivatives", r.derivatives);
   if (!r.derivatives.empty()) j.boolean("compiled", r.compiled);
-  if (r.compiled) j.num("compile_seconds", r.compile_seconds);
+  if (r.compiled) j.num("compile_seconds", r.compile_seconds).str("interpreted", r.interpreted);
   if (r.newton_steps >= 0) j.num("newton_steps", static_cast<double>(r.newton_steps));
   if (r.hessian_colours >= 0) j.num("hessian_colours", r.hessian_colours);
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
@@ -207,6 +207,7 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
           char c[64];
           std::snprintf(c, sizeof c, ", compiled to machine code in %.3f s", r.compile_seconds);
           how += c;
+          if (!r.interpreted.empty()) how += " (interpreted: " + r.interpreted + ")";
         }
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());
       } else if (r.step_path == "sphere-chain-banded-newton") {

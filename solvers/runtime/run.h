@@ -73,6 +73,10 @@ struct RunReport {
   // C compiler took (before the run; not in wall_seconds)
   bool compiled = false;
   double compile_seconds = 0.0;
+  // system.compile: what the chosen step still evaluates interpreted ("" nothing): the
+  // sparse Hessian of U (step_path separable-sparse-newton, evaluated in Jets), L's
+  // Hessian where its program has none (over 32 coordinates: on the tape)
+  std::string interpreted;
   // step_path separable-sparse-newton: the colours of the Hessian's columns, so the
   // gradient passes per Jacobian are ceil(colours / 8) (-1: not such a path)
   int hessian_colours = -1;

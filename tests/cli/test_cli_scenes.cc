@@ -6,6 +6,7 @@
 #include <boost/test/unit_test.hpp>
 
 #include "tests/cli/cli_harness.h"
+#include "tests/scoped_env.h"
 
 #include <fcntl.h>
 #include <pty.h>
@@ -453,9 +454,27 @@ BOOST_AUTO_TEST_CASE(system_compile_runs_compiled_derivatives_or_is_refused) {
       BOOST_TEST(b.out.find("\"compiled\": true") != std::string::npos);
       BOOST_TEST(json_number(b.out, "compile_seconds") > 0.0);
       BOOST_TEST(json_string(b.out, "derivatives") == "program");
+      BOOST_TEST(b.out.find("\"interpreted\": \"\"") != std::string::npos);
       BOOST_TEST(max_diff(json_array(a.out, "q_final"), json_array(b.out, "q_final")) == 0.0);
       BOOST_TEST(max_diff(json_array(a.out, "p_final"), json_array(b.out, "p_final")) == 0.0);
     }
+  }
+  // the sparse step of a separable text of 3 coordinates evaluates U's sparse Hessian
+  // interpreted: the report says so (the force is compiled)
+  {
+    const std::string chain = write_scene(
+        "chain3.toml", "[system]\ncoordinates = [\"a\", \"b\", \"c\"]\nlagrangian = \"(a_dot^2 + b_dot^2 + "
+                       "c_dot^2)/2 - (b - a)^4/4 - (c - b)^4/4 - a^2/2 - c^2/2\"\n[initial]\nq = [0.5, 0.0, -0.2]\n"
+                       "p = [0.0, 0.1, 0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.01\nsteps = 50\n");
+    const Output a = dvm({"run", chain, "--json", "--quiet"}),
+                 b = dvm({"run", chain, "--json", "--quiet", "--set", "system.compile=true"});
+    BOOST_TEST_REQUIRE(a.status == 0, a.err);
+    BOOST_TEST_REQUIRE(b.status == 0, b.err);
+    BOOST_TEST(json_string(b.out, "step_path") == "separable-sparse-newton");
+    BOOST_TEST(json_string(b.out, "interpreted").find("sparse Hessian of U") != std::string::npos, b.out);
+    BOOST_TEST(max_diff(json_array(a.out, "q_final"), json_array(b.out, "q_final")) == 0.0);
+    const Output c = dvm({"run", chain, "--set", "system.compile=true"});
+    BOOST_TEST((c.err + c.out).find("(interpreted: the sparse Hessian of U") != std::string::npos, c.err + c.out);
   }
   // refused, exit 2, naming the key: a built-in system, a Lagrangian written on S^2, a
   // text with sums over arrays, a compiler that fails ($DVM_CC)
@@ -471,9 +490,10 @@ BOOST_AUTO_TEST_CASE(system_compile_runs_compiled_derivatives_or_is_refused) {
       BOOST_TEST(o.err.find(says) != std::string::npos);
     }
   }
-  ::setenv("DVM_CC", "false", 1);
-  const Output f = run_json("pendulum_written.toml", {"--set", "system.compile=true"});
-  ::unsetenv("DVM_CC");
+  const Output f = [&] {
+    const dvm_test::ScopedEnv cc("DVM_CC", "false");
+    return run_json("pendulum_written.toml", {"--set", "system.compile=true"});
+  }();
   BOOST_TEST(f.status == 2);
   BOOST_TEST(f.err.find("system.compile") != std::string::npos, f.err);
   BOOST_TEST(f.err.find("exited with status 1") != std::string::npos, f.err);

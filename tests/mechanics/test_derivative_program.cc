@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <fstream>
 #include <random>
 #include <string>
 
@@ -20,6 +21,7 @@
 #include "mechanics/native_code.h"
 #include "mechanics/written_lagrangian.h"
 #include "tests/random_vector.h"
+#include "tests/scoped_env.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
@@ -501,9 +503,88 @@ BOOST_AUTO_TEST_CASE(what_cannot_be_compiled_is_refused) {
     }
   }
   // $DVM_CC names the compiler
-  ::setenv("DVM_CC", "false", 1);
-  BOOST_TEST(default_c_compiler() == "false");
-  BOOST_CHECK_THROW(WrittenDynamic(s, WrittenDerivatives::compiled), NativeCodeError);
-  ::unsetenv("DVM_CC");
-  BOOST_TEST(default_c_compiler() == "cc");
+  {
+    const dvm_test::ScopedEnv cc("DVM_CC", "false");
+    BOOST_TEST(default_c_compiler() == "false");
+    BOOST_CHECK_THROW(WrittenDynamic(s, WrittenDerivatives::compiled), NativeCodeError);
+  }
+  {
+    const dvm_test::ScopedEnv cc("DVM_CC", "");
+    BOOST_TEST(default_c_compiler() == "cc");
+  }
+}
+
+namespace {
+
+// Whether arithmetic on subnormal numbers is exact in this process (no flush-to-zero).
+bool subnormals_kept() {
+  volatile double tiny = 0x1p-1022, half = 0.5;
+  return tiny * half == 0x1p-1023 && 0x1p-1023 != 0.0;
+}
+
+// The C compiler's own crtfastmath.o (gcc's; "" where there is none).
+std::string crtfastmath() {
+  FILE* p = ::popen((default_c_compiler() + " -print-file-name=crtfastmath.o 2>/dev/null").c_str(), "r");
+  if (!p) return "";
+  char buf[4096] = {0};
+  const bool got = std::fgets(buf, sizeof buf, p) != nullptr;
+  ::pclose(p);
+  std::string path = got ? buf : "";
+  while (!path.empty() && (path.back() == '\n' || path.back() == ' ')) path.pop_back();
+  return path.find('/') != std::string::npos && std::ifstream(path).good() ? path : "";
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(compiled_code_keeps_the_interpreters_arithmetic) {
+  BOOST_TEST_REQUIRE(compiler_runs());
+  BOOST_TEST_REQUIRE(subnormals_kept());
+  // x^c with c = 1e-17: the derivative's power c - 1 rounds to -1.0 exactly, which gcc
+  // would write as 1/x; glibc's pow(x, -1.0) differs from 1/x in the last bit here
+  {
+    const auto s = written({"x"}, "x_dot^2/2 - x^1e-17");
+    const auto P = DerivativeProgram::build(s->lagrangian, 1);
+    BOOST_TEST_REQUIRE(P != nullptr);
+    const auto C = compile_programs({P.get()})[0];
+    std::vector<double> w = P->workspace();
+    const double q = 0x1.2d753ba068f6fp+9, v = 0.3;
+    double gi[2], gc[2];
+    P->gradient(&q, &v, gi, gi + 1, w.data());
+    C->gradient(&q, &v, gc, gc + 1, nullptr);
+    BOOST_TEST(same_bits(gi, gc, 2), gi[0] << " against " << gc[0]);
+    BOOST_TEST(gi[0] == -1e-17 * std::pow(q, 1e-17 - 1.0));
+  }
+  // a compiler command with -ffast-math: our flags after it undo it, the results stay
+  // the interpreter's, and flush-to-zero does not reach this process
+  const auto s = written({"x", "y"}, "m/2*(x_dot^2 + y_dot^2) + k/sqrt(x^2 + y^2) + x^2*y/(1 + y^2)");
+  const auto P = DerivativeProgram::build(s->lagrangian, 2);
+  BOOST_TEST_REQUIRE(P != nullptr);
+  {
+    const dvm_test::ScopedEnv cc("DVM_CC", default_c_compiler() + " -ffast-math -O3");
+    const auto C = compile_programs({P.get()})[0];
+    BOOST_TEST(subnormals_kept());
+    std::vector<double> w = P->workspace();
+    for (int k = 0; k < 5; ++k) {
+      const VectorXd a = random_vector(2, 0.8, 40 + k), b = random_vector(2, 1.2, 50 + k);
+      double gi[4], gc[4];
+      P->gradient(a.data(), b.data(), gi, gi + 2, w.data());
+      C->gradient(a.data(), b.data(), gc, gc + 2, nullptr);
+      BOOST_TEST(same_bits(gi, gc, 4));
+    }
+  }
+  // code whose loading sets flush-to-zero (crtfastmath.o linked in by hand) is refused
+  // and the process's modes are put back
+  const std::string fast = crtfastmath();
+  if (fast.empty()) {
+    BOOST_TEST_MESSAGE("the C compiler has no crtfastmath.o: the refusal of code that changes the modes is not run");
+    return;
+  }
+  const dvm_test::ScopedEnv cc("DVM_CC", default_c_compiler() + " '" + fast + "'");
+  try {
+    compile_programs({P.get()});
+    BOOST_FAIL("code that sets flush-to-zero was loaded");
+  } catch (const NativeCodeError& e) {
+    BOOST_TEST(std::string(e.what()).find("floating-point control modes") != std::string::npos, e.what());
+  }
+  BOOST_TEST(subnormals_kept());
 }
