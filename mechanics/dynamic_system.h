@@ -607,12 +607,10 @@ class NBodyDynamic {
 
 // How a written tape is differentiated: automatic = a DerivativeProgram
 // (mechanics/derivative_program.h) where one is built, else reverse mode on the tape
-// (forward over reverse for the Hessian); the other two force the tape one way
-// (forward over forward is kept to check reverse mode against).
-// How a written Lagrangian is differentiated: automatic, its derivative program where one
-// is built (else the tape, reverse mode); compiled, that program compiled to machine code
-// (mechanics/native_code.h; throws NativeCodeError where there is none to compile); the
-// tape forced (forward over reverse, forward over forward), for checking.
+// (forward over reverse for the Hessian); compiled = that program compiled to machine
+// code (mechanics/native_code.h; NativeCodeError where there is none to compile); the
+// other two force the tape one way (forward over forward is kept to check reverse mode
+// against).
 enum class WrittenDerivatives { automatic, forward_over_reverse, forward_over_forward, compiled };
 
 namespace dynamic_detail {
@@ -654,6 +652,8 @@ class TapeDerivatives {
     compile_seconds_ = seconds;
   }
   double compile_seconds() const { return compile_seconds_; }
+  // Whether the gradient and Hessian run compiled code.
+  bool compiled() const { return program_ && program_->compiled(); }
   const Expression& expression() const { return *e_; }
 
   double value(const double* a, const double* b) const { return (*e_)(a, b); }
@@ -927,7 +927,7 @@ class WrittenDynamic {
   const DerivativeProgram* derivative_program() const { return tape_.program(); }
   // Whether its derivatives run compiled code (WrittenDerivatives::compiled), and the
   // seconds the compiler took.
-  bool compiled() const { return tape_.program() && tape_.program()->compiled(); }
+  bool compiled() const { return tape_.compiled(); }
   double compile_seconds() const { return tape_.compile_seconds(); }
 
   double value(const DynIn& q, const DynIn& v) const { return tape_.value(q.data(), v.data()); }
@@ -1087,7 +1087,7 @@ class WrittenDynamicHamiltonian {
   }
   // Whether its derivatives run compiled code (WrittenDerivatives::compiled), and the
   // seconds the compiler took.
-  bool compiled() const { return tape_.program() && tape_.program()->compiled(); }
+  bool compiled() const { return tape_.compiled(); }
   double compile_seconds() const { return tape_.compile_seconds(); }
 
   int dim() const { return system_->dim(); }
