@@ -1,5 +1,5 @@
 // Shared harness of the end-to-end tests: run the built dvm binary, read its output,
-// pick numbers out of its JSON. DVM_BINARY and DVM_SCENES come from CMake.
+// parse its JSON. DVM_BINARY and DVM_SCENES come from CMake.
 #pragma once
 
 #include <boost/test/unit_test.hpp>
@@ -17,6 +17,8 @@
 #include <system_error>
 #include <vector>
 
+#include <nlohmann/json.hpp>
+
 #include "tests/cli/temp_files.h"
 
 namespace cli_test {
@@ -26,9 +28,16 @@ struct Output {
   std::string out, err;
 };
 
+// The program under test: DVM_BINARY, or $DVM_TEST_BINARY where set (to run the suites
+// against another build, e.g. that of an earlier revision).
+inline std::string dvm_binary() {
+  const char* other = std::getenv("DVM_TEST_BINARY");
+  return other && *other ? other : DVM_BINARY;
+}
+
 // Runs dvm with the arguments (each single-quoted for the shell).
 inline Output dvm(const std::vector<std::string>& args) {
-  std::string cmd = DVM_BINARY;
+  std::string cmd = "'" + dvm_binary() + "'";
   for (const auto& a : args) {
     std::string q = "'";
     for (char c : a) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -54,38 +63,67 @@ inline std::string write_scene(const std::string& name, const std::string& text)
   return path;
 }
 
-// The number after "key": in a JSON text, searching from `from` (NaN if absent).
-inline double json_number(const std::string& json, const std::string& key, std::size_t from = 0) {
-  const auto pos = json.find("\"" + key + "\":", from);
-  if (pos == std::string::npos) return NAN;
-  return std::strtod(json.c_str() + pos + key.size() + 3, nullptr);
-}
-
 inline bool file_exists(const std::string& path) { return std::ifstream(path).good(); }
 
-// The numbers of the array after "key": (empty if absent).
-inline std::vector<double> json_array(const std::string& json, const std::string& key) {
-  std::vector<double> out;
-  const std::size_t at = json.find("\"" + key + "\": [");
-  if (at == std::string::npos) return out;
-  const char* c = json.c_str() + json.find('[', at) + 1;
-  char* end = nullptr;
-  for (;;) {
-    const double x = std::strtod(c, &end);
-    if (end == c) break;
-    out.push_back(x);
-    c = end;
-    while (*c == ',' || *c == ' ' || *c == '\n') ++c;
+// ---- reading the program's JSON ---------------------------------------------------------
+// Every JSON text the program prints is parsed (nlohmann::json, in document order): a
+// text that is not JSON fails the test that reads it.
+using Json = nlohmann::ordered_json;
+
+// The parsed text; the test stops with the text when it is not JSON.
+inline Json parse_json(const std::string& text) {
+  Json j = Json::parse(text, nullptr, false);
+  BOOST_REQUIRE_MESSAGE(!j.is_discarded(), "not a JSON text:\n" << text);
+  return j;
+}
+
+// The first member named `key` in document order, depth first (a top-level member before
+// the members of the objects before it only where it comes first); nullptr if none.
+inline const Json* json_find(const Json& j, const std::string& key) {
+  if (j.is_object()) {
+    const auto it = j.find(key);
+    for (auto m = j.begin(); m != j.end(); ++m) {
+      if (m == it) return &*m;
+      if (const Json* inner = json_find(*m, key)) return inner;
+    }
+  } else if (j.is_array()) {
+    for (const Json& e : j)
+      if (const Json* inner = json_find(e, key)) return inner;
   }
+  return nullptr;
+}
+
+// A JSON number as a double: null (how the program writes NaN) is NaN.
+inline double json_double(const Json& j) {
+  BOOST_REQUIRE_MESSAGE(j.is_number() || j.is_null(), "not a number: " << j.dump());
+  return j.is_null() ? NAN : j.get<double>();
+}
+
+// The number of the first member `key` of a JSON text (NaN if absent or null).
+inline double json_number(const std::string& text, const std::string& key) {
+  const Json j = parse_json(text);
+  const Json* m = json_find(j, key);
+  return m ? json_double(*m) : NAN;
+}
+
+// The numbers of the array of the first member `key` (empty if absent).
+inline std::vector<double> json_array(const std::string& text, const std::string& key) {
+  const Json j = parse_json(text);
+  const Json* m = json_find(j, key);
+  std::vector<double> out;
+  if (!m) return out;
+  BOOST_REQUIRE_MESSAGE(m->is_array(), key << " is not an array: " << m->dump());
+  for (const Json& x : *m) out.push_back(json_double(x));
   return out;
 }
 
-// The string after "key": (without escapes; "" if absent), searching from `from`.
-inline std::string json_string(const std::string& json, const std::string& key, std::size_t from = 0) {
-  const auto pos = json.find("\"" + key + "\": \"", from);
-  if (pos == std::string::npos) return "";
-  const auto start = pos + key.size() + 5;
-  return json.substr(start, json.find('"', start) - start);
+// The string of the first member `key` ("" if absent; the test fails if it is not a string).
+inline std::string json_string(const std::string& text, const std::string& key) {
+  const Json j = parse_json(text);
+  const Json* m = json_find(j, key);
+  if (!m) return "";
+  BOOST_REQUIRE_MESSAGE(m->is_string(), key << " is not a string: " << m->dump());
+  return m->get<std::string>();
 }
 
 }  // namespace cli_test

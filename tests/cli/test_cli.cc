@@ -7,6 +7,7 @@
 
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -32,12 +33,13 @@ BOOST_AUTO_TEST_CASE(shipped_scenes_run_and_keep_their_invariants) {
     const Output o = dvm({"run", scene(s), "--json", "--csv", csv});
     BOOST_TEST_CONTEXT(s << "\n" << o.out << o.err) {
       BOOST_TEST(o.status == 0);
-      BOOST_TEST(o.out.find("\"status\": \"ok\"") != std::string::npos);
+      const Json j = parse_json(o.out);
+      BOOST_TEST(j.value("status", "") == "ok");
       for (const char* key : {"steps", "t_final", "energy_initial", "energy_final", "max_abs_energy_error",
                               "wall_seconds", "solver_iterations"})
-        BOOST_TEST(std::isfinite(json_number(o.out, key)), key);
-      BOOST_TEST(o.out.find("\"q_final\": [") != std::string::npos);
-      BOOST_TEST(o.out.find("\"p_final\": [") != std::string::npos);
+        BOOST_TEST(std::isfinite(json_double(j.at(key))), key);
+      BOOST_TEST(j.value("q_final", Json()).is_array());
+      BOOST_TEST(j.value("p_final", Json()).is_array());
       BOOST_TEST(file_exists(csv));
     }
   }
@@ -78,7 +80,7 @@ BOOST_AUTO_TEST_CASE(set_overrides_and_velocity_input) {
   BOOST_TEST(json_number(o.out, "t_final") == 1.0, boost::test_tools::tolerance(1e-14));
   o = dvm({"run", path, "--json", "--set", "integrator.map=theta", "--set", "integrator.theta=0.3"});
   BOOST_TEST(o.status == 0, o.err);
-  BOOST_TEST(o.out.find("\"map\": \"theta\"") != std::string::npos);
+  BOOST_TEST(parse_json(o.out).value("map", "") == "theta");
   // v instead of p: for the harmonic oscillator p = v
   const Output a = dvm({"run", path, "--json", "--set", "initial.p=[0.5]"});
   const Output b = dvm({"run", write_scene("v.toml",
@@ -159,10 +161,11 @@ BOOST_AUTO_TEST_CASE(non_convergence_exits_3_and_keeps_converged_steps) {
   const Output o = dvm({"run", scene("pendulum.toml"), "--json", "--csv", csv, "--set", "integrator.step=4.0",
                         "--set", "integrator.t_end=400.0", "--set", "output.every=1"});
   BOOST_TEST(o.status == 3, o.out << o.err);
-  BOOST_TEST(o.out.find("\"status\": \"failed\"") != std::string::npos);
+  const Json j = parse_json(o.out);
+  BOOST_TEST(j.value("status", "") == "failed");
   BOOST_TEST(o.err.find("did not converge") != std::string::npos);
   BOOST_TEST(o.err.find("residual") != std::string::npos);
-  const double steps = json_number(o.out, "steps");
+  const double steps = json_double(j.at("steps"));
   BOOST_TEST(steps < 100);
   // the final path is left alone; the converged steps are in PATH.partial
   BOOST_TEST(!file_exists(csv));
@@ -171,7 +174,7 @@ BOOST_AUTO_TEST_CASE(non_convergence_exits_3_and_keeps_converged_steps) {
   int rows = -1;  // header
   while (std::getline(f, line)) ++rows;
   BOOST_TEST(rows == 1 + static_cast<int>(steps));  // t = 0 and each converged step
-  BOOST_TEST(std::isfinite(json_number(o.out, "residual")));
+  BOOST_TEST(std::isfinite(json_double(j.at("failure").at("residual"))));  // the failed step's residual
   // the iteration bound is a scene key: one iteration cannot converge
   const Output b = dvm({"run", scene("harmonic.toml"), "--quiet", "--csv", csv, "--set", "integrator.max_iterations=1"});
   BOOST_TEST(b.status == 3);
@@ -181,8 +184,11 @@ BOOST_AUTO_TEST_CASE(non_convergence_exits_3_and_keeps_converged_steps) {
 BOOST_AUTO_TEST_CASE(maps_and_check_map) {
   const Output m = dvm({"maps", "--json"});
   BOOST_TEST(m.status == 0);
+  // the array of the maps, each an object with its name
+  std::vector<std::string> names;
+  for (const Json& e : parse_json(m.out)) names.push_back(e.value("name", ""));
   for (const char* name : {"explicit-euler", "adjoint-euler", "midpoint", "theta", "retraction-theta"})
-    BOOST_TEST(m.out.find(std::string("\"name\": \"") + name + "\"") != std::string::npos, name);
+    BOOST_TEST((std::find(names.begin(), names.end(), name) != names.end()), name);
   for (const char* name : {"explicit-euler", "adjoint-euler", "midpoint", "theta", "retraction-theta"}) {
     for (const char* dim : {"1", "3"}) {
       const bool takes_theta = std::string(name) == "theta" || std::string(name) == "retraction-theta";
@@ -190,10 +196,11 @@ BOOST_AUTO_TEST_CASE(maps_and_check_map) {
                                    : dvm({"check-map", name, "--dim", dim});
       BOOST_TEST_CONTEXT(name << " dim " << dim << "\n" << c.out) {
         BOOST_TEST(c.status == 0);
-        BOOST_TEST(c.out.find("\"passed\": true") != std::string::npos);
+        const Json j = parse_json(c.out);
+        BOOST_TEST(j.value("passed", false));
         for (const char* key : {"zero_section", "tangent_identity", "inverse_round_trip", "adjoint_involution",
                                 "cotangent_symplectic", "cotangent_round_trip"})
-          BOOST_TEST(json_number(c.out, key) <= 1e-13, key);
+          BOOST_TEST(json_double(j.at("residuals").at(key)) <= 1e-13, key);
       }
     }
   }
@@ -213,8 +220,9 @@ BOOST_AUTO_TEST_CASE(maps_and_check_map) {
     const Output c = dvm({"check-map", name, "--theta", "0.3"});
     BOOST_TEST_CONTEXT(name << "\n" << c.out << c.err) {
       BOOST_TEST(c.status == 0);
-      BOOST_TEST(c.out.find("\"passed\": true") != std::string::npos);
-      BOOST_TEST(json_number(c.out, "cotangent_symplectic") <= 1e-13);
+      const Json j = parse_json(c.out);
+      BOOST_TEST(j.value("passed", false));
+      BOOST_TEST(json_double(j.at("residuals").at("cotangent_symplectic")) <= 1e-13);
     }
   }
   for (const char* cmd : {"run", "maps", "check-map"}) {
@@ -310,13 +318,10 @@ BOOST_AUTO_TEST_CASE(points_off_the_manifold_are_refused_with_the_defect) {
   const Output g = dvm({"run", good, "--json"});
   BOOST_TEST(g.status == 0, g.err);
   // spatial angular momentum R pi: the quarter turn maps (0.1, 1, 0) to (-1, 0.1, 0)
-  const auto pos = g.out.find("\"spatial_angular_momentum_initial\": [");
-  BOOST_REQUIRE(pos != std::string::npos);
-  char* end = nullptr;
-  const double m0 = std::strtod(g.out.c_str() + g.out.find('[', pos) + 1, &end);
-  const double m1 = std::strtod(end + 1, nullptr);
-  BOOST_TEST(m0 == -1.0, boost::test_tools::tolerance(1e-15));
-  BOOST_TEST(m1 == 0.1, boost::test_tools::tolerance(1e-14));
+  const std::vector<double> m = json_array(g.out, "spatial_angular_momentum_initial");
+  BOOST_REQUIRE(m.size() >= 2u);
+  BOOST_TEST(m[0] == -1.0, boost::test_tools::tolerance(1e-15));
+  BOOST_TEST(m[1] == 0.1, boost::test_tools::tolerance(1e-14));
 }
 
 BOOST_AUTO_TEST_CASE(check_map_on_manifold_maps) {
@@ -325,9 +330,10 @@ BOOST_AUTO_TEST_CASE(check_map_on_manifold_maps) {
     const Output c = dvm({"check-map", name});
     BOOST_TEST_CONTEXT(name << "\n" << c.out) {
       BOOST_TEST(c.status == 0);
-      BOOST_TEST(c.out.find("\"passed\": true") != std::string::npos);
-      BOOST_TEST(json_number(c.out, "cotangent_symplectic") <= 1e-13);
-      BOOST_TEST(json_number(c.out, "manifold_round_trip") <= 1e-13);
+      const Json j = parse_json(c.out);
+      BOOST_TEST(j.value("passed", false));
+      BOOST_TEST(json_double(j.at("residuals").at("cotangent_symplectic")) <= 1e-13);
+      BOOST_TEST(json_double(j.at("residuals").at("manifold_round_trip")) <= 1e-13);
     }
   }
 }
@@ -348,9 +354,9 @@ BOOST_AUTO_TEST_CASE(composition_key_runs_and_raises_the_order) {
     }
     const Output o = dvm(args);
     BOOST_TEST(o.status == 0, o.err);
-    const auto pos = o.out.find("\"q_final\": [");
-    const double q = std::strtod(o.out.c_str() + pos + 12, nullptr);
-    return std::fabs(q - std::cos(2.0));
+    const std::vector<double> q = json_array(o.out, "q_final");
+    BOOST_REQUIRE(!q.empty());
+    return std::fabs(q[0] - std::cos(2.0));
   };
   const double none = final_error({}), tj = final_error({"integrator.composition=\"triple-jump\""}),
                kl8 = final_error({"integrator.composition=\"kahan-li8\""}),
@@ -370,7 +376,7 @@ BOOST_AUTO_TEST_CASE(composition_key_runs_and_raises_the_order) {
   // the JSON names the composition
   const Output o = dvm({"run", write_scene("comp.toml", kGood), "--json", "--set", "integrator.composition=yoshida6a"});
   BOOST_TEST(o.status == 0);
-  BOOST_TEST(o.out.find("\"composition\": \"yoshida6a\"") != std::string::npos, o.out);
+  BOOST_TEST(parse_json(o.out).value("composition", "") == "yoshida6a", o.out);
 }
 
 BOOST_AUTO_TEST_CASE(composition_key_is_validated) {
@@ -410,19 +416,28 @@ BOOST_AUTO_TEST_CASE(methods_lists_every_method) {
     BOOST_TEST(t.out.find(std::string("\n") + name + " ") != std::string::npos, name);
   const Output j = dvm({"methods", "--json"});
   BOOST_TEST(j.status == 0);
-  BOOST_TEST(j.out.find("\"name\": \"kahan-li8\"") != std::string::npos);
+  // the array of the methods, each an object with its name; method(name) is the first entry of that name
+  const Json methods = parse_json(j.out);
+  std::vector<std::string> names;
+  for (const Json& e : methods) names.push_back(e.value("name", ""));
+  BOOST_TEST((std::find(names.begin(), names.end(), "kahan-li8") != names.end()));
+  auto method = [&](const std::string& name) {
+    const auto at = std::find(names.begin(), names.end(), name);
+    BOOST_REQUIRE_MESSAGE(at != names.end(), "dvm methods --json lists no " << name);
+    return methods.at(static_cast<std::size_t>(at - names.begin()));
+  };
   // Stormer-Verlet is stable up to h omega = 2, the triple jump up to 1.5734
-  const auto sv = j.out.find("\"name\": \"stormer-verlet\"");
-  BOOST_TEST(std::fabs(json_number(j.out.substr(sv), "stability_threshold_explicit_euler") - 2.0) <= 1e-9);
-  const auto tj = j.out.find("\"name\": \"triple-jump\"");
-  BOOST_TEST(std::fabs(json_number(j.out.substr(tj), "stability_threshold_explicit_euler") - 1.5734) <= 1e-4);
-  BOOST_TEST(json_number(j.out.substr(tj), "order") == 4.0);
-  BOOST_TEST(json_number(j.out.substr(tj), "stages") == 3.0);
+  const Json sv = method("stormer-verlet");
+  BOOST_TEST(std::fabs(json_double(sv.at("stability_threshold_explicit_euler")) - 2.0) <= 1e-9);
+  const Json tj = method("triple-jump");
+  BOOST_TEST(std::fabs(json_double(tj.at("stability_threshold_explicit_euler")) - 1.5734) <= 1e-4);
+  BOOST_TEST(json_double(tj.at("order")) == 4.0);
+  BOOST_TEST(json_double(tj.at("stages")) == 3.0);
   // a splitting: its stages are the forces of a step; no midpoint stages to be stable with
-  const std::string bm = j.out.substr(j.out.find("\"name\": \"blanes-moan4\""));
-  BOOST_TEST(json_number(bm, "order") == 4.0);
-  BOOST_TEST(json_number(bm, "stages") == 6.0);
-  BOOST_TEST(bm.substr(0, bm.find('}')).find("\"midpoint_unconditionally_stable\": null") != std::string::npos);
+  const Json bm = method("blanes-moan4");
+  BOOST_TEST(json_double(bm.at("order")) == 4.0);
+  BOOST_TEST(json_double(bm.at("stages")) == 6.0);
+  BOOST_TEST((bm.contains("midpoint_unconditionally_stable") && bm.at("midpoint_unconditionally_stable").is_null()));
   const Output h = dvm({"methods", "--help"});
   BOOST_TEST(h.status == 0);
   BOOST_TEST(h.out.find("example") != std::string::npos);
@@ -433,25 +448,20 @@ BOOST_AUTO_TEST_CASE(methods_lists_every_method) {
 
 namespace {
 
-// The keys of a flat JSON object, in order.
-// The top-level keys of a report but "lift", which only the forms that lift the map
-// (hamiltonian, sode1, sode2) report.
+// The top-level keys of a report, in order, but "lift", which only the forms that lift
+// the map (hamiltonian, sode1, sode2) report.
 std::vector<std::string> json_keys(const std::string& json) {
   std::vector<std::string> keys;
-  std::size_t pos = 0;
-  while ((pos = json.find("\n  \"", pos)) != std::string::npos) {
-    const std::size_t start = pos + 4, end = json.find('"', start);
-    if (json.compare(start, end - start, "lift") != 0) keys.push_back(json.substr(start, end - start));
-    pos = end;
-  }
+  const Json j = parse_json(json);
+  for (const auto& m : j.items())
+    if (m.key() != "lift") keys.push_back(m.key());
   return keys;
 }
 
-// The first element of the array after "key": [.
+// The first number of the array "key" of a JSON text (NaN if absent or empty).
 double json_first(const std::string& json, const std::string& key) {
-  const auto pos = json.find("\"" + key + "\": [");
-  if (pos == std::string::npos) return NAN;
-  return std::strtod(json.c_str() + pos + key.size() + 5, nullptr);
+  const std::vector<double> x = json_array(json, key);
+  return x.empty() ? NAN : x[0];
 }
 
 }  // namespace
@@ -464,9 +474,10 @@ BOOST_AUTO_TEST_CASE(hamiltonian_form_writes_the_same_csv_and_json) {
   BOOST_TEST(a.status == 0, a.err);
   BOOST_TEST(b.status == 0, b.err);
   BOOST_TEST(json_keys(a.out) == json_keys(b.out), a.out << b.out);
-  BOOST_TEST(b.out.find("\"form\": \"hamiltonian\"") != std::string::npos);
-  BOOST_TEST(b.out.find("\"lift\": \"cotangent\"") != std::string::npos);
-  BOOST_TEST(a.out.find("\"lift\"") == std::string::npos);  // the lagrangian form uses the map on Q itself
+  const Json ja = parse_json(a.out), jb = parse_json(b.out);
+  BOOST_TEST(jb.value("form", "") == "hamiltonian");
+  BOOST_TEST(jb.value("lift", "") == "cotangent");
+  BOOST_TEST(!ja.contains("lift"));  // the lagrangian form uses the map on Q itself
   // same CSV header and rows; for the midpoint map and L = v^2/2 - w^2 q^2/2 both forms
   // are the implicit midpoint rule, so the numbers agree to round-off
   std::ifstream fa(c1), fb(c2);
@@ -512,7 +523,7 @@ BOOST_AUTO_TEST_CASE(sode_and_newmark_forms_run) {
                           std::string("integrator.form=") + form});
     BOOST_TEST_CONTEXT(form << "\n" << o.out << o.err) {
       BOOST_TEST(o.status == 0);
-      BOOST_TEST(o.out.find(std::string("\"form\": \"") + form + "\"") != std::string::npos);
+      BOOST_TEST(parse_json(o.out).value("form", "") == form);
       // all three are second order on the harmonic oscillator: q(1) near cos(2)
       BOOST_TEST(std::fabs(json_first(o.out, "q_final") - std::cos(2.0)) <= 2e-4);
     }
@@ -588,7 +599,7 @@ BOOST_AUTO_TEST_CASE(boundary_value_problem_recovers_the_initial_momentum) {
   const std::string csv = temp_dir() + "/bvp.csv";
   const Output b = dvm({"run", bvp, "--json", "--csv", csv});
   BOOST_TEST(b.status == 0, b.err);
-  BOOST_TEST(b.out.find("\"problem\": \"boundary-value\"") != std::string::npos);
+  BOOST_TEST(parse_json(b.out).value("problem", "") == "boundary-value");
   BOOST_TEST(std::fabs(json_first(b.out, "p_initial") - 0.3) <= 1e-11, b.out);
   BOOST_TEST(std::fabs(json_first(b.out, "p_final") - json_first(a.out, "p_final")) <= 1e-11);
   std::ifstream f(csv);
@@ -712,18 +723,7 @@ std::vector<double> final_q(const std::string& path, const std::vector<std::stri
   }
   const Output o = dvm(args);
   BOOST_TEST(o.status == 0, o.err);
-  std::vector<double> q;
-  auto pos = o.out.find("\"q_final\": [");
-  if (pos == std::string::npos) return q;
-  const char* c = o.out.c_str() + o.out.find('[', pos) + 1;
-  char* end = nullptr;
-  for (;;) {
-    q.push_back(std::strtod(c, &end));
-    while (*end == ' ') ++end;
-    if (*end != ',') break;
-    c = end + 1;
-  }
-  return q;
+  return json_array(o.out, "q_final");
 }
 
 double max_diff(const std::vector<double>& a, const std::vector<double>& b) {
@@ -784,8 +784,9 @@ BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
   // the JSON and the text name the composition
   const Output j = dvm({"run", pend, "--json", "--set", "integrator.form=newmark", "--set",
                         "integrator.composition=suzuki5"});
-  BOOST_TEST(j.out.find("\"composition\": \"suzuki5\"") != std::string::npos, j.out);
-  BOOST_TEST(j.out.find("\"form\": \"newmark\"") != std::string::npos, j.out);
+  const Json jj = parse_json(j.out);
+  BOOST_TEST(jj.value("composition", "") == "suzuki5", j.out);
+  BOOST_TEST(jj.value("form", "") == "newmark", j.out);
   const Output t =
       dvm({"run", pend, "--set", "integrator.form=hamiltonian", "--set", "integrator.composition=suzuki5"});
   BOOST_TEST(t.out.find("composition suzuki5") != std::string::npos, t.out);
@@ -804,7 +805,7 @@ BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
                          "integrator.composition=kahan-li6", "--set", "integrator.step=0.05", "--set",
                          "integrator.t_end=20.0"});
   BOOST_TEST(s2.status == 0, s2.err);
-  BOOST_TEST(s2.out.find("\"composition\": \"kahan-li6\"") != std::string::npos, s2.out);
+  BOOST_TEST(parse_json(s2.out).value("composition", "") == "kahan-li6", s2.out);
   BOOST_TEST(json_number(s2.out, "max_abs_vertical_angular_momentum_error") <= 1e-13, s2.out);
   BOOST_TEST(json_number(s2.out, "max_point_defect") <= 1e-15, s2.out);
 
@@ -812,7 +813,7 @@ BOOST_AUTO_TEST_CASE(compositions_run_in_every_form_and_on_manifolds) {
   // angular momentum to round-off; the heavy top's triple jump is of order 4.
   const Output rb = dvm({"run", scene("rigid-body-composition.toml"), "--json", "--csv", temp_dir() + "/rbc.csv"});
   BOOST_TEST(rb.status == 0, rb.err);
-  BOOST_TEST(rb.out.find("\"composition\": ") != std::string::npos, rb.out);
+  BOOST_TEST(parse_json(rb.out).contains("composition"), rb.out);
   BOOST_TEST(json_number(rb.out, "max_abs_spatial_angular_momentum_error") <= 1e-12, rb.out);
   const std::string top = write_scene(
       "top_comp.toml",
@@ -861,7 +862,7 @@ BOOST_AUTO_TEST_CASE(hamiltonian_form_on_curved_spaces) {
       BOOST_TEST(a.status == 0);
       BOOST_TEST(b.status == 0);
       BOOST_TEST(json_keys(a.out) == json_keys(b.out));
-      BOOST_TEST(b.out.find("\"form\": \"hamiltonian\"") != std::string::npos);
+      BOOST_TEST(parse_json(b.out).value("form", "") == "hamiltonian");
       BOOST_TEST(json_number(b.out, "max_point_defect") <= 1e-14);
       const std::string momentum = std::string(name) == "rigid-body.toml" ? "max_abs_spatial_angular_momentum_error"
                                                                           : "max_abs_vertical_angular_momentum_error";

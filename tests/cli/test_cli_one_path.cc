@@ -20,6 +20,7 @@
 #include <map>
 #include <sstream>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "tests/cli/cli_harness.h"
@@ -29,6 +30,12 @@ namespace {
 using namespace cli_test;
 
 double fitted(const Output& o) { return json_number(o.out, "fitted_order"); }
+
+// Whether a run's JSON reports the invariant `name` (a member of its "invariants").
+bool has_invariant(const std::string& json, const std::string& name) {
+  const Json j = parse_json(json);
+  return j.contains("invariants") && j.at("invariants").contains(name);
+}
 
 std::string first_line(const std::string& path) {
   std::ifstream f(path);
@@ -409,8 +416,9 @@ BOOST_AUTO_TEST_CASE(written_maps_run_every_form_and_are_checked) {
   }
   const Output ok = dvm({"check-map", "--scene", path});
   BOOST_TEST(ok.status == 0, ok.out << ok.err);
-  BOOST_TEST(ok.out.find("\"claims_symmetric\": true") != std::string::npos, ok.out);
-  BOOST_TEST(ok.out.find("\"passed\": true") != std::string::npos, ok.out);
+  const Json checked = parse_json(ok.out);
+  BOOST_TEST(checked.value("claims_symmetric", false), ok.out);
+  BOOST_TEST(checked.value("passed", false), ok.out);
 
   const std::vector<std::pair<std::string, std::vector<std::string>>> broken = {
       {"map.q1", {"map.q1=\"x + 2*v\""}},         // d/dv (R^2 - R^1) = 2.5 at v = 0
@@ -454,11 +462,9 @@ BOOST_AUTO_TEST_CASE(converge_measures_galerkin_against_a_reference_that_reports
   const double acc = json_number(o.out, "reference_accuracy");
   BOOST_TEST(acc > 0.0);
   // every fitted run's error is well above the reference's accuracy
-  for (std::size_t at = o.out.find("\"fitted\": true"); at != std::string::npos;
-       at = o.out.find("\"fitted\": true", at + 1)) {
-    const auto row = o.out.rfind("\"error\": ", at);
-    BOOST_TEST(std::strtod(o.out.c_str() + row + 9, nullptr) > 10.0 * acc);
-  }
+  const Json study = parse_json(o.out);
+  for (const Json& run : study.at("runs"))
+    if (run.value("fitted", false)) BOOST_TEST(json_double(run.at("error")) > 10.0 * acc, run.dump());
 }
 
 // On S^2 and SO(3), and in the Hamiltonian form, converge makes a table (and leaves
@@ -498,8 +504,9 @@ BOOST_AUTO_TEST_CASE(converge_refuses_or_flags_what_it_cannot_measure) {
   const Output chaos = dvm({"converge", scene("double_pendulum.toml"), "--t-end", "100", "--steps-list",
                             "2000,4000", "--json"});
   BOOST_TEST(chaos.status == 0, chaos.err);
-  BOOST_TEST(chaos.out.find("\"fitted_order\": null") != std::string::npos, chaos.out);
-  BOOST_TEST(chaos.out.find("not determined") != std::string::npos, chaos.out);
+  const Json study = parse_json(chaos.out);
+  BOOST_TEST((study.contains("fitted_order") && study.at("fitted_order").is_null()), chaos.out);
+  BOOST_TEST(study.value("fit_note", "").find("not determined") != std::string::npos, chaos.out);
 }
 
 // Every space writes .npy (never nothing with exit 0), with the CSV's columns.
@@ -603,8 +610,8 @@ BOOST_AUTO_TEST_CASE(lagrangians_written_on_curved_spaces) {
         const auto qw = json_array(w.out, "q_final"), qb = json_array(o.out, "q_final");
         BOOST_TEST_REQUIRE(qw.size() == qb.size());
         for (std::size_t i = 0; i < qw.size(); ++i) BOOST_TEST(std::fabs(qw[i] - qb[i]) <= 1e-13, form);
-        const bool reports_j3 = w.out.find("\"angular momentum about e3\"") != std::string::npos ||
-                                w.out.find("\"spatial angular momentum about e3\"") != std::string::npos;
+        const bool reports_j3 = has_invariant(w.out, "angular momentum about e3") ||
+                                has_invariant(w.out, "spatial angular momentum about e3");
         BOOST_TEST(reports_j3, w.out);
       }
     }
@@ -639,7 +646,7 @@ BOOST_AUTO_TEST_CASE(lagrangians_written_on_curved_spaces) {
     BOOST_TEST_REQUIRE(qw.size() == 6u);
     BOOST_TEST_REQUIRE(qb.size() == 6u);
     for (std::size_t i = 0; i < qw.size(); ++i) BOOST_TEST(std::fabs(qw[i] - qb[i]) <= 1e-13);
-    BOOST_TEST(w.out.find("\"angular momentum about e3\"") != std::string::npos, w.out);
+    BOOST_TEST(has_invariant(w.out, "angular momentum about e3"), w.out);
   }
 
   struct Refused {
@@ -707,7 +714,7 @@ BOOST_AUTO_TEST_CASE(lagrangians_written_on_curved_spaces) {
   BOOST_TEST(fb.status == 0, fb.err);
   for (const char* k : {"spatial angular momentum about e1", "spatial angular momentum about e2",
                         "spatial angular momentum about e3"})
-    BOOST_TEST(fb.out.find(std::string("\"") + k + "\"") != std::string::npos, k << "\n" << fb.out);
+    BOOST_TEST(has_invariant(fb.out, k), k << "\n" << fb.out);
 }
 
 // Sizes known only at run time run through the run-time-sized kernels: a written chain
@@ -753,34 +760,39 @@ BOOST_AUTO_TEST_CASE(sizes_known_only_at_run_time) {
   const Output b = dvm({"run", bodies, "--json"});
   BOOST_TEST(b.status == 0, b.err);
   BOOST_TEST(json_array(b.out, "q_final").size() == 24u);
+  const Json jb = parse_json(b.out);
   for (const char* inv : {"momentum x", "angular momentum z"}) {
-    const auto at = b.out.find(std::string("\"") + inv + "\": {");
-    BOOST_REQUIRE(at != std::string::npos);
-    BOOST_TEST(json_number(b.out, "max_abs_error", at) <= 1e-13, inv);
+    BOOST_REQUIRE_MESSAGE(jb.contains("invariants") && jb.at("invariants").contains(inv), inv);
+    BOOST_TEST(json_double(jb.at("invariants").at(inv).at("max_abs_error")) <= 1e-13, inv);
   }
 }
 
 namespace {
 
-// The objects of a JSON array printed by `dvm maps|methods|systems --json`: the text
-// of each, from its "name" to the next one.
-std::vector<std::string> json_objects(const std::string& json) {
-  std::vector<std::string> out;
-  const std::string key = "\"name\": \"";
-  for (std::size_t at = json.find(key); at != std::string::npos;) {
-    const std::size_t next = json.find(key, at + key.size());
-    out.push_back(json.substr(at, next == std::string::npos ? std::string::npos : next - at));
-    at = next;
-  }
-  return out;
+// The objects of the JSON array printed by `dvm maps|methods|systems --json`.
+std::vector<Json> json_objects(const std::string& json) {
+  const Json j = parse_json(json);
+  BOOST_REQUIRE_MESSAGE(j.is_array(), "not a JSON array:\n" << json);
+  return std::vector<Json>(j.begin(), j.end());
 }
 
-// The text between `open` and the next `close` in `text` ("" if absent).
-std::string between(const std::string& text, const std::string& open, const std::string& close) {
-  const std::size_t at = text.find(open);
-  if (at == std::string::npos) return "";
-  const std::size_t from = at + open.size();
-  return text.substr(from, text.find(close, from) - from);
+// The parameters of a README cell "m = 1, l = 1", in order, each name with its number
+// (NaN where the value is not a number, so that it equals none); "" is none.
+std::vector<std::pair<std::string, double>> readme_params(const std::string& cell) {
+  std::vector<std::pair<std::string, double>> out;
+  std::istringstream in(cell);
+  for (std::string part; std::getline(in, part, ',');) {
+    const std::size_t eq = part.find('=');
+    std::string name = part.substr(0, eq), value = eq == std::string::npos ? "" : part.substr(eq + 1);
+    for (std::string* x : {&name, &value}) {
+      while (!x->empty() && x->front() == ' ') x->erase(0, 1);
+      while (!x->empty() && x->back() == ' ') x->pop_back();
+    }
+    char* end = nullptr;
+    const double v = std::strtod(value.c_str(), &end);
+    out.emplace_back(name, !value.empty() && *end == '\0' ? v : NAN);
+  }
+  return out;
 }
 
 // The cells of the README's table row for `name` ("| name | a | b |" -> {name, a, b});
@@ -892,17 +904,17 @@ BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
   BOOST_REQUIRE_EQUAL(maps.status, 0);
   const auto map_entries = json_objects(maps.out);
   BOOST_REQUIRE_GE(map_entries.size(), 13u);
-  for (const std::string& m : map_entries) {
-    const std::string name = json_string(m, "name");
+  for (const Json& m : map_entries) {
+    const std::string name = m.value("name", "");
     BOOST_TEST_CONTEXT("map " << name) {
       const auto row = readme_row(readme, name);
       BOOST_REQUIRE(!row.empty());
-      const std::string order = std::to_string(static_cast<int>(json_number(m, "order")));
-      if (json_string(m, "space") == "R^n") {
+      const std::string order = std::to_string(static_cast<int>(json_double(m.at("order"))));
+      if (m.value("space", "") == "R^n") {
         // | name | R_d(x, v) | symmetric | order | inverse |
         BOOST_REQUIRE_EQUAL(row.size(), 5u);
-        const bool symmetric = m.find("\"symmetric\": true") != std::string::npos;
-        const bool takes_theta = m.find("\"takes_theta\": true") != std::string::npos;
+        const bool symmetric = m.value("symmetric", false);
+        const bool takes_theta = m.value("takes_theta", false);
         BOOST_TEST((row[2] == (symmetric ? "yes" : "no") || (takes_theta && row[2] == "at θ = 1/2") ||
                     (name == "written" && row[2] == "measured")));
         BOOST_TEST(row[3].rfind(order, 0) == 0);
@@ -910,7 +922,7 @@ BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
         // | name | R_d(x, v) | order | domain of the inverse |
         BOOST_REQUIRE_EQUAL(row.size(), 4u);
         // the maps that take a theta: "1 (2 at theta = 1/2)", as on R^n
-        const bool takes_theta = m.find("\"takes_theta\": true") != std::string::npos;
+        const bool takes_theta = m.value("takes_theta", false);
         BOOST_TEST((takes_theta ? row[2].rfind(order + " (", 0) == 0 : row[2] == order));
       }
     }
@@ -919,21 +931,20 @@ BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
   const Output methods = dvm({"methods", "--json"});
   BOOST_REQUIRE_EQUAL(methods.status, 0);
   int compositions = 0;
-  for (const std::string& m : json_objects(methods.out)) {
-    const std::string name = json_string(m, "name");
+  for (const Json& m : json_objects(methods.out)) {
+    const std::string name = m.value("name", "");
     // the basic method alone, the Galerkin methods (their own table) and the lifts are
     // not compositions; of the recursive triple jumps (triple-jump:<order>), a family,
     // the README lists some
-    if (name == "none" || m.find("\"quadrature\"") != std::string::npos || m.find("\"lift\"") != std::string::npos)
-      continue;
+    if (name == "none" || m.contains("quadrature") || m.contains("lift")) continue;
     const auto row = readme_row(readme, name);
     if (name.find(':') != std::string::npos && row.empty()) continue;
     ++compositions;
     BOOST_TEST_CONTEXT("composition " << name) {
       // | method | order | stages | global | local | threshold |
       BOOST_REQUIRE_EQUAL(row.size(), 6u);
-      BOOST_TEST(row[1] == std::to_string(static_cast<int>(json_number(m, "order"))));
-      BOOST_TEST(row[2] == std::to_string(static_cast<int>(json_number(m, "stages"))));
+      BOOST_TEST(row[1] == std::to_string(static_cast<int>(json_double(m.at("order")))));
+      BOOST_TEST(row[2] == std::to_string(static_cast<int>(json_double(m.at("stages")))));
     }
   }
   BOOST_TEST(compositions >= 17);
@@ -943,29 +954,35 @@ BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
   BOOST_REQUIRE_EQUAL(systems.status, 0);
   const auto system_entries = json_objects(systems.out);
   BOOST_REQUIRE_GE(system_entries.size(), 14u);
-  for (const std::string& s : system_entries) {
-    const std::string name = json_string(s, "name");
+  for (const Json& s : system_entries) {
+    const std::string name = s.value("name", "");
     BOOST_TEST_CONTEXT("system " << name) {
       const auto row = readme_row(readme, name);
       BOOST_REQUIRE_EQUAL(row.size(), 6u);
-      BOOST_TEST(row[1] == json_string(s, "space"));
-      // "params": {"m": 1, "l": 1} -> "m = 1, l = 1"; "forms": ["a", "b"] -> "a, b"
-      std::string params = between(s, "\"params\": {", "}"), forms = between(s, "\"forms\": [", "]");
-      for (std::size_t at; (at = params.find("\": ")) != std::string::npos;) params.replace(at, 3, " = ");
-      params.erase(std::remove_if(params.begin(), params.end(), [](char c) { return c == '"' || c == '\n'; }),
-                   params.end());
-      while (params.find("  ") != std::string::npos) params.replace(params.find("  "), 2, " ");
-      while (!params.empty() && params.front() == ' ') params.erase(0, 1);
-      while (!params.empty() && params.back() == ' ') params.pop_back();
-      forms.erase(std::remove(forms.begin(), forms.end(), '"'), forms.end());
-      BOOST_TEST(row[3] == params);
+      BOOST_TEST(row[1] == s.value("space", ""));
+      // "params": {"m": 1, "l": 1} against "m = 1, l = 1": the same names in the same
+      // order, with equal numbers
+      const auto params = readme_params(row[3]);
+      const Json& defaults = s.at("params");
+      BOOST_TEST(params.size() == defaults.size(), row[3]);
+      std::size_t k = 0;
+      for (const auto& p : defaults.items()) {
+        if (k < params.size()) {
+          BOOST_TEST(params[k].first == p.key(), row[3]);
+          BOOST_TEST(params[k].second == json_double(p.value()), row[3] << ": " << p.key());
+        }
+        ++k;
+      }
+      // "forms": ["a", "b"] -> "a, b"
+      std::string forms;
+      for (const Json& f : s.at("forms")) forms += (forms.empty() ? "" : ", ") + f.get<std::string>();
       BOOST_TEST(row[4] == forms);
       std::string also;
       for (const auto& [key, label] : {std::pair<std::string, std::string>{"retraction_maps", "retraction maps"},
                                        {"composition", "composition"},
                                        {"galerkin", "galerkin"},
                                        {"boundary_value", "boundary values"}})
-        if (s.find("\"" + key + "\": true") != std::string::npos) also += (also.empty() ? "" : ", ") + label;
+        if (s.value(key, false)) also += (also.empty() ? "" : ", ") + label;
       BOOST_TEST(row[5] == also);
     }
   }
@@ -1587,7 +1604,7 @@ BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
   }
   const Output ok = dvm({"check-map", "--scene", S});
   BOOST_TEST(ok.status == 0, ok.out << ok.err);
-  BOOST_TEST(ok.out.find("\"passed\": true") != std::string::npos, ok.out);
+  BOOST_TEST(parse_json(ok.out).value("passed", false), ok.out);
   // on the spherical chain: the written projection on each link, as sphere-projection-theta
   {
     const std::string chain = scene("spherical-chain.toml");
