@@ -75,7 +75,7 @@ class ChainStep {
       x_ = q0 + th * dq;
       chain_.gradient(x_, g_);
       r_ = p0 - (m / h_) * dq - a * g_;
-      s.iterations = it + 1;
+      s.iterations = s.jacobians = it + 1;
       s.residual = max_abs(r_);
       s.scale = pscale + std::fabs(m / h_) * max_abs(dq) + std::fabs(a) * chain_.gradient_scale(x_) +
                 options_.absolute_floor;

@@ -275,7 +275,7 @@ class SeparableGaussStep {
     parts_.velocity(q0, f_, a_);
     dq = h_ * v0_ + (0.5 * h_ * h_) * a_;
     StepSummary g = generic_->step(q0, p0, dq, dp);
-    g.iterations += sweeps;
+    g.iterations += sweeps;  // (the sweeps form no Jacobian)
     ++newton_steps_;
     return g;
   }

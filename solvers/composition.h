@@ -92,6 +92,7 @@ class ComposedStep {
       const V q = q0 + Q.sum, p = p0 + P.sum;
       const StepSummary s = substeps_[k].adjoint ? dual_[index_[k]].step(q, p, d, e) : plain_[index_[k]].step(q, p, d, e);
       total.iterations += s.iterations;
+      total.jacobians += s.jacobians;
       if (!(s.residual / s.scale <= total.residual / std::fmax(total.scale, 1e-300))) {
         total.residual = s.residual;
         total.scale = s.scale;
@@ -217,7 +218,7 @@ class ComposedLagrangianStep {
         scale += max_abs(D1);
         a = a + inc[k];
       }
-      s.iterations = it + 1;
+      s.iterations = s.jacobians = it + 1;
       s.residual = F.lpNorm<Eigen::Infinity>();
       s.scale = scale / static_cast<double>(S) + options_.absolute_floor;
       if (!std::isfinite(s.residual)) {

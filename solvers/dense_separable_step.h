@@ -95,13 +95,13 @@ class DenseSeparableThetaStep : public SeparableThetaNewton<DenseSeparableThetaS
     return true;
   }
   void solve(const V& r, V& dx) const { dx = factorisation_->lu.solve(r); }
-  KeptJacobian& kept() const { return *factorisation_; }
+  DriverState& kept() const { return *factorisation_; }
 
   Sys L_;  // its Hessian
   ForceSys force_;
   std::shared_ptr<Work> work_;
   // The factored Jacobian, kept from step to step and shared by copies of the step.
-  struct Factorisation : KeptJacobian {
+  struct Factorisation : DriverState {
     explicit Factorisation(int n) : lu(n) {}  // (its storage sized here: a step allocates nothing)
     Eigen::PartialPivLU<Eigen::MatrixXd> lu;
   };

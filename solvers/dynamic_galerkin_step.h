@@ -149,6 +149,7 @@ class DynamicGalerkinStep {
     try {
       if (!lu_valid_) {
         refresh(q0);
+        ++sum.jacobians;
         fresh = true;
       }
       double dxn = INFINITY;
@@ -187,6 +188,7 @@ class DynamicGalerkinStep {
           if (fresh) return sum;
           sum.message.clear();  // stalled on an old Jacobian: refresh and go on
           refresh(q0);
+          ++sum.jacobians;
           fresh = true;
           dxn = INFINITY;
           continue;
@@ -200,6 +202,7 @@ class DynamicGalerkinStep {
         }
         if (it >= 1 && nd > contraction_ * dxn && !fresh) {
           refresh(q0);
+          ++sum.jacobians;
           fresh = true;
           dxn = INFINITY;
           continue;

@@ -32,22 +32,22 @@
 // of the adjoint map is the adjoint method, so adjoint() of either step is the same
 // type with 1 - theta: ComposedStep<DynamicThetaStep<Sys>> composes one type.
 //
-// Solving: Newton's method with the stopping rule newton_verdict (solvers/newton.h), the
-// correction of the accepted residual applied as solve_newton does, and the scale
-// conventions of the fixed-size steps: |p0| + |J| |dq| for the position-momentum step
-// (stall measured against |dq| + |q0|), |h| max(|H_p|, |H_q|)(q0, p0) + |J| |(dq, dp)|
-// for the Hamiltonian step (against |(dq, dp)| + max(|q0|, |p0|)). The linear solves use
-// DenseLU (a pivot not above 1e-14 max|J| is singular, as solve_dense; the fixed-size
-// Newton of dimension <= 4 refuses only an exactly singular matrix). The
-// position-momentum step may instead keep its Jacobian across steps (keep_jacobian:
-// simplified Newton, solvers/kept_newton.h), where a step then costs gradients of L and
-// triangular solves, and L's Hessian only where the iteration stops converging fourfold.
-// Compiled for a number of coordinates K known in advance (DynamicThetaStep<Sys, K>),
-// it keeps the first iteration's Jacobian within each step by the same rule and forms dp
-// from the last gradient (newton() below). Non-convergence,
-// singular Jacobians, non-finite values and std::domain_error from the system (e.g. a
-// degenerate Legendre transform) are reported in the StepSummary, never thrown. Only
-// Newton's method is offered: StepOptions::solver = tiny is refused at construction.
+// Solving: each equation is written once (ThetaEquation, HamiltonianThetaEquation below:
+// residual, Jacobian blocks, scale) and solved by newton_drive (solvers/newton_driver.h),
+// which holds the stopping rule, the correction of the accepted residual and the refresh
+// of the Jacobian; the linear solves use DenseLU (a pivot not above 1e-14 max|J| is
+// singular). The scales are |p0| + |J| |dq| for the position-momentum step (stall
+// measured against |dq| + |q0|), |h| max(|H_p|, |H_q|)(q0, p0) + |J| |(dq, dp)| for the
+// Hamiltonian step (against |(dq, dp)| + max(|q0|, |p0|)). The position-momentum step
+// may keep its Jacobian across steps (keep_jacobian, Refresh::across_steps): a step then
+// costs gradients of L and triangular solves, and L's Hessian only where the iteration
+// stops converging fourfold; compiled for a number of coordinates K known in advance
+// (DynamicThetaStep<Sys, K>) it keeps the first iteration's Jacobian within each step by
+// the same rule (Refresh::within_step) and forms dp from the last gradient.
+// Non-convergence, singular Jacobians, non-finite values and std::domain_error from the
+// system (e.g. a degenerate Legendre transform) are reported in the StepSummary, never
+// thrown. Only Newton's method is offered: StepOptions::solver = tiny is refused at
+// construction.
 //
 // Workspace is allocated at construction for the system's dimension; a step allocates
 // nothing (checked with Eigen's EIGEN_RUNTIME_NO_MALLOC and a count of operator new in
@@ -63,8 +63,8 @@
 
 #include "core/discretization_map.h"
 #include "mechanics/dynamic_system.h"
-#include "solvers/kept_newton.h"
 #include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -89,10 +89,110 @@ inline bool sizes_match(int n, const Eigen::VectorXd& q0, const Eigen::VectorXd&
 
 }  // namespace dynamic_detail
 
-// The position-momentum step of the theta map for a run-time-sized Lagrangian Sys.
+// The position-momentum equation of the theta map (paper Sec. 5.3) for a run-time-sized
+// Lagrangian Sys, over its derivative blocks: for the increment D = q1 - q0,
+//   F(D) = p0 + h (1 - theta) L_q(x, v) - L_v(x, v),   x = q0 + theta D,  v = D / h,
+//   dF/dD = h theta (1 - theta) L_qq + (1 - theta) L_qv - theta L_qv^T - L_vv / h,
+// and p1 - p0 = h L_q(x, v) at the solution. The equation of solvers/newton_driver.h;
+// K: the number of coordinates where it is known when compiled (else Dynamic).
+template <class Sys, int K = Eigen::Dynamic>
+class ThetaEquation {
+ public:
+  using Vector = Eigen::Matrix<double, K, 1>;
+  using Matrix = Eigen::Matrix<double, K, K>;
+
+  ThetaEquation(const Sys& L, double theta, double h) : L_(&L), th_(theta), h_(h) {
+    const int n = L.dim();
+    x_.resize(n);
+    v_.resize(n);
+    Lq_.resize(n);
+    Lv_.resize(n);
+    Lqq_.resize(n, n);
+    Lqv_.resize(n, n);
+    Lvv_.resize(n, n);
+  }
+  // The start of the step.
+  void begin(const Vector& q0, const Vector& p0) {
+    q0_ = &q0;
+    p0_ = &p0;
+    pscale_ = dynamic_detail::inf_norm(p0);
+    q0size_ = dynamic_detail::inf_norm(q0);
+  }
+  void residual(const Vector& D, Vector& r) {
+    at(D);
+    L_->gradient(x_, v_, Lq_, Lv_);
+    form(r);
+  }
+  double jacobian(const Vector& D, Vector& r, Matrix& J) {
+    at(D);
+    L_->hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
+    form(r);
+    const double a = h_ * th_ * (1.0 - th_), b = 1.0 - th_, inv_h = 1.0 / h_;
+    const Eigen::Index n = J.rows();
+    for (Eigen::Index j = 0; j < n; ++j)
+      for (Eigen::Index i = 0; i < n; ++i)
+        J(i, j) = a * Lqq_(i, j) + b * Lqv_(i, j) - th_ * Lqv_(j, i) - inv_h * Lvv_(i, j);
+    const double m = dynamic_detail::inf_norm(J);
+    return std::isfinite(m) ? m : INFINITY;
+  }
+  double scale(const Vector& D, double Jmax) const { return pscale_ + Jmax * dynamic_detail::inf_norm(D); }
+  double offset() const { return q0size_; }
+
+  // p1 - p0 = h L_q at the solution D.
+  void momentum(const Vector& D, Vector& dp) {
+    at(D);
+    L_->gradient(x_, v_, Lq_, Lv_);
+    for (Eigen::Index i = 0; i < dp.size(); ++i) dp[i] = h_ * Lq_[i];
+  }
+  // The same from L_q of the last evaluation and the correction c applied after it (x
+  // moved by -theta c, v by -c / h), to first order with the blocks of the last Jacobian:
+  // for a correction at the residual's tolerance what this leaves out (c times the change
+  // of the Hessian since, and c^2) lies below the round-off of dp, for one gradient less.
+  void momentum_after(const Vector& c, Vector& dp) const {
+    const Eigen::Index n = dp.size();
+    const double inv_h = 1.0 / h_;
+    for (Eigen::Index i = 0; i < n; ++i) {
+      double d = Lq_[i];
+      for (Eigen::Index j = 0; j < n; ++j) d -= (th_ * Lqq_(i, j) + inv_h * Lqv_(i, j)) * c[j];
+      dp[i] = h_ * d;
+    }
+  }
+
+ private:
+  // x = q0 + theta D, v = D / h (as ThetaMap::inverse_increment and DiscreteLagrangian)
+  void at(const Vector& D) {
+    const double inv_h = 1.0 / h_;
+    const Vector& q0 = *q0_;
+    for (Eigen::Index i = 0; i < x_.size(); ++i) {
+      x_[i] = q0[i] + th_ * D[i];
+      v_[i] = D[i] * inv_h;
+    }
+  }
+  // F, written as PositionMomentumStep evaluates it
+  void form(Vector& r) const {
+    const double b = 1.0 - th_;
+    const Vector& p0 = *p0_;
+    for (Eigen::Index i = 0; i < r.size(); ++i) r[i] = p0[i] + ((h_ * Lq_[i]) * b - Lv_[i]);
+  }
+
+  const Sys* L_;
+  double th_, h_;
+  const Vector* q0_ = nullptr;
+  const Vector* p0_ = nullptr;
+  double pscale_ = 0.0, q0size_ = 0.0;
+  Vector x_, v_, Lq_, Lv_;
+  Matrix Lqq_, Lqv_, Lvv_;
+};
+
+// The position-momentum step of the theta map for a run-time-sized Lagrangian Sys: the
+// ThetaEquation solved by newton_drive (solvers/newton_driver.h) with a dense LU.
 // K: the number of coordinates where it is known when the step is compiled (the runtime
 // makes K = 1 and 2 for a written Lagrangian of so few): the same step, its workspace and
 // its loops of fixed size; the state stays run-time sized. Sys::dim() must equal K.
+// Refresh of the Jacobian: kept across steps (keep_jacobian), else kept within each step
+// where K is known (a step that converges in two iterations then costs one Hessian of L
+// and two gradients instead of two Hessians and a gradient, and forms dp from the last
+// gradient), else formed at every iteration.
 template <class Sys, int K = Eigen::Dynamic>
 class DynamicThetaStep {
   static_assert(is_dynamic_system_v<Sys>, "DynamicThetaStep needs a run-time-sized system (dynamic_system.h)");
@@ -101,41 +201,34 @@ class DynamicThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
-  // keep_jacobian: simplified Newton across steps (solvers/kept_newton.h), the
-  // factorisation of an earlier step kept while it serves; otherwise Newton's method with
-  // a Jacobian at every iteration.
+  // keep_jacobian: the factorisation of an earlier step kept while it serves
+  // (Refresh::across_steps); otherwise as the comment above says.
   DynamicThetaStep(Sys L, ThetaMap R, double h, StepOptions options = {}, bool keep_jacobian = false)
       : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options) {
-    if (keep_jacobian) kept_ = std::make_shared<Kept>();
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
     const int n = L_.dim();
     if (K != Eigen::Dynamic && n != K)
       throw std::invalid_argument("DynamicThetaStep<" + std::to_string(K) + ">: a system of " + std::to_string(n) +
                                   " coordinates");
-    x_.resize(n);
-    v_.resize(n);
-    Lq_.resize(n);
-    Lv_.resize(n);
-    r_.resize(n);
-    Lqq_.resize(n, n);
-    Lqv_.resize(n, n);
-    Lvv_.resize(n, n);
-    J_.resize(n, n);
-    if (kept_) {
-      kept_->lu.resize(n);
-      work_.resize(n);
-    } else {
-      lu_.resize(n);
-    }
+    work_ = std::make_shared<Work>(L_, R_.theta(), h_, n);
+    refresh_ = keep_jacobian ? Refresh::across_steps : K != Eigen::Dynamic ? Refresh::within_step
+                                                                           : Refresh::every_iteration;
+    kept_ = std::make_shared<Kept>(n);
   }
+  // A copy has its own equation and workspace (reading its own L); a factorisation kept
+  // across steps is shared with it.
+  DynamicThetaStep(const DynamicThetaStep& o)
+      : L_(o.L_), R_(o.R_), h_(o.h_), options_(o.options_), refresh_(o.refresh_) {
+    work_ = std::make_shared<Work>(L_, R_.theta(), h_, L_.dim());
+    kept_ = refresh_ == Refresh::across_steps ? o.kept_ : std::make_shared<Kept>(L_.dim());
+  }
+  DynamicThetaStep& operator=(const DynamicThetaStep&) = delete;
 
   double step_size() const { return h_; }
-  bool keeps_jacobian() const { return kept_ != nullptr; }
+  bool keeps_jacobian() const { return refresh_ == Refresh::across_steps; }
   // Forgets the kept factorisation (keep_jacobian): the next step forms one.
-  void reset() const {
-    if (kept_) kept_->valid = false;
-  }
+  void reset() const { kept_->state.valid = false; }
   const Sys& lagrangian() const { return L_; }
   const ThetaMap& map() const { return R_; }
   const StepOptions& options() const { return options_; }
@@ -151,185 +244,160 @@ class DynamicThetaStep {
     const int n = K == Eigen::Dynamic ? L_.dim() : K;
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
     if (dp.size() != n) dp.resize(n);
+    Work& w = *work_;
+    Kept& k = *kept_;
     try {
-      if (kept_) {
-        kept_jacobian_newton(KeptOps{*this}, *kept_, options_, q0, p0, dq, dp, work_, s);
-      } else if constexpr (K == Eigen::Dynamic) {
-        newton(q0, p0, dq, dp, s);
-      } else {  // the state in storage of fixed size: every loop and norm below of length K
-        const SV a = q0, b = p0;
-        SV d = dq, e = dp;
-        newton(a, b, d, e, s);
-        dq = d;
-        dp = e;
+      w.q0 = q0;
+      w.p0 = p0;
+      w.D = dq;
+      w.eq.begin(w.q0, w.p0);
+      s = newton_drive(w.eq, k.lu, refresh_, options_, w.D, w.r, w.dx, w.J, k.state, w.start);
+      dq = w.D;
+      if (s.converged) {
+        if (K != Eigen::Dynamic && refresh_ == Refresh::within_step &&
+            s.residual <= options_.residual_tolerance * s.scale)
+          w.eq.momentum_after(w.dx, w.dp);  // (w.dx: the correction applied last)
+        else
+          w.eq.momentum(w.D, w.dp);
+        dp = w.dp;
+        if (!std::isfinite(dynamic_detail::inf_norm(w.dp))) {
+          s.converged = false;
+          s.message = "non-finite momentum";
+        }
       }
     } catch (const std::domain_error& e) {
       s.converged = false;
       s.message = e.what();
+      k.state.valid = false;
     }
+    if (!s.converged && s.iterations == 0) s.iterations = 1;
     return s;
   }
 
  private:
   using SV = Eigen::Matrix<double, K, 1>;
-  static constexpr bool kChord = K != Eigen::Dynamic;
-
-  // Newton's method on vectors of type W (V, or SV where K is known). Where K is known
-  // (kChord), the Jacobian of the first iteration serves the next ones while each
-  // shrinks the residual fourfold (the rule of solvers/kept_newton.h, within a step): a
-  // step that converges in two iterations costs one Hessian of L and two gradients
-  // instead of two Hessians and a gradient. Otherwise a Jacobian at every iteration.
-  template <class W>
-  void newton(const W& q0, const W& p0, W& dq, W& dp, StepSummary& s) const {
-    const int n = static_cast<int>(x_.size());
-    const double th = R_.theta(), inv_h = 1.0 / h_;
-    const double a = h_ * th * (1.0 - th), b = 1.0 - th;
-    const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
-    // F = p0 + D1 L_d, written as PositionMomentumStep evaluates it
-    auto residual = [&] {
-      for (int i = 0; i < n; ++i) r_[i] = p0[i] + ((h_ * Lq_[i]) * b - Lv_[i]);
-      s.residual = dynamic_detail::inf_norm(r_);
-    };
-    double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
-    bool factored = false, done = false, corrected = false;
-    for (int it = 0; it < options_.max_iterations && !done; ++it) {
-      at(q0, dq);
-      const double dqn = dynamic_detail::inf_norm(dq);
-      corrected = false;
-      bool fresh = !factored;
-      if (factored) {  // (kChord) the residual alone; a Jacobian where the kept one no longer serves
-        L_.gradient(x_, v_, Lq_, Lv_);
-        residual();
-        fresh = !kept_jacobian_serves(s, last, it, pscale + Jmax * dqn + options_.absolute_floor, options_,
-                                      [&](StepSummary& probe) {
-                                        return newton_verdict(probe, dxn, dqn + q0size, options_);
-                                      });
-      }
-      if (fresh) {
-        L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
-        residual();
-        for (int j = 0; j < n; ++j)
-          for (int i = 0; i < n; ++i)
-            J_(i, j) = a * Lqq_(i, j) + b * Lqv_(i, j) - th * Lqv_(j, i) - inv_h * Lvv_(i, j);
-        Jmax = dynamic_detail::inf_norm(J_);
-        ++s.iterations;
-      }
-      s.scale = pscale + Jmax * dqn + options_.absolute_floor;
-      if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
-        s.message = "non-finite residual or Jacobian";
-        return;
-      }
-      const NewtonVerdict verdict = newton_verdict(s, dxn, dqn + q0size, options_);
-      if (verdict == NewtonVerdict::failed) return;
-      if (fresh) {
-        if (!lu_.factor(J_, Jmax)) {
-          if (verdict == NewtonVerdict::converged) break;  // nothing more to apply
-          s.message = "singular step Jacobian";
-          return;
-        }
-        factored = kChord;
-      }
-      lu_.solve(r_, r_);  // r_ is now the Newton correction
-      dq -= r_;
-      corrected = true;
-      dxn = dynamic_detail::inf_norm(r_);
-      last = s.residual;
-      // on convergence the correction already paid for is applied (see solve_newton)
-      done = verdict == NewtonVerdict::converged;
+  using SM = Eigen::Matrix<double, K, K>;
+  // The equation and the driver's workspace, sized once.
+  struct Work {
+    Work(const Sys& L, double theta, double h, int n) : eq(L, theta, h) {
+      q0.resize(n);
+      p0.resize(n);
+      D.resize(n);
+      r.resize(n);
+      dx.resize(n);
+      dp.resize(n);
+      start.resize(n);
+      J.resize(n, n);
     }
-    if (!s.converged) {
-      s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-      return;
-    }
-    // (the correction is at round-off where the residual met its tolerance; where the
-    // iteration was accepted as stalled above it, the gradient at the solution instead)
-    if (kChord && s.residual <= options_.residual_tolerance * s.scale) {
-      // dp = h L_q at the solution, from L_q at the last iterate and the correction c
-      // applied since (x moved by -theta c, v by -c / h): L_q + L_qq (-theta c) + L_qv (-c / h),
-      // with the blocks of the Jacobian's Hessian. The correction is the converged one, at
-      // the residual's tolerance, so what this leaves out (c times the change of the
-      // Hessian, and c^2) lies below the round-off of dp: one gradient less a step.
-      // (Where the loop ended at a singular Jacobian no correction was applied: c = 0.)
-      for (int i = 0; i < n; ++i) {
-        double d = Lq_[i];
-        if (corrected)
-          for (int j = 0; j < n; ++j) d -= (th * Lqq_(i, j) + inv_h * Lqv_(i, j)) * r_[j];
-        dp[i] = h_ * d;
-      }
-    } else {
-      at(q0, dq);
-      L_.gradient(x_, v_, Lq_, Lv_);
-      for (int i = 0; i < n; ++i) dp[i] = h_ * Lq_[i];
-    }
-    if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-      s.converged = false;
-      s.message = "non-finite momentum";
-    }
-  }
-
-  // x = q0 + theta dq, v = dq / h (as ThetaMap::inverse_increment and DiscreteLagrangian)
-  template <class W>
-  void at(const W& q0, const W& dq) const {
-    const double th = R_.theta(), inv_h = 1.0 / h_;
-    for (Eigen::Index i = 0; i < x_.size(); ++i) {
-      x_[i] = q0[i] + th * dq[i];
-      v_[i] = dq[i] * inv_h;
-    }
-  }
-
-  // The equation in the terms of kept_jacobian_newton: r as above, J = -dF/ddq.
-  struct KeptOps {
-    const DynamicThetaStep& s;
-    void residual(const V& q0, const V& p0, const V& dq, V& r) const {
-      s.at(q0, dq);
-      s.L_.gradient(s.x_, s.v_, s.Lq_, s.Lv_);
-      const double b = 1.0 - s.R_.theta();
-      for (Eigen::Index i = 0; i < r.size(); ++i) r[i] = p0[i] + ((s.h_ * s.Lq_[i]) * b - s.Lv_[i]);
-    }
-    double jacobian(const V& q0, const V& dq) const {
-      s.at(q0, dq);
-      s.L_.hessian(s.x_, s.v_, s.Lq_, s.Lv_, s.Lqq_, s.Lqv_, s.Lvv_);
-      const double th = s.R_.theta(), inv_h = 1.0 / s.h_, a = s.h_ * th * (1.0 - th), b = 1.0 - th;
-      const Eigen::Index n = s.J_.rows();
-      for (Eigen::Index j = 0; j < n; ++j)
-        for (Eigen::Index i = 0; i < n; ++i)
-          s.J_(i, j) = -(a * s.Lqq_(i, j) + b * s.Lqv_(i, j) - th * s.Lqv_(j, i) - inv_h * s.Lvv_(i, j));
-      const double m = dynamic_detail::inf_norm(s.J_);
-      return std::isfinite(m) ? m : INFINITY;
-    }
-    bool factor() const { return s.kept_->lu.factor(s.J_); }
-    void solve(const V& r, V& dx) const { s.kept_->lu.solve(r, dx); }
-    void increment(const V& q0, const V& dq, V& dp) const {
-      s.at(q0, dq);
-      s.L_.gradient(s.x_, s.v_, s.Lq_, s.Lv_);
-      for (Eigen::Index i = 0; i < dp.size(); ++i) dp[i] = s.h_ * s.Lq_[i];
-    }
-    const char* factorisation() const { return "dense LU factorisation"; }
+    ThetaEquation<Sys, K> eq;
+    SV q0, p0, D, r, dx, dp, start;
+    SM J;
   };
-  // The factorisation kept across steps, shared by copies of the step.
-  struct Kept : KeptJacobian {
+  // The factorisation and what the driver keeps of it (shared by copies where it is kept
+  // across steps: they then use one factorisation, from one thread at a time).
+  struct Kept {
+    explicit Kept(int n) : lu(n) {}
     DenseLUOf<K> lu;
+    DriverState state;
   };
 
   Sys L_;
   ThetaMap R_;
   double h_;
   StepOptions options_;
-  mutable Eigen::Matrix<double, K, 1> x_, v_, Lq_, Lv_, r_;
-  mutable KeptNewtonWork work_;  // (keep_jacobian)
-  mutable Eigen::Matrix<double, K, K> Lqq_, Lqv_, Lvv_, J_;
-  mutable DenseLUOf<K> lu_;
+  Refresh refresh_ = Refresh::every_iteration;
+  std::shared_ptr<Work> work_;
   std::shared_ptr<Kept> kept_;
 };
 
-// The Hamiltonian step (Eq. 5.1) of the theta map for a run-time-sized Hamiltonian Ham
-// (WrittenDynamicHamiltonian, LegendreDynamicHamiltonian<Sys>, or any type of the
-// concept with (q, p) as its blocks):
-//   q1 - q0 = h dH/dp(Q, P),  p1 - p0 = -h dH/dq(Q, P),  Q = q0 + theta dq,
+// The Hamiltonian equation (Eq. 5.1) of the theta map for a run-time-sized Hamiltonian
+// Ham (WrittenDynamicHamiltonian, LegendreDynamicHamiltonian<Sys>, or any type of the
+// concept with (q, p) as its blocks), for the increments y = (dq, dp):
+//   F(y) = (dq - h H_p(Q, P),  dp + h H_q(Q, P)),   Q = q0 + theta dq,
 // with P = p0 + (1 - theta) dp for the cotangent lift of the theta map on Q, and
 // P = p0 + theta dp for the theta map given directly on T*Q (`on_bundle`, the map of
 // OnCotangentBundle<ThetaMap> in solvers/hamiltonian_step.h: the theta method, not
-// symplectic unless theta = 1/2).
+// symplectic unless theta = 1/2). The Jacobian (H_pq = H_qp^T, b the weight of dp in P):
+//   [ I - h theta H_pq      -h b H_pp   ]
+//   [ h theta H_qq           I + h b H_qp ].
+// The equation of solvers/newton_driver.h.
+template <class Ham>
+class HamiltonianThetaEquation {
+ public:
+  using Vector = Eigen::VectorXd;
+  using Matrix = Eigen::MatrixXd;
+
+  HamiltonianThetaEquation(const Ham& H, double theta, double h, bool on_bundle)
+      : H_(&H), th_(theta), b_(on_bundle ? theta : 1.0 - theta), h_(h) {
+    const int n = H.dim();
+    x_.resize(n);
+    p_.resize(n);
+    Hq_.resize(n);
+    Hp_.resize(n);
+    Hqq_.resize(n, n);
+    Hqp_.resize(n, n);
+    Hpp_.resize(n, n);
+  }
+  // The start of the step: the scale of the terms, |h| max(|H_p|, |H_q|) at (q0, p0).
+  void begin(const Vector& q0, const Vector& p0) {
+    q0_ = &q0;
+    p0_ = &p0;
+    H_->gradient(q0, p0, Hq_, Hp_);
+    s0_ = std::fabs(h_) * std::fmax(dynamic_detail::inf_norm(Hp_), dynamic_detail::inf_norm(Hq_));
+    x0_ = std::fmax(dynamic_detail::inf_norm(q0), dynamic_detail::inf_norm(p0));
+  }
+  void residual(const Vector& y, Vector& r) {
+    at(y);
+    H_->gradient(x_, p_, Hq_, Hp_);
+    form(y, r);
+  }
+  double jacobian(const Vector& y, Vector& r, Matrix& J) {
+    at(y);
+    H_->hessian(x_, p_, Hq_, Hp_, Hqq_, Hqp_, Hpp_);
+    form(y, r);
+    const Eigen::Index n = x_.size();
+    const double ht = h_ * th_, hb = h_ * b_;
+    for (Eigen::Index j = 0; j < n; ++j)
+      for (Eigen::Index i = 0; i < n; ++i) {
+        J(i, j) = (i == j ? 1.0 : 0.0) - ht * Hqp_(j, i);
+        J(i, n + j) = -hb * Hpp_(i, j);
+        J(n + i, j) = ht * Hqq_(i, j);
+        J(n + i, n + j) = (i == j ? 1.0 : 0.0) + hb * Hqp_(i, j);
+      }
+    const double m = dynamic_detail::inf_norm(J);
+    return std::isfinite(m) ? m : INFINITY;
+  }
+  double scale(const Vector& y, double Jmax) const { return s0_ + Jmax * dynamic_detail::inf_norm(y); }
+  double offset() const { return x0_; }
+
+ private:
+  void at(const Vector& y) {
+    const Eigen::Index n = x_.size();
+    for (Eigen::Index i = 0; i < n; ++i) {
+      x_[i] = (*q0_)[i] + th_ * y[i];
+      p_[i] = (*p0_)[i] + b_ * y[n + i];
+    }
+  }
+  void form(const Vector& y, Vector& r) const {
+    const Eigen::Index n = x_.size();
+    for (Eigen::Index i = 0; i < n; ++i) {
+      r[i] = y[i] - h_ * Hp_[i];
+      r[n + i] = y[n + i] + h_ * Hq_[i];
+    }
+  }
+
+  const Ham* H_;
+  double th_, b_, h_;
+  const Vector* q0_ = nullptr;
+  const Vector* p0_ = nullptr;
+  double s0_ = 0.0, x0_ = 0.0;
+  Vector x_, p_, Hq_, Hp_;
+  Matrix Hqq_, Hqp_, Hpp_;
+};
+
+// The Hamiltonian step of the theta map for a run-time-sized Hamiltonian: the
+// HamiltonianThetaEquation solved by newton_drive with a dense LU, a Jacobian at every
+// iteration.
 template <class Ham>
 class DynamicHamiltonianThetaStep {
   static_assert(is_dynamic_system_v<Ham>,
@@ -343,19 +411,14 @@ class DynamicHamiltonianThetaStep {
       : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), on_bundle_(on_bundle) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
-    const int n = H_.dim();
-    x_.resize(n);
-    p_.resize(n);
-    Hq_.resize(n);
-    Hp_.resize(n);
-    y_.resize(2 * n);
-    r_.resize(2 * n);
-    Hqq_.resize(n, n);
-    Hqp_.resize(n, n);
-    Hpp_.resize(n, n);
-    J_.resize(2 * n, 2 * n);
-    lu_.resize(2 * n);
+    work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_);
   }
+  // A copy has its own equation and workspace, reading its own H.
+  DynamicHamiltonianThetaStep(const DynamicHamiltonianThetaStep& o)
+      : H_(o.H_), R_(o.R_), h_(o.h_), options_(o.options_), on_bundle_(o.on_bundle_) {
+    work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_);
+  }
+  DynamicHamiltonianThetaStep& operator=(const DynamicHamiltonianThetaStep&) = delete;
 
   double step_size() const { return h_; }
   const Ham& hamiltonian() const { return H_; }
@@ -375,72 +438,45 @@ class DynamicHamiltonianThetaStep {
     const int n = H_.dim();
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
     if (dp.size() != n) dp.setZero(n);
-    const double th = R_.theta(), b = on_bundle_ ? th : 1.0 - th;
-    y_.head(n) = dq;
-    y_.tail(n) = dp;
+    Work& w = *work_;
+    w.y.head(n) = dq;
+    w.y.tail(n) = dp;
     try {
-      H_.gradient(q0, p0, Hq_, Hp_);
-      const double s0 = std::fabs(h_) * std::fmax(dynamic_detail::inf_norm(Hp_), dynamic_detail::inf_norm(Hq_));
-      const double x0 = std::fmax(dynamic_detail::inf_norm(q0), dynamic_detail::inf_norm(p0));
-      double dxn = INFINITY;
-      bool done = false;
-      for (int it = 0; it < options_.max_iterations && !done; ++it) {
-        for (int i = 0; i < n; ++i) {
-          x_[i] = q0[i] + th * y_[i];
-          p_[i] = p0[i] + b * y_[n + i];
-        }
-        H_.hessian(x_, p_, Hq_, Hp_, Hqq_, Hqp_, Hpp_);
-        for (int i = 0; i < n; ++i) {
-          r_[i] = y_[i] - h_ * Hp_[i];
-          r_[n + i] = y_[n + i] + h_ * Hq_[i];
-        }
-        const double ht = h_ * th, hb = h_ * b;
-        for (int j = 0; j < n; ++j)
-          for (int i = 0; i < n; ++i) {
-            J_(i, j) = (i == j ? 1.0 : 0.0) - ht * Hqp_(j, i);
-            J_(i, n + j) = -hb * Hpp_(i, j);
-            J_(n + i, j) = ht * Hqq_(i, j);
-            J_(n + i, n + j) = (i == j ? 1.0 : 0.0) + hb * Hqp_(i, j);
-          }
-        s.iterations = it + 1;
-        s.residual = dynamic_detail::inf_norm(r_);
-        const double Jmax = dynamic_detail::inf_norm(J_);
-        s.scale = s0 + Jmax * dynamic_detail::inf_norm(y_) + options_.absolute_floor;
-        if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
-          s.message = "non-finite residual or Jacobian";
-          break;
-        }
-        const NewtonVerdict verdict = newton_verdict(s, dxn, dynamic_detail::inf_norm(y_) + x0, options_);
-        if (verdict == NewtonVerdict::failed) break;
-        if (!lu_.factor(J_)) {
-          if (verdict != NewtonVerdict::converged) s.message = "singular step Jacobian";
-          break;
-        }
-        lu_.solve(r_, r_);
-        y_ -= r_;
-        dxn = dynamic_detail::inf_norm(r_);
-        done = verdict == NewtonVerdict::converged;
-      }
-      if (!s.converged && s.message.empty())
-        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
+      w.eq.begin(q0, p0);
+      s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
     } catch (const std::domain_error& e) {
       s.converged = false;
       s.message = e.what();
     }
-    dq = y_.head(n);
-    dp = y_.tail(n);
+    dq = w.y.head(n);
+    dp = w.y.tail(n);
     return s;
   }
 
  private:
+  struct Work {
+    Work(const Ham& H, double theta, double h, bool on_bundle) : eq(H, theta, h, on_bundle) {
+      const int m = 2 * H.dim();
+      y.resize(m);
+      r.resize(m);
+      dx.resize(m);
+      start.resize(m);
+      J.resize(m, m);
+      lu.resize(m);
+    }
+    HamiltonianThetaEquation<Ham> eq;
+    Eigen::VectorXd y, r, dx, start;
+    Eigen::MatrixXd J;
+    DenseLU lu;
+    DriverState state;
+  };
+
   Ham H_;
   ThetaMap R_;
   double h_;
   StepOptions options_;
   bool on_bundle_;
-  mutable V x_, p_, Hq_, Hp_, y_, r_;
-  mutable Eigen::MatrixXd Hqq_, Hqp_, Hpp_, J_;
-  mutable DenseLU lu_;
+  std::shared_ptr<Work> work_;
 };
 
 }  // namespace dvm

@@ -282,6 +282,7 @@ class GalerkinStep {
     try {
       if (!lu_valid_) {
         refresh(q0);
+        ++sum.jacobians;
         fresh = true;
       }
       V force;
@@ -327,6 +328,7 @@ class GalerkinStep {
           if (fresh) return sum;
           sum.message.clear();  // stalled on an old Jacobian: refresh and go on
           refresh(q0);
+          ++sum.jacobians;
           fresh = true;
           dxn = INFINITY;
           continue;
@@ -340,6 +342,7 @@ class GalerkinStep {
         }
         if (it >= 1 && n > contraction_ * dxn && !fresh) {
           refresh(q0);
+          ++sum.jacobians;
           fresh = true;
           dxn = INFINITY;
           continue;

@@ -57,13 +57,15 @@ struct RunSummary {
   std::int64_t failed_step = -1;  // index k of the step k -> k+1 that failed
   double failed_time = NAN;       // t_k at the start of that step
   StepSummary failure;            // the failed step's summary
-  std::int64_t solver_iterations = 0;
+  std::int64_t solver_iterations = 0;  // Newton (or fixed-point) iterations, summed over the steps
+  std::int64_t jacobians = 0;          // Jacobians formed, summed over the steps
   int max_step_iterations = 0;
 
   // Books the summary of step k (from t0 + k h); returns false, recording the
   // failure, if the step did not converge.
   bool record(const StepSummary& s, std::int64_t k, double t0, double h) {
     solver_iterations += s.iterations;
+    jacobians += s.jacobians;
     if (s.iterations > max_step_iterations) max_step_iterations = s.iterations;
     if (s.converged) return true;
     fail(s, k, t0, h);

@@ -60,6 +60,7 @@ class ComposedPointStep {
       Covector pn;
       const StepSummary s = stages_[i].step(q, p, guess, qn, pn);
       total.iterations += s.iterations;
+      total.jacobians += s.jacobians;
       if (!s.converged) {
         total = s;
         total.message = "substep " + std::to_string(i + 1) + " of " + std::to_string(stages_.size()) + ": " + s.message;

@@ -339,6 +339,7 @@ class ManifoldGalerkinStep {
     try {
       if (!lu_valid_) {
         refresh(q0, pi0);
+        ++sum.jacobians;
         fresh = true;
       }
       const double pscale = max_abs(pi0);
@@ -370,6 +371,7 @@ class ManifoldGalerkinStep {
           if (fresh) break;
           sum.message.clear();
           refresh(q0, pi0);
+          ++sum.jacobians;
           fresh = true;
           dxn = INFINITY;
           continue;
@@ -383,6 +385,7 @@ class ManifoldGalerkinStep {
         }
         if (it >= 1 && d > contraction_ * dxn && !fresh) {
           refresh(q0, pi0);
+          ++sum.jacobians;
           fresh = true;
           dxn = INFINITY;
           continue;

@@ -56,7 +56,8 @@ struct StepOptions {
 
 struct StepSummary {
   bool converged = false;
-  int iterations = 0;     // Jacobian evaluations
+  int iterations = 0;     // Newton iterations: residuals evaluated and judged
+  int jacobians = 0;      // Jacobians formed (fewer than iterations where one is kept)
   double residual = NAN;  // |F|_inf at the returned x
   double scale = NAN;     // the scale the residual was judged against
   std::string message;    // why a solve failed
@@ -135,7 +136,7 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
       r[i] = rd[i].a;
       J.row(i) = rd[i].v.transpose();
     }
-    s.iterations = it + 1;
+    s.iterations = s.jacobians = it + 1;
     s.residual = max_abs(r);
     s.scale = scale_of(x, J) + opt.absolute_floor;
     if (!std::isfinite(s.residual) || !std::isfinite(max_abs(J))) {
@@ -186,7 +187,7 @@ StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptio
   solver.options.cost_threshold = 0.5 * target * target;
   const auto& summary = solver.Solve(fn, &x);
   StepSummary s;
-  s.iterations = summary.iterations + 1;
+  s.iterations = s.jacobians = summary.iterations + 1;
   fn(x.data(), r.data(), J.data());
   s.residual = max_abs(r);
   s.scale = scale_of(x, J) + opt.absolute_floor;

@@ -1,6 +1,7 @@
 // The base of the steps of a theta map on a separable Lagrangian of run-time size that
-// solve by simplified Newton across steps (solvers/kept_newton.h): the sparse one
-// (solvers/sparse_separable_step.h) and the dense one (solvers/dense_separable_step.h).
+// solve by simplified Newton across steps (Refresh::across_steps of
+// solvers/newton_driver.h): the sparse one (solvers/sparse_separable_step.h) and the
+// dense one (solvers/dense_separable_step.h).
 //
 // SeparableThetaNewton<Step>: for
 // L(q, v) = v^T M v / 2 + U(q) with M constant and the theta map
@@ -12,7 +13,7 @@
 //   void force(const V& x, V& F) const           F = grad U(x)
 //   double jacobian(const V& x) const            J formed at x; its largest entry (or INFINITY)
 //   bool factor() const, void solve(const V& r, V& dx) const, const char* factorisation() const
-//   KeptJacobian& kept() const                   the kept factorisation's state, shared
+//   DriverState& kept() const                    the kept factorisation's state, shared
 //                                                by copies of a step
 #pragma once
 
@@ -22,7 +23,7 @@
 
 #include "mechanics/dynamic_system.h"
 #include "solvers/dynamic_step.h"
-#include "solvers/kept_newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -77,7 +78,19 @@ class SeparableThetaNewton {
     if (!dynamic_detail::sizes_match(n_, q0, p0, dq, s)) return s;
     if (dp.size() != n_) dp.resize(n_);
     const Step& self = static_cast<const Step&>(*this);
-    kept_jacobian_newton(Ops{self, *this}, self.kept(), options_, q0, p0, dq, dp, work_, s);
+    Equation eq{self, *this, q0, p0, dynamic_detail::inf_norm(p0), dynamic_detail::inf_norm(q0)};
+    Factor la{self};
+    s = newton_drive(eq, la, Refresh::across_steps, options_, dq, r_, dx_, J_, self.kept(), start_);
+    if (s.converged) {
+      x_ = q0 + theta_ * dq;
+      self.force(x_, F_);
+      dp = h_ * F_;
+      if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+        s.converged = false;
+        s.message = "non-finite momentum";
+      }
+    }
+    if (!s.converged && s.iterations == 0) s.iterations = 1;
     return s;
   }
 
@@ -89,7 +102,9 @@ class SeparableThetaNewton {
     dynamic_detail::require_newton(options);
     x_.resize(n);
     F_.resize(n);
-    work_.resize(n);
+    r_.resize(n);
+    dx_.resize(n);
+    start_.resize(n);
   }
 
   double theta_, h_;
@@ -98,31 +113,41 @@ class SeparableThetaNewton {
   ConstantMass mass_;
 
  private:
-  // the separable equation, in the terms of kept_jacobian_newton
-  struct Ops {
+  // The separable equation for the driver, F(D) = r above, dF/dD = -J: the step forms J
+  // (jacobian(x)) in its own storage and factors it, so the driver's matrix is unused and
+  // the correction is J^{-1} r with the sign turned.
+  struct Equation {
+    using Vector = V;
+    using Matrix = Eigen::MatrixXd;
     const Step& step;
     const SeparableThetaNewton& base;
-    void residual(const V& q0, const V& p0, const V& dq, V& r) const {
-      base.x_ = q0 + base.theta_ * dq;
+    const V& q0;
+    const V& p0;
+    double pscale, x0;
+    void residual(const V& D, V& r) const {
+      base.x_ = q0 + base.theta_ * D;
       step.force(base.x_, base.F_);
-      base.mass_.times(dq, r);
+      base.mass_.times(D, r);
       r = p0 - r / base.h_ + (base.h_ * (1.0 - base.theta_)) * base.F_;
     }
-    double jacobian(const V& q0, const V& dq) const {
-      base.x_ = q0 + base.theta_ * dq;
+    double jacobian(const V& D, V& r, Matrix&) const {
+      residual(D, r);
       return step.jacobian(base.x_);
     }
-    bool factor() const { return step.factor(); }
-    void solve(const V& r, V& dx) const { step.solve(r, dx); }
-    void increment(const V& q0, const V& dq, V& dp) const {
-      base.x_ = q0 + base.theta_ * dq;
-      step.force(base.x_, base.F_);
-      dp = base.h_ * base.F_;
-    }
-    const char* factorisation() const { return step.factorisation(); }
+    double scale(const V& D, double Jmax) const { return pscale + Jmax * dynamic_detail::inf_norm(D); }
+    double offset() const { return x0; }
   };
-  mutable V x_, F_;
-  mutable KeptNewtonWork work_;
+  struct Factor {
+    const Step& step;
+    bool factor(const Eigen::MatrixXd&, double) const { return step.factor(); }
+    void solve(const V& r, V& dx) const {
+      step.solve(r, dx);
+      dx = -dx;
+    }
+    const char* name() const { return step.factorisation(); }
+  };
+  mutable V x_, F_, r_, dx_, start_;
+  mutable Eigen::MatrixXd J_;  // (unused: the step holds its Jacobian)
 };
 
 }  // namespace dvm

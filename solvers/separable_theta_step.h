@@ -73,8 +73,9 @@ class SeparableThetaStep {
         jacobian(q0 + theta_ * dq, J);
         lu.compute(J);
         have_jacobian = true;
-        ++s.iterations;  // (Jacobian evaluations, as solve_newton counts them)
+        ++s.jacobians;
       }
+      s.iterations = it + 1;
       last = s.residual;
       s.scale = pscale + max_abs(J) * max_abs(dq) + opt.absolute_floor;
       if (!std::isfinite(s.residual) || !std::isfinite(max_abs(J))) {

@@ -166,7 +166,7 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
       dx = factorisation_->ldlt.solve(r);
     }
   }
-  KeptJacobian& kept() const { return *factorisation_; }
+  DriverState& kept() const { return *factorisation_; }
   bool factor() const {
     if (banded()) return factorisation_->band->factor();
     auto& ldlt = factorisation_->ldlt;
@@ -187,7 +187,7 @@ class SparseSeparableThetaStep : public SeparableThetaNewton<SparseSeparableThet
   mutable Eigen::SparseMatrix<double> J_;
   // The factored Jacobian, kept from step to step (SimplicialLDLT is not copyable:
   // copies of a step share it, and with it the Jacobian they keep).
-  struct Factorisation : KeptJacobian {
+  struct Factorisation : DriverState {
     std::unique_ptr<BandedLU> band;  // J and its factors, where J is banded
     Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
   };

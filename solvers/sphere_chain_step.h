@@ -85,6 +85,7 @@ class SphereChainStep {
       bool have_jacobian = false;
       double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
       for (int it = 0; it < opt.max_iterations; ++it) {
+        s.iterations = it + 1;
         evaluate(q0, xi, !have_jacobian);
         w.r = pi0 + w.d1;
         s.residual = max_abs(w.r);
@@ -98,7 +99,7 @@ class SphereChainStep {
         if (refresh) {
           Jmax = jacobian_size();
           have_jacobian = true;
-          ++s.iterations;
+          ++s.jacobians;
           if (std::isfinite(Jmax) && !w.solver->factor(w.D, w.B, w.C, 1.0 / h_)) {
             s.message = "singular step Jacobian (banded LU of the chain)";
             return s;

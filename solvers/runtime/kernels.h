@@ -188,8 +188,15 @@ class StepperRun final : public Run {
     r.energy_final = E;
     r.max_abs_energy_error = max_energy_error;
     r.solver_iterations = r.loop.solver_iterations;
+    r.jacobians = r.loop.jacobians;
     r.max_step_iterations = r.loop.max_step_iterations;
     r.max_point_defect = defect;
+    {
+      RunReport first;
+      view_.finish_report(first, q0_, p0_);
+      r.q_initial = std::move(first.q_final);
+      r.p_initial = std::move(first.p_final);
+    }
     r.invariants = view_.invariant_reports(I0);
     {
       int k = 0;
@@ -448,7 +455,7 @@ class BoundaryValueRun final : public Run {
     if (spread_) r.momentum_spread = jmax - jmin;
     r.max_del_residual = res.max_residual;
     r.residual_scale = res.scale;
-    r.solver_iterations = res.iterations;
+    r.solver_iterations = r.jacobians = res.iterations;
     r.message = res.message;
     if (rec) {
       if (!rec->finish(res.converged, r.kept)) r.output_error = true;

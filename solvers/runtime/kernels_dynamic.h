@@ -199,7 +199,7 @@ constexpr int kStructuredNewtonMinDim = 3;
 constexpr int kMaxDenseDynamicDim = 4096;
 
 // From this many coordinates the position-momentum step of a Lagrangian that is not
-// separable keeps its Jacobian across steps (simplified Newton, solvers/kept_newton.h).
+// separable keeps its Jacobian across steps (simplified Newton, Refresh::across_steps of solvers/newton_driver.h).
 // A kept Jacobian takes 7 to 8 gradients of L a step where Newton's method takes 3
 // Hessians; a written Hessian of n <= 4 coordinates is one pass of 8 forward
 // derivatives, about a gradient's cost, and there keeping it is 1.7 times slower.
@@ -213,7 +213,7 @@ constexpr int kKeptJacobianMinDim = 8;
 // compiled for its size (DynamicThetaStep<WrittenDynamic, K>, K = 1, 2): loops, norms
 // and LU of fixed length, one Hessian of L a step where its first Jacobian serves
 // (solvers/dynamic_step.h). Keeping the Jacobian across steps instead (the loop of
-// solvers/kept_newton.h) took 2.0 times as long for the pendulum, 1.6 for Kepler. The
+// Refresh::across_steps of solvers/newton_driver.h) took 2.0 times as long for the pendulum, 1.6 for Kepler. The
 // explicit steps of a separable text of so few coordinates are compiled for its size
 // too, and so is their run's state (WrittenSeparableOf<K>, DynamicView<Sys, K>): Kepler's
 // Stormer-Verlet 55.5 ns a step where the run-time-sized step takes 59.9

@@ -39,10 +39,10 @@ RunReport base_report(const Problem& pr, const Method& me, const std::string& sy
   r.boundary_value = pr.boundary_value;
   r.step = pr.step;
   r.steps_requested = pr.steps;
+  r.order = me.order();
   if (me.galerkin) {
     r.stages = me.stages;
     r.quadrature = to_string(me.quadrature);
-    r.order = 2 * me.stages;
   }
   if (me.form == Form::newmark) {
     r.newmark = true;
@@ -125,7 +125,7 @@ std::string report_json(const RunReport& r) {
   j.num("step", r.step).num("steps", static_cast<double>(r.steps));
   if (!r.boundary_value) j.num("steps_requested", static_cast<double>(r.steps_requested));
   j.num("t_final", r.t_final);
-  if (r.boundary_value) j.arr("q_initial", r.q_initial).arr("p_initial", r.p_initial);
+  j.arr("q_initial", r.q_initial).arr("p_initial", r.p_initial);
   j.arr("q_final", r.q_final).arr("p_final", r.p_final);
   j.num("energy_initial", r.energy_initial).num("energy_final", r.energy_final);
   j.num("max_abs_energy_error", r.max_abs_energy_error);
@@ -141,8 +141,10 @@ std::string report_json(const RunReport& r) {
   if (r.momentum_spread >= 0.0) j.num("vertical_angular_momentum_spread", r.momentum_spread);
   if (r.boundary_value) j.num("max_del_residual", r.max_del_residual).num("residual_scale", r.residual_scale);
   j.num("wall_seconds", r.wall_seconds).num("solver_iterations", static_cast<double>(r.solver_iterations));
+  j.num("jacobians", static_cast<double>(r.jacobians));
   if (!r.boundary_value) j.num("max_step_iterations", r.max_step_iterations).num("monitor_every", static_cast<double>(r.monitor_every));
-  if (r.stages > 0) j.num("stages", r.stages).str("quadrature", r.quadrature).num("order", r.order);
+  if (r.order > 0) j.num("order", r.order);
+  if (r.stages > 0) j.num("stages", r.stages).str("quadrature", r.quadrature);
   if (r.newmark) j.num("gamma", r.gamma).num("beta", r.beta);
   if (!r.invariants.empty()) {
     Json::Object inv;
@@ -213,10 +215,12 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
       } else if (r.step_path == "sphere-chain-banded-newton") {
         std::fprintf(to, "  steps by Newton on the chain's equation, banded Jacobian (O(n) a step)\n");
       }
-      std::fprintf(to, "  solver iterations %lld (%.2f per step, at most %d in a step); wall time %.3f s (%.3g us/step)\n",
+      std::fprintf(to,
+                   "  solver iterations %lld (%.2f per step, at most %d in a step), Jacobians formed %lld; wall time "
+                   "%.3f s (%.3g us/step)\n",
                   static_cast<long long>(r.solver_iterations),
                   static_cast<double>(r.solver_iterations) / std::fmax(1.0, static_cast<double>(r.steps)),
-                  r.max_step_iterations, r.wall_seconds,
+                  r.max_step_iterations, static_cast<long long>(r.jacobians), r.wall_seconds,
                   1e6 * r.wall_seconds / std::fmax(1.0, static_cast<double>(r.steps)));
     }
     for (const std::string& f : r.written) std::fprintf(to, "  wrote %s\n", f.c_str());

@@ -58,7 +58,7 @@ struct RunReport {
   // same with the sparse Hessian of a written potential, solvers/sparse_separable_step.h),
   // "separable-dense-newton" (the same with a dense Hessian of U, n bodies,
   // solvers/dense_separable_step.h), "kept-jacobian-newton" (a Lagrangian that is not
-  // separable, of run-time size, its Jacobian kept across steps, solvers/kept_newton.h),
+  // separable, of run-time size, its Jacobian kept across steps, Refresh::across_steps of solvers/newton_driver.h),
   // "gauss-collocation" or "generic". Empty: not reported.
   std::string structure, structure_source, step_path;
   // How a Lagrangian written on R^n is differentiated: "program" (gradient and Hessian
@@ -88,7 +88,9 @@ struct RunReport {
   std::int64_t steps = 0, steps_requested = 0;
   double t_final = 0.0;
   std::vector<double> q_final, p_final;   // as stored (SO(3): quaternion [w, x, y, z])
-  std::vector<double> q_initial, p_initial;  // boundary-value problems: the solved end
+  // The initial state as stored (boundary-value problems: the solved end, p_initial the
+  // discrete momentum found there)
+  std::vector<double> q_initial, p_initial;
   // The final point in embedding coordinates (SO(3): the nine entries of R), for
   // distances between runs.
   std::vector<double> q_embedded;
@@ -97,10 +99,14 @@ struct RunReport {
   std::vector<InvariantReport> invariants;
   double wall_seconds = 0.0;
   std::int64_t monitor_every = 1;  // initial-value runs: the steps between evaluations of the energy
-  std::int64_t solver_iterations = 0;
+  // Iterations of the step equations' solves (Newton, fixed-point sweeps, or Ceres'
+  // iterations for boundary values), summed over the steps, and the Jacobians formed
+  // (fewer where a Jacobian is kept within or across steps).
+  std::int64_t solver_iterations = 0, jacobians = 0;
   int max_step_iterations = 0;
+  int order = 0;  // the order the method is built to have (Method::order; 0: none stated)
   // galerkin
-  int stages = 0, order = 0;
+  int stages = 0;
   std::string quadrature;
   // newmark
   bool newmark = false;

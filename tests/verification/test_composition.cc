@@ -91,7 +91,7 @@ BOOST_AUTO_TEST_CASE(measured_orders_on_kepler) {
     }
   }
   // the basic methods alone, for comparison: midpoint order 2, symplectic Euler 1
-  const CompositionScheme none{"none", 2, 1, false, CompositionKind::of_symmetric, {1.0}, {}, {}, ""};
+  const CompositionScheme none{"none", 2, 1, false, CompositionKind::of_symmetric, {1.0}, {}, {}, "", {}, {}};
   const OrderResult m = kepler_order(none, ThetaMap::midpoint(), true);
   BOOST_TEST(std::fabs(m.order - 2.0) <= 0.3);
 }

@@ -1,0 +1,182 @@
+// The one Newton driver: an equation F(x) = 0 of a step, solved by Newton's method with
+// the linear algebra and the refresh of the Jacobian as policies.
+//
+// The minimum API of an equation E (what each discrete equation writes once):
+//   using Vector, Matrix;                     Eigen types of the unknowns' size (fixed or
+//                                             run-time) and of the Jacobian
+//   void residual(const Vector& x, Vector& r)        r = F(x)
+//   double jacobian(const Vector& x, Vector& r, Matrix& J)
+//                                             r = F(x) and J = dF/dx at x; returns max|J_ij|
+//                                             (INFINITY where it is not finite)
+//   double scale(const Vector& x, double Jmax) const  the size of the terms F is made of at
+//                                             x, which the residual is judged against
+//   double offset() const                      the size of the point x is an increment of
+//                                             (round-off in forming it sets a floor under F)
+// The equation holds its data (the step's start, its time, its size) and may keep what
+// it evaluated at the last x (the caller reads the solution's by-products from it).
+//
+// Deduced here, once for every equation:
+//   - the stopping rule of every step (newton_verdict_floored, solvers/newton.h): F below
+//     its tolerance relative to the scale, or updates stalled at round-off;
+//   - the correction from the last evaluation applied on convergence (it takes the
+//     residual from the tolerance down to round-off; the reported residual is the one
+//     measured before it);
+//   - the refresh of the Jacobian (Refresh policies below): formed at every iteration,
+//     kept within a step while each iteration shrinks the residual fourfold, or kept
+//     across steps by the same rule;
+//   - StepSummary::iterations counts Newton iterations (residuals evaluated and judged),
+//     StepSummary::jacobians the Jacobians formed and factored.
+//
+// Linear algebra policies LA: `bool factor(const Matrix& J, double Jmax)` (false where J is
+// singular to working precision) and `void solve(const Vector& r, Vector& dx)` (dx =
+// J^{-1} r, dx may alias r). DenseLUOf<K> (mechanics/dynamic_system.h) is one; BandedLU and
+// the sparse factorisations of the separable steps are others.
+#pragma once
+
+#include <cmath>
+#include <string>
+#include <type_traits>
+#include <utility>
+
+#include "mechanics/dynamic_system.h"
+#include "solvers/newton.h"
+
+namespace dvm {
+
+// How the driver refreshes the Jacobian.
+enum class Refresh {
+  every_iteration,  // Newton's method
+  within_step,      // a Jacobian formed in the step serves later iterations of it while
+                    // each shrinks the residual fourfold (kept_jacobian_serves)
+  across_steps,     // the same, and the factorisation of an earlier step serves the next
+};
+
+// What the driver keeps between steps (Refresh::across_steps).
+struct DriverState {
+  bool valid = false;  // a factorisation is held
+  double Jmax = 0.0;   // the largest entry of the Jacobian factored
+};
+
+// Whether a factorisation formed at an earlier iterate still serves at this one: the
+// residual shrank fourfold since the last iterate, within the first half of the
+// iteration budget (Newton's method from there on, so that a small budget converges
+// where Newton's method does), or it already meets the stopping rule (a residual at
+// round-off shrinks no more, whatever J is). scale: the residual's scale with that
+// Jacobian; verdict(probe): the caller's stopping rule on a copy of s.
+template <class Verdict>
+bool kept_jacobian_serves(const StepSummary& s, double last, int it, double scale, const StepOptions& opt,
+                          Verdict&& verdict) {
+  if (s.residual <= 0.25 * last && 2 * (it + 1) <= opt.max_iterations) return true;
+  StepSummary probe = s;
+  probe.scale = scale;
+  return verdict(probe) == NewtonVerdict::converged;
+}
+
+namespace driver_detail {
+
+template <class V>
+double norm(const V& x) {
+  return dynamic_detail::inf_norm(x);
+}
+
+// "singular step Jacobian", with the factorisation that failed where the policy names it
+// (const char* name() const).
+template <class LA, class = void>
+struct has_name : std::false_type {};
+template <class LA>
+struct has_name<LA, std::void_t<decltype(std::declval<const LA&>().name())>> : std::true_type {};
+template <class LA>
+std::string singular(const LA& la) {
+  if constexpr (has_name<LA>::value)
+    return std::string("singular step Jacobian (") + la.name() + " failed)";
+  else
+    return "singular step Jacobian";
+}
+
+}  // namespace driver_detail
+
+// Solves F(x) = 0 from x (the guess in, the solution out; dx the correction applied last,
+// zero if none). r, dx: workspace of x's size;
+// J: of the Jacobian's; la: the factorisation; state: what is kept across steps
+// (Refresh::across_steps; else only within this call). A non-finite residual at an
+// iterate reached through a kept Jacobian starts the iteration again from the guess
+// with a fresh one. Throws nothing itself; the equation's exceptions pass through.
+template <class E, class LA>
+StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt, typename E::Vector& x,
+                         typename E::Vector& r, typename E::Vector& dx, typename E::Matrix& J, DriverState& state,
+                         typename E::Vector& start) {
+  using driver_detail::norm;
+  StepSummary s;
+  if (refresh != Refresh::across_steps) state.valid = false;
+  const double x0 = eq.offset();
+  double dxn = INFINITY, last = INFINITY;
+  bool formed = false;  // a Jacobian formed in this call
+  start = x;
+  auto fail = [&](std::string message) {
+    s.converged = false;
+    s.message = std::move(message);
+    return s;
+  };
+  for (int it = 0; it < opt.max_iterations; ++it) {
+    const double xn = norm(x);
+    bool fresh = !state.valid || refresh == Refresh::every_iteration;
+    if (!fresh) {
+      eq.residual(x, r);
+      s.residual = norm(r);
+      if (!std::isfinite(s.residual) && !formed) {
+        // a kept Jacobian took the iterate out of the equation's domain: from the guess again
+        x = start;
+        state.valid = false;
+        dxn = last = INFINITY;
+        fresh = true;
+      } else {
+        const double Jmax = state.Jmax;
+        fresh = !kept_jacobian_serves(s, last, it, eq.scale(x, Jmax) + opt.absolute_floor, opt,
+                                      [&](StepSummary& probe) {
+                                        return newton_verdict_floored(probe, dxn, xn + x0, opt, Jmax);
+                                      });
+      }
+    }
+    if (fresh) {
+      state.Jmax = eq.jacobian(x, r, J);
+      s.residual = norm(r);
+      ++s.jacobians;
+      formed = true;
+      state.valid = std::isfinite(state.Jmax) && la.factor(J, state.Jmax);
+      if (std::isfinite(state.Jmax) && !state.valid) {
+        // singular: accepted only where the stopping rule accepts the iterate as it is
+        s.iterations = it + 1;
+        s.scale = eq.scale(x, state.Jmax) + opt.absolute_floor;
+        if (std::isfinite(s.residual) &&
+            newton_verdict_floored(s, dxn, xn + x0, opt, state.Jmax) == NewtonVerdict::converged) {
+          dx.setZero();  // (no correction applied)
+          return s;
+        }
+        return fail(driver_detail::singular(la));
+      }
+    }
+    s.iterations = it + 1;
+    const double Jmax = state.Jmax;
+    s.scale = eq.scale(x, Jmax) + opt.absolute_floor;
+    if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
+      state.valid = false;
+      return fail("non-finite residual or Jacobian");
+    }
+    const NewtonVerdict verdict = newton_verdict_floored(s, dxn, xn + x0, opt, Jmax);
+    if (verdict == NewtonVerdict::failed) return s;
+    la.solve(r, dx);
+    const double step = norm(dx);
+    if (!std::isfinite(step)) {
+      state.valid = false;
+      return fail(driver_detail::singular(la));
+    }
+    x -= dx;  // (on convergence too: the correction already paid for)
+    if (verdict == NewtonVerdict::converged) return s;
+    dxn = step;
+    last = s.residual;
+  }
+  return fail("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +
+              std::to_string(s.jacobians) + " Jacobians formed)");
+}
+
+}  // namespace dvm
