@@ -11,6 +11,7 @@
 
 #include "mechanics/systems.h"
 #include "solvers/composition.h"
+#include "tests/displacement_check.h"
 #include "tests/verification/common.h"
 
 using namespace dvm;
@@ -374,6 +375,43 @@ BOOST_AUTO_TEST_CASE(two_routes_agree_with_a_loose_tolerance) {
     BOOST_TEST_MESSAGE(name << ", tolerance 1e-6: route 1 - route 2 after 20 steps " << d);
     BOOST_TEST(d <= 1e-13, name << ": " << d);
   }
+}
+
+// The displacement check of the cross-product suite (tests/displacement_check.h,
+// tests/cli/test_cli_combinations.cc) on real steps, against Kepler's exact flow: the
+// kahan-li8 composition of the midpoint map passes it; the same composition with any one
+// of its stages left out fails it, and so does a step that returns its input.
+BOOST_AUTO_TEST_CASE(the_displacement_check_fails_a_composition_that_drops_a_stage) {
+  const Kepler L(1.0);
+  const V2 q0(0.4, 0.0), p0(0.0, 2.0);
+  const double h = 1e-3;
+  const int K = 3;
+  V2 qe, pe;
+  L.exact(K * h, q0, p0, qe, pe);
+  const std::vector<double> dq_ref{qe[0] - q0[0], qe[1] - q0[1]}, dp_ref{pe[0] - p0[0], pe[1] - p0[1]};
+  auto judge = [&](const std::vector<Substep>& subs) {
+    const CompositionStep<Kepler, ThetaMap> S(L, ThetaMap::midpoint(), h, subs);
+    V2 q = q0, p = p0;
+    const RunSummary run = integrate(S, 0.0, q, p, p0, K, [](auto&&...) {});
+    BOOST_REQUIRE(!run.failed);
+    return dvm_test::judge_displacement({q0[0], q0[1]}, {p0[0], p0[1]}, {q[0], q[1]}, {p[0], p[1]}, dq_ref, dp_ref, 8,
+                                        h);
+  };
+  const std::vector<Substep> all = substeps(find_composition("kahan-li8"), true);
+  const auto whole = judge(all);
+  BOOST_TEST(whole.ok, whole.message);
+  BOOST_TEST_MESSAGE("kahan-li8, midpoint, Kepler: displacement error " << whole.error_q << " (q), " << whole.error_p
+                                                                         << " (p) against the tolerance " << whole.tol);
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    std::vector<Substep> dropped = all;
+    dropped.erase(dropped.begin() + static_cast<std::ptrdiff_t>(k));
+    const auto v = judge(dropped);
+    BOOST_TEST(!v.ok, "stage " << k + 1 << " left out");
+    BOOST_TEST(std::fmax(v.error_q, v.error_p) >= 0.5 * std::fabs(all[k].weight), "stage " << k + 1);
+  }
+  const auto idle = dvm_test::judge_displacement({q0[0], q0[1]}, {p0[0], p0[1]}, {q0[0], q0[1]}, {p0[0], p0[1]},
+                                                 dq_ref, dp_ref, 8, h);
+  BOOST_TEST(!idle.ok);
 }
 
 BOOST_AUTO_TEST_CASE(composed_lagrangian_is_stationary_at_the_micro_nodes) {
