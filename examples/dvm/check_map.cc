@@ -6,7 +6,7 @@
 #include "core/manifold_checks.h"
 #include "core/map_checks.h"
 #include "examples/dvm/commands.h"
-#include "examples/dvm/scene.h"
+#include "solvers/runtime/scene.h"
 #include "solvers/runtime/json.h"
 #include "solvers/runtime/manifold_map_of.h"
 #include "solvers/runtime/registry.h"

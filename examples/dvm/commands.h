@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-#include "examples/dvm/scene.h"
+#include "solvers/runtime/scene.h"
 #include "solvers/runtime/converge.h"
 
 namespace dvm::cli {

@@ -9,13 +9,15 @@
 #include <vector>
 
 #include "examples/dvm/commands.h"
-#include "examples/dvm/scene.h"
+#include "solvers/runtime/scene.h"
 #include "solvers/runtime/converge.h"
 #include "solvers/runtime/json.h"
 #include "solvers/runtime/registry.h"
 #include "solvers/runtime/run.h"
 
 using namespace dvm::cli;
+using dvm::InputError;
+using dvm::load_scene;
 using dvm::Json;
 
 // The project version and the git revision at configure time (dvm_version.cc,

@@ -9,7 +9,7 @@
 //
 // validate(problem, method) checks every rule that involves more than one value, once,
 // with one message per rule naming the keys as a scene writes them ('integrator.form',
-// 'problem.kind', ...). A scene reader (examples/dvm/scene.cc), a C++ caller or a
+// 'problem.kind', ...). A scene reader (solvers/runtime/scene.cc), a C++ caller or a
 // binding fills these structs; make_run (solvers/runtime/run.h) validates again, so
 // nothing unchecked reaches a kernel.
 #pragma once

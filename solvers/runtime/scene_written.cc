@@ -1,4 +1,4 @@
-#include "examples/dvm/scene_written.h"
+#include "solvers/runtime/scene_written.h"
 
 #include <cmath>
 #include <fstream>
@@ -8,7 +8,7 @@
 
 #include "mechanics/written_lagrangian.h"
 
-namespace dvm::cli {
+namespace dvm {
 
 namespace {
 
@@ -282,4 +282,4 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   pr.written = std::move(w);
 }
 
-}  // namespace dvm::cli
+}  // namespace dvm

@@ -1,5 +1,6 @@
 // Scenes: what `dvm run` and `dvm converge` read (a TOML file plus --set overrides),
-// turned once into the runtime layer's typed values (solvers/runtime/problem.h):
+// turned once into the runtime layer's typed values (solvers/runtime/problem.h). The one
+// reader of scenes: the dvm program, C++ callers and bindings share it and its messages.
 //
 //   [system]      builtin = NAME   params = { ... }      (dvm systems)
 //                 or a Lagrangian written in the scene (scene_written.h)
@@ -24,11 +25,9 @@
 
 #include "solvers/runtime/problem.h"
 
-namespace dvm::cli {
+namespace dvm {
 
-using dvm::InputError;
-using dvm::echo;
-
+// A scene read and validated: the run it asks for, and its output.
 struct Scene {
   std::string path;
   Problem problem;
@@ -49,4 +48,4 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
 // The same for a scene given as text; `path` names it in messages.
 Scene load_scene_text(const std::string& text, const std::string& path, const std::vector<std::string>& overrides);
 
-}  // namespace dvm::cli
+}  // namespace dvm

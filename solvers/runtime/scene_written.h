@@ -23,9 +23,9 @@
 
 #include <toml++/toml.h>
 
-#include "examples/dvm/scene.h"
+#include "solvers/runtime/scene.h"
 
-namespace dvm::cli {
+namespace dvm {
 
 // Fills the problem's system, params, written system and dimension from `sys`.
 // Throws InputError.
@@ -35,4 +35,4 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
 // description of the --set override when the value did not come from the file).
 std::string string_location(const std::string& path, const toml::node& n, std::size_t offset);
 
-}  // namespace dvm::cli
+}  // namespace dvm

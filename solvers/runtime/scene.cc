@@ -1,4 +1,4 @@
-#include "examples/dvm/scene.h"
+#include "solvers/runtime/scene.h"
 
 #include <algorithm>
 #include <cctype>
@@ -15,12 +15,12 @@
 
 #include <toml++/toml.h>
 
-#include "examples/dvm/scene_written.h"
+#include "solvers/runtime/scene_written.h"
 #include "mechanics/written_lagrangian.h"
 #include "mechanics/written_retraction.h"
 #include "solvers/runtime/registry.h"
 
-namespace dvm::cli {
+namespace dvm {
 
 namespace {
 
@@ -958,4 +958,4 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
 
 }  // namespace
 
-}  // namespace dvm::cli
+}  // namespace dvm
