@@ -1,4 +1,4 @@
-// Every combination the registries can name, through `dvm run`: for each system of
+// Every combination the registries can name, run as `dvm run` runs a scene: for each system of
 // `dvm systems` (and the written ones on R^n, S^2 and SO(3)), each map of its space
 // (and none), each form, compositions of each kind, each Galerkin method, and boundary
 // values, a run of three steps must either
@@ -21,12 +21,16 @@
 // must end there to 1e-12 relative (|q - q_rec|_inf <= 1e-12 |q_rec|_inf, the same for
 // p, and p_initial of boundary values). It guards refactorings: a change that moves a
 // number by more than round-off must say which bug it fixes and remake the record. To
-// remake it, run this program (no shard argument) with DVM_COMBINATIONS_RECORD set to the
+// remake it, run this program with DVM_COMBINATIONS_RECORD set to the
 // file to write; a run missing from the record fails, naming this comment.
-// DVM_TEST_BINARY runs every case against another build of dvm.
+// DVM_TEST_BINARY runs the listings and the reference runs against another build of dvm.
 //
-// ctest runs it as two processes (`-- --shard=1/2` and `2/2`), each walking half of the
-// systems; run by hand without the argument, it walks them all.
+// Each scene is read by the library's scene reader and run in this process (load_scene_text,
+// make_run, execute, report_json: what `dvm run --json` does, without starting a process
+// for each of the thousands of runs); a run refused with InputError counts as exit 2 with
+// its message, a failed one as exit 3. The registries are read from the program's
+// listings, and every reference run also through the program, whose JSON must equal the
+// library's.
 #define BOOST_TEST_MODULE cli_combinations
 #include <boost/test/unit_test.hpp>
 
@@ -39,6 +43,8 @@
 #include <string>
 #include <vector>
 
+#include "solvers/runtime/run.h"
+#include "solvers/runtime/scene.h"
 #include "tests/cli/cli_harness.h"
 #include "tests/displacement_check.h"
 
@@ -111,7 +117,7 @@ struct SystemCaps {
 
 // What `dvm systems --json` says each system runs.
 std::vector<SystemCaps> registry_systems() {
-  const Output o = dvm({"systems", "--json"});
+  const Output o = cli_test::dvm({"systems", "--json"});
   BOOST_REQUIRE(o.status == 0);
   const Json listed = parse_json(o.out);
   BOOST_REQUIRE(listed.is_array());
@@ -155,26 +161,8 @@ std::vector<SystemCaps> registry_systems() {
   return out;
 }
 
-// The systems this process walks: every one, or with `-- --shard=k/n` after the test
-// program's own arguments, the k-th of each n in registry order (ctest runs the suite as
-// n processes, which share the cores with the other suites).
-std::vector<SystemCaps> shard_of(const std::vector<SystemCaps>& all) {
-  int k = 1, n = 1;
-  const auto& master = boost::unit_test::framework::master_test_suite();
-  for (int i = 1; i < master.argc; ++i) {
-    const std::string a = master.argv[i];
-    if (a.rfind("--shard=", 0) != 0) continue;
-    const bool ok = std::sscanf(a.c_str() + 8, "%d/%d", &k, &n) == 2 && n >= 1 && k >= 1 && k <= n;
-    BOOST_REQUIRE_MESSAGE(ok, "bad argument '" << a << "': --shard=k/n with 1 <= k <= n");
-  }
-  std::vector<SystemCaps> out;
-  for (std::size_t i = 0; i < all.size(); ++i)
-    if (static_cast<int>(i % static_cast<std::size_t>(n)) == k - 1) out.push_back(all[i]);
-  return out;
-}
-
 std::vector<std::pair<std::string, std::string>> registry_maps() {  // (name, space)
-  const Output o = dvm({"maps", "--json"});
+  const Output o = cli_test::dvm({"maps", "--json"});
   BOOST_REQUIRE(o.status == 0);
   const Json listed = parse_json(o.out);
   BOOST_REQUIRE(listed.is_array());
@@ -187,7 +175,7 @@ std::vector<std::pair<std::string, std::string>> registry_maps() {  // (name, sp
 // "galerkin <quadrature> s=<stages>".
 const std::map<std::string, int>& registry_orders() {
   static const std::map<std::string, int> orders = [] {
-    const Output o = dvm({"methods", "--json"});
+    const Output o = cli_test::dvm({"methods", "--json"});
     BOOST_REQUIRE(o.status == 0);
     std::map<std::string, int> out;
     for (const Json& e : parse_json(o.out)) {
@@ -209,7 +197,7 @@ const std::map<std::string, int>& registry_orders() {
 // that take integrator.theta, which the scenes here leave at its default 1/2.
 const std::set<std::string>& second_order_maps() {
   static const std::set<std::string> maps = [] {
-    const Output o = dvm({"maps", "--json"});
+    const Output o = cli_test::dvm({"maps", "--json"});
     BOOST_REQUIRE(o.status == 0);
     std::set<std::string> out;
     for (const Json& e : parse_json(o.out))
@@ -229,6 +217,27 @@ int expected_order(const std::string& map, const std::string& composition) {
     return it->second;
   }
   return map.empty() || map == "newmark" || second_order_maps().count(map) ? 2 : 1;
+}
+
+// `dvm run SCENE --json --quiet` on a scene text, in this process: status 0 (the report's
+// JSON on out), 2 (bad input: the message on err), or 3 (a failed run).
+Output run_scene_text(const std::string& text) {
+  Output o{0, "", ""};
+  try {
+    const dvm::Scene s = dvm::load_scene_text(text, "combination.toml", {});
+    const auto run = dvm::make_run(s.problem, s.method);
+    dvm::OutputSpec spec;
+    spec.every = s.every;
+    spec.monitor_every = s.monitor_every;
+    dvm::Recorder rec(spec);
+    const dvm::RunReport r = run->execute(&rec);
+    o.out = dvm::report_json(r) + "\n";
+    o.status = r.failed || r.output_error ? 3 : 0;
+  } catch (const dvm::InputError& e) {
+    o.status = 2;
+    o.err = std::string("dvm: ") + e.what() + "\n";
+  }
+  return o;
 }
 
 bool names_a_key(const std::string& err) {
@@ -320,8 +329,7 @@ std::string g_worst;
 // displacement is not checked).
 void check(const std::string& what, const std::string& text, bool supported, const Reference* ref, int order,
            const std::map<std::string, std::string>& expect) {
-  const std::string path = write_scene("combination.toml", text);
-  const Output o = dvm({"run", path, "--json", "--quiet"});
+  const Output o = run_scene_text(text);
   ++g_runs;
   BOOST_TEST_CONTEXT(what << "\n" << o.err << o.out) {
     if (!supported) {
@@ -388,11 +396,16 @@ std::string midpoint_map(const std::string& space) {
 
 // The reference run of a system (see the opening comment).
 Reference reference_of(const std::string& head, const std::string& space) {
-  const Output o = dvm({"run",
-                        write_scene("ref.toml", head + integrator("map = \"" + midpoint_map(space) +
-                                                                  "\"\ncomposition = \"kahan-li8\"\n")),
-                        "--json", "--quiet"});
+  const std::string text =
+      head + integrator("map = \"" + midpoint_map(space) + "\"\ncomposition = \"kahan-li8\"\n");
+  const Output o = cli_test::dvm({"run", write_scene("ref.toml", text), "--json", "--quiet"});
   BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+  if (!std::getenv("DVM_TEST_BINARY")) {  // the program and the library: one result
+    Json a = parse_json(o.out), b = parse_json(run_scene_text(text).out);
+    a.erase("wall_seconds");
+    b.erase("wall_seconds");
+    BOOST_TEST(a == b, "dvm run and the library differ:\n" << a.dump(2) << "\n" << b.dump(2));
+  }
   Reference r;
   if (record_out()) return r;
   const Json j = parse_json(o.out);
@@ -408,8 +421,7 @@ Reference reference_of(const std::string& head, const std::string& space) {
 
 // The final q of the space's plain midpoint run (the end of the boundary-value problems).
 std::vector<double> midpoint_end(const std::string& head, const std::string& space) {
-  const Output o = dvm(
-      {"run", write_scene("mid.toml", head + integrator("map = \"" + midpoint_map(space) + "\"\n")), "--json", "--quiet"});
+  const Output o = run_scene_text(head + integrator("map = \"" + midpoint_map(space) + "\"\n"));
   BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
   return json_array(o.out, "q_final");
 }
@@ -421,7 +433,7 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
   const auto maps = registry_maps();
   BOOST_REQUIRE(systems.size() >= 15);
   BOOST_REQUIRE(maps.size() >= 13);
-  for (const SystemCaps& sys : shard_of(systems)) {
+  for (const SystemCaps& sys : systems) {
     BOOST_TEST_CONTEXT("system " << sys.name) {
       const auto h = heads().find(sys.name);
       BOOST_REQUIRE_MESSAGE(h != heads().end(), "no initial state for system " << sys.name << " in this test");
@@ -503,7 +515,7 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
           if (!supported || record_out()) continue;
           // The solved first momentum is that of the initial state the midpoint run started
           // from, to the map's order (exactly, to round-off, for the midpoint map itself).
-          const Output o = dvm({"run", write_scene("bvp.toml", text), "--json", "--quiet"});
+          const Output o = run_scene_text(text);
           const std::vector<double> p_initial = json_array(o.out, "p_initial");
           const int order = expected_order(map, "none");
           const double tol = map == midpoint_map(sys.space) ? 1e-9 : dvm_test::displacement_tolerance(order, kStep);
@@ -523,7 +535,7 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
 // hamiltonian form, with an Euler map; every other case is refused naming a key.
 BOOST_AUTO_TEST_CASE(every_splitting_runs_or_is_refused) {
   const std::set<std::string> not_separable = {"double-pendulum", "charged-particle", "lagrangian"};
-  for (const SystemCaps& sys : shard_of(registry_systems())) {
+  for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
     const Reference ref = reference_of(head, sys.space);
     for (const char* comp : {"blanes-moan4"})  // (blanes-moan6 takes the same path and rules)
@@ -558,11 +570,11 @@ BOOST_AUTO_TEST_CASE(every_lift_and_theta_per_stage_runs_or_is_refused) {
                                                                    {"none", {"hamiltonian"}},
                                                                    {"tangent", {"sode1", "sode2"}},
                                                                    {"legendre", {"sode1", "sode2"}}};
-  const Output listed = dvm({"methods"});
+  const Output listed = cli_test::dvm({"methods"});
   BOOST_REQUIRE(listed.status == 0);
   for (const auto& [lift, forms] : lift_forms) BOOST_TEST(listed.out.find("  " + lift + " ") != std::string::npos);
   const int runs_before = g_runs;
-  for (const SystemCaps& sys : shard_of(registry_systems())) {
+  for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
     const Reference ref = reference_of(head, sys.space);
     const Reference* r = record_out() ? nullptr : &ref;
@@ -592,7 +604,7 @@ BOOST_AUTO_TEST_CASE(every_lift_and_theta_per_stage_runs_or_is_refused) {
 // dvm converge on every form, on every space, composed: a table whose runs used the
 // method asked for (the order measured is the method's), or exit 2 naming the keys.
 BOOST_AUTO_TEST_CASE(converge_runs_every_combination_or_refuses_it) {
-  for (const SystemCaps& sys : shard_of(registry_systems())) {
+  for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
     for (const char* form : kForms)
       for (const char* comp : {"none", "stormer-verlet"}) {
@@ -600,7 +612,7 @@ BOOST_AUTO_TEST_CASE(converge_runs_every_combination_or_refuses_it) {
         std::string keys = "form = \"" + f + "\"\nmap = \"" + midpoint_map(sys.space) + "\"\n";
         if (c != "none") keys += "composition = \"" + c + "\"\n";
         const bool supported = sys.forms.count(f) && (c == "none" || sys.composition);
-        const Output o = dvm({"converge", write_scene("conv.toml", head + integrator(keys)), "--steps-list", "2,4",
+        const Output o = cli_test::dvm({"converge", write_scene("conv.toml", head + integrator(keys)), "--steps-list", "2,4",
                               "--json"});
         BOOST_TEST_CONTEXT(sys.name << " converge form=" << f << " composition=" << c << "\n" << o.err << o.out) {
           if (supported) {
@@ -626,7 +638,7 @@ BOOST_AUTO_TEST_CASE(the_displacement_check_fails_a_step_that_does_nothing) {
   if (record_out()) return;
   const std::string head = heads().at("kepler");
   const Reference ref = reference_of(head, "R^n");
-  const Output good = dvm({"run", write_scene("k.toml", head + integrator("map = \"midpoint\"\n")), "--json", "--quiet"});
+  const Output good = cli_test::dvm({"run", write_scene("k.toml", head + integrator("map = \"midpoint\"\n")), "--json", "--quiet"});
   BOOST_REQUIRE(good.status == 0);
   const Json j = parse_json(good.out);
   auto numbers = [&](const char* key) { return j.at(key).get<std::vector<double>>(); };
