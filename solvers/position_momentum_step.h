@@ -19,7 +19,9 @@
 
 namespace dvm {
 
-template <class System, class Map>
+// Tiny: whether StepOptions::solver may choose ceres::TinySolver (else Newton's method
+// alone is compiled, and a step that asks for TinySolver throws at construction).
+template <class System, class Map, bool Tiny = true>
 class PositionMomentumStep {
  public:
   static constexpr int N = System::dim;
@@ -27,7 +29,10 @@ class PositionMomentumStep {
   using DL = DiscreteLagrangian<System, Map>;
 
   PositionMomentumStep(System L, Map R, double h, StepOptions options = {})
-      : dl_(std::move(L), std::move(R), h), options_(options) {}
+      : dl_(std::move(L), std::move(R), h), options_(options) {
+    if (!Tiny && options_.solver != SolverKind::newton)
+      throw std::invalid_argument("this position-momentum step is compiled for Newton's method only");
+  }
 
   const DL& discrete_lagrangian() const { return dl_; }
   const StepOptions& options() const { return options_; }
@@ -61,7 +66,10 @@ class PositionMomentumStep {
     };
     StepSummary s;
     try {
-      s = solve_step_system<N>(f, dq, max_abs(q0), options_, scale_of);
+      if constexpr (Tiny)
+        s = solve_step_system<N>(f, dq, max_abs(q0), options_, scale_of);
+      else
+        s = solve_newton<N>(f, dq, max_abs(q0), options_, scale_of);
       if (s.converged) {
         V d2;
         dl_.D2Ld_and_shift(q0, dq, d2, dp);

@@ -1,5 +1,5 @@
-// The kernels behind make_run: templates instantiated once per system type in the
-// kernels_*.cc translation units, never in a caller.
+// The kernels behind make_run: templates instantiated in the kernels_*.cc translation
+// units, never in a caller.
 //
 // A kernel is StepperRun<View, Stepper>: a system view (what is monitored, written
 // and reported for a system: energy, invariants, columns, stored coordinates) and a
@@ -23,6 +23,10 @@
 //   composition       ComposedStep<Step> of any of these, adjoint stages from the
 //                     adjoint map (theta -> 1 - theta, Prop. 2.4) or Newmark's adjoint
 //   boundary value    BoundaryValueProblem<S, Map>        SphereBoundaryValueProblem
+//
+// On R^n, S is the system's own type only for the theta maps solved by Newton's method,
+// the splitting and Gauss collocation; every other row runs with S = ErasedLagrangian<N>,
+// compiled once per size (kernels_rn.h, kernels_rn_sized.h).
 //
 // Maps are resolved from their registry entry into a value of the space's map type(s):
 // on R^n std::variant<ThetaMap, WrittenMap>, visited once (retraction-theta is the

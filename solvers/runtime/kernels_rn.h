@@ -2,6 +2,17 @@
 // system view (energy, invariants, columns, exact solution, diagnosis of a failed
 // step) and make_rn_run, which picks the step type of the method once. Included only
 // by the kernels_*.cc translation units.
+//
+// What is compiled for each system and what once for each size: make_rn_run<S> builds,
+// with S itself, the steps a benchmark shows to pay for it (the position-momentum step
+// of the theta maps by Newton's method, alone and composed; on a separable S the kicks
+// and drifts of the Euler maps, Newton on the structured equation from 3 coordinates,
+// and Gauss collocation). Every other choice of the method (the hamiltonian, sode and
+// newmark forms, maps inverted by Newton's method, TinySolver, Galerkin methods that
+// are not Gauss collocation, boundary values) runs the same step templates with
+// ErasedLagrangian<N> (mechanics/erased_lagrangian.h) and the view erased likewise
+// (ErasedRnView<N>): make_sized_run<N>, compiled once for each size the built-in
+// systems have (kernels_rn_sized.cc).
 #pragma once
 
 #include <array>
@@ -12,11 +23,11 @@
 #include <type_traits>
 #include <vector>
 
+#include "mechanics/erased_lagrangian.h"
 #include "mechanics/hamiltonian.h"
 #include "mechanics/legendre_lift.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
-#include "mechanics/written_lagrangian.h"
 #include "solvers/composition.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/hamiltonian_step.h"
@@ -84,21 +95,7 @@ void invariant_values(const NBody<B>&, const Vec<double, 3 * B>& q, const Vec<do
   const auto m = NBody<B>::momenta(q, p);
   for (int i = 0; i < 6; ++i) out[i] = m[static_cast<std::size_t>(i)];
 }
-template <int N>
-std::vector<InvariantReport> invariant_names(const WrittenLagrangian<N>& L) {
-  std::vector<InvariantReport> out;
-  for (int i = 0; i < N && static_cast<int>(out.size()) < kMaxInvariantValues; ++i)
-    if (L.cyclic(i)) out.push_back(scalar_invariant("p_" + L.system->coordinates[static_cast<std::size_t>(i)] + " (cyclic)"));
-  return out;
-}
-template <int N>
-void invariant_values(const WrittenLagrangian<N>& L, const Vec<double, N>&, const Vec<double, N>& p, double* out) {
-  int k = 0;
-  for (int i = 0; i < N && k < kMaxInvariantValues; ++i)
-    if (L.cyclic(i)) out[k++] = p[i];
-}
-
-// ---- the monitored energy: a written energy where the scene gives one, else E_L -------
+// ---- the monitored energy: E_L ----------------------------------------------------------
 // (A separable system's v = M^{-1} p is in closed form or from a factored M, so
 // dL/dv(q, v) = M v is p to round-off: E_L = <p, v> - L(q, v) without the gradient,
 // a third of a Kepler Galerkin step's monitoring cost.)
@@ -109,12 +106,6 @@ double monitored_energy(const S& L, const Vec<double, N>& q, const Vec<double, N
   else
     return energy(L, q, v);
 }
-template <int N>
-double monitored_energy(const WrittenLagrangian<N>& L, const Vec<double, N>& q, const Vec<double, N>& v,
-                        const Vec<double, N>& p) {
-  return L.energy_at(q, v, p);
-}
-
 // ---- exact solutions, where a system has one ------------------------------------------
 template <class S, class = void>
 struct has_exact_member : std::false_type {};
@@ -127,11 +118,6 @@ template <class S, class = void>
 struct has_exact_condition : std::false_type {};
 template <class S>
 struct has_exact_condition<S, std::void_t<decltype(std::declval<const S&>().has_exact())>> : std::true_type {};
-
-template <class S>
-struct is_written : std::false_type {};
-template <int N>
-struct is_written<WrittenLagrangian<N>> : std::true_type {};
 
 // ---- the view of a fixed-size system on R^n --------------------------------------------
 template <class S>
@@ -229,36 +215,105 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
     v0 = to_vec<N>(pr.v);
     p = legendre(L, q, v0);
   }
-  if constexpr (is_written<S>::value) {
-    if (L.has_hamiltonian()) {
-      const double H = L.hamiltonian(q, p), E = energy(L, q, v0);
-      if (!(std::fabs(H - E) <= 1e-9 * std::fmax(1.0, std::fabs(E)))) {
-        std::ostringstream m;
-        m.precision(17);
-        m << pr.hamiltonian_where << ": system.hamiltonian does not match the Legendre transform of the Lagrangian at "
-          << "the initial state: H(q, p) = " << H << " but E_L(q, v) = <p, v> - L = " << E;
-        throw InputError(m.str());
-      }
-    }
-  }
 }
 
-// ---- the factory ---------------------------------------------------------------------
-// Which parts of the method table are built for a system type (what validate() refuses
-// for the system is not instantiated): the forms other than lagrangian and
-// boundary-value problems.
-struct AllKernels {
-  static constexpr bool hamiltonian = true, sode = true, newmark = true, boundary_value = true;
-};
-struct LagrangianKernels {
-  static constexpr bool hamiltonian = false, sode = false, newmark = false, boundary_value = false;
-};
-struct LagrangianHamiltonianKernels {
-  static constexpr bool hamiltonian = true, sode = false, newmark = false, boundary_value = false;
+// ---- the view with the system's type erased ------------------------------------------
+// The view of a fixed-size system for the kernels compiled once per size (make_sized_run):
+// RnView<S>'s functions behind one indirect call each (they run at most once a step).
+template <int N>
+class ErasedRnView {
+ public:
+  using Point = Vec<double, N>;
+  using Covector = Point;
+
+  class Model {
+   public:
+    virtual ~Model() = default;
+    virtual std::vector<std::string> columns() const = 0;
+    virtual void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const = 0;
+    virtual double energy(const Point& q, const Covector& p) const = 0;
+    virtual int invariant_count() const = 0;
+    virtual void invariants(const Point& q, const Covector& p, double* out) const = 0;
+    virtual std::vector<InvariantReport> invariant_reports(const double* I0) const = 0;
+    virtual void finish_report(RunReport& r, const Point& q, const Covector& p) const = 0;
+    virtual void diagnose(std::string& message, const Point& q, const Covector& p) const = 0;
+    virtual bool exact(double t, const Point& q0, const Covector& p0, std::vector<double>& q,
+                       std::vector<double>& p) const = 0;
+  };
+  template <class S>
+  class ModelOf final : public Model {
+   public:
+    explicit ModelOf(RnView<S> v) : v_(std::move(v)) {}
+    std::vector<std::string> columns() const override { return v_.columns(); }
+    void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const override {
+      v_.fill_row(row, t, q, p, E);
+    }
+    double energy(const Point& q, const Covector& p) const override { return v_.energy(q, p); }
+    int invariant_count() const override { return v_.invariant_count(); }
+    void invariants(const Point& q, const Covector& p, double* out) const override { v_.invariants(q, p, out); }
+    std::vector<InvariantReport> invariant_reports(const double* I0) const override {
+      return v_.invariant_reports(I0);
+    }
+    void finish_report(RunReport& r, const Point& q, const Covector& p) const override { v_.finish_report(r, q, p); }
+    void diagnose(std::string& message, const Point& q, const Covector& p) const override {
+      v_.diagnose(message, q, p);
+    }
+    bool exact(double t, const Point& q0, const Covector& p0, std::vector<double>& q,
+               std::vector<double>& p) const override {
+      return v_.exact(t, q0, p0, q, p);
+    }
+
+   private:
+    RnView<S> v_;
+  };
+
+  template <class S>
+  explicit ErasedRnView(RnView<S> v) : model_(std::make_shared<const ModelOf<S>>(std::move(v))) {}
+
+  std::vector<std::string> columns() const { return model_->columns(); }
+  int row_size() const { return 2 * N + 2; }
+  void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const {
+    model_->fill_row(row, t, q, p, E);
+  }
+  double energy(const Point& q, const Covector& p) const { return model_->energy(q, p); }
+  int invariant_count() const { return model_->invariant_count(); }
+  void invariants(const Point& q, const Covector& p, double* out) const { model_->invariants(q, p, out); }
+  std::vector<InvariantReport> invariant_reports(const double* I0) const { return model_->invariant_reports(I0); }
+  double point_defect(const Point&) const { return -1.0; }
+  void finish_report(RunReport& r, const Point& q, const Covector& p) const { model_->finish_report(r, q, p); }
+  void diagnose(std::string& message, const Point& q, const Covector& p) const { model_->diagnose(message, q, p); }
+  bool exact(double t, const Point& q0, const Covector& p0, std::vector<double>& q, std::vector<double>& p) const {
+    return model_->exact(t, q0, p0, q, p);
+  }
+
+ private:
+  std::shared_ptr<const Model> model_;
 };
 
+// The start of a run of the kernels compiled per size: the initial state (q, p, v0), or
+// none for a boundary-value problem (its ends are the problem's).
+template <int N>
+struct SizedStart {
+  Vec<double, N> q, p, v0;
+};
+
+// Every choice of the method that make_rn_run<S> does not compile for S itself, for the
+// erased system L of N coordinates and its view (kernels_rn_sized.cc; N = 1, 2 and 6,
+// the sizes of the built-in systems). start: null for a boundary-value problem.
+template <int N>
+std::unique_ptr<Run> make_sized_run(const ErasedLagrangian<N>& L, const ErasedRnView<N>& view, const Problem& pr,
+                                    const Method& me, RunReport base, const SizedStart<N>* start);
+
+// ---- the factory ---------------------------------------------------------------------
+// Whether the method is the position-momentum step of a theta map solved by Newton's
+// method (composed or not): the path make_rn_run compiles for each system.
+inline bool theta_newton_path(const Method& me) {
+  return !me.galerkin && me.form == Form::lagrangian && me.map && me.map->family == MapFamily::theta &&
+         me.solver == SolverKind::newton;
+}
+
 // `names`: the coordinate names for the columns (empty: q0.., p0..).
-template <class S, class Set = AllKernels>
+template <class S>
 std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me,
                                  const std::vector<std::string>& names = {}) {
   constexpr int N = S::dim;
@@ -268,20 +323,7 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
   const StepOptions opt = me.step_options();
   const double h = pr.step;
 
-  if (pr.boundary_value) {
-    if constexpr (Set::boundary_value) {
-      return std::visit(
-          [&](const auto& R) -> std::unique_ptr<Run> {
-            using Map = std::decay_t<decltype(R)>;
-            return std::make_unique<BoundaryValueRun<RnView<S>, BoundaryValueProblem<S, Map>>>(
-                view, BoundaryValueProblem<S, Map>(L, R, h), to_vec<N>(pr.q), to_vec<N>(pr.q_final), pr.steps, h,
-                me.max_iterations, base, false);
-          },
-          rn_map(me));
-    } else {
-      throw InputError("problem.kind: unsupported");  // refused by validate()
-    }
-  }
+  if (pr.boundary_value) return make_sized_run<N>(erase_lagrangian(L), ErasedRnView<N>(view), pr, me, base, nullptr);
 
   V q, p, v0;
   initial_state(pr, L, q, p, v0);
@@ -291,103 +333,29 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 
-  if (me.galerkin) {
-    if constexpr (is_separable_v<S>)
-      if (collocation_applies(me))
-        return collocation_run(view, SeparableGaussStep<S>(L, me.stages, h, opt, q), q, p, v0, base, pr.steps);
-    return stepper_run(view, GalerkinStep<S>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
-  }
+  if constexpr (is_separable_v<S>)
+    if (collocation_applies(me))
+      return collocation_run(view, SeparableGaussStep<S>(L, me.stages, h, opt, q), q, p, v0, base, pr.steps);
 
-  if (me.form == Form::newmark) {
-    if constexpr (!Set::newmark) {
-      throw InputError("integrator.form: unsupported");  // refused by validate()
-    } else {
-      const NewmarkStep<S> basic(L, h, me.newmark_gamma, me.newmark_beta, opt);
-      auto make = [&](double hk, const NewmarkStep<S>& b) { return VelocityFormStep<NewmarkStep<S>>(b.with_step(hk)); };
-      const auto stages = composition_stages(
-          me, basic, me.newmark_gamma == 0.5, [](const NewmarkStep<S>& b) { return b.adjoint(); },
-          [&](double) -> NewmarkStep<S> { throw InputError("integrator.thetas: unsupported"); });  // refused by validate()
-      return composable_run(view, me, h, stages, make, q, p, v0, base, pr.steps);
-    }
-  }
-
-  return std::visit(
-      [&](const auto& R) -> std::unique_ptr<Run> {
-        using Map = std::decay_t<decltype(R)>;
-        switch (me.form) {
-          case Form::lagrangian: {
-            if constexpr (is_separable_v<S> && std::is_same_v<Map, ThetaMap>) {
-              if (splitting_applies(me, R))
-                return splitting_run<RnView<S>, S, Map>(view, L, R, me, h, q, p, v0, base, pr.steps);
-              if (S::dim >= 3 && separable_newton_applies(me)) {
-                // any theta (a theta per stage included): Newton on the structured equation
-                auto make = [&](double hk, const Map& Rk) { return SeparableThetaStep<S>(L, Rk.theta(), hk, opt, q); };
-                base.step_path = "separable-newton";
-                return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-              }
-            }
-            auto make = [&](double hk, const Map& Rk) { return PositionMomentumStep<S, Map>(L, Rk, hk, opt); };
-            return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-          }
-          case Form::hamiltonian: {
-            if constexpr (!Set::hamiltonian) {
-              throw InputError("integrator.form: unsupported");  // refused by validate()
-            } else {
-              // the scene's own H for a written L (H from it would need a third level of Jets)
-              using H = std::conditional_t<is_written<S>::value, WrittenHamiltonian<N>, LegendreHamiltonian<S>>;
-              const H ham = [&] {
-                if constexpr (is_written<S>::value)
-                  return H{L.system};
-                else
-                  return H(L);
-              }();
-              if (me.effective_lift() == Lift::none) {
-                // the map itself on T*Q = R^{2n} (the theta family: validate refuses written maps)
-                if constexpr (std::is_same_v<Map, ThetaMap>) {
-                  auto make = [&](double hk, const Map& Rk) {
-                    return HamiltonianStep<H, OnCotangentBundle<Map>>(ham, OnCotangentBundle<Map>{Rk}, hk, opt);
-                  };
-                  return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-                }
-                throw InputError("integrator.lift: unsupported");
-              }
-              auto make = [&](double hk, const Map& Rk) { return HamiltonianStep<H, Map>(ham, Rk, hk, opt); };
-              return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-            }
-          }
-          case Form::sode1:
-          case Form::sode2: {
-            if constexpr (!Set::sode) {
-              throw InputError("integrator.form: unsupported");  // refused by validate()
-            } else {
-              // the lift of the adjoint map gives the adjoint SODE step (Prop. 3.3 for the
-              // tangent lift; R_d^L is the cotangent lift of R_d conjugated by FL, Prop. 3.7)
-              const SodeForm f = me.form == Form::sode1 ? SodeForm::sode1 : SodeForm::sode2;
-              if (me.effective_lift() == Lift::legendre) {
-                // (the theta family: validate refuses written maps)
-                if constexpr (std::is_same_v<Map, ThetaMap>) {
-                  using RL = LegendreLiftedMap<S, Map>;
-                  auto make = [&, f](double hk, const Map& Rk) {
-                    return VelocityFormStep<SodeStep<S, RL>>(SodeStep<S, RL>(L, RL(L, Rk), hk, f, opt));
-                  };
-                  return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-                }
-                throw InputError("integrator.lift: unsupported");
-              }
-              auto make = [&, f](double hk, const Map& Rk) {
-                const auto lift = tangent_lift(Rk);
-                using Step = SodeStep<S, std::decay_t<decltype(lift)>>;
-                return VelocityFormStep<Step>(Step(L, lift, hk, f, opt));
-              };
-              return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-            }
-          }
-          case Form::newmark:
-            break;
+  if (theta_newton_path(me)) {
+    const ThetaMap R(me.theta, me.map->name);
+    if constexpr (is_separable_v<S>) {
+      if (splitting_applies(me, R)) return splitting_run<RnView<S>, S, ThetaMap>(view, L, R, me, h, q, p, v0, base, pr.steps);
+      if constexpr (S::dim >= 3) {
+        if (separable_newton_applies(me)) {
+          // any theta (a theta per stage included): Newton on the structured equation
+          auto make = [&](double hk, const ThetaMap& Rk) { return SeparableThetaStep<S>(L, Rk.theta(), hk, opt, q); };
+          base.step_path = "separable-newton";
+          return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
         }
-        throw InputError("integrator.form: unsupported");
-      },
-      rn_map(me));
+      }
+    }
+    auto make = [&](double hk, const ThetaMap& Rk) { return PositionMomentumStep<S, ThetaMap, false>(L, Rk, hk, opt); };
+    return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+  }
+
+  const SizedStart<N> start{q, p, v0};
+  return make_sized_run<N>(erase_lagrangian(L), ErasedRnView<N>(view), pr, me, base, &start);
 }
 
 }  // namespace dvm::kernels
