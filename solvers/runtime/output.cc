@@ -68,7 +68,6 @@ void install_signal_cleanup() {
 // (that temporary is then not removed on a signal).
 int register_temporary(const std::string& path) {
   if (path.size() >= PATH_MAX) return -1;
-  install_signal_cleanup();
   for (int i = 0; i < kTempSlots; ++i) {
     TempSlot& t = g_temp_slots[i];
     if (t.used) continue;
@@ -163,10 +162,20 @@ void OutputFile::open(const std::string& path, const std::string& what, double b
     throw InputError(where + ": cannot create files in '" + dir.string() + "' (" + std::strerror(errno) + ")");
 
   std::string tmpl = (dir / ("." + p.filename().string() + ".XXXXXX")).string();
+  // The handler is installed, and the signals it serves are held back, before the
+  // temporary exists; they are let through once its path is registered, so a signal at
+  // any moment finds either no file or a registered one.
+  install_signal_cleanup();
+  sigset_t cleanup_signals, previous;
+  sigemptyset(&cleanup_signals);
+  for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaddset(&cleanup_signals, sig);
+  pthread_sigmask(SIG_BLOCK, &cleanup_signals, &previous);
   const int fd = mkstemp(tmpl.data());
+  const int mkstemp_errno = errno;
+  if (fd >= 0) slot_ = register_temporary(tmpl);
+  pthread_sigmask(SIG_SETMASK, &previous, nullptr);
   if (fd < 0)
-    throw InputError(where + ": cannot create a file in '" + dir.string() + "' (" + std::strerror(errno) + ")");
-  slot_ = register_temporary(tmpl);
+    throw InputError(where + ": cannot create a file in '" + dir.string() + "' (" + std::strerror(mkstemp_errno) + ")");
   // mkstemp makes the file private (0600); give it the permissions a plain fopen would
   const mode_t mask = umask(0);
   umask(mask);

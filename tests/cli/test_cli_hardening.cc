@@ -18,11 +18,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <random>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -394,48 +396,122 @@ BOOST_AUTO_TEST_CASE(every_run_path_reports_a_failed_step_with_exit_3) {
   }
 }
 
+// A long run (10^8 pendulum steps, every 10^6-th written to dir/killed.csv) in a child
+// process whose output goes nowhere.
+pid_t start_long_run(const std::string& dir) {
+  const std::string csv = dir + "/killed.csv";
+  const std::string sc = scene("pendulum.toml");
+  const pid_t pid = fork();
+  if (pid == 0) {
+    const int null = ::open("/dev/null", O_WRONLY);
+    dup2(null, 1);
+    dup2(null, 2);
+    execl(DVM_BINARY, DVM_BINARY, "run", sc.c_str(), "--quiet", "--csv", csv.c_str(), "--set",
+          "integrator.t_end=1e6", "--set", "output.every=1000000", static_cast<char*>(nullptr));
+    _exit(127);
+  }
+  return pid;
+}
+
+// The hidden temporaries of dir/killed.csv.
+int hidden_temporaries(const std::string& dir) {
+  int n = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir))
+    if (e.path().filename().string().rfind(".killed.csv.", 0) == 0) ++n;
+  return n;
+}
+
+// Stops the run by `sig` and checks that it ended by that signal and left no file.
+void stop_and_check(pid_t pid, int sig, const std::string& dir) {
+  BOOST_REQUIRE(kill(pid, sig) == 0);
+  int status = 0;
+  BOOST_REQUIRE(waitpid(pid, &status, 0) == pid);
+  BOOST_TEST(WIFSIGNALED(status));
+  BOOST_TEST((WIFSIGNALED(status) ? WTERMSIG(status) : 0) == sig);
+  BOOST_TEST(hidden_temporaries(dir) == 0);
+  BOOST_TEST(!file_exists(dir + "/killed.csv"));
+  BOOST_TEST(!file_exists(dir + "/killed.csv.partial"));
+}
+
 BOOST_AUTO_TEST_CASE(a_run_stopped_by_sigint_or_sigterm_removes_its_temporary) {
-  // A long run (10^8 pendulum steps, every 10^6-th written) is stopped once its hidden
-  // temporary exists: the process still ends by the signal, and neither the final
-  // path nor a temporary is left.
+  // The run is stopped once its hidden temporary exists: the process still ends by the
+  // signal, and neither the final path nor a temporary is left.
   const std::string dir = temp_dir();
   for (int sig : {SIGTERM, SIGINT}) {
-    const std::string csv = dir + "/killed.csv";
-    const pid_t pid = fork();
+    const pid_t pid = start_long_run(dir);
     BOOST_REQUIRE(pid >= 0);
-    if (pid == 0) {
-      const int null = ::open("/dev/null", O_WRONLY);
-      dup2(null, 1);
-      dup2(null, 2);
-      const std::string sc = scene("pendulum.toml");
-      execl(DVM_BINARY, DVM_BINARY, "run", sc.c_str(), "--quiet", "--csv", csv.c_str(), "--set",
-            "integrator.t_end=1e6", "--set", "output.every=1000000", static_cast<char*>(nullptr));
-      _exit(127);
-    }
-    auto hidden = [&] {
-      int n = 0;
-      for (const auto& e : std::filesystem::directory_iterator(dir))
-        if (e.path().filename().string().rfind(".killed.csv.", 0) == 0) ++n;
-      return n;
-    };
     int status = 0;
     bool exited = false;
-    for (int i = 0; i < 6000 && hidden() == 0 && !exited; ++i) {  // up to 60 s (a sanitized build starts slowly)
+    for (int i = 0; i < 6000 && hidden_temporaries(dir) == 0 && !exited; ++i) {  // up to 60 s (a sanitized build starts slowly)
       exited = waitpid(pid, &status, WNOHANG) == pid;
       usleep(10000);
     }
     BOOST_REQUIRE_MESSAGE(!exited, "the run ended before it could be stopped");
-    BOOST_REQUIRE_EQUAL(hidden(), 1);
-    BOOST_REQUIRE(kill(pid, sig) == 0);
-    BOOST_REQUIRE(waitpid(pid, &status, 0) == pid);
-    BOOST_TEST_CONTEXT("signal " << sig) {
-      BOOST_TEST(WIFSIGNALED(status));
-      BOOST_TEST((WIFSIGNALED(status) ? WTERMSIG(status) : 0) == sig);
-      BOOST_TEST(hidden() == 0);
-      BOOST_TEST(!file_exists(csv));
-      BOOST_TEST(!file_exists(csv + ".partial"));
+    BOOST_REQUIRE_EQUAL(hidden_temporaries(dir), 1);
+    BOOST_TEST_CONTEXT("signal " << sig) { stop_and_check(pid, sig, dir); }
+  }
+}
+
+BOOST_AUTO_TEST_CASE(a_signal_at_any_moment_of_the_start_leaves_no_temporary) {
+  // The temporary is created while the program starts; a signal can come before, during
+  // or after. Runs are stopped, each by SIGTERM or SIGINT, at random moments spread over
+  // twice the measured time from start to temporary (seeded, so a failure repeats) and,
+  // to aim at the moment the file appears, by a watcher that polls the directory without
+  // pause and signals as soon as it sees the temporary, which may be before the program
+  // has registered it for removal. Two busy processes run beside it, as other suites do
+  // under ctest -j2: a program that loses its core between creating the file and
+  // registering it widens any window between the two. No run may leave a file.
+  const std::string dir = temp_dir();
+  struct BusyLoops {
+    std::vector<pid_t> pids;
+    BusyLoops() {
+      for (int i = 0; i < 2; ++i) {
+        const pid_t pid = fork();
+        if (pid == 0)
+          for (volatile unsigned long n = 0;; n = n + 1) {
+          }
+        pids.push_back(pid);
+      }
+    }
+    ~BusyLoops() {
+      for (pid_t pid : pids)
+        if (pid > 0) kill(pid, SIGKILL), waitpid(pid, nullptr, 0);
+    }
+  } load;
+  const auto t0 = std::chrono::steady_clock::now();
+  const pid_t first = start_long_run(dir);
+  BOOST_REQUIRE(first >= 0);
+  for (int i = 0; i < 60000 && hidden_temporaries(dir) == 0; ++i) usleep(1000);
+  const double created_us =
+      std::chrono::duration<double, std::micro>(std::chrono::steady_clock::now() - t0).count();
+  BOOST_REQUIRE_EQUAL(hidden_temporaries(dir), 1);
+  stop_and_check(first, SIGTERM, dir);
+  BOOST_TEST_MESSAGE("temporary created " << created_us / 1000.0 << " ms after the start");
+
+  std::mt19937 rng(20261127);
+  std::uniform_real_distribution<double> moment(0.0, 2.0 * created_us);
+  int with_temporary = 0;
+  const int runs = 60;
+  for (int k = 0; k < runs; ++k) {
+    const int sig = k % 2 ? SIGINT : SIGTERM;
+    const bool watch = k % 3 != 0;
+    const auto wait = static_cast<useconds_t>(moment(rng));
+    const pid_t pid = start_long_run(dir);
+    BOOST_REQUIRE(pid >= 0);
+    if (watch) {
+      const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+      while (hidden_temporaries(dir) == 0 && std::chrono::steady_clock::now() < give_up) {
+      }
+    } else {
+      usleep(wait);
+    }
+    with_temporary += hidden_temporaries(dir);
+    BOOST_TEST_CONTEXT("run " << k << ", signal " << sig << (watch ? " when the temporary appeared" : " after ")
+                              << (watch ? 0 : wait) << " us") {
+      stop_and_check(pid, sig, dir);
     }
   }
+  BOOST_TEST_MESSAGE(with_temporary << " of " << runs << " runs had their temporary when stopped");
 }
 
 // A written Lagrangian "L" in a one-coordinate scene (x, x_dot), initial q = [q0].
