@@ -906,16 +906,34 @@ class WrittenDynamic {
               dynamic_detail::checked_written(system_).dim(), mode),
         parts_(parts_of(*system_, mode, tape_)),
         Lq_(system_->dim()),
-        Lv_(system_->dim()) {}
+        Lv_(system_->dim()) {
+    if (parts_->split.quadratic && !parts_->separable) mass_ = Mass(system_->dim());
+  }
 
   // The structure read off the text, and for a separable L its parts.
   const WrittenParts& parts() const { return *parts_; }
   bool separable() const { return parts_->separable; }
-  // v = M^{-1} p when L is separable (returns false otherwise: Newton's method then).
-  bool closed_velocity(const DynIn&, const DynIn& p, DynOut v) const {
-    if (!parts_->separable) return false;
-    parts_->velocity(p, v);
-    return true;
+  // v = FL^{-1}(q, p) where the text's structure gives it by a linear solve: v = M^{-1} p
+  // for a separable L (M constant, factored once), and v = M(q)^{-1} p for a text that is
+  // quadratic in the velocities, L = v^T M(q) v / 2 + U(q) (p = M(q) v; M(q) = d2L/dv2 at
+  // any v, formed by one Hessian at v = 0 and factored). Returns false otherwise, and
+  // where M(q) is singular: Newton's method then (which reports the degeneracy).
+  bool closed_velocity(const DynIn& q, const DynIn& p, DynOut v) const {
+    if (parts_->separable) {
+      parts_->velocity(p, v);
+      return true;
+    }
+    if (!parts_->split.quadratic || mass_.zero.size() != dim()) return false;
+    Mass& m = mass_;
+    for (int i = 0; i < dim(); ++i) {  // column i of M(q) is L_v(q, e_i): a gradient each
+      m.zero[i] = 1.0;
+      gradient(q, m.zero, Lq_, Lv_);
+      m.Lvv.col(i) = Lv_;
+      m.zero[i] = 0.0;
+    }
+    if (!m.lu.factor(m.Lvv)) return false;
+    m.lu.solve(p, v);
+    return v.allFinite();
   }
 
   int dim() const { return system_->dim(); }
@@ -939,11 +957,12 @@ class WrittenDynamic {
     tape_.hessian(q.data(), v.data(), Lq, Lv, Lqq, Lqv, Lvv);
   }
 
-  // The monitored energy: the written one if given, else E_L = <L_v, v> - L.
+  // The monitored energy at (q, p) with v = FL^{-1}(q, p): the written one if given,
+  // else E_L = <L_v, v> - L = <p, v> - L(q, v) (L_v(q, v) = p, to the tolerance v was
+  // solved to).
   double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
     if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
-    gradient(q, v, Lq_, Lv_);
-    return Lv_.dot(v) - value(q, v);
+    return p.dot(v) - value(q, v);
   }
   bool has_hamiltonian() const { return !system_->hamiltonian.empty(); }
   double hamiltonian(const DynIn& q, const DynIn& p) const {
@@ -961,10 +980,19 @@ class WrittenDynamic {
       parts->potential_program = dynamic_detail::compile_programs_of(tape, s.name, parts->potential_program);
     return parts;
   }
+  // Workspace of closed_velocity for a text quadratic in the velocities (M(q) and its LU).
+  struct Mass {
+    Mass() = default;
+    explicit Mass(int n) : zero(Eigen::VectorXd::Zero(n)), Lqq(n, n), Lqv(n, n), Lvv(n, n), lu(n) {}
+    Eigen::VectorXd zero;
+    Eigen::MatrixXd Lqq, Lqv, Lvv;
+    DenseLU lu;
+  };
   std::shared_ptr<const WrittenSystem> system_;
   dynamic_detail::TapeDerivatives tape_;
   std::shared_ptr<const WrittenParts> parts_;
   mutable Eigen::VectorXd Lq_, Lv_;
+  mutable Mass mass_;  // sized only for a text quadratic in the velocities and not separable
 };
 
 // A written Lagrangian whose text is separable (WrittenDynamic::separable()), seen as a
