@@ -109,6 +109,8 @@ class ErasedLagrangian {
 
    public:
     using Next::Next;
+    using Next::value;  // the other scalar types' overrides stay visible
+    using Next::gradient;
     T value(const Vec<T, N>& q, const Vec<T, N>& v) const override { return this->s_(q, v); }
     void gradient(const Vec<T, N>& q, const Vec<T, N>& v, Vec<T, N>& dLdq, Vec<T, N>& dLdv) const override {
       lagrangian_gradient(this->s_, q, v, dLdq, dLdv);
