@@ -35,7 +35,8 @@
 //   J_r(eta) = I - (1 - cos t)/t^2 hat(eta) + (t - sin t)/t^3 hat(eta)^2,  t = |eta|.
 //
 // Small-angle branches are Taylor series in the squared angle, never constants, so
-// that derivatives survive at zero (DESIGN.md).
+// that derivatives (Jets) survive at zero: a constant branch would give a zero
+// derivative where the function has none.
 #pragma once
 
 #include <Eigen/Geometry>

@@ -11,7 +11,7 @@
 //     (passed in by the caller), later steps from the linear extrapolation
 //     2 dq_{k-1} - dq_{k-2} of the previous increments (error O(h^3));
 //   - accumulates q and p with compensated (Kahan) summation, so that round-off
-//     does not grow with the number of steps (DESIGN.md, "Speed");
+//     does not grow with the number of steps;
 //   - computes t_k = t_0 + k h by multiplication, never by summation;
 //   - stops at the first step that fails and reports it, never passing a failed
 //     step on. A step fails when its solve does not converge, when it would make q
