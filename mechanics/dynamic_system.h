@@ -71,24 +71,18 @@
 //                        by the machine's C compiler in one run (mechanics/native_code.h),
 //                        the same results to the bit; NativeCodeError where a program
 //                        cannot be (blocks; a graph too large to build) or the compiler
-//                        fails.
-//                        Measured (bench_written_lagrangian, g++ -O3; program / tape's
-//                        forward over reverse): a Hessian with its gradient, pendulum
-//                        27 / 122 ns, Kepler 113 / 251, double pendulum 79 / 445; the
-//                        gradient alone 12 / 64, 34 / 113, 50 / 233; a written FPU
-//                        chain's explicit step 8.4 ns a particle by its block's program
-//                        against 12.5 by the tape's reverse sweeps of the block.
+//                        fails. A program is faster than the tape's forward over
+//                        reverse for the gradient and the Hessian
+//                        (bench_written_lagrangian measures both).
 //                        Its structure is read off the text (Expression::split_velocity):
 //                        when L = v^T M v / 2 + U(q) with M constant and positive definite
 //                        (separable()), the inverse Legendre map is v = M^{-1} p in closed
 //                        form (M diagonal: a product by 1/m; else a Cholesky factor) and
 //                        WrittenSeparable views it as a declared separable system, whose
 //                        force is the gradient of U alone (U's own program, or its tape).
-//                        On the tape, forward over reverse against forward over forward
-//                        (g++ -O2, one full Hessian, the same chunk width K both ways):
-//                        pendulum (K = 2) 100 against 132 ns, Kepler (K = 4) 209 / 528,
-//                        double pendulum (K = 4) 373 / 783, FPU of 6 coordinates (K = 8)
-//                        1635 / 13736: where no program is built, forward over reverse.
+//                        On the tape, the Hessian is by forward over reverse, which
+//                        beat forward over forward at every size measured (1 to 6
+//                        coordinates): where no program is built, that.
 //   WrittenDynamicHamiltonian  the Hamiltonian H(q, p) written in a scene, the same way
 //                        (its text is parsed a second time with p as the second block, so
 //                        that reverse mode, which differentiates blocks 0 and 1, applies).
@@ -161,7 +155,7 @@ namespace dynamic_detail {
 
 // max |x_i| over a vector or matrix of doubles, NaN if any entry is NaN (as max_abs of
 // core/scalar.h, in plain loops over the storage: four running maxima, which do not
-// wait on each other, 0.41 against 0.55 ns an entry with one at n = 10000, g++ -O3).
+// wait on each other, where one would make each comparison wait on the last).
 // (fixed sizes: one pass over a few entries, inlined)
 template <class Derived>
 [[gnu::always_inline]] inline double inf_norm_fixed(const Eigen::PlainObjectBase<Derived>& x) {

@@ -3,9 +3,8 @@
 // A DerivativeProgram (mechanics/derivative_program.h) is interpreted: every operation
 // stores its result in a slot and the next loads it, so a chain of dependent
 // operations pays a store and a load on each link. On a small system that is most of a
-// step: Kepler's force is 9 operations, 19 ns interpreted, within a Stormer-Verlet step
-// of 29 ns by the built-in closed form. Compiled, the program's values stay in
-// registers.
+// step (Kepler's force is 9 operations). Compiled, the program's values stay in
+// registers (bench_written_lagrangian compares the two).
 //
 // compile_programs writes the programs as one C translation unit
 // (DerivativeProgram::c_source), runs the machine's C compiler on it once, loads the
@@ -22,8 +21,8 @@
 // -fno-math-errno only stops libm setting errno. So compiled code gives the
 // interpreter's results to the bit (tests/mechanics/test_derivative_program.cc). Code
 // whose loading changes the floating-point control modes is refused.
-// A run of the compiler takes 50 to 90 ms for the small texts of bench_written_lagrangian
-// (gcc 12; compile_seconds in the run report).
+// A run of the compiler costs tens of milliseconds, once per run (compile_seconds in
+// the run report).
 //
 // Programs with blocks (sums over arrays) have no C source: their loops over the terms
 // are interpreted already at array speed. compile_programs throws NativeCodeError

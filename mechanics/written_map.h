@@ -67,7 +67,7 @@ class WrittenMap {
   }
 
   // The flat retraction R(x, v) = x + v (retraction-theta): the same map, evaluated
-  // without the tape (1.8 times faster per step on the double pendulum).
+  // without the tape, which is faster per step.
   static WrittenMap flat_retraction(std::string name, double theta) {
     WrittenMap m = retraction(std::move(name), "x + v", theta);
     m.flat_ = true;

@@ -106,10 +106,9 @@ class ExplicitSplittingStep {
   // At a fixed size of 3 coordinates or more the step is flattened: everything it
   // calls is inlined into it (the system's gradient, Eigen's fixed-size assignments), so
   // the workspace stays in registers. In a large translation unit (the benchmark suite)
-  // g++ 12 -O3 had left those calls out of line: FPU (6 dof) with mclachlan4 took
-  // 466 ns a step, 113 ns flattened. With 1 or 2 coordinates they were inlined already,
-  // and flattening made Stormer-Verlet on Kepler slower (24.5 -> 31.6 ns a step); the
-  // run-time-sized step is left as it was (not measured flattened).
+  // GCC may leave those calls out of line, several times slower for FPU (6 dof); with 1
+  // or 2 coordinates they are inlined already and flattening made Kepler's step slower.
+  // The run-time-sized step is left as it is.
   StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
     if constexpr (N != Eigen::Dynamic && N >= 3)
       return step_flattened(q0, p0, dq, dp);

@@ -364,9 +364,9 @@ std::unique_ptr<Run> splitting_run(const View& view, const S& L, const Map& R, c
 // Whether a theta map (any theta, composed or not) on a separable system of fixed size
 // steps by Newton's method on the structured equation (solvers/separable_theta_step.h):
 // Method::use_structure with Newton's method (solver = "tiny" keeps the generic path).
-// The kernels take it from 3 coordinates on: on Kepler (2) it is only 1.1 times faster
-// than the generic step, and instantiating it beside the explicit step made g++'s
-// Stormer-Verlet there 1.3 times slower.
+// The kernels take it from 3 coordinates on: with 2 (Kepler) its gain over the generic
+// step is small, and instantiating it beside the explicit step made GCC's
+// Stormer-Verlet there slower.
 inline bool separable_newton_applies(const Method& me) {
   return me.use_structure && me.solver == SolverKind::newton;
 }

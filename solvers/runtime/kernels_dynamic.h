@@ -187,10 +187,9 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
 
 // From this many coordinates an implicit theta map on a separable system solves the
 // structured equation (sparse or dense, its Jacobian kept across steps); below, the
-// generic step of fixed size (kFixedWrittenMaxDim) costs less: a written pendulum's
-// midpoint step about 95 ns, Kepler's about 210, where the sparse step took 249 and 489
-// (bench_written_lagrangian, g++ -O3). The fixed-size built-ins draw the line at the
-// same place (solvers/runtime/kernels_rn.h).
+// generic step of fixed size (kFixedWrittenMaxDim) costs less (bench_written_lagrangian
+// compares them). The fixed-size built-ins draw the line at the same place
+// (solvers/runtime/kernels_rn.h).
 constexpr int kStructuredNewtonMinDim = 3;
 
 // The dense steps of a run-time-sized system form n x n matrices (the Newton Jacobian,
@@ -200,24 +199,21 @@ constexpr int kMaxDenseDynamicDim = 4096;
 
 // From this many coordinates the position-momentum step of a Lagrangian that is not
 // separable keeps its Jacobian across steps (simplified Newton, Refresh::across_steps of solvers/newton_driver.h).
-// A kept Jacobian takes 7 to 8 gradients of L a step where Newton's method takes 3
-// Hessians; a written Hessian of n <= 4 coordinates is one pass of 8 forward
-// derivatives, about a gradient's cost, and there keeping it is 1.7 times slower.
-// Measured on a written chain whose mass matrix depends on q (midpoint), kept against a
-// Jacobian every iteration: clang -O1, n = 2 and 4, 1.7 times slower; 6 and 8, equal;
-// 10, 2.3 times faster; 50, 8.4; 200, 11; g++ -O3, n = 8, 1.5 times faster
-// (solvers/README.md has the g++ table).
+// A kept Jacobian takes more gradients of L a step (its iteration converges linearly)
+// where Newton's method takes fewer Hessians; a written Hessian of n <= 4 coordinates
+// is one pass of 8 forward derivatives, about a gradient's cost, so there keeping it
+// loses; from n = 8 it wins, by more as n grows (a written chain whose mass matrix
+// depends on q, measured by bench_written_lagrangian; solvers/README.md has the table).
 constexpr int kKeptJacobianMinDim = 8;
 
 // Up to this many coordinates the position-momentum step of a written Lagrangian is
 // compiled for its size (DynamicThetaStep<WrittenDynamic, K>, K = 1, 2): loops, norms
 // and LU of fixed length, one Hessian of L a step where its first Jacobian serves
-// (solvers/dynamic_step.h). Keeping the Jacobian across steps instead (the loop of
-// Refresh::across_steps of solvers/newton_driver.h) took 2.0 times as long for the pendulum, 1.6 for Kepler. The
-// explicit steps of a separable text of so few coordinates are compiled for its size
-// too, and so is their run's state (WrittenSeparableOf<K>, DynamicView<Sys, K>): Kepler's
-// Stormer-Verlet 55.5 ns a step where the run-time-sized step takes 59.9
-// (bench_written_lagrangian).
+// (solvers/dynamic_step.h), faster at these sizes than keeping the Jacobian across
+// steps (Refresh::across_steps of solvers/newton_driver.h). The explicit steps of a
+// separable text of so few coordinates are compiled for its size too, and so is their
+// run's state (WrittenSeparableOf<K>, DynamicView<Sys, K>). bench_written_lagrangian
+// measures both choices.
 constexpr int kFixedWrittenMaxDim = 2;
 
 // A written system's derivatives: compiled where the scene asks (system.compile), the

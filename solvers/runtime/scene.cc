@@ -798,7 +798,7 @@ Scene load_scene(const std::string& path, const std::vector<std::string>& overri
   if (!in) throw InputError(path + ": cannot open the scene file (" + std::strerror(errno) + ")");
   // read in chunks and stop past the limit: /dev/zero or a huge file is refused without
   // being loaded. (A buffer of the limit's size, zeroed for every scene, cost each run
-  // 4000 page faults and 10 ms of system time, more than a short run itself.)
+  // thousands of page faults, more than a short run itself.)
   std::string text;
   char chunk[1 << 16];
   for (;;) {
