@@ -235,7 +235,7 @@ void set_bottom_value(T& t, double v) {
 //   p0 + dA/deps = 0,   dA/dX_j = 0 (j = 1..S-1)   at eps = 0,   p1 = dA/dX_S
 // (internal control points are stationary, so how they move with eps does not
 // matter). One Jet of dimension dim + S dim gives all of them; the Jacobian in X
-// (nested Jets) is factored and reused across iterations and steps while the
+// (central differences of them) is factored and reused across iterations and steps while the
 // iteration contracts, as in solvers/galerkin_step.h.
 template <class System, int S>
 class ManifoldGalerkinStep {
@@ -416,16 +416,29 @@ class ManifoldGalerkinStep {
     pi1 = A.v.template tail<n>();
   }
 
-  // The Jacobian dR/dX at the current X_ (nested Jets), inverted.
-  void refresh(const Point& q0, const V&) const {
-    using I = ceres::Jet<double, SN>;
-    using DD = ceres::Jet<I, K>;
-    Vec<DD, n> eps;
-    Vec<DD, SN> X;
-    for (int a = 0; a < n; ++a) eps[a] = seed<I, K>(I(0.0), a);
-    for (int k = 0; k < SN; ++k) X[k] = seed<I, K>(seed<double, SN>(X_[k], k), n + k);
-    const DD A = action<DD>(q0, eps, X);
-    for (int r = 0; r < SN; ++r) J_.row(r) = A.v[r].v.transpose();
+  // The Jacobian dR/dX at the current X_, inverted, by central differences of the
+  // residual (each column from two residuals in Jets of the first order). The Jacobian
+  // only steers the iteration: its error (relative ~1e-10) slows the contraction to a
+  // rate near that, and the solution is the zero of the residual, which is exact, to the
+  // iteration's tolerance. (Nested Jets gave it exactly but instantiated the action in a
+  // second-order Jet type per stage count, most of the compile time of the manifold
+  // kernels.)
+  void refresh(const Point& q0, const V& pi0) const {
+    const XV X0 = X_;
+    const double size = std::fmax(max_abs(X0), 1e-300);
+    XV Rp, Rm;
+    V pi1;
+    for (int k = 0; k < SN; ++k) {
+      const double dk = 6e-6 * std::fmax(std::fabs(X0[k]), size);  // ~ cbrt(machine epsilon)
+      X_[k] = X0[k] + dk;
+      residual(q0, pi0, pi1);
+      Rp = R_;
+      X_[k] = X0[k] - dk;
+      residual(q0, pi0, pi1);
+      Rm = R_;
+      X_[k] = X0[k];
+      J_.col(k) = (Rp - Rm) / (2.0 * dk);
+    }
     if (!std::isfinite(max_abs(J_))) throw std::domain_error("non-finite Galerkin Jacobian");
     Jmax_ = max_abs(J_);
     const Eigen::PartialPivLU<Mat<double, SN, SN>> lu(J_);
