@@ -417,9 +417,27 @@ std::string run_help() {
   return h;
 }
 
+// A usage error: the message and where the help is, one line each (the command list
+// when no command was recognised, which is short).
 [[noreturn]] void usage_error(const std::string& msg, const char* help) {
-  std::cerr << "dvm: " << msg << "\n\n" << (help == kRunHelp ? run_help() : std::string(help));
+  if (help == kUsage) {
+    std::cerr << "dvm: " << msg << "\n\n" << kUsage;
+    std::exit(2);
+  }
+  const char* command = help == kRunHelp        ? "run"
+                        : help == kMapsHelp     ? "maps"
+                        : help == kMethodsHelp  ? "methods"
+                        : help == kSystemsHelp  ? "systems"
+                        : help == kCheckHelp    ? "check-map"
+                        : help == kConvergeHelp ? "converge"
+                                                : "version";
+  std::cerr << "dvm: " << msg << "\nsee 'dvm " << command << " --help'\n";
   std::exit(2);
+}
+
+// "unknown option X" with the nearest option of the command, if one is near.
+std::string unknown_option(const std::string& got, const std::vector<std::string>& options) {
+  return "unknown option " + got + dvm::did_you_mean(got, options);
 }
 
 bool is_help(const std::string& a) { return a == "--help" || a == "-h"; }
@@ -460,7 +478,7 @@ int cmd_run(const std::vector<std::string>& args) {
     } else if (a == "--quiet") {
       o.quiet = true;
     } else if (!a.empty() && a[0] == '-') {
-      usage_error("unknown option " + a, kRunHelp);
+      usage_error(unknown_option(a, {"--set", "--csv", "--npy", "--json", "--quiet", "--help"}), kRunHelp);
     } else if (scene.empty()) {
       scene = a;
     } else {
@@ -480,7 +498,7 @@ int cmd_maps(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else {
-      usage_error("unknown argument " + a, kMapsHelp);
+      usage_error("unknown argument " + a + dvm::did_you_mean(a, {"--json", "--help"}), kMapsHelp);
     }
   }
   const auto& maps = dvm::map_registry();
@@ -519,7 +537,7 @@ int cmd_systems(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else {
-      usage_error("unknown argument " + a, kSystemsHelp);
+      usage_error("unknown argument " + a + dvm::did_you_mean(a, {"--json", "--help"}), kSystemsHelp);
     }
   }
   const auto& systems = dvm::system_registry();
@@ -565,7 +583,7 @@ int cmd_methods(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else {
-      usage_error("unknown argument " + a, kMethodsHelp);
+      usage_error("unknown argument " + a + dvm::did_you_mean(a, {"--json", "--help"}), kMethodsHelp);
     }
   }
   return methods_command(json);
@@ -613,7 +631,8 @@ int cmd_converge(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       o.json = true;
     } else if (!a.empty() && a[0] == '-') {
-      usage_error("unknown option " + a, kConvergeHelp);
+      usage_error(unknown_option(a, {"--set", "--steps-list", "--t-end", "--max-steps", "--json", "--help"}),
+                  kConvergeHelp);
     } else if (scene.empty()) {
       scene = a;
     } else {
@@ -639,7 +658,8 @@ int cmd_version(const std::vector<std::string>& args) {
 int cmd_check_map(const std::vector<std::string>& args) {
   std::string name, scene;
   std::vector<std::string> overrides;
-  double theta = -1.0, tol = 1e-12;  // theta < 0, dim 0: not given
+  double theta = -1.0, tol = 1e-12;  // dim 0: not given
+  bool theta_given = false;
   int dim = 0;
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
@@ -652,6 +672,9 @@ int cmd_check_map(const std::vector<std::string>& args) {
       return 0;
     } else if (a == "--theta") {
       theta = parse_number("--theta", value("--theta"), kCheckHelp);
+      theta_given = true;
+      if (!(theta >= 0.0 && theta <= 1.0))
+        usage_error("--theta: got " + args[i] + ", expected a number in [0, 1]", kCheckHelp);
     } else if (a == "--dim") {
       const double d = parse_number("--dim", value("--dim"), kCheckHelp);
       if (d != std::floor(d) || d < 1 || d > 4) usage_error("--dim: expected 1, 2, 3 or 4", kCheckHelp);
@@ -664,7 +687,7 @@ int cmd_check_map(const std::vector<std::string>& args) {
     } else if (a == "--set") {
       overrides.push_back(value("--set"));
     } else if (!a.empty() && a[0] == '-') {
-      usage_error("unknown option " + a, kCheckHelp);
+      usage_error(unknown_option(a, {"--theta", "--dim", "--tolerance", "--scene", "--set", "--help"}), kCheckHelp);
     } else if (name.empty()) {
       name = a;
     } else {
@@ -673,7 +696,7 @@ int cmd_check_map(const std::vector<std::string>& args) {
   }
   if (!scene.empty()) {
     if (!name.empty()) usage_error("give a map name or --scene, not both", kCheckHelp);
-    if (theta >= 0.0) usage_error("--theta: with --scene, the scene's integrator.theta is the map's (use --set)", kCheckHelp);
+    if (theta_given) usage_error("--theta: with --scene, the scene's integrator.theta is the map's (use --set)", kCheckHelp);
     return check_scene_map_command(scene, overrides, dim, tol);
   }
   if (!overrides.empty()) usage_error("--set applies only with --scene", kCheckHelp);
@@ -713,7 +736,10 @@ int main(int argc, char** argv) {
     if (command == "systems") return cmd_systems(args);
     if (command == "methods") return cmd_methods(args);
     if (command == "converge") return cmd_converge(args);
-    usage_error("unknown command '" + command + "'", kUsage);
+    usage_error("unknown command '" + command + "'" +
+                    dvm::did_you_mean(command, {"run", "maps", "methods", "systems", "check-map", "converge",
+                                                "version", "help"}),
+                kUsage);
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";
     return 2;

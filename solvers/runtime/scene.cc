@@ -133,7 +133,7 @@ class Reader {
       if (!allowed.count(std::string(k.str()))) {
         std::vector<std::string> names(allowed.begin(), allowed.end());
         throw InputError(where(&v, section + "." + std::string(k.str())) + ": unknown key; [" + section +
-                         "] takes: " + join_names(names));
+                         "] takes: " + join_names(names) + did_you_mean(std::string(k.str()), names));
       }
     }
   }
@@ -199,6 +199,31 @@ void apply_override(toml::table& root, const std::string& spec) {
   t->insert_or_assign(parts.back(), *parsed.get("value"));
 }
 
+
+// What a vector of the state holds, for messages: "the dimension of kepler", or for a
+// written system its coordinates by name, "one per coordinate: r, phi" (an array as
+// q[1] ... q[n]).
+std::string dimension_of(const Problem& s) {
+  const WrittenSystem* w = s.written.get();
+  if (!w || w->coordinates.empty() || w->space == WrittenSystem::Space::rotation)
+    return "the dimension of " + (s.system ? s.system->name : std::string("the system"));
+  std::string names;
+  int shown = 0;
+  for (int i = 0; i < static_cast<int>(w->coordinates.size()); ++shown) {
+    if (shown == 12) {
+      names += ", ...";
+      break;
+    }
+    names += shown ? ", " : "";
+    if (const auto* a = w->array_of(i)) {
+      names += a->size == 1 ? a->name + "[1]" : a->name + "[1] ... " + a->name + "[" + std::to_string(a->size) + "]";
+      i = a->offset + a->size;
+    } else {
+      names += w->coordinates[static_cast<std::size_t>(i++)];
+    }
+  }
+  return "one per coordinate: " + names;
+}
 
 // An initial vector of `dim` numbers: an array of numbers; on R^n a string, an
 // expression in the index i = 1 ... dim and the system's parameters (lists included,
@@ -275,7 +300,7 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   const std::string n_expected = std::to_string(dim);
   if (static_cast<int>(s.q.size()) != dim)
     throw InputError(r.where(q, "initial.q") + ": got " + std::to_string(s.q.size()) + " numbers, expected " +
-                     n_expected + " (the dimension of " + info.name + ")");
+                     n_expected + " (" + dimension_of(s) + ")");
   const toml::node* p = ini.get("p");
   const toml::node* v = ini.get("v");
   if (p && v) throw InputError(r.where(v, "initial.v") + ": give either initial.p or initial.v, not both");
@@ -290,7 +315,7 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   s.momentum_given = p != nullptr;
   if (static_cast<int>((p ? s.p : s.v).size()) != dim)
     throw InputError(r.where(pv, pv_key) + ": got " + std::to_string((p ? s.p : s.v).size()) + " numbers, expected " +
-                     n_expected + " (the dimension of " + info.name + ")");
+                     n_expected + " (" + dimension_of(s) + ")");
   for (int k = 0; info.space == Space::sphere && k < links; ++k) {
     // on the manifold, not projected onto it: the defect is reported
     const std::size_t o = 3 * static_cast<std::size_t>(k);
@@ -419,7 +444,8 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
     const std::string kind = r.string(*k, "problem.kind");
     if (kind != "initial-value" && kind != "boundary-value")
       throw InputError(r.where(k, "problem.kind") + ": got \"" + echo(kind) +
-                       "\", expected \"initial-value\" or \"boundary-value\"");
+                       "\", expected \"initial-value\" or \"boundary-value\"" +
+                       did_you_mean(kind, {"initial-value", "boundary-value"}));
     s.boundary_value = kind == "boundary-value";
     if (s.boundary_value) {
       try {
@@ -442,7 +468,7 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
   s.q_final = r.vector(*qf, "problem.q_final");
   if (static_cast<int>(s.q_final.size()) != dim)
     throw InputError(r.where(qf, "problem.q_final") + ": got " + std::to_string(s.q_final.size()) +
-                     " numbers, expected " + std::to_string(dim) + " (the dimension of " + s.system->name + ")");
+                     " numbers, expected " + std::to_string(dim) + " (" + dimension_of(s) + ")");
   s.steps = r.integer(*st, "problem.steps", 2);
   if (s.steps > 100000000)
     throw InputError(r.where(st, "problem.steps") + ": got " + Reader::describe(*st) +
@@ -562,7 +588,8 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     const std::string method = r.string(*m, "integrator.method");
     if (method != "map" && method != "galerkin")
       throw InputError(r.where(m, "integrator.method") + ": got \"" + echo(method) +
-                       "\", expected \"map\" (the map's own step) or \"galerkin\" (Galerkin discrete Lagrangians)");
+                       "\", expected \"map\" (the map's own step) or \"galerkin\" (Galerkin discrete Lagrangians)" +
+                       did_you_mean(method, {"map", "galerkin"}));
     me.galerkin = method == "galerkin";
   }
   for (const char* key : {"stages", "quadrature"}) {
@@ -582,7 +609,8 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     const std::string q = r.string(*qu, "integrator.quadrature");
     if (q != "gauss" && q != "lobatto")
       throw InputError(r.where(qu, "integrator.quadrature") + ": got \"" + echo(q) +
-                       "\", expected \"gauss\" (s points) or \"lobatto\" (s + 1 points)");
+                       "\", expected \"gauss\" (s points) or \"lobatto\" (s + 1 points)" +
+                       did_you_mean(q, {"gauss", "lobatto"}));
     me.quadrature = q == "gauss" ? QuadratureKind::gauss : QuadratureKind::lobatto;
   }
   // the map: needed by every form but newmark and by every method but galerkin, which
@@ -651,7 +679,8 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
   if (const toml::node* so = in.get("solver")) {
     const std::string solver = r.string(*so, "integrator.solver");
     if (solver != "newton" && solver != "tiny")
-      throw InputError(r.where(so, "integrator.solver") + ": got \"" + echo(solver) + "\", expected \"newton\" or \"tiny\"");
+      throw InputError(r.where(so, "integrator.solver") + ": got \"" + echo(solver) + "\", expected \"newton\" or \"tiny\"" +
+                       did_you_mean(solver, {"newton", "tiny"}));
     me.solver = solver == "tiny" ? SolverKind::tiny : SolverKind::newton;
   }
   if (const toml::node* mi = in.get("max_iterations")) {
@@ -854,7 +883,8 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     if (name != "system" && name != "initial" && name != "integrator" && name != "output" && name != "problem" &&
         name != "map")
       throw InputError(r.where(&v, name) +
-                       ": unknown section; expected system, initial, integrator, map, output, problem");
+                       ": unknown section; expected system, initial, integrator, map, output, problem" +
+                       did_you_mean(name, {"system", "initial", "integrator", "map", "output", "problem"}));
   }
 
   // [system]
@@ -893,8 +923,10 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
         if (!pr.params.count(name)) {
           std::string names;
           for (const auto& p : pr.system->params) names += (names.empty() ? "" : ", ") + p.name;
+          std::vector<std::string> known;
+          for (const auto& p : pr.system->params) known.push_back(p.name);
           throw InputError(r.where(&v, "system.params." + name) + ": unknown parameter of " + pr.system->name +
-                           "; expected one of: " + names);
+                           "; expected one of: " + names + did_you_mean(name, known));
         }
         pr.params[name] = r.number(v, "system.params." + name);
       }

@@ -770,3 +770,70 @@ BOOST_AUTO_TEST_CASE(the_harness_removes_its_temporary_folder) {
   }
   BOOST_TEST(!std::filesystem::exists(path));
 }
+
+// Messages that point at the cause: a reserved name used as a parameter is blamed on
+// that parameter's key and line (not on the coordinates); end points on S^2 that are
+// antipodal are bad input (every great circle joins them), not an internal error;
+// check-map refuses a theta below 0 as it does one above 1; a mistyped option costs one
+// line and where the help is, not the whole help; a misspelt key or name gets the
+// nearest known one.
+BOOST_AUTO_TEST_CASE(messages_point_at_the_cause_and_suggest_the_name_meant) {
+  auto written = [](const std::string& params) {
+    return "[system]\ncoordinates = [\"x\"]\nparams = { " + params +
+           " }\nlagrangian = \"m/2*x_dot^2 - x^2/2\"\n"
+           "[initial]\nq = [1.0]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n";
+  };
+  const std::string t = write_scene("param_t.toml", written("m = 1.0, t = 0.0"));
+  const std::string s = write_scene("param_sum.toml", written("m = 1.0, sum = 2.0"));
+  const std::string pi = write_scene("param_pi.toml", written("m = 1.0, pi = 3.0"));
+  const std::string twice = write_scene("param_x.toml", written("m = 1.0, x_dot = 3.0"));
+  const std::string antipodal = write_scene(
+      "antipodal.toml",
+      "[system]\nbuiltin = \"spherical-pendulum\"\n[problem]\nkind = \"boundary-value\"\n"
+      "q_final = [-0.6, 0.0, 0.8]\nsteps = 20\n[initial]\nq = [0.6, 0.0, -0.8]\n"
+      "[integrator]\nmap = \"sphere-exp\"\nstep = 0.05\n");
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::string misspelt_key = write_scene(
+      "lagrangain.toml", "[system]\ncoordinates = [\"x\"]\nlagrangain = \"x_dot^2/2 - x^2/2\"\n"
+                         "[initial]\nq = [1.0]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n");
+  const std::vector<Case> cases = {
+      {"parameter t", {"run", t}, 2, {"param_t.toml:3:25: key 'system.params.t'", "reserved (time)"}},
+      {"parameter sum", {"run", s}, 2, {"param_sum.toml:3:27: key 'system.params.sum'", "reserved"}},
+      {"parameter pi", {"run", pi}, 2, {"key 'system.params.pi'", "reserved for the constant"}},
+      {"parameter named as a velocity", {"run", twice}, 2, {"key 'system.params.x_dot'", "used twice"}},
+      {"antipodal end points on S^2", {"run", antipodal}, 2,
+       {"antipodal.toml:5:11: key 'problem.q_final'", "antipodal to initial.q", "great circle"}},
+      {"check-map --theta below 0", {"check-map", "theta", "--theta", "-0.5"}, 2, {"--theta", "[0, 1]"}},
+      {"check-map --theta above 1", {"check-map", "theta", "--theta", "2"}, 2, {"--theta", "[0, 1]"}},
+      {"t_ned", {"run", h, "--set", "integrator.t_ned=1.0"}, 2, {"integrator.t_ned", "did you mean \"t_end\"?"}},
+      {"lagrangain", {"run", misspelt_key}, 2, {"system.lagrangain", "did you mean \"lagrangian\"?"}},
+      {"mid-point", {"run", h, "--set", "integrator.map=mid-point"}, 2, {"did you mean \"midpoint\"?"}},
+      {"kahan_li8", {"run", h, "--set", "integrator.composition=kahan_li8"}, 2, {"did you mean \"kahan-li8\"?"}},
+      {"builtin pendulm", {"run", h, "--set", "system.builtin=pendulm"}, 2, {"did you mean \"pendulum\"?"}},
+      {"form hamiltonan", {"run", h, "--set", "integrator.form=hamiltonan"}, 2, {"did you mean \"hamiltonian\"?"}},
+  };
+  for (const auto& c : cases) {
+    check(c);
+    BOOST_TEST(dvm(c.args).err.find("internal error") == std::string::npos, c.name);
+  }
+  // a name far from every known one gets no guess
+  BOOST_TEST(dvm({"run", h, "--set", "integrator.map=zzzzzz"}).err.find("did you mean") == std::string::npos);
+  // the antipodal problem nearly: 1e-6 apart from antipodal, it solves
+  const Output near = dvm({"run", antipodal, "--set", "problem.q_final=[-0.6, 0.000001, 0.7999999999993750]"});
+  BOOST_TEST(near.status == 0, near.err);
+
+  // a mistyped option: the message, the nearest option and where the help is
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"run", h, "--cvs", "x.csv"}, std::vector<std::string>{"converge", h, "--t_end", "1"},
+        std::vector<std::string>{"check-map", "theta", "--thetta", "0.3"}}) {
+    const Output o = dvm(args);
+    const std::string command = args[0];
+    BOOST_TEST_CONTEXT(command << " -> " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(std::count(o.err.begin(), o.err.end(), '\n') == 2);
+      BOOST_TEST(o.err.find("unknown option") != std::string::npos);
+      BOOST_TEST(o.err.find("did you mean") != std::string::npos);
+      BOOST_TEST(o.err.find("see 'dvm " + command + " --help'") != std::string::npos);
+    }
+  }
+}
