@@ -92,7 +92,12 @@ const char* kRunHelp =
     "\n"
     "Scene keys, by section: key = its default (or a placeholder), * required, then\n"
     "its type and values. A key that applies only to another choice is refused where\n"
-    "it is written.\n"
+    "it is written, with the nearest known key or name when one is close. With method\n"
+    "galerkin or form newmark, which take no map, the scene file's map (and [map])\n"
+    "is set aside so that --set can switch any scene to them: checked, unused, the\n"
+    "report says map \"none\" or \"newmark\"; so is its theta when the switch comes\n"
+    "from --set. A map or theta given with --set beside such a method is refused,\n"
+    "and so is a theta written in the same file as the method.\n"
     "  [system]    builtin or lagrangian *\n"
     "    builtin = \"NAME\"           string, a built-in system (parameters and defaults:\n"
     "                               'dvm systems'): @SYSTEMS@\n"
@@ -486,7 +491,14 @@ int cmd_run(const std::vector<std::string>& args) {
     }
   }
   if (scene.empty()) usage_error("run needs a scene file", kRunHelp);
-  return run_scene(load_scene(scene, sets), o);
+  const dvm::Scene s = load_scene(scene, sets);
+  // a row interval given on the command line for a run that writes no rows
+  if (s.csv.empty() && s.npy.empty() && o.csv.empty() && o.npy.empty())
+    for (const std::string& set : sets)
+      if (set.rfind("output.every=", 0) == 0)
+        throw InputError("--set output.every: this run writes no rows (no --csv or --npy, no [output] csv or npy), "
+                         "so a row interval would change nothing");
+  return run_scene(s, o);
 }
 
 int cmd_maps(const std::vector<std::string>& args) {
@@ -640,6 +652,12 @@ int cmd_converge(const std::vector<std::string>& args) {
     }
   }
   if (scene.empty()) usage_error("converge needs a scene file", kConvergeHelp);
+  // a study writes no rows: an [output] key on the command line would change nothing
+  for (const std::string& set : sets)
+    if (set.rfind("output.", 0) == 0)
+      usage_error("--set " + set.substr(0, set.find('=')) +
+                      ": dvm converge writes no rows (it prints a table of errors); [output] applies to dvm run",
+                  kConvergeHelp);
   return run_scene(load_scene(scene, sets), o);
 }
 

@@ -12,6 +12,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include <toml++/toml.h>
 
@@ -62,6 +63,9 @@ class Reader {
     out << ": key '" << echo(key) << "'";
     return out.str();
   }
+
+  // A value given by --set (overrides carry no source position).
+  static bool from_override(const toml::node* n) { return n && n->source().begin.line == 0; }
 
   static std::string describe(const toml::node& n) {
     std::ostringstream out;
@@ -567,6 +571,34 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
   }
 }
 
+// method = "galerkin" and form = "newmark" use no map. The scene's own map and theta
+// are then set aside (checked, unused; the report says map "none" or "newmark"), so
+// that one --set switches the method of any scene. A map or theta given with --set
+// beside such a method, or a theta written in the same file as the method, would
+// change nothing: refused, naming the keys (after every rule between values, which
+// says what is wrong with the method itself first).
+void refuse_unused_map_keys(const Reader& r, const toml::table& in, const Method& me) {
+  if (!(me.galerkin || me.form == Form::newmark)) return;
+  const toml::node* m = in.get("map");
+  const toml::node* th = in.get("theta");
+  const toml::node* chooser = me.galerkin ? in.get("method") : in.get("form");
+  const bool chooser_in_file = chooser && !Reader::from_override(chooser);
+  std::vector<std::pair<const toml::node*, std::string>> unused;
+  if (m && Reader::from_override(m)) unused.push_back({m, "integrator.map"});
+  if (th && (Reader::from_override(th) || chooser_in_file)) unused.push_back({th, "integrator.theta"});
+  if (unused.empty()) return;
+  const bool one = unused.size() == 1;
+  const std::string keys = one ? unused[0].second : unused[0].second + " and " + unused[1].second;
+  throw InputError(r.where(unused[0].first, unused[0].second) + ": " +
+                   (me.galerkin ? "method = \"galerkin\" takes no map (its discrete Lagrangian is built from "
+                                  "polynomial curves and quadrature)"
+                                : "form = \"newmark\" steps by its own map on TQ (integrator.gamma and "
+                                  "integrator.beta)") +
+                   ", so " + keys + " would change nothing; " + (one ? "it applies" : "they apply") + " to " +
+                   (me.galerkin ? "method = \"map\"" : "the other forms") +
+                   " (a map written in the scene file is kept, unused, when --set switches the method)");
+}
+
 // [integrator]: the method's keys whose presence matters (a key that applies only to
 // another choice is refused where it is written); the rules between values are
 // validate()'s.
@@ -698,6 +730,10 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     me.tolerance = r.number(*tol, "integrator.tolerance");
   }
   if (const toml::node* us = in.get("use_structure")) {
+    if (pr.boundary_value)
+      throw InputError(r.where(us, "integrator.use_structure") + ": a boundary-value problem is one solve of every "
+                       "node by Ceres' sparse least squares, whatever the system's structure; "
+                       "integrator.use_structure applies to the steps of initial-value problems");
     if (!us->is_boolean())
       throw InputError(r.where(us, "integrator.use_structure") + ": got " + Reader::describe(*us) +
                        ", expected true or false");
@@ -972,7 +1008,12 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     if (s.csv.empty()) throw InputError(r.where(c, "output.csv") + ": expected a file name, got an empty string");
   }
   if (const toml::node* e = out.get("every")) s.every = r.integer(*e, "output.every", 1);
-  if (const toml::node* e = out.get("monitor_every")) s.monitor_every = r.integer(*e, "output.monitor_every", 1);
+  if (const toml::node* e = out.get("monitor_every")) {
+    if (pr.boundary_value)
+      throw InputError(r.where(e, "output.monitor_every") + ": a boundary-value problem evaluates the energy at "
+                       "every node of its solution; output.monitor_every applies to initial-value runs");
+    s.monitor_every = r.integer(*e, "output.monitor_every", 1);
+  }
 
   // every rule between values, with the position of the key it names
   try {
@@ -985,6 +1026,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     const std::string rest = msg.substr(key.size() + 2);
     throw InputError((n ? r.where(n, key) : path + ": key '" + key + "'") + ": " + rest);
   }
+  refuse_unused_map_keys(r, r.section(root, "integrator", true), me);
   return s;
 }
 

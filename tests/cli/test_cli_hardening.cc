@@ -771,6 +771,62 @@ BOOST_AUTO_TEST_CASE(the_harness_removes_its_temporary_folder) {
   BOOST_TEST(!std::filesystem::exists(path));
 }
 
+// A key that the method or problem chosen does not use is refused, naming it, rather
+// than run without it: method = "galerkin" and form = "newmark" take no map, so a map
+// or theta given with --set beside them (or a theta written in the same file as the
+// method) would change nothing; use_structure does not shape a boundary-value solve;
+// a convergence study writes no rows. The scene's own map stays allowed when --set
+// switches the method (it is set aside, and the report says so: map "none").
+BOOST_AUTO_TEST_CASE(a_key_the_chosen_method_does_not_use_is_refused) {
+  const std::string p = scene("pendulum.toml"), kg = scene("kepler-galerkin.toml");
+  const std::string in_file = write_scene(
+      "galerkin_theta.toml",
+      "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
+      "[integrator]\nmethod = \"galerkin\"\nmap = \"theta\"\ntheta = 0.2\nstep = 0.1\nsteps = 10\n");
+  const std::string bvp = scene("pendulum_bvp.toml");
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::vector<Case> cases = {
+      {"galerkin with a map and theta from --set",
+       {"run", p, "--set", "integrator.method=galerkin", "--set", "integrator.map=theta", "--set",
+        "integrator.theta=0.2"},
+       2,
+       {"(from --set): key 'integrator.map'", "integrator.map and integrator.theta", "method = \"galerkin\"",
+        "would change nothing"}},
+      {"a map from --set on a Galerkin scene", {"run", kg, "--set", "integrator.map=midpoint"}, 2,
+       {"key 'integrator.map'", "method = \"galerkin\" takes no map"}},
+      {"theta written in the file beside method = galerkin", {"run", in_file}, 2,
+       {"galerkin_theta.toml:9:9: key 'integrator.theta'", "method = \"galerkin\""}},
+      {"newmark with a map and theta from --set",
+       {"run", p, "--set", "integrator.form=newmark", "--set", "integrator.map=theta", "--set",
+        "integrator.theta=0.2"},
+       2, {"key 'integrator.map'", "integrator.map and integrator.theta", "form = \"newmark\""}},
+      {"use_structure on a boundary-value problem", {"run", bvp, "--set", "integrator.use_structure=false"}, 2,
+       {"key 'integrator.use_structure'", "boundary-value"}},
+      {"[output] keys given to converge", {"converge", p, "--set", "output.csv=x.csv", "--steps-list", "10,20"}, 2,
+       {"--set output.csv", "writes no rows"}},
+      {"monitor_every on a boundary-value problem", {"run", bvp, "--set", "output.monitor_every=2"}, 2,
+       {"key 'output.monitor_every'", "boundary-value"}},
+      {"a row interval for a run that writes no rows", {"run", h, "--set", "output.every=5"}, 2,
+       {"output.every", "writes no rows"}},
+  };
+  for (const auto& c : cases) check(c);
+  // --set switching the method of a scene written for a map still works: the scene's
+  // map (and its theta and [map] section) are set aside, and the report says so
+  const std::string csv = temp_dir() + "/switched.csv";
+  const Output g = dvm({"run", p, "--json", "--csv", csv, "--set", "integrator.method=galerkin", "--set",
+                        "integrator.t_end=1"});
+  BOOST_TEST(g.status == 0, g.err);
+  BOOST_TEST(json_string(g.out, "map") == "none");
+  const Output w = dvm({"run", scene("spherical_pendulum_written_map.toml"), "--json", "--csv", csv, "--set",
+                        "integrator.method=galerkin", "--set", "integrator.t_end=1"});
+  BOOST_TEST(w.status == 0, w.err);
+  BOOST_TEST(json_string(w.out, "map") == "none");
+  const Output n = dvm({"run", p, "--json", "--csv", csv, "--set", "integrator.form=newmark", "--set",
+                        "integrator.t_end=1"});
+  BOOST_TEST(n.status == 0, n.err);
+  BOOST_TEST(json_string(n.out, "map") == "newmark");
+}
+
 // Messages that point at the cause: a reserved name used as a parameter is blamed on
 // that parameter's key and line (not on the coordinates); end points on S^2 that are
 // antipodal are bad input (every great circle joins them), not an internal error;
