@@ -1646,3 +1646,47 @@ BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
     }
   }
 }
+
+// A study whose runs are not all in the asymptotic range says so: kahan-li8 (order 8)
+// on the pendulum to t = 10 with 10, 20 and 40 steps observes orders 12.6 and 8.9 and
+// fits 10.8; the warning goes to stderr (text) or "warnings" (JSON). A study in the
+// asymptotic range (Kepler to t = 1, orders 8.09 and 8.02) has none. The first row
+// has no order: "-" in the table, null in the JSON.
+BOOST_AUTO_TEST_CASE(converge_warns_when_the_orders_disagree_with_the_fit) {
+  const std::vector<std::string> far = {"converge", scene("pendulum.toml"), "--set", "integrator.composition=kahan-li8",
+                                        "--t-end", "10", "--steps-list", "10,20,40"};
+  const Output t = dvm(far);
+  BOOST_TEST(t.status == 0, t.err);
+  BOOST_TEST(t.err.find("warning") != std::string::npos, t.err);
+  BOOST_TEST(t.err.find("asymptotic range") != std::string::npos, t.err);
+  BOOST_TEST(t.out.find("nan") == std::string::npos, t.out);
+  // the first row of the table: steps, h, error, then "-" for the order
+  std::istringstream table(t.out);
+  std::string line;
+  std::getline(table, line);  // the title
+  std::getline(table, line);  // the column names
+  std::getline(table, line);
+  std::istringstream first(line);
+  std::string steps, h, error, order;
+  first >> steps >> h >> error >> order;
+  BOOST_TEST(steps == "10");
+  BOOST_TEST(order == "-", line);
+
+  std::vector<std::string> far_json = far;
+  far_json.push_back("--json");
+  const Output j = dvm(far_json);
+  BOOST_TEST(j.status == 0, j.err);
+  const Json study = parse_json(j.out);
+  BOOST_REQUIRE(study.contains("warnings"));
+  BOOST_TEST(study.at("warnings").size() == 1u, j.out);
+  BOOST_TEST(study.at("runs").at(0).at("order").is_null());
+  BOOST_TEST(j.err.find("warning") == std::string::npos, j.err);
+
+  const Output ok = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list", "10,20,40",
+                         "--json"});
+  BOOST_TEST(ok.status == 0, ok.err);
+  const Json good = parse_json(ok.out);
+  BOOST_TEST((good.contains("warnings") && good.at("warnings").empty()), ok.out);
+  const Output okt = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list", "10,20,40"});
+  BOOST_TEST(okt.err.find("warning") == std::string::npos, okt.err);
+}
