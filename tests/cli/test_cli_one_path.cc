@@ -1647,6 +1647,52 @@ BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
   }
 }
 
+// The help describes the program that runs. converge: the reference its JSON reports
+// (Galerkin Gauss s = 6, or kahan-li8 of the midpoint map) and the exclusion it applies
+// (10 times the reference's accuracy), not another method or a fixed threshold; run:
+// the column count it states for each space is the one the .npy files have.
+BOOST_AUTO_TEST_CASE(help_describes_what_the_program_does) {
+  const Output c = dvm({"converge", "--help"});
+  BOOST_TEST(c.status == 0);
+  BOOST_TEST(c.out.find("Runge-Kutta") == std::string::npos, c.out);
+  BOOST_TEST(c.out.find("1e-12") == std::string::npos, c.out);
+  for (const char* said : {"Galerkin Gauss s = 6", "kahan-li8", "10 times the reference's accuracy", "warnings"})
+    BOOST_TEST(c.out.find(said) != std::string::npos, "converge --help does not say '" << said << "'");
+  // the references it names are the ones the studies use
+  const Output g = dvm({"converge", scene("double_pendulum.toml"), "--t-end", "1", "--steps-list", "20,40", "--json"});
+  BOOST_TEST(g.status == 0, g.err);
+  BOOST_TEST(json_string(g.out, "reference").rfind("galerkin gauss s=6", 0) == 0, g.out);
+  const Output k = dvm({"converge", scene("spherical-chain.toml"), "--t-end", "0.1", "--steps-list", "4,8", "--json"});
+  BOOST_TEST(k.status == 0, k.err);
+  BOOST_TEST(json_string(k.out, "reference").find("kahan-li8") != std::string::npos, k.out);
+
+  const Output r = dvm({"run", "--help"});
+  BOOST_TEST(r.status == 0);
+  BOOST_TEST(r.out.find("(2n+2)") == std::string::npos);
+  BOOST_TEST(r.out.find("[--npy PATH]") != std::string::npos);
+  struct Stated {
+    const char* scene;
+    const char* words;  // what the help says of that system's columns
+    long columns;
+  };
+  for (const Stated& s : {Stated{"spherical-pendulum.toml", "9 for the spherical", 9},
+                          Stated{"heavy-top.toml", "10 for the heavy top", 10},
+                          Stated{"rigid-body.toml", "12 for the free rigid body", 12},
+                          Stated{"kepler.toml", "2n + 2 columns on R^n", 6}}) {
+    BOOST_TEST_CONTEXT(s.scene) {
+      BOOST_TEST(r.out.find(s.words) != std::string::npos);
+      const std::string npy = temp_dir() + "/columns.npy";
+      const Output o = dvm({"run", scene(s.scene), "--quiet", "--npy", npy, "--csv", temp_dir() + "/columns.csv",
+                            "--set", "integrator.t_end=1.0"});
+      BOOST_TEST(o.status == 0, o.err);
+      const std::string data = slurp(npy);
+      const auto shape = data.find("'shape': (");
+      BOOST_REQUIRE(shape != std::string::npos);
+      BOOST_TEST(std::strtol(data.c_str() + data.find(',', shape) + 1, nullptr, 10) == s.columns);
+    }
+  }
+}
+
 // A study whose runs are not all in the asymptotic range says so: kahan-li8 (order 8)
 // on the pendulum to t = 10 with 10, 20 and 40 steps observes orders 12.6 and 8.9 and
 // fits 10.8; the warning goes to stderr (text) or "warnings" (JSON). A study in the
