@@ -830,9 +830,10 @@ BOOST_AUTO_TEST_CASE(a_key_the_chosen_method_does_not_use_is_refused) {
 // Messages that point at the cause: a reserved name used as a parameter is blamed on
 // that parameter's key and line (not on the coordinates); end points on S^2 that are
 // antipodal are bad input (every great circle joins them), not an internal error;
-// check-map refuses a theta below 0 as it does one above 1; a mistyped option costs one
-// line and where the help is, not the whole help; a misspelt key or name gets the
-// nearest known one.
+// check-map refuses a theta below 0 as it does one above 1; a degenerate Lagrangian
+// names the velocities it lacks, a vector of the wrong length the coordinates; a
+// mistyped option costs one line and where the help is, not the whole help; a
+// misspelt key or name gets the nearest known one.
 BOOST_AUTO_TEST_CASE(messages_point_at_the_cause_and_suggest_the_name_meant) {
   auto written = [](const std::string& params) {
     return "[system]\ncoordinates = [\"x\"]\nparams = { " + params +
@@ -877,6 +878,21 @@ BOOST_AUTO_TEST_CASE(messages_point_at_the_cause_and_suggest_the_name_meant) {
   // the antipodal problem nearly: 1e-6 apart from antipodal, it solves
   const Output near = dvm({"run", antipodal, "--set", "problem.q_final=[-0.6, 0.000001, 0.7999999999993750]"});
   BOOST_TEST(near.status == 0, near.err);
+
+  // a degenerate Lagrangian names the velocities along which d2L/dv2 vanishes
+  auto degenerate = [](const std::string& name, const std::string& lagrangian) {
+    return write_scene(name, "[system]\ncoordinates = [\"x\", \"y\"]\nlagrangian = \"" + lagrangian +
+                                 "\"\n[initial]\nq = [1.0, 0.5]\nv = [0.0, 0.0]\n"
+                                 "[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n");
+  };
+  check({"no y_dot in L", {"run", degenerate("no_y_dot.toml", "x_dot^2/2 - x^2/2 - y^2/2")}, 2,
+         {"degenerate at the initial state", "no term of second order in y_dot"}});
+  check({"only x_dot + y_dot in L", {"run", degenerate("sum_dot.toml", "(x_dot + y_dot)^2/2 - x^2/2 - y^2/2")}, 2,
+         {"degenerate at the initial state", "a combination of x_dot and y_dot"}});
+  // a vector of the wrong length is described by the coordinates' names
+  check({"q of the wrong length", {"run", degenerate("short_q.toml", "x_dot^2/2 + y_dot^2/2"), "--set",
+                                   "initial.q=[1.0]"},
+         2, {"expected 2 (one per coordinate: x, y)"}});
 
   // a mistyped option: the message, the nearest option and where the help is
   for (const std::vector<std::string>& args :
