@@ -506,7 +506,32 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
   WrittenMap::Params params;
   if (const toml::node* ps = m.get("params")) {
     if (!ps->is_table()) throw InputError(r.where(ps, "map.params") + ": expected a table of numbers");
-    for (const auto& [k, v] : *ps->as_table()) params.push_back({std::string(k.str()), r.number(v, "map.params." + std::string(k.str()))});
+    // the names the map's expressions already give a meaning: a parameter of one of
+    // them would be hidden by it (and never used)
+    std::vector<std::string> taken = {"pi"};
+    if (!manifold) {
+      taken.insert(taken.end(), {"x", "v"});
+    } else if (me.map->space == Space::sphere) {
+      for (const char* n : {"x1", "x2", "x3", "v1", "v2", "v3"}) taken.push_back(n);
+    } else {
+      for (int i = 1; i <= 3; ++i)
+        for (int j = 1; j <= 3; ++j) taken.push_back("R" + std::to_string(i) + std::to_string(j));
+      for (const char* n : {"w1", "w2", "w3"}) taken.push_back(n);
+    }
+    const std::size_t variables = taken.size();
+    for (const auto& f : expression_detail::functions()) taken.push_back(f.name);
+    for (const auto& [k, v] : *ps->as_table()) {
+      const std::string name(k.str());
+      const auto at = std::find(taken.begin(), taken.end(), name);
+      if (at != taken.end())
+        throw InputError(r.where(&v, "map.params." + name) + ": the name '" + echo(name) + "' is " +
+                         (name == "pi"                                                ? "reserved for the constant"
+                          : static_cast<std::size_t>(at - taken.begin()) >= variables ? "a function name"
+                                                                                       : "a variable of the map's "
+                                                                                         "expressions") +
+                         "; expected another name");
+      params.push_back({name, r.number(v, "map.params." + name)});
+    }
   }
   std::string name = "written";
   if (const toml::node* n = m.get("name")) name = r.string(*n, "map.name");
