@@ -111,7 +111,16 @@ struct WrittenSystem {
     return s;
   }
 
-  // Checks the coordinate and parameter names; throws std::invalid_argument.
+  // A name check_names() refuses, with the role it was given ("coordinate",
+  // "velocity", "parameter", "parameter list", "definition", ...): the role tells a
+  // reader which key to blame. A name given twice is blamed on its second role.
+  struct NameError : std::invalid_argument {
+    NameError(const std::string& message, std::string role_, std::string name_)
+        : std::invalid_argument(message), role(std::move(role_)), name(std::move(name_)) {}
+    std::string role, name;
+  };
+
+  // Checks the coordinate and parameter names; throws NameError.
   void check_names() const {
     auto identifier = [](const std::string& n) {
       if (n.empty() || !(std::isalpha(static_cast<unsigned char>(n[0])) || n[0] == '_')) return false;
@@ -122,12 +131,17 @@ struct WrittenSystem {
     std::set<std::string> seen;
     auto claim = [&](const std::string& n, const char* what) {
       if (!identifier(n))
-        throw std::invalid_argument(std::string(what) + " name '" + n +
-                                    "' is not a name (letters, digits and '_', not starting with a digit)");
-      if (n == "pi") throw std::invalid_argument(std::string(what) + " name 'pi' is reserved for the constant");
+        throw NameError(std::string(what) + " name '" + n +
+                            "' is not a name (letters, digits and '_', not starting with a digit)",
+                        what, n);
+      if (n == "pi") throw NameError(std::string(what) + " name 'pi' is reserved for the constant", what, n);
       for (const auto& f : expression_detail::functions())
-        if (n == f.name) throw std::invalid_argument(std::string(what) + " name '" + n + "' is a function name");
-      if (!seen.insert(n).second) throw std::invalid_argument("the name '" + n + "' is used twice");
+        if (n == f.name) throw NameError(std::string(what) + " name '" + n + "' is a function name", what, n);
+      if (n == "sum" || n == "t")
+        throw NameError("the name '" + n + "' is reserved (" + (n == "sum" ? "sum(i, first, last, term)" : "time") +
+                            ")",
+                        what, n);
+      if (!seen.insert(n).second) throw NameError("the name '" + n + "' is used twice", what, n);
     };
     if (space == Space::rotation) {
       if (!coordinates.empty())
@@ -169,10 +183,6 @@ struct WrittenSystem {
     for (const auto& d : definitions) claim(d.first, "definition");
     if (static_cast<int>(definitions.size()) > Expression::kMaxDefinitions)
       throw std::invalid_argument("at most " + std::to_string(Expression::kMaxDefinitions) + " definitions");
-    for (const char* r : {"sum", "t"})
-      if (seen.count(r))
-        throw std::invalid_argument(std::string("the name '") + r + "' is reserved (" +
-                                    (r[0] == 's' ? "sum(i, first, last, term)" : "time") + ")");
   }
 
   // "R11" ... "R33": the entry in row i, column j (0-based arguments).

@@ -22,7 +22,9 @@
 #include <ceres/product_manifold.h>
 #include <ceres/sphere_manifold.h>
 
+#include <cmath>
 #include <memory>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -87,7 +89,12 @@ class SphereBoundaryValueProblem {
       } else {
         const double t = static_cast<double>(k) / K;
         qk = (1.0 - t) * qa + t * qb;
-        for (int j = 0; j < spheres; ++j) qk.template segment<3>(3 * j).normalize();
+        for (int j = 0; j < spheres; ++j) {
+          if (!(qk.template segment<3>(3 * j).norm() > 0.0))
+            throw std::invalid_argument("boundary-value problem: antipodal end points (every great circle joins "
+                                        "them; the starting path passes through the centre)");
+          qk.template segment<3>(3 * j).normalize();
+        }
       }
       for (int i = 0; i < S; ++i) node(k)[i] = qk[i];
     }
@@ -134,20 +141,31 @@ class SphereBoundaryValueProblem {
     pmax = std::fmax(pmax, max_abs(res.p[static_cast<std::size_t>(K)]));
     // the momentum carried by a rounding of the nodes (|q| = 1): |M| eps / h, with |M|
     // the largest velocity-Hessian entry, from the Legendre map at the first node
-    const P v0 = manifold_legendre_inverse(dl_.lagrangian(), res.q[0], res.p[0]);
+    // (a solve that ended away from any solution, or at non-finite nodes, may leave no
+    // velocity there: the run is then reported as not converged, not thrown)
     double W = 0.0;
-    for (int i = 0; i < S; ++i) {
-      P e = P::Zero();
-      e[i] = 1.0;
-      const P t = M::tangent(res.q[0], M::tangent_coordinates(res.q[0], e));
-      W = std::fmax(W, max_abs(P(manifold_legendre(dl_.lagrangian(), res.q[0], P(v0 + t)) -
-                                 manifold_legendre(dl_.lagrangian(), res.q[0], v0))));
+    std::string degenerate;
+    try {
+      const P v0 = manifold_legendre_inverse(dl_.lagrangian(), res.q[0], res.p[0]);
+      for (int i = 0; i < S; ++i) {
+        P e = P::Zero();
+        e[i] = 1.0;
+        const P t = M::tangent(res.q[0], M::tangent_coordinates(res.q[0], e));
+        W = std::fmax(W, max_abs(P(manifold_legendre(dl_.lagrangian(), res.q[0], P(v0 + t)) -
+                                   manifold_legendre(dl_.lagrangian(), res.q[0], v0))));
+      }
+    } catch (const DegenerateLagrangianError& e) {
+      W = NAN;
+      degenerate = e.what();
     }
     res.max_residual = rmax;
     res.scale = pmax + W / dl_.step();
-    res.converged = std::isfinite(rmax) && rmax <= opt.residual_tolerance * std::fmax(res.scale, 1e-300);
+    res.converged = degenerate.empty() && std::isfinite(rmax) &&
+                    rmax <= opt.residual_tolerance * std::fmax(res.scale, 1e-300);
     res.message = summary.BriefReport();
-    if (!res.converged)
+    if (!degenerate.empty())
+      res.message = "no velocity at the first node (" + degenerate + "); Ceres: " + res.message;
+    else if (!res.converged)
       res.message = "discrete Euler-Lagrange residual " + std::to_string(rmax) + " above tolerance (scale " +
                     std::to_string(res.scale) + "); Ceres: " + res.message;
     return res;

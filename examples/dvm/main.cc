@@ -55,7 +55,8 @@ const char* kVersionHelp =
     "  dvm --version\n";
 
 const char* kRunHelp =
-    "usage: dvm run SCENE.toml [--set section.key=value]... [--csv PATH] [--json] [--quiet]\n"
+    "usage: dvm run SCENE.toml [--set section.key=value]... [--csv PATH] [--npy PATH]\n"
+    "               [--json] [--quiet]\n"
     "\n"
     "Integrates the scene with the position-momentum form of the discrete Lagrangian\n"
     "L_d(q0, q1) = h L(R_d^{-1}(q0, q1) / h) of the scene's discretization map.\n"
@@ -63,8 +64,16 @@ const char* kRunHelp =
     "  --set k=v   override any scene key; v is written as in TOML, e.g.\n"
     "              --set integrator.step=0.001  --set initial.q=[0.5]\n"
     "              --set integrator.map='\"theta\"'\n"
-    "  --csv PATH  write the trajectory (columns t, q0.., p0.., energy) to PATH,\n"
-    "              overriding [output] csv; rows every [output] every steps.\n"
+    "  --csv PATH  write the trajectory to PATH, overriding [output] csv; rows\n"
+    "              every [output] every steps, a header row of column names.\n"
+    "              Columns: t; the stored position (R^n: the n coordinates; S^2 and\n"
+    "              (S^2)^K: 3 per unit vector; SO(3): 4, the unit quaternion w, x,\n"
+    "              y, z); the momenta (R^n, S^2: as many as the position; SO(3): 3,\n"
+    "              the body angular momentum); the energy; then on S^2 and SO(3)\n"
+    "              the conserved momenta (builtin rigid-body: the 3 components of\n"
+    "              its spatial angular momentum; every other system there, written\n"
+    "              ones too: the vertical one, J3). So 2n + 2 columns on R^n, 9 for\n"
+    "              the spherical pendulum, 10 for the heavy top, 12 for rigid-body.\n"
     "              PATH - (or /dev/stdout) writes to standard output, and the\n"
     "              summary goes to standard error\n"
     "  --json      print a JSON summary (steps, t_final, q_initial, p_initial, q_final,\n"
@@ -85,14 +94,20 @@ const char* kRunHelp =
     "              interpreted (what the step still evaluates interpreted: \"\",\n"
     "              or the sparse Hessian of U of separable-sparse-newton))\n"
     "  --npy PATH  also write the rows as a NumPy .npy file (float64, shape\n"
-    "              rows x (2n+2), the CSV's columns), overriding [output] npy\n"
+    "              rows x columns, the CSV's columns as --csv states them, with no\n"
+    "              names), overriding [output] npy\n"
     "  --quiet     print nothing on success and no progress (errors still go to\n"
     "              stderr); progress (step, time, rate, time left) is shown on\n"
     "              stderr only when stderr is a terminal\n"
     "\n"
     "Scene keys, by section: key = its default (or a placeholder), * required, then\n"
     "its type and values. A key that applies only to another choice is refused where\n"
-    "it is written.\n"
+    "it is written, with the nearest known key or name when one is close. With method\n"
+    "galerkin or form newmark, which take no map, the scene file's map (and [map])\n"
+    "is set aside so that --set can switch any scene to them: checked, unused, the\n"
+    "report says map \"none\" or \"newmark\"; so is its theta when the switch comes\n"
+    "from --set. A map or theta given with --set beside such a method is refused,\n"
+    "and so is a theta written in the same file as the method.\n"
     "  [system]    builtin or lagrangian *\n"
     "    builtin = \"NAME\"           string, a built-in system (parameters and defaults:\n"
     "                               'dvm systems'): @SYSTEMS@\n"
@@ -251,9 +266,8 @@ const char* kRunHelp =
     "    steps = K                  whole number 2..1e8, the steps between the end points\n"
     "                               (boundary-value only, required)\n"
     "  [output]    no output file unless csv or npy is given\n"
-    "    csv = \"PATH\"               string, the CSV file (columns t, q.., p.., energy and\n"
-    "                               the system's invariants), relative to the working\n"
-    "                               directory\n"
+    "    csv = \"PATH\"               string, the CSV file (its columns: --csv above),\n"
+    "                               relative to the working directory\n"
     "    npy = \"PATH\"               string, a NumPy .npy file of the same rows\n"
     "    every = 1                  whole number >= 1, a row every N steps (and the last)\n"
     "    monitor_every = 1          whole number >= 1: the energy and invariants of the\n"
@@ -338,17 +352,39 @@ const char* kConvergeHelp =
     "usage: dvm converge SCENE.toml [--steps-list N1,N2,...] [--t-end T]\n"
     "                   [--max-steps M] [--set section.key=value]... [--json]\n"
     "\n"
-    "Runs the scene to the time T (default: the scene's steps x step) with each step\n"
-    "count N of the list (h = T/N; default: the scene's count times 1, 2, 4, 8), and\n"
-    "prints the error max(|q - q_ref|, |p - p_ref|) at T, the observed order between\n"
-    "neighbouring runs and a least-squares fitted order (points within 1e-12 of the\n"
-    "solution's size are left out as round-off). The reference is the exact solution\n"
-    "where the system has one (harmonic, kepler, duffing, charged-particle), else a\n"
-    "classical Runge-Kutta run on Hamilton's equations with 16 times the largest N.\n"
-    "Chaotic systems (double pendulum, Henon-Heiles at high energy) need a short T.\n"
+    "Runs the scene's method to the time T (default: the scene's steps x step) with\n"
+    "each step count N of the list (h = T/N; default: the scene's count times 1, 2,\n"
+    "4, 8) and prints, for each run, the error max(|q - q_ref|, |p - p_ref|) at T\n"
+    "(the largest over the stored coordinates, in the embedding on S^2 and SO(3), and\n"
+    "the momenta), the order observed against the run before it (\"-\" on the first\n"
+    "row, which has none, and beside a failed run; \"order\": null in the JSON), and\n"
+    "the order fitted by least squares to log(error) against log(h).\n"
+    "\n"
+    "The reference is the exact solution where the system has one (harmonic, kepler,\n"
+    "duffing with alpha > 0 and beta >= 0, charged-particle), else a run of a higher\n"
+    "order method on the same problem: Galerkin Gauss s = 6 (order 12) where the\n"
+    "system runs Galerkin, else the kahan-li8 composition (order 8) of the space's\n"
+    "midpoint map (midpoint, sphere-exp, so3-exp). That run starts at the largest\n"
+    "N and doubles its steps (at most 5 times) until two successive runs\n"
+    "agree to a hundredth of the smallest error measured, or to round-off; their\n"
+    "difference is printed as the reference's accuracy.\n"
+    "\n"
+    "The fit leaves out, and marks, the runs that failed, those whose error is not\n"
+    "above 10 times the reference's accuracy (\"reference\"), and those whose error\n"
+    "is not below a tenth of the solution's size (\"pre-asymptotic\": steps too\n"
+    "large, or a chaotic horizon); with fewer than two runs left no order is printed,\n"
+    "and the reason is. When the order observed between two neighbouring fitted runs\n"
+    "differs from the fitted order by more than a tenth of it (at least 0.5), the\n"
+    "runs are not all in the asymptotic range and the fitted order is not the\n"
+    "method's: a warning says so on stderr (JSON: \"warnings\", a list of strings,\n"
+    "empty when there is none); refine --steps-list or shorten --t-end. Chaotic\n"
+    "systems (double pendulum, Henon-Heiles at high energy) need a short T.\n"
+    "\n"
     "A study whose runs take more than M steps together (default 1e8, the reference\n"
-    "runs not counted) is refused with exit 2 before it starts; on a terminal, stderr\n"
-    "shows which run is under way.\n"
+    "runs not counted) is refused with exit 2 before it starts; so are [output] keys\n"
+    "given with --set (a study writes no rows; the scene's own are not used); on a\n"
+    "terminal, stderr shows which run is under way. Exit status 0; 2 for bad input,\n"
+    "and when the reference run fails; 3 when a run of the study fails.\n"
     "\n"
     "example:\n"
     "  dvm converge examples/scenes/duffing.toml --steps-list 100,200,400,800 --t-end 10\n";
@@ -417,9 +453,27 @@ std::string run_help() {
   return h;
 }
 
+// A usage error: the message and where the help is, one line each (the command list
+// when no command was recognised, which is short).
 [[noreturn]] void usage_error(const std::string& msg, const char* help) {
-  std::cerr << "dvm: " << msg << "\n\n" << (help == kRunHelp ? run_help() : std::string(help));
+  if (help == kUsage) {
+    std::cerr << "dvm: " << msg << "\n\n" << kUsage;
+    std::exit(2);
+  }
+  const char* command = help == kRunHelp        ? "run"
+                        : help == kMapsHelp     ? "maps"
+                        : help == kMethodsHelp  ? "methods"
+                        : help == kSystemsHelp  ? "systems"
+                        : help == kCheckHelp    ? "check-map"
+                        : help == kConvergeHelp ? "converge"
+                                                : "version";
+  std::cerr << "dvm: " << msg << "\nsee 'dvm " << command << " --help'\n";
   std::exit(2);
+}
+
+// "unknown option X" with the nearest option of the command, if one is near.
+std::string unknown_option(const std::string& got, const std::vector<std::string>& options) {
+  return "unknown option " + got + dvm::did_you_mean(got, options);
 }
 
 bool is_help(const std::string& a) { return a == "--help" || a == "-h"; }
@@ -460,7 +514,7 @@ int cmd_run(const std::vector<std::string>& args) {
     } else if (a == "--quiet") {
       o.quiet = true;
     } else if (!a.empty() && a[0] == '-') {
-      usage_error("unknown option " + a, kRunHelp);
+      usage_error(unknown_option(a, {"--set", "--csv", "--npy", "--json", "--quiet", "--help"}), kRunHelp);
     } else if (scene.empty()) {
       scene = a;
     } else {
@@ -468,7 +522,14 @@ int cmd_run(const std::vector<std::string>& args) {
     }
   }
   if (scene.empty()) usage_error("run needs a scene file", kRunHelp);
-  return run_scene(load_scene(scene, sets), o);
+  const dvm::Scene s = load_scene(scene, sets);
+  // a row interval given on the command line for a run that writes no rows
+  if (s.csv.empty() && s.npy.empty() && o.csv.empty() && o.npy.empty())
+    for (const std::string& set : sets)
+      if (set.rfind("output.every=", 0) == 0)
+        throw InputError("--set output.every: this run writes no rows (no --csv or --npy, no [output] csv or npy), "
+                         "so a row interval would change nothing");
+  return run_scene(s, o);
 }
 
 int cmd_maps(const std::vector<std::string>& args) {
@@ -480,7 +541,7 @@ int cmd_maps(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else {
-      usage_error("unknown argument " + a, kMapsHelp);
+      usage_error("unknown argument " + a + dvm::did_you_mean(a, {"--json", "--help"}), kMapsHelp);
     }
   }
   const auto& maps = dvm::map_registry();
@@ -519,7 +580,7 @@ int cmd_systems(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else {
-      usage_error("unknown argument " + a, kSystemsHelp);
+      usage_error("unknown argument " + a + dvm::did_you_mean(a, {"--json", "--help"}), kSystemsHelp);
     }
   }
   const auto& systems = dvm::system_registry();
@@ -565,7 +626,7 @@ int cmd_methods(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else {
-      usage_error("unknown argument " + a, kMethodsHelp);
+      usage_error("unknown argument " + a + dvm::did_you_mean(a, {"--json", "--help"}), kMethodsHelp);
     }
   }
   return methods_command(json);
@@ -613,7 +674,8 @@ int cmd_converge(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       o.json = true;
     } else if (!a.empty() && a[0] == '-') {
-      usage_error("unknown option " + a, kConvergeHelp);
+      usage_error(unknown_option(a, {"--set", "--steps-list", "--t-end", "--max-steps", "--json", "--help"}),
+                  kConvergeHelp);
     } else if (scene.empty()) {
       scene = a;
     } else {
@@ -621,6 +683,12 @@ int cmd_converge(const std::vector<std::string>& args) {
     }
   }
   if (scene.empty()) usage_error("converge needs a scene file", kConvergeHelp);
+  // a study writes no rows: an [output] key on the command line would change nothing
+  for (const std::string& set : sets)
+    if (set.rfind("output.", 0) == 0)
+      usage_error("--set " + set.substr(0, set.find('=')) +
+                      ": dvm converge writes no rows (it prints a table of errors); [output] applies to dvm run",
+                  kConvergeHelp);
   return run_scene(load_scene(scene, sets), o);
 }
 
@@ -639,7 +707,8 @@ int cmd_version(const std::vector<std::string>& args) {
 int cmd_check_map(const std::vector<std::string>& args) {
   std::string name, scene;
   std::vector<std::string> overrides;
-  double theta = -1.0, tol = 1e-12;  // theta < 0, dim 0: not given
+  double theta = -1.0, tol = 1e-12;  // dim 0: not given
+  bool theta_given = false;
   int dim = 0;
   for (std::size_t i = 0; i < args.size(); ++i) {
     const std::string& a = args[i];
@@ -652,6 +721,9 @@ int cmd_check_map(const std::vector<std::string>& args) {
       return 0;
     } else if (a == "--theta") {
       theta = parse_number("--theta", value("--theta"), kCheckHelp);
+      theta_given = true;
+      if (!(theta >= 0.0 && theta <= 1.0))
+        usage_error("--theta: got " + args[i] + ", expected a number in [0, 1]", kCheckHelp);
     } else if (a == "--dim") {
       const double d = parse_number("--dim", value("--dim"), kCheckHelp);
       if (d != std::floor(d) || d < 1 || d > 4) usage_error("--dim: expected 1, 2, 3 or 4", kCheckHelp);
@@ -664,7 +736,7 @@ int cmd_check_map(const std::vector<std::string>& args) {
     } else if (a == "--set") {
       overrides.push_back(value("--set"));
     } else if (!a.empty() && a[0] == '-') {
-      usage_error("unknown option " + a, kCheckHelp);
+      usage_error(unknown_option(a, {"--theta", "--dim", "--tolerance", "--scene", "--set", "--help"}), kCheckHelp);
     } else if (name.empty()) {
       name = a;
     } else {
@@ -673,7 +745,7 @@ int cmd_check_map(const std::vector<std::string>& args) {
   }
   if (!scene.empty()) {
     if (!name.empty()) usage_error("give a map name or --scene, not both", kCheckHelp);
-    if (theta >= 0.0) usage_error("--theta: with --scene, the scene's integrator.theta is the map's (use --set)", kCheckHelp);
+    if (theta_given) usage_error("--theta: with --scene, the scene's integrator.theta is the map's (use --set)", kCheckHelp);
     return check_scene_map_command(scene, overrides, dim, tol);
   }
   if (!overrides.empty()) usage_error("--set applies only with --scene", kCheckHelp);
@@ -713,7 +785,10 @@ int main(int argc, char** argv) {
     if (command == "systems") return cmd_systems(args);
     if (command == "methods") return cmd_methods(args);
     if (command == "converge") return cmd_converge(args);
-    usage_error("unknown command '" + command + "'", kUsage);
+    usage_error("unknown command '" + command + "'" +
+                    dvm::did_you_mean(command, {"run", "maps", "methods", "systems", "check-map", "converge",
+                                                "version", "help"}),
+                kUsage);
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";
     return 2;

@@ -246,6 +246,32 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
          << " run(s) with an error above a tenth of the solution's size";
   }
   rep.fit_note = note.str();
+  // the fit against the orders it averages: neighbouring fitted runs whose observed
+  // order is far from the fitted one mean a fit over runs in and out of the asymptotic
+  // range (e.g. steps too coarse for a high order), and the fitted order is not the method's
+  if (used >= 2) {
+    std::ostringstream far;
+    far.precision(3);
+    int count = 0;
+    const double allowed = std::fmax(0.5, 0.1 * std::fabs(rep.fitted_order));
+    for (std::size_t i = 1; i < rep.rows.size(); ++i) {
+      const ConvergeRow& a = rep.rows[i - 1];
+      const ConvergeRow& b = rep.rows[i];
+      if (!a.excluded.empty() || !b.excluded.empty() || !std::isfinite(b.order)) continue;
+      if (std::fabs(b.order - rep.fitted_order) <= allowed) continue;
+      far << (count++ ? ", " : "") << b.order << " (" << a.steps << " to " << b.steps << " steps)";
+    }
+    if (count > 0) {
+      std::ostringstream w;
+      w.precision(3);
+      w << "the observed order" << (count > 1 ? "s " : " ") << far.str() << (count > 1 ? " differ" : " differs")
+        << " from the fitted order " << rep.fitted_order << " by more than " << allowed
+        << ": the fitted runs are not all in the asymptotic range, where the error falls as a power of h (steps "
+           "too coarse for the order, or errors at round-off), so the fitted order is not the method's (change "
+           "--steps-list or --t-end)";
+      rep.warnings.push_back(w.str());
+    }
+  }
   return rep;
 }
 
@@ -271,21 +297,31 @@ int print_converge(const ConvergeReport& r, bool json) {
     j.raw("runs", rows + "  ]").num("fitted_order", r.fitted_order).num("map_order", r.map_order);
     j.num("method_order", r.method_order);
     if (!r.fit_note.empty()) j.str("fit_note", r.fit_note);
+    std::string warnings = "[";
+    for (std::size_t i = 0; i < r.warnings.size(); ++i) warnings += (i ? ", " : "") + Json::string(r.warnings[i]);
+    j.raw("warnings", warnings + "]");
     if (!r.failure.empty()) j.str("failure", r.failure);
     std::cout << j.dump() << "\n";
   } else {
     std::printf("%s with %s to t = %g; reference: %s (accuracy %.1e)\n", r.system.c_str(), r.method_label.c_str(),
                 r.t_end, r.reference.c_str(), r.reference_accuracy);
     std::printf("  %12s %14s %14s %8s %12s\n", "steps", "h", "error", "order", "iterations");
-    for (const ConvergeRow& c : r.rows)
-      std::printf("  %12lld %14.6e %14.6e %8.3f %12lld%s%s\n", static_cast<long long>(c.steps), c.h, c.error, c.order,
+    for (const ConvergeRow& c : r.rows) {
+      // no number where there is none: the first row has no run before it, a failed run no error
+      char error[32] = "-", order[32] = "-";
+      if (std::isfinite(c.error)) std::snprintf(error, sizeof error, "%.6e", c.error);
+      if (std::isfinite(c.order)) std::snprintf(order, sizeof order, "%.3f", c.order);
+      std::printf("  %12lld %14.6e %14s %8s %12lld%s%s\n", static_cast<long long>(c.steps), c.h, error, order,
                   static_cast<long long>(c.iterations), c.excluded.empty() ? "" : "   not fitted: ",
                   c.excluded.c_str());
+    }
     if (std::isnan(r.fitted_order))
       std::printf("  fitted order %s\n", r.fit_note.c_str());
     else
       std::printf("  fitted order %.3f over %d runs (the method's order is %d)%s%s\n", r.fitted_order,
                   r.fitted_points, r.method_order, r.fit_note.empty() ? "" : "; ", r.fit_note.c_str());
+    std::fflush(stdout);
+    for (const std::string& w : r.warnings) std::fprintf(stderr, "dvm: warning: %s\n", w.c_str());
   }
   if (!r.failure.empty()) {
     std::fprintf(stderr, "dvm: a run of the convergence study did not converge: %s\n", r.failure.c_str());

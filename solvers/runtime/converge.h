@@ -19,7 +19,9 @@
 // 10 times the reference's accuracy and below a tenth of the solution's size (the
 // others are marked in the table: at the reference's floor, or not yet in the
 // asymptotic range). With fewer than two such runs the fitted order is not determined
-// and the report says why; it is never printed as a result.
+// and the report says why; it is never printed as a result. When the orders observed
+// between neighbouring fitted runs disagree with the fitted order, the report carries
+// a warning: the fit then mixes runs in and out of the asymptotic range.
 #pragma once
 
 #include <cstdint>
@@ -41,7 +43,9 @@ struct ConvergeOptions {
 
 struct ConvergeRow {
   std::int64_t steps = 0;
-  double h = 0.0, error = 0.0, order = 0.0;  // order: against the previous row
+  // order: against the previous row; NaN on the first row (and beside a failed run),
+  // printed "-" in the table and null in the JSON
+  double h = 0.0, error = 0.0, order = 0.0;
   std::int64_t iterations = 0;
   // "" when the row enters the fit; else why not ("reference", "pre-asymptotic", "failed")
   std::string excluded;
@@ -63,6 +67,10 @@ struct ConvergeReport {
   double fitted_order = 0.0;  // NaN when not determined
   int fitted_points = 0;
   std::string fit_note;       // why the fit is not determined, or what was left out
+  // What makes the fitted order doubtful: an order observed between two neighbouring
+  // fitted runs that differs from the fitted order by more than max(0.5, a tenth of
+  // it), a sign that the runs are not all in the asymptotic range. Empty: none.
+  std::vector<std::string> warnings;
   std::string failure;        // the first run that failed (empty: none)
 };
 

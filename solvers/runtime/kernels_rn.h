@@ -194,7 +194,10 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
   const std::string where = pr.written ? pr.written_where : pr.origin;
   if constexpr (!has_velocity<S>::value) {
     // no closed-form inverse Legendre map: the velocity Hessian must be invertible
-    auto check = [&](const Vec<double, N>& v) { require_regular_hessian<N>(velocity_hessian(L, q, v), where); };
+    const std::vector<std::string> velocities = velocity_names(pr);
+    auto check = [&](const Vec<double, N>& v) {
+      require_regular_hessian<N>(velocity_hessian(L, q, v), where, velocities);
+    };
     if (pr.momentum_given) {
       check(Vec<double, N>::Zero());
       try {

@@ -228,7 +228,10 @@ void validate(const Problem& pr, const Method& me) {
       me.scheme();
     } catch (const std::invalid_argument& e) {
       const bool weights = me.composition == "dirk";
-      throw InputError(std::string(weights ? "integrator.weights: " : "integrator.composition: ") + e.what());
+      std::vector<std::string> names = {"none", "dirk"};
+      for (const auto& c : composition_schemes()) names.push_back(c.name);
+      throw InputError(std::string(weights ? "integrator.weights: " : "integrator.composition: ") + e.what() +
+                       (weights ? std::string() : did_you_mean(me.composition, names)));
     }
     if (!caps.composition) throw InputError("integrator.composition: " + name + " takes no composition" + note);
     if (me.scheme().kind == CompositionKind::rkn_splitting) {
@@ -330,6 +333,18 @@ void validate(const Problem& pr, const Method& me) {
   size_check(pr.q, nq, "initial.q");
   if (pr.boundary_value) {
     size_check(pr.q_final, nq, "problem.q_final");
+    // On S^2, antipodal end points are joined by every great circle: no path between
+    // them is singled out, and the solve's starting path (the chord, normalised)
+    // passes through the centre. Refused to the 1e-12 that points are taken on S^2.
+    for (std::size_t k = 0; sys.space == Space::sphere && k + 2 < nq; k += 3) {
+      const double sum = std::sqrt(std::pow(pr.q[k] + pr.q_final[k], 2) + std::pow(pr.q[k + 1] + pr.q_final[k + 1], 2) +
+                                   std::pow(pr.q[k + 2] + pr.q_final[k + 2], 2));
+      if (!(sum > 1e-12))
+        throw InputError("problem.q_final: " + std::string(nq > 3 ? "link " + std::to_string(k / 3 + 1) + " is " : "") +
+                         "antipodal to initial.q (|q_final + q| = " + fmt(sum) +
+                         ", within 1e-12): every great circle joins the two points, so no path between them is "
+                         "singled out; expected end points that are not antipodal");
+    }
   } else {
     size_check(pr.momentum_given ? pr.p : pr.v, nv, pr.momentum_given ? "initial.p" : "initial.v");
   }

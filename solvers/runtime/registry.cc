@@ -72,7 +72,8 @@ Form find_form(const std::string& name, const std::string& key) {
     if (f.name == name) return f.form;
     names.push_back(f.name);
   }
-  throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names));
+  throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names) +
+                   did_you_mean(name, names));
 }
 
 const char* to_string(Lift l) {
@@ -110,7 +111,8 @@ Lift find_lift(const std::string& name, const std::string& key) {
     if (l.name == name) return l.lift;
     names.push_back(l.name);
   }
-  throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names));
+  throw InputError(key + ": got \"" + echo(name) + "\", expected one of: " + join(names) +
+                   did_you_mean(name, names));
 }
 
 Lift default_lift(Form f) {
@@ -190,7 +192,8 @@ const MapEntry& find_map_entry(const std::string& name, const std::string& where
     if (m.name == name) return m;
     names.push_back(m.name);
   }
-  throw InputError(where + ": unknown map \"" + echo(name) + "\"; expected one of: " + join(names));
+  throw InputError(where + ": unknown map \"" + echo(name) + "\"; expected one of: " + join(names) +
+                   did_you_mean(name, names));
 }
 
 const std::vector<GalerkinEntry>& galerkin_registry() {
@@ -338,7 +341,8 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
     if (s.name == name) return s;
     names.push_back(s.name);
   }
-  throw InputError(where + ": unknown system \"" + echo(name) + "\"; expected one of: " + join(names));
+  throw InputError(where + ": unknown system \"" + echo(name) + "\"; expected one of: " + join(names) +
+                   did_you_mean(name, names));
 }
 
 const SystemEntry& written_system_entry(Space space, int factors) {

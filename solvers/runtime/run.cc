@@ -5,6 +5,7 @@
 #include <cstdlib>
 
 #include "solvers/runtime/json.h"
+#include "mechanics/written_lagrangian.h"
 #include "solvers/runtime/kernels.h"
 
 namespace dvm {
@@ -23,6 +24,16 @@ std::unique_ptr<Run> make_run(const Problem& problem, const Method& method) {
 }
 
 namespace kernels {
+
+std::vector<std::string> velocity_names(const Problem& pr) {
+  std::vector<std::string> out;
+  if (!pr.written || pr.written->space != WrittenSystem::Space::euclidean) return out;
+  for (const std::string& c : pr.written->coordinates) {
+    const auto open = c.find('[');  // an array's entry q[3]: its velocity q_dot[3]
+    out.push_back(open == std::string::npos ? c + "_dot" : c.substr(0, open) + "_dot" + c.substr(open));
+  }
+  return out;
+}
 
 RunReport base_report(const Problem& pr, const Method& me, const std::string& system_name) {
   RunReport r;

@@ -12,6 +12,7 @@
 #include <limits>
 #include <set>
 #include <sstream>
+#include <utility>
 
 #include <toml++/toml.h>
 
@@ -62,6 +63,9 @@ class Reader {
     out << ": key '" << echo(key) << "'";
     return out.str();
   }
+
+  // A value given by --set (overrides carry no source position).
+  static bool from_override(const toml::node* n) { return n && n->source().begin.line == 0; }
 
   static std::string describe(const toml::node& n) {
     std::ostringstream out;
@@ -133,7 +137,7 @@ class Reader {
       if (!allowed.count(std::string(k.str()))) {
         std::vector<std::string> names(allowed.begin(), allowed.end());
         throw InputError(where(&v, section + "." + std::string(k.str())) + ": unknown key; [" + section +
-                         "] takes: " + join_names(names));
+                         "] takes: " + join_names(names) + did_you_mean(std::string(k.str()), names));
       }
     }
   }
@@ -199,6 +203,31 @@ void apply_override(toml::table& root, const std::string& spec) {
   t->insert_or_assign(parts.back(), *parsed.get("value"));
 }
 
+
+// What a vector of the state holds, for messages: "the dimension of kepler", or for a
+// written system its coordinates by name, "one per coordinate: r, phi" (an array as
+// q[1] ... q[n]).
+std::string dimension_of(const Problem& s) {
+  const WrittenSystem* w = s.written.get();
+  if (!w || w->coordinates.empty() || w->space == WrittenSystem::Space::rotation)
+    return "the dimension of " + (s.system ? s.system->name : std::string("the system"));
+  std::string names;
+  int shown = 0;
+  for (int i = 0; i < static_cast<int>(w->coordinates.size()); ++shown) {
+    if (shown == 12) {
+      names += ", ...";
+      break;
+    }
+    names += shown ? ", " : "";
+    if (const auto* a = w->array_of(i)) {
+      names += a->size == 1 ? a->name + "[1]" : a->name + "[1] ... " + a->name + "[" + std::to_string(a->size) + "]";
+      i = a->offset + a->size;
+    } else {
+      names += w->coordinates[static_cast<std::size_t>(i++)];
+    }
+  }
+  return "one per coordinate: " + names;
+}
 
 // An initial vector of `dim` numbers: an array of numbers; on R^n a string, an
 // expression in the index i = 1 ... dim and the system's parameters (lists included,
@@ -275,7 +304,7 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   const std::string n_expected = std::to_string(dim);
   if (static_cast<int>(s.q.size()) != dim)
     throw InputError(r.where(q, "initial.q") + ": got " + std::to_string(s.q.size()) + " numbers, expected " +
-                     n_expected + " (the dimension of " + info.name + ")");
+                     n_expected + " (" + dimension_of(s) + ")");
   const toml::node* p = ini.get("p");
   const toml::node* v = ini.get("v");
   if (p && v) throw InputError(r.where(v, "initial.v") + ": give either initial.p or initial.v, not both");
@@ -290,7 +319,7 @@ void read_vector_initial(const Reader& r, const toml::table& ini, const std::str
   s.momentum_given = p != nullptr;
   if (static_cast<int>((p ? s.p : s.v).size()) != dim)
     throw InputError(r.where(pv, pv_key) + ": got " + std::to_string((p ? s.p : s.v).size()) + " numbers, expected " +
-                     n_expected + " (the dimension of " + info.name + ")");
+                     n_expected + " (" + dimension_of(s) + ")");
   for (int k = 0; info.space == Space::sphere && k < links; ++k) {
     // on the manifold, not projected onto it: the defect is reported
     const std::size_t o = 3 * static_cast<std::size_t>(k);
@@ -419,7 +448,8 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
     const std::string kind = r.string(*k, "problem.kind");
     if (kind != "initial-value" && kind != "boundary-value")
       throw InputError(r.where(k, "problem.kind") + ": got \"" + echo(kind) +
-                       "\", expected \"initial-value\" or \"boundary-value\"");
+                       "\", expected \"initial-value\" or \"boundary-value\"" +
+                       did_you_mean(kind, {"initial-value", "boundary-value"}));
     s.boundary_value = kind == "boundary-value";
     if (s.boundary_value) {
       try {
@@ -442,7 +472,7 @@ void read_problem(const Reader& r, const toml::table& root, Problem& s, int dim)
   s.q_final = r.vector(*qf, "problem.q_final");
   if (static_cast<int>(s.q_final.size()) != dim)
     throw InputError(r.where(qf, "problem.q_final") + ": got " + std::to_string(s.q_final.size()) +
-                     " numbers, expected " + std::to_string(dim) + " (the dimension of " + s.system->name + ")");
+                     " numbers, expected " + std::to_string(dim) + " (" + dimension_of(s) + ")");
   s.steps = r.integer(*st, "problem.steps", 2);
   if (s.steps > 100000000)
     throw InputError(r.where(st, "problem.steps") + ": got " + Reader::describe(*st) +
@@ -476,7 +506,32 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
   WrittenMap::Params params;
   if (const toml::node* ps = m.get("params")) {
     if (!ps->is_table()) throw InputError(r.where(ps, "map.params") + ": expected a table of numbers");
-    for (const auto& [k, v] : *ps->as_table()) params.push_back({std::string(k.str()), r.number(v, "map.params." + std::string(k.str()))});
+    // the names the map's expressions already give a meaning: a parameter of one of
+    // them would be hidden by it (and never used)
+    std::vector<std::string> taken = {"pi"};
+    if (!manifold) {
+      taken.insert(taken.end(), {"x", "v"});
+    } else if (me.map->space == Space::sphere) {
+      for (const char* n : {"x1", "x2", "x3", "v1", "v2", "v3"}) taken.push_back(n);
+    } else {
+      for (int i = 1; i <= 3; ++i)
+        for (int j = 1; j <= 3; ++j) taken.push_back("R" + std::to_string(i) + std::to_string(j));
+      for (const char* n : {"w1", "w2", "w3"}) taken.push_back(n);
+    }
+    const std::size_t variables = taken.size();
+    for (const auto& f : expression_detail::functions()) taken.push_back(f.name);
+    for (const auto& [k, v] : *ps->as_table()) {
+      const std::string name(k.str());
+      const auto at = std::find(taken.begin(), taken.end(), name);
+      if (at != taken.end())
+        throw InputError(r.where(&v, "map.params." + name) + ": the name '" + echo(name) + "' is " +
+                         (name == "pi"                                                ? "reserved for the constant"
+                          : static_cast<std::size_t>(at - taken.begin()) >= variables ? "a function name"
+                                                                                       : "a variable of the map's "
+                                                                                         "expressions") +
+                         "; expected another name");
+      params.push_back({name, r.number(v, "map.params." + name)});
+    }
   }
   std::string name = "written";
   if (const toml::node* n = m.get("name")) name = r.string(*n, "map.name");
@@ -541,6 +596,34 @@ void read_written_map(const Reader& r, const toml::table& root, Method& me) {
   }
 }
 
+// method = "galerkin" and form = "newmark" use no map. The scene's own map and theta
+// are then set aside (checked, unused; the report says map "none" or "newmark"), so
+// that one --set switches the method of any scene. A map or theta given with --set
+// beside such a method, or a theta written in the same file as the method, would
+// change nothing: refused, naming the keys (after every rule between values, which
+// says what is wrong with the method itself first).
+void refuse_unused_map_keys(const Reader& r, const toml::table& in, const Method& me) {
+  if (!(me.galerkin || me.form == Form::newmark)) return;
+  const toml::node* m = in.get("map");
+  const toml::node* th = in.get("theta");
+  const toml::node* chooser = me.galerkin ? in.get("method") : in.get("form");
+  const bool chooser_in_file = chooser && !Reader::from_override(chooser);
+  std::vector<std::pair<const toml::node*, std::string>> unused;
+  if (m && Reader::from_override(m)) unused.push_back({m, "integrator.map"});
+  if (th && (Reader::from_override(th) || chooser_in_file)) unused.push_back({th, "integrator.theta"});
+  if (unused.empty()) return;
+  const bool one = unused.size() == 1;
+  const std::string keys = one ? unused[0].second : unused[0].second + " and " + unused[1].second;
+  throw InputError(r.where(unused[0].first, unused[0].second) + ": " +
+                   (me.galerkin ? "method = \"galerkin\" takes no map (its discrete Lagrangian is built from "
+                                  "polynomial curves and quadrature)"
+                                : "form = \"newmark\" steps by its own map on TQ (integrator.gamma and "
+                                  "integrator.beta)") +
+                   ", so " + keys + " would change nothing; " + (one ? "it applies" : "they apply") + " to " +
+                   (me.galerkin ? "method = \"map\"" : "the other forms") +
+                   " (a map written in the scene file is kept, unused, when --set switches the method)");
+}
+
 // [integrator]: the method's keys whose presence matters (a key that applies only to
 // another choice is refused where it is written); the rules between values are
 // validate()'s.
@@ -562,7 +645,8 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     const std::string method = r.string(*m, "integrator.method");
     if (method != "map" && method != "galerkin")
       throw InputError(r.where(m, "integrator.method") + ": got \"" + echo(method) +
-                       "\", expected \"map\" (the map's own step) or \"galerkin\" (Galerkin discrete Lagrangians)");
+                       "\", expected \"map\" (the map's own step) or \"galerkin\" (Galerkin discrete Lagrangians)" +
+                       did_you_mean(method, {"map", "galerkin"}));
     me.galerkin = method == "galerkin";
   }
   for (const char* key : {"stages", "quadrature"}) {
@@ -582,7 +666,8 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     const std::string q = r.string(*qu, "integrator.quadrature");
     if (q != "gauss" && q != "lobatto")
       throw InputError(r.where(qu, "integrator.quadrature") + ": got \"" + echo(q) +
-                       "\", expected \"gauss\" (s points) or \"lobatto\" (s + 1 points)");
+                       "\", expected \"gauss\" (s points) or \"lobatto\" (s + 1 points)" +
+                       did_you_mean(q, {"gauss", "lobatto"}));
     me.quadrature = q == "gauss" ? QuadratureKind::gauss : QuadratureKind::lobatto;
   }
   // the map: needed by every form but newmark and by every method but galerkin, which
@@ -651,7 +736,8 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
   if (const toml::node* so = in.get("solver")) {
     const std::string solver = r.string(*so, "integrator.solver");
     if (solver != "newton" && solver != "tiny")
-      throw InputError(r.where(so, "integrator.solver") + ": got \"" + echo(solver) + "\", expected \"newton\" or \"tiny\"");
+      throw InputError(r.where(so, "integrator.solver") + ": got \"" + echo(solver) + "\", expected \"newton\" or \"tiny\"" +
+                       did_you_mean(solver, {"newton", "tiny"}));
     me.solver = solver == "tiny" ? SolverKind::tiny : SolverKind::newton;
   }
   if (const toml::node* mi = in.get("max_iterations")) {
@@ -669,6 +755,10 @@ void read_integrator(const Reader& r, const toml::table& in, Problem& pr, Method
     me.tolerance = r.number(*tol, "integrator.tolerance");
   }
   if (const toml::node* us = in.get("use_structure")) {
+    if (pr.boundary_value)
+      throw InputError(r.where(us, "integrator.use_structure") + ": a boundary-value problem is one solve of every "
+                       "node by Ceres' sparse least squares, whatever the system's structure; "
+                       "integrator.use_structure applies to the steps of initial-value problems");
     if (!us->is_boolean())
       throw InputError(r.where(us, "integrator.use_structure") + ": got " + Reader::describe(*us) +
                        ", expected true or false");
@@ -854,7 +944,8 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     if (name != "system" && name != "initial" && name != "integrator" && name != "output" && name != "problem" &&
         name != "map")
       throw InputError(r.where(&v, name) +
-                       ": unknown section; expected system, initial, integrator, map, output, problem");
+                       ": unknown section; expected system, initial, integrator, map, output, problem" +
+                       did_you_mean(name, {"system", "initial", "integrator", "map", "output", "problem"}));
   }
 
   // [system]
@@ -893,8 +984,10 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
         if (!pr.params.count(name)) {
           std::string names;
           for (const auto& p : pr.system->params) names += (names.empty() ? "" : ", ") + p.name;
+          std::vector<std::string> known;
+          for (const auto& p : pr.system->params) known.push_back(p.name);
           throw InputError(r.where(&v, "system.params." + name) + ": unknown parameter of " + pr.system->name +
-                           "; expected one of: " + names);
+                           "; expected one of: " + names + did_you_mean(name, known));
         }
         pr.params[name] = r.number(v, "system.params." + name);
       }
@@ -940,7 +1033,12 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     if (s.csv.empty()) throw InputError(r.where(c, "output.csv") + ": expected a file name, got an empty string");
   }
   if (const toml::node* e = out.get("every")) s.every = r.integer(*e, "output.every", 1);
-  if (const toml::node* e = out.get("monitor_every")) s.monitor_every = r.integer(*e, "output.monitor_every", 1);
+  if (const toml::node* e = out.get("monitor_every")) {
+    if (pr.boundary_value)
+      throw InputError(r.where(e, "output.monitor_every") + ": a boundary-value problem evaluates the energy at "
+                       "every node of its solution; output.monitor_every applies to initial-value runs");
+    s.monitor_every = r.integer(*e, "output.monitor_every", 1);
+  }
 
   // every rule between values, with the position of the key it names
   try {
@@ -953,6 +1051,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
     const std::string rest = msg.substr(key.size() + 2);
     throw InputError((n ? r.where(n, key) : path + ": key '" + key + "'") + ": " + rest);
   }
+  refuse_unused_map_keys(r, r.section(root, "integrator", true), me);
   return s;
 }
 

@@ -240,7 +240,29 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   }
   try {
     w->check_names();
-  } catch (const std::invalid_argument& e) {
+  } catch (const WrittenSystem::NameError& e) {
+    // blamed on the key that gave the name: a parameter (or list) on its own key, a
+    // definition on its entry, a coordinate (or the velocity or momentum named after
+    // it) on system.coordinates
+    const toml::node* params = sys.get("params");
+    const toml::node* at = nullptr;
+    std::string key;
+    if (e.role.rfind("parameter", 0) == 0 && params && params->is_table() && params->as_table()->get(e.name)) {
+      at = params->as_table()->get(e.name);
+      key = "system.params." + e.name;
+    } else if (e.role == "definition" && defs && defs->is_array()) {
+      for (std::size_t i = 0; i < w->definitions.size() && !at; ++i)
+        if (w->definitions[i].first == e.name) {
+          at = defs->as_array()->get(i);
+          key = "system.definitions[" + std::to_string(i) + "]";
+        }
+    }
+    if (!at) {
+      at = c ? c : params ? params : sys.get("lagrangian");
+      key = c ? "system.coordinates" : params ? "system.params" : "system.lagrangian";
+    }
+    throw InputError(key_where(path, *at, key) + ": " + e.what());
+  } catch (const std::invalid_argument& e) {  // the number of coordinates for the space
     const toml::node* at = c ? c : sys.get("params") ? sys.get("params") : sys.get("lagrangian");
     throw InputError(key_where(path, *at, c ? "system.coordinates" : "system.params") + ": " + e.what());
   }

@@ -770,3 +770,148 @@ BOOST_AUTO_TEST_CASE(the_harness_removes_its_temporary_folder) {
   }
   BOOST_TEST(!std::filesystem::exists(path));
 }
+
+// A key that the method or problem chosen does not use is refused, naming it, rather
+// than run without it: method = "galerkin" and form = "newmark" take no map, so a map
+// or theta given with --set beside them (or a theta written in the same file as the
+// method) would change nothing; use_structure does not shape a boundary-value solve;
+// a convergence study writes no rows. The scene's own map stays allowed when --set
+// switches the method (it is set aside, and the report says so: map "none").
+BOOST_AUTO_TEST_CASE(a_key_the_chosen_method_does_not_use_is_refused) {
+  const std::string p = scene("pendulum.toml"), kg = scene("kepler-galerkin.toml");
+  const std::string in_file = write_scene(
+      "galerkin_theta.toml",
+      "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
+      "[integrator]\nmethod = \"galerkin\"\nmap = \"theta\"\ntheta = 0.2\nstep = 0.1\nsteps = 10\n");
+  const std::string bvp = scene("pendulum_bvp.toml");
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::vector<Case> cases = {
+      {"galerkin with a map and theta from --set",
+       {"run", p, "--set", "integrator.method=galerkin", "--set", "integrator.map=theta", "--set",
+        "integrator.theta=0.2"},
+       2,
+       {"(from --set): key 'integrator.map'", "integrator.map and integrator.theta", "method = \"galerkin\"",
+        "would change nothing"}},
+      {"a map from --set on a Galerkin scene", {"run", kg, "--set", "integrator.map=midpoint"}, 2,
+       {"key 'integrator.map'", "method = \"galerkin\" takes no map"}},
+      {"theta written in the file beside method = galerkin", {"run", in_file}, 2,
+       {"galerkin_theta.toml:9:9: key 'integrator.theta'", "method = \"galerkin\""}},
+      {"newmark with a map and theta from --set",
+       {"run", p, "--set", "integrator.form=newmark", "--set", "integrator.map=theta", "--set",
+        "integrator.theta=0.2"},
+       2, {"key 'integrator.map'", "integrator.map and integrator.theta", "form = \"newmark\""}},
+      {"use_structure on a boundary-value problem", {"run", bvp, "--set", "integrator.use_structure=false"}, 2,
+       {"key 'integrator.use_structure'", "boundary-value"}},
+      {"[output] keys given to converge", {"converge", p, "--set", "output.csv=x.csv", "--steps-list", "10,20"}, 2,
+       {"--set output.csv", "writes no rows"}},
+      {"monitor_every on a boundary-value problem", {"run", bvp, "--set", "output.monitor_every=2"}, 2,
+       {"key 'output.monitor_every'", "boundary-value"}},
+      {"a row interval for a run that writes no rows", {"run", h, "--set", "output.every=5"}, 2,
+       {"output.every", "writes no rows"}},
+  };
+  for (const auto& c : cases) check(c);
+  // --set switching the method of a scene written for a map still works: the scene's
+  // map (and its theta and [map] section) are set aside, and the report says so
+  const std::string csv = temp_dir() + "/switched.csv";
+  const Output g = dvm({"run", p, "--json", "--csv", csv, "--set", "integrator.method=galerkin", "--set",
+                        "integrator.t_end=1"});
+  BOOST_TEST(g.status == 0, g.err);
+  BOOST_TEST(json_string(g.out, "map") == "none");
+  const Output w = dvm({"run", scene("spherical_pendulum_written_map.toml"), "--json", "--csv", csv, "--set",
+                        "integrator.method=galerkin", "--set", "integrator.t_end=1"});
+  BOOST_TEST(w.status == 0, w.err);
+  BOOST_TEST(json_string(w.out, "map") == "none");
+  const Output n = dvm({"run", p, "--json", "--csv", csv, "--set", "integrator.form=newmark", "--set",
+                        "integrator.t_end=1"});
+  BOOST_TEST(n.status == 0, n.err);
+  BOOST_TEST(json_string(n.out, "map") == "newmark");
+}
+
+// Messages that point at the cause: a reserved name used as a parameter is blamed on
+// that parameter's key and line (not on the coordinates); end points on S^2 that are
+// antipodal are bad input (every great circle joins them), not an internal error;
+// check-map refuses a theta below 0 as it does one above 1; a degenerate Lagrangian
+// names the velocities it lacks, a vector of the wrong length the coordinates; a
+// mistyped option costs one line and where the help is, not the whole help; a
+// misspelt key or name gets the nearest known one.
+BOOST_AUTO_TEST_CASE(messages_point_at_the_cause_and_suggest_the_name_meant) {
+  auto written = [](const std::string& params) {
+    return "[system]\ncoordinates = [\"x\"]\nparams = { " + params +
+           " }\nlagrangian = \"m/2*x_dot^2 - x^2/2\"\n"
+           "[initial]\nq = [1.0]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n";
+  };
+  const std::string t = write_scene("param_t.toml", written("m = 1.0, t = 0.0"));
+  const std::string s = write_scene("param_sum.toml", written("m = 1.0, sum = 2.0"));
+  const std::string pi = write_scene("param_pi.toml", written("m = 1.0, pi = 3.0"));
+  const std::string twice = write_scene("param_x.toml", written("m = 1.0, x_dot = 3.0"));
+  const std::string antipodal = write_scene(
+      "antipodal.toml",
+      "[system]\nbuiltin = \"spherical-pendulum\"\n[problem]\nkind = \"boundary-value\"\n"
+      "q_final = [-0.6, 0.0, 0.8]\nsteps = 20\n[initial]\nq = [0.6, 0.0, -0.8]\n"
+      "[integrator]\nmap = \"sphere-exp\"\nstep = 0.05\n");
+  const std::string h = write_scene("h.toml", kHarmonic);
+  const std::string misspelt_key = write_scene(
+      "lagrangain.toml", "[system]\ncoordinates = [\"x\"]\nlagrangain = \"x_dot^2/2 - x^2/2\"\n"
+                         "[initial]\nq = [1.0]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n");
+  const std::vector<Case> cases = {
+      {"parameter t", {"run", t}, 2, {"param_t.toml:3:25: key 'system.params.t'", "reserved (time)"}},
+      {"parameter sum", {"run", s}, 2, {"param_sum.toml:3:27: key 'system.params.sum'", "reserved"}},
+      {"parameter pi", {"run", pi}, 2, {"key 'system.params.pi'", "reserved for the constant"}},
+      {"parameter named as a velocity", {"run", twice}, 2, {"key 'system.params.x_dot'", "used twice"}},
+      {"map parameter named as the map's variable",
+       {"run", scene("pendulum_written_map.toml"), "--set", "map.params.x=1.0"}, 2,
+       {"key 'map.params.x'", "a variable of the map's expressions"}},
+      {"map parameter named as a function",
+       {"run", scene("spherical_pendulum_written_map.toml"), "--set", "map.params.sin=1.0"}, 2,
+       {"key 'map.params.sin'", "a function name"}},
+      {"antipodal end points on S^2", {"run", antipodal}, 2,
+       {"antipodal.toml:5:11: key 'problem.q_final'", "antipodal to initial.q", "great circle"}},
+      {"check-map --theta below 0", {"check-map", "theta", "--theta", "-0.5"}, 2, {"--theta", "[0, 1]"}},
+      {"check-map --theta above 1", {"check-map", "theta", "--theta", "2"}, 2, {"--theta", "[0, 1]"}},
+      {"t_ned", {"run", h, "--set", "integrator.t_ned=1.0"}, 2, {"integrator.t_ned", "did you mean \"t_end\"?"}},
+      {"lagrangain", {"run", misspelt_key}, 2, {"system.lagrangain", "did you mean \"lagrangian\"?"}},
+      {"mid-point", {"run", h, "--set", "integrator.map=mid-point"}, 2, {"did you mean \"midpoint\"?"}},
+      {"kahan_li8", {"run", h, "--set", "integrator.composition=kahan_li8"}, 2, {"did you mean \"kahan-li8\"?"}},
+      {"builtin pendulm", {"run", h, "--set", "system.builtin=pendulm"}, 2, {"did you mean \"pendulum\"?"}},
+      {"form hamiltonan", {"run", h, "--set", "integrator.form=hamiltonan"}, 2, {"did you mean \"hamiltonian\"?"}},
+  };
+  for (const auto& c : cases) {
+    check(c);
+    BOOST_TEST(dvm(c.args).err.find("internal error") == std::string::npos, c.name);
+  }
+  // a name far from every known one gets no guess
+  BOOST_TEST(dvm({"run", h, "--set", "integrator.map=zzzzzz"}).err.find("did you mean") == std::string::npos);
+  // the antipodal problem nearly: 1e-6 apart from antipodal, it solves
+  const Output near = dvm({"run", antipodal, "--set", "problem.q_final=[-0.6, 0.000001, 0.7999999999993750]"});
+  BOOST_TEST(near.status == 0, near.err);
+
+  // a degenerate Lagrangian names the velocities along which d2L/dv2 vanishes
+  auto degenerate = [](const std::string& name, const std::string& lagrangian) {
+    return write_scene(name, "[system]\ncoordinates = [\"x\", \"y\"]\nlagrangian = \"" + lagrangian +
+                                 "\"\n[initial]\nq = [1.0, 0.5]\nv = [0.0, 0.0]\n"
+                                 "[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 10\n");
+  };
+  check({"no y_dot in L", {"run", degenerate("no_y_dot.toml", "x_dot^2/2 - x^2/2 - y^2/2")}, 2,
+         {"degenerate at the initial state", "no term of second order in y_dot"}});
+  check({"only x_dot + y_dot in L", {"run", degenerate("sum_dot.toml", "(x_dot + y_dot)^2/2 - x^2/2 - y^2/2")}, 2,
+         {"degenerate at the initial state", "a combination of x_dot and y_dot"}});
+  // a vector of the wrong length is described by the coordinates' names
+  check({"q of the wrong length", {"run", degenerate("short_q.toml", "x_dot^2/2 + y_dot^2/2"), "--set",
+                                   "initial.q=[1.0]"},
+         2, {"expected 2 (one per coordinate: x, y)"}});
+
+  // a mistyped option: the message, the nearest option and where the help is
+  for (const std::vector<std::string>& args :
+       {std::vector<std::string>{"run", h, "--cvs", "x.csv"}, std::vector<std::string>{"converge", h, "--t_end", "1"},
+        std::vector<std::string>{"check-map", "theta", "--thetta", "0.3"}}) {
+    const Output o = dvm(args);
+    const std::string command = args[0];
+    BOOST_TEST_CONTEXT(command << " -> " << o.err) {
+      BOOST_TEST(o.status == 2);
+      BOOST_TEST(std::count(o.err.begin(), o.err.end(), '\n') == 2);
+      BOOST_TEST(o.err.find("unknown option") != std::string::npos);
+      BOOST_TEST(o.err.find("did you mean") != std::string::npos);
+      BOOST_TEST(o.err.find("see 'dvm " + command + " --help'") != std::string::npos);
+    }
+  }
+}

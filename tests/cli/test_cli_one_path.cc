@@ -468,13 +468,18 @@ BOOST_AUTO_TEST_CASE(converge_measures_galerkin_against_a_reference_that_reports
 }
 
 // On S^2 and SO(3), and in the Hamiltonian form, converge makes a table (and leaves
-// the scene's CSV unwritten): the triple jump of the sphere's midpoint
-// map is of order 4 on the spherical pendulum, the error measured on the manifold.
+// the scene's CSV unwritten; an [output] key given with --set is refused): the triple
+// jump of the sphere's midpoint map is of order 4 on the spherical pendulum, the error
+// measured on the manifold.
 BOOST_AUTO_TEST_CASE(converge_works_on_curved_spaces_and_in_every_form) {
   const std::string csv = temp_dir() + "/not_written.csv";
-  const Output s = dvm({"converge", scene("spherical-pendulum.toml"), "--t-end", "1", "--steps-list", "10,20,40,80",
-                        "--set", "integrator.composition=triple-jump", "--set", "output.csv=\"" + csv + "\"",
-                        "--json"});
+  std::string text = slurp(scene("spherical-pendulum.toml"));
+  const auto out = text.find("[output]");
+  BOOST_REQUIRE(out != std::string::npos);
+  text = text.substr(0, out) + "[output]\ncsv = \"" + csv + "\"\n";
+  const std::string with_csv = write_scene("spherical_with_csv.toml", text);
+  const Output s = dvm({"converge", with_csv, "--t-end", "1", "--steps-list", "10,20,40,80", "--set",
+                        "integrator.composition=triple-jump", "--json"});
   BOOST_TEST_MESSAGE("spherical pendulum, triple jump: fitted order " << fitted(s) << "\n" << s.out);
   BOOST_TEST(s.status == 0, s.err);
   BOOST_TEST(std::fabs(fitted(s) - 4.0) <= 0.3);
@@ -1640,4 +1645,102 @@ BOOST_AUTO_TEST_CASE(retractions_written_on_curved_spaces) {
       BOOST_TEST(o.err.find(r.says) != std::string::npos, o.err);
     }
   }
+}
+
+// The help describes the program that runs. converge: the reference its JSON reports
+// (Galerkin Gauss s = 6, or kahan-li8 of the midpoint map) and the exclusion it applies
+// (10 times the reference's accuracy), not another method or a fixed threshold; run:
+// the column count it states for each space is the one the .npy files have.
+BOOST_AUTO_TEST_CASE(help_describes_what_the_program_does) {
+  const Output c = dvm({"converge", "--help"});
+  BOOST_TEST(c.status == 0);
+  BOOST_TEST(c.out.find("Runge-Kutta") == std::string::npos, c.out);
+  BOOST_TEST(c.out.find("1e-12") == std::string::npos, c.out);
+  for (const char* said : {"Galerkin Gauss s = 6", "kahan-li8", "10 times the reference's accuracy", "warnings"})
+    BOOST_TEST(c.out.find(said) != std::string::npos, "converge --help does not say '" << said << "'");
+  // the references it names are the ones the studies use
+  const Output g = dvm({"converge", scene("double_pendulum.toml"), "--t-end", "1", "--steps-list", "20,40", "--json"});
+  BOOST_TEST(g.status == 0, g.err);
+  BOOST_TEST(json_string(g.out, "reference").rfind("galerkin gauss s=6", 0) == 0, g.out);
+  const Output k = dvm({"converge", scene("spherical-chain.toml"), "--t-end", "0.1", "--steps-list", "4,8", "--json"});
+  BOOST_TEST(k.status == 0, k.err);
+  BOOST_TEST(json_string(k.out, "reference").find("kahan-li8") != std::string::npos, k.out);
+
+  const Output r = dvm({"run", "--help"});
+  BOOST_TEST(r.status == 0);
+  // the help's words with its line breaks and indentation as single spaces
+  std::string words;
+  for (char ch : r.out)
+    if (!std::isspace(static_cast<unsigned char>(ch)))
+      words += ch;
+    else if (!words.empty() && words.back() != ' ')
+      words += ' ';
+  BOOST_TEST(r.out.find("(2n+2)") == std::string::npos);
+  BOOST_TEST(r.out.find("[--npy PATH]") != std::string::npos);
+  struct Stated {
+    const char* scene;
+    const char* words;  // what the help says of that system's columns
+    long columns;
+  };
+  for (const Stated& s : {Stated{"spherical-pendulum.toml", "9 for the spherical pendulum", 9},
+                          Stated{"heavy-top.toml", "10 for the heavy top", 10},
+                          Stated{"rigid-body.toml", "12 for rigid-body", 12},
+                          Stated{"kepler.toml", "2n + 2 columns on R^n", 6},
+                          Stated{"heavy_top_written.toml", "written ones too: the vertical one, J3", 10}}) {
+    BOOST_TEST_CONTEXT(s.scene) {
+      BOOST_TEST(words.find(s.words) != std::string::npos);
+      const std::string npy = temp_dir() + "/columns.npy";
+      const Output o = dvm({"run", scene(s.scene), "--quiet", "--npy", npy, "--csv", temp_dir() + "/columns.csv",
+                            "--set", "integrator.t_end=1.0"});
+      BOOST_TEST(o.status == 0, o.err);
+      const std::string data = slurp(npy);
+      const auto shape = data.find("'shape': (");
+      BOOST_REQUIRE(shape != std::string::npos);
+      BOOST_TEST(std::strtol(data.c_str() + data.find(',', shape) + 1, nullptr, 10) == s.columns);
+    }
+  }
+}
+
+// A study whose runs are not all in the asymptotic range says so: kahan-li8 (order 8)
+// on the pendulum to t = 10 with 10, 20 and 40 steps observes orders 12.6 and 8.9 and
+// fits 10.8; the warning goes to stderr (text) or "warnings" (JSON). A study in the
+// asymptotic range (Kepler to t = 1, orders 8.09 and 8.02) has none. The first row
+// has no order: "-" in the table, null in the JSON.
+BOOST_AUTO_TEST_CASE(converge_warns_when_the_orders_disagree_with_the_fit) {
+  const std::vector<std::string> far = {"converge", scene("pendulum.toml"), "--set", "integrator.composition=kahan-li8",
+                                        "--t-end", "10", "--steps-list", "10,20,40"};
+  const Output t = dvm(far);
+  BOOST_TEST(t.status == 0, t.err);
+  BOOST_TEST(t.err.find("warning") != std::string::npos, t.err);
+  BOOST_TEST(t.err.find("asymptotic range") != std::string::npos, t.err);
+  BOOST_TEST(t.out.find("nan") == std::string::npos, t.out);
+  // the first row of the table: steps, h, error, then "-" for the order
+  std::istringstream table(t.out);
+  std::string line;
+  std::getline(table, line);  // the title
+  std::getline(table, line);  // the column names
+  std::getline(table, line);
+  std::istringstream first(line);
+  std::string steps, h, error, order;
+  first >> steps >> h >> error >> order;
+  BOOST_TEST(steps == "10");
+  BOOST_TEST(order == "-", line);
+
+  std::vector<std::string> far_json = far;
+  far_json.push_back("--json");
+  const Output j = dvm(far_json);
+  BOOST_TEST(j.status == 0, j.err);
+  const Json study = parse_json(j.out);
+  BOOST_REQUIRE(study.contains("warnings"));
+  BOOST_TEST(study.at("warnings").size() == 1u, j.out);
+  BOOST_TEST(study.at("runs").at(0).at("order").is_null());
+  BOOST_TEST(j.err.find("warning") == std::string::npos, j.err);
+
+  const Output ok = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list", "10,20,40",
+                         "--json"});
+  BOOST_TEST(ok.status == 0, ok.err);
+  const Json good = parse_json(ok.out);
+  BOOST_TEST((good.contains("warnings") && good.at("warnings").empty()), ok.out);
+  const Output okt = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list", "10,20,40"});
+  BOOST_TEST(okt.err.find("warning") == std::string::npos, okt.err);
 }
