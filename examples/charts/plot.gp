@@ -20,12 +20,12 @@ do for [k=1:12] {
 }
 
 # The 0-based indices of the blocks of file f (one block per method, its title on its
-# first line) whose method is of the order class c: "high" (order 6 and more: Galerkin
-# s = 4 and 6, the Kahan-Li compositions), "four" (triple jump, McLachlan's 4th order
-# methods, Galerkin s = 2), else "low".
-class_blocks(f, c) = system(sprintf("awk -v c=%s 'BEGIN{b=-1;inb=0} NF==0 {inb=0; next} /^#/ {next} \
-  !inb {inb=1; b++; t=$0; k=(t ~ /s=4|s=6|kahan-li/) ? \"high\" : (t ~ /triple-jump|mclachlan|s=2/) ? \"four\" : \"low\"; \
-  if (k==c) printf \"%%d \", b}' '%s'", c, f))
+# first line) whose method is of the order class c, by the order work_precision.csv
+# gives the method on problem p: "high" (6 and more), "four" (3 to 5), else "low".
+class_blocks(f, p, c) = system(sprintf("awk -F, -v c=%s -v p='%s' 'NR==FNR { if ($1==p) ord[$2]=$4; next } \
+  BEGIN{b=-1;inb=0} NF==0 {inb=0; next} /^#/ {next} \
+  !inb {inb=1; b++; t=$0; sub(/^\"/, \"\", t); sub(/\".*$/, \"\", t); o=ord[t]+0; \
+  k=(o>=6) ? \"high\" : (o>=3) ? \"four\" : \"low\"; if (k==c) printf \"%%d \", b}' '%s/work_precision.csv' '%s'", c, p, dir, f))
 class_title(c) = c eq "low" ? "order 1 and 2" : (c eq "four" ? "order 4" : "order 6 to 12")
 
 exists_file(f) = system(sprintf("test -s '%s' && echo 1 || echo 0", f)) eq "1"
@@ -48,8 +48,8 @@ do for [kind in "png svg"] {
       set ylabel "error"
       set key bottom left font ",9" noenhanced
       do for [c in "low four high"] {
-        d = class_blocks(file, c)
-        q = exists_file(peers) ? class_blocks(peers, c) : ""
+        d = class_blocks(file, p, c)
+        q = exists_file(peers) ? class_blocks(peers, p, c) : ""
         nd = words(d)
         set title class_title(c)
         if (nd + words(q) == 0) {

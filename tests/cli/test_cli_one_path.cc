@@ -1744,3 +1744,47 @@ BOOST_AUTO_TEST_CASE(converge_warns_when_the_orders_disagree_with_the_fit) {
   const Output okt = dvm({"converge", scene("kepler-composition.toml"), "--t-end", "1", "--steps-list", "10,20,40"});
   BOOST_TEST(okt.err.find("warning") == std::string::npos, okt.err);
 }
+
+BOOST_AUTO_TEST_CASE(solver_iterations_mean_newton_iterations_on_every_path) {
+  // The written double pendulum's midpoint step by Newton's method, its Jacobian formed
+  // once a step (use_structure, the default) or every iteration: the same equation to the
+  // same tolerance, so the same count of iterations to within a few percent, and the
+  // Jacobians formed a separate count, equal to the iterations only in the second.
+  // (Iterations that meant "Jacobians formed" on one path gave 1 a step against 3.)
+  double iterations[2], jacobians[2], steps[2];
+  int k = 0;
+  for (const char* structure : {"true", "false"}) {
+    const Output o = dvm({"run", scene("double_pendulum_written.toml"), "--json", "--quiet", "--set",
+                          std::string("integrator.use_structure=") + structure, "--set", "integrator.t_end=10"});
+    BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+    iterations[k] = json_number(o.out, "solver_iterations");
+    jacobians[k] = json_number(o.out, "jacobians");
+    steps[k] = json_number(o.out, "steps");
+    ++k;
+  }
+  BOOST_TEST(steps[0] == steps[1]);
+  BOOST_TEST(iterations[0] >= 2.0 * steps[0]);  // Newton from the extrapolated guess: about 3 a step
+  BOOST_TEST(std::fabs(iterations[0] - iterations[1]) <= 0.1 * iterations[1]);
+  BOOST_TEST(jacobians[0] <= iterations[0]);
+  BOOST_TEST(jacobians[0] < 0.5 * iterations[0]);  // kept within the step
+  BOOST_TEST(jacobians[1] == iterations[1]);       // formed every iteration
+}
+
+BOOST_AUTO_TEST_CASE(readme_shows_a_work_precision_chart_on_its_first_screens) {
+  // Speed against accuracy is what users judge an integrator by: README.md shows one
+  // work-precision chart (an image the charts write) within its first 60 lines, with a
+  // link to the charts' page.
+  const auto ls = lines_of(slurp(repo_file("README.md")));
+  std::string image, link;
+  for (std::size_t i = 0; i < ls.size() && i < 60; ++i) {
+    const auto at = ls[i].find("](examples/charts/wp_");
+    if (at != std::string::npos && ls[i].rfind("![", at) != std::string::npos)
+      image = ls[i].substr(at + 2, ls[i].find(')', at) - at - 2);
+    if (ls[i].find("](examples/charts/README.md)") != std::string::npos) link = ls[i];
+  }
+  BOOST_REQUIRE_MESSAGE(!image.empty(), "no work-precision image in the first 60 lines of README.md");
+  BOOST_TEST(image.size() > 4);
+  BOOST_TEST(image.substr(image.size() - 4) == ".png");
+  BOOST_TEST(std::filesystem::exists(repo_file(image)), image);
+  BOOST_TEST(!link.empty(), "no link to examples/charts/README.md beside it");
+}
