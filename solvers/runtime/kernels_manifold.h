@@ -1,10 +1,11 @@
 // Kernels for systems on S^2, (S^2)^n and SO(3): the system view (stored coordinates,
 // momentum maps, columns) and make_manifold_run, which picks the step type of the
 // method once. The steps are solved in the chart centred at the current point
-// (solvers/manifold_step.h); their output on each space:
-//   S^2     CSV  t, x, y, z, p0, p1, p2, energy, J3          (J3 = (x cross p)_3)
-//   (S^2)^n CSV  t, x1, y1, z1, ..., p0, ..., energy, J3
-//   SO(3)   CSV  t, qw, qx, qy, qz, pi0, pi1, pi2, energy, m0, m1, m2 (rigid body: the
+// (solvers/manifold_step.h); their output on each space (one rule for the built-ins and
+// the Lagrangians written there: the momentum of position column c is p_c):
+//   S^2     CSV  t, x, y, z, p_x, p_y, p_z, energy, J3          (J3 = (x cross p)_3)
+//   (S^2)^n CSV  t, x1, y1, z1, ..., p_x1, p_y1, p_z1, ..., energy, J3
+//   SO(3)   CSV  t, qw, qx, qy, qz, pi1, pi2, pi3, energy, m0, m1, m2 (rigid body: the
 //                spatial angular momentum R pi) or J3 (heavy top: its vertical part)
 // Included only by the kernels_*.cc translation units.
 #pragma once
@@ -156,14 +157,17 @@ std::vector<std::string> point_columns(const SphericalChain<K>&) {
     for (const char* c : {"x", "y", "z"}) out.push_back(c + std::to_string(i));
   return out;
 }
-// The stored covector's columns: p0, p1, ... (pi0, ... on SO(3)).
+// The stored covector's columns: p_c for each position column c (S^2, (S^2)^K); the
+// body angular momentum pi1, pi2, pi3 on SO(3).
 template <class S>
-std::vector<std::string> covector_columns(const S&) {
-  const char* prefix = std::is_same_v<typename S::Manifold, SO3> ? "pi" : "p";
-  std::vector<std::string> out;
-  for (int i = 0; i < S::Manifold::template Tangent<double>::RowsAtCompileTime; ++i)
-    out.push_back(prefix + std::to_string(i));
-  return out;
+std::vector<std::string> covector_columns(const S& L) {
+  if constexpr (std::is_same_v<typename S::Manifold, SO3>) {
+    return {"pi1", "pi2", "pi3"};
+  } else {
+    std::vector<std::string> out;
+    for (const std::string& c : point_columns(L)) out.push_back("p_" + c);
+    return out;
+  }
 }
 inline std::vector<std::string> momentum_columns(const SphericalPendulum&) { return {"J3"}; }
 inline std::vector<std::string> momentum_columns(const RigidBody&) { return {"m0", "m1", "m2"}; }

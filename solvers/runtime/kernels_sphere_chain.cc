@@ -12,7 +12,7 @@ namespace dvm::factories {
 namespace {
 
 // What a run of the chain at any number of links monitors and writes: the columns of
-// the compiled chain (t, x1, y1, z1, ..., p0, ..., energy, J3).
+// the compiled chain (t, x1, y1, z1, ..., p_x1, p_y1, p_z1, ..., energy, J3).
 struct SphereChainView : kernels::FlatStateView {
   DynamicSphericalChain L;
   // the banded solver of the Legendre inverse: the steps' own (the energy is evaluated
@@ -20,9 +20,9 @@ struct SphereChainView : kernels::FlatStateView {
   std::shared_ptr<ChainCouplingSolve> legendre;
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
-    for (int i = 1; i <= L.links(); ++i)
-      for (const char* x : {"x", "y", "z"}) c.push_back(x + std::to_string(i));
-    for (int i = 0; i < 3 * L.links(); ++i) c.push_back("p" + std::to_string(i));
+    for (const char* prefix : {"", "p_"})
+      for (int i = 1; i <= L.links(); ++i)
+        for (const char* x : {"x", "y", "z"}) c.push_back(prefix + (x + std::to_string(i)));
     c.push_back("energy");
     c.push_back("J3");
     return c;

@@ -9,6 +9,7 @@
 #include <utility>
 
 #include "solvers/runtime/errors.h"
+#include "solvers/runtime/json.h"
 
 namespace dvm {
 
@@ -52,6 +53,22 @@ void Recorder::open(const std::vector<std::string>& columns, double rows) {
                        "written at the end; expected a regular file or a seekable device");
     }
     write_npy_header();
+    if (!npy_.streamed()) {
+      // the column names beside the array, in PATH.json (a .npy header holds none)
+      const std::string names_path = npy_names_path(spec_.npy);
+      if (!spec_.csv.empty() && same_file(spec_.csv, names_path))
+        throw InputError(spec_.csv_source + " '" + spec_.csv + "' is the file of the .npy's column names ('" +
+                         names_path + "', written beside " + spec_.npy_source + "); expected another path");
+      std::string list = "[";
+      for (std::size_t i = 0; i < columns.size(); ++i) list += (i ? ", " : "") + Json::string(columns[i]);
+      list += "]";
+      Json::Object j;
+      j.raw("columns", list).str("npy", std::filesystem::path(spec_.npy).filename().string());
+      const std::string text = j.dump() + "\n";
+      npy_names_.open(names_path, spec_.npy_source + " (its column names, " + names_path + ")",
+                      static_cast<double>(text.size()));
+      std::fwrite(text.data(), 1, text.size(), npy_names_.get());
+    }
   }
   if (spec_.progress && isatty(fileno(stderr))) {
     progress_on_ = true;
@@ -100,7 +117,7 @@ bool Recorder::finish(bool complete, std::string& kept) {
     std::fseek(npy_.get(), 0, SEEK_SET);
     write_npy_header();
   }
-  return finish_outputs(complete, {&csv_, &npy_}, kept);
+  return finish_outputs(complete, {&csv_, &npy_, &npy_names_}, kept);
 }
 
 void Recorder::progress(std::int64_t k, std::int64_t total, double h) {

@@ -6,7 +6,8 @@
 // which steps are written is decided by wants(k, last): the initial state, every
 // `every`-th step and the last. The CSV header is the column names; the .npy file is
 // a little-endian float64 array of shape rows x columns (format version 1.0, header
-// rewritten with the row count when the file is finished).
+// rewritten with the row count when the file is finished), its column names beside it
+// in PATH.json (written, kept or discarded with it; not for a stream such as -).
 #pragma once
 
 #include <chrono>
@@ -30,6 +31,10 @@ struct OutputSpec {
   std::int64_t monitor_every = 1;
   bool progress = false;                // progress on stderr when it is a terminal
 };
+
+// The file beside a .npy file written to a path that holds its column names, as JSON
+// {"columns": [...], "npy": FILE NAME}: PATH.json.
+inline std::string npy_names_path(const std::string& npy) { return npy + ".json"; }
 
 class Recorder {
  public:
@@ -63,7 +68,7 @@ class Recorder {
  private:
   void write_npy_header();
   OutputSpec spec_;
-  OutputFile csv_, npy_;
+  OutputFile csv_, npy_, npy_names_;  // npy_names_: the .npy's column names (PATH.json)
   int columns_ = 0;
   long long npy_rows_ = 0;
   bool progress_on_ = false, progress_shown_ = false;

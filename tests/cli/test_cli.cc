@@ -239,11 +239,11 @@ BOOST_AUTO_TEST_CASE(manifold_scenes_run_and_keep_their_invariants) {
     const char* header;
   };
   const std::vector<Case> cases = {
-      {"spherical-pendulum.toml", "max_abs_vertical_angular_momentum_error", "t,x,y,z,p0,p1,p2,energy,J3"},
-      {"rigid-body.toml", "max_abs_spatial_angular_momentum_error", "t,qw,qx,qy,qz,pi0,pi1,pi2,energy,m0,m1,m2"},
-      {"heavy-top.toml", "max_abs_vertical_angular_momentum_error", "t,qw,qx,qy,qz,pi0,pi1,pi2,energy,J3"},
+      {"spherical-pendulum.toml", "max_abs_vertical_angular_momentum_error", "t,x,y,z,p_x,p_y,p_z,energy,J3"},
+      {"rigid-body.toml", "max_abs_spatial_angular_momentum_error", "t,qw,qx,qy,qz,pi1,pi2,pi3,energy,m0,m1,m2"},
+      {"heavy-top.toml", "max_abs_vertical_angular_momentum_error", "t,qw,qx,qy,qz,pi1,pi2,pi3,energy,J3"},
       {"spherical-chain.toml", "max_abs_vertical_angular_momentum_error",
-       "t,x1,y1,z1,x2,y2,z2,x3,y3,z3,p0,p1,p2,p3,p4,p5,p6,p7,p8,energy,J3"}};
+       "t,x1,y1,z1,x2,y2,z2,x3,y3,z3,p_x1,p_y1,p_z1,p_x2,p_y2,p_z2,p_x3,p_y3,p_z3,energy,J3"}};
   for (const auto& c : cases) {
     const std::string csv = temp_dir() + "/" + c.scene + ".csv";
     // a shorter run keeps the suite fast: 2000 steps
@@ -920,7 +920,7 @@ BOOST_AUTO_TEST_CASE(boundary_value_problem_on_the_sphere) {
     std::ifstream f(csv);
     std::string header;
     std::getline(f, header);
-    BOOST_TEST(header == "t,x,y,z,p0,p1,p2,energy,J3");
+    BOOST_TEST(header == "t,x,y,z,p_x,p_y,p_z,energy,J3");
   }
   // end points off the sphere are refused with the defect
   const Output bad = dvm({"run", bvp, "--set", "problem.q_final=[0.0, 0.6, -0.9]"});

@@ -173,7 +173,7 @@ BOOST_AUTO_TEST_CASE(galerkin_on_the_sphere_matches_an_order_8_composition) {
   std::ifstream csv(temp_dir() + "/m.csv");
   std::string header;
   std::getline(csv, header);
-  BOOST_TEST(header == "t,x,y,z,p0,p1,p2,energy,J3");
+  BOOST_TEST(header == "t,x,y,z,p_x,p_y,p_z,energy,J3");
 }
 
 BOOST_AUTO_TEST_CASE(galerkin_on_so3_matches_an_order_8_composition) {

@@ -233,6 +233,8 @@ BOOST_AUTO_TEST_CASE(a_failed_run_leaves_no_file_at_the_final_path) {
   // the rows of the completed steps are kept under a name that says so
   BOOST_TEST(count_lines(csv + ".partial") == 2 + static_cast<std::size_t>(steps));  // header, t = 0, each step
   BOOST_TEST(file_exists(npy + ".partial"));
+  BOOST_TEST(!file_exists(npy + ".json"));  // the column names go with the rows
+  BOOST_TEST(file_exists(npy + ".json.partial"));
   BOOST_TEST(o.err.find(csv + ".partial") != std::string::npos, o.err);
   // an older complete file at the final path is kept as it was
   std::ofstream(csv) << "old\n";
@@ -252,6 +254,8 @@ BOOST_AUTO_TEST_CASE(a_failed_run_leaves_no_file_at_the_final_path) {
   const std::string bytes = slurp(npy);
   BOOST_TEST(bytes.size() > 128u);
   BOOST_TEST(bytes.find("'shape': (") != std::string::npos);
+  BOOST_TEST(slurp(npy + ".json").find("\"columns\": [\"t\", \"q0\", \"p0\", \"energy\"]") != std::string::npos,
+             slurp(npy + ".json"));
   // permissions as a plain file (not mkstemp's 0600)
   struct stat st {};
   BOOST_TEST(stat(csv.c_str(), &st) == 0);

@@ -194,9 +194,16 @@ BOOST_AUTO_TEST_CASE(expression_errors_point_at_line_and_column) {
 }
 
 BOOST_AUTO_TEST_CASE(npy_output_holds_the_csv_rows) {
-  const std::string npy = temp_dir() + "/k.npy";
-  const Output o = dvm({"run", scene("kepler.toml"), "--json", "--npy", npy, "--set", "output.every=100"});
+  const std::string npy = temp_dir() + "/k.npy", csv = temp_dir() + "/k.csv";
+  const Output o = dvm({"run", scene("kepler.toml"), "--json", "--npy", npy, "--csv", csv, "--set", "output.every=100"});
   BOOST_TEST(o.status == 0, o.err);
+  // the column names beside it, in k.npy.json: the CSV's header
+  const Json names = parse_json(slurp(npy + ".json"));
+  std::string joined;
+  for (const Json& c : names.at("columns")) joined += (joined.empty() ? "" : ",") + c.get<std::string>();
+  const std::string text = slurp(csv);
+  BOOST_TEST(joined == text.substr(0, text.find('\n')));
+  BOOST_TEST(names.at("npy").get<std::string>() == "k.npy");
   const std::string bytes = slurp(npy);
   BOOST_REQUIRE(bytes.size() > 10);
   BOOST_TEST(bytes.compare(0, 6, "\x93NUMPY") == 0);
