@@ -909,23 +909,23 @@ class WrittenDynamic {
   bool separable() const { return parts_->separable; }
   // v = FL^{-1}(q, p) where the text's structure gives it by a linear solve: v = M^{-1} p
   // for a separable L (M constant, factored once), and v = M(q)^{-1} p for a text that is
-  // quadratic in the velocities, L = v^T M(q) v / 2 + U(q) (p = M(q) v; M(q) = d2L/dv2 at
-  // any v, formed by one Hessian at v = 0 and factored). Returns false otherwise, and
+  // quadratic in the velocities, L = v^T M(q) v / 2 + U(q) (p = M(q) v; column i of M(q)
+  // is L_v(q, e_i), a gradient each, then factored). Returns false otherwise, and
   // where M(q) is singular: Newton's method then (which reports the degeneracy).
   bool closed_velocity(const DynIn& q, const DynIn& p, DynOut v) const {
     if (parts_->separable) {
       parts_->velocity(p, v);
       return true;
     }
-    if (!parts_->split.quadratic || mass_.zero.size() != dim()) return false;
+    if (mass_.unit.size() != dim()) return false;  // not quadratic in the velocities
     Mass& m = mass_;
-    for (int i = 0; i < dim(); ++i) {  // column i of M(q) is L_v(q, e_i): a gradient each
-      m.zero[i] = 1.0;
-      gradient(q, m.zero, Lq_, Lv_);
-      m.Lvv.col(i) = Lv_;
-      m.zero[i] = 0.0;
+    for (int i = 0; i < dim(); ++i) {
+      m.unit[i] = 1.0;
+      gradient(q, m.unit, Lq_, Lv_);
+      m.M.col(i) = Lv_;
+      m.unit[i] = 0.0;
     }
-    if (!m.lu.factor(m.Lvv)) return false;
+    if (!m.lu.factor(m.M)) return false;
     m.lu.solve(p, v);
     return v.allFinite();
   }
@@ -977,9 +977,9 @@ class WrittenDynamic {
   // Workspace of closed_velocity for a text quadratic in the velocities (M(q) and its LU).
   struct Mass {
     Mass() = default;
-    explicit Mass(int n) : zero(Eigen::VectorXd::Zero(n)), Lqq(n, n), Lqv(n, n), Lvv(n, n), lu(n) {}
-    Eigen::VectorXd zero;
-    Eigen::MatrixXd Lqq, Lqv, Lvv;
+    explicit Mass(int n) : unit(Eigen::VectorXd::Zero(n)), M(n, n), lu(n) {}
+    Eigen::VectorXd unit;  // e_i, zero between uses
+    Eigen::MatrixXd M;
     DenseLU lu;
   };
   std::shared_ptr<const WrittenSystem> system_;

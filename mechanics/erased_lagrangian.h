@@ -7,7 +7,7 @@
 // evaluates L in, and velocity(q, p), the inverse Legendre map. Here each of those is a
 // virtual function, one per scalar type of ErasedScalars<N> (double and the Jets the
 // steps nest: seeds of 1, N, 2N and 3N directions, and those nested once), implemented
-// once per system by Model<S> with the system's own code: its closed-form gradient
+// once per system by ModelOf<S> with the system's own code: its closed-form gradient
 // where it has one, automatic differentiation otherwise (lagrangian_gradient), its
 // closed-form velocity or Newton's method on the Legendre map (legendre_inverse). A step
 // calls L a few times per Newton iteration, so the indirect call is paid a few times per

@@ -120,6 +120,7 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
   for (int it = 0; it < opt.max_iterations; ++it) {
     const double xn = norm(x);
     bool fresh = !state.valid || refresh == Refresh::every_iteration;
+    double kept_scale = 0.0;  // the residual's scale with the kept Jacobian (when it serves)
     if (!fresh) {
       eq.residual(x, r);
       s.residual = norm(r);
@@ -131,7 +132,8 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
         fresh = true;
       } else {
         const double Jmax = state.Jmax;
-        fresh = !kept_jacobian_serves(s, last, it, eq.scale(x, Jmax) + opt.absolute_floor, opt,
+        kept_scale = eq.scale(x, Jmax) + opt.absolute_floor;
+        fresh = !kept_jacobian_serves(s, last, it, kept_scale, opt,
                                       [&](StepSummary& probe) {
                                         return newton_verdict_floored(probe, dxn, xn + x0, opt, Jmax);
                                       });
@@ -157,7 +159,7 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
     }
     s.iterations = it + 1;
     const double Jmax = state.Jmax;
-    s.scale = eq.scale(x, Jmax) + opt.absolute_floor;
+    s.scale = fresh ? eq.scale(x, Jmax) + opt.absolute_floor : kept_scale;
     if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
       state.valid = false;
       return fail("non-finite residual or Jacobian");
