@@ -63,7 +63,7 @@ class ChainStep {
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     const int n = chain_.n;
     const double th = map_.theta(), m = chain_.m;
     const double a = h_ * (1.0 - th);    // weight of grad V in F

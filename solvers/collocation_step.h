@@ -170,7 +170,7 @@ class SeparableGaussStep {
   // Forces evaluated by the fixed-point sweeps since construction (s per sweep).
   long forces() const { return forces_; }
 
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary sum;
     const int s = s_;
     parts_.velocity(q0, p0, v0_);
@@ -208,7 +208,7 @@ class SeparableGaussStep {
       if (dn >= dn_prev) break;  // not contracting
       dn_prev = dn;
     }
-    if (!converged) return by_newton(q0, p0, dq, dp, it);
+    if (!converged) return by_newton(t, q0, p0, dq, dp, it);
     // the end point and momentum from the forces of the last sweep
     dq = h_ * v0_;
     dp.setZero(parts_.dim());
@@ -260,7 +260,7 @@ class SeparableGaussStep {
 
   // The step by the generic Galerkin step's simplified Newton iteration, from the
   // guess dq = h v0 + h^2 a(q0) / 2.
-  StepSummary by_newton(const V& q0, const V& p0, V& dq, V& dp, int sweeps) const {
+  StepSummary by_newton(double t, const V& q0, const V& p0, V& dq, V& dp, int sweeps) const {
     guess_.forget();
     if (parts_.dim() > max_newton_dim_) {
       StepSummary f = step_fault("the fixed-point iteration of the Gauss collocation stages does not converge (last "
@@ -274,7 +274,7 @@ class SeparableGaussStep {
     parts_.force(q0, f_);
     parts_.velocity(q0, f_, a_);
     dq = h_ * v0_ + (0.5 * h_ * h_) * a_;
-    StepSummary g = generic_->step(q0, p0, dq, dp);
+    StepSummary g = generic_->step(t, q0, p0, dq, dp);
     g.iterations += sweeps;  // (the sweeps form no Jacobian)
     ++newton_steps_;
     return g;

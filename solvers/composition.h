@@ -72,7 +72,7 @@ class ComposedStep {
   // entry (about h v), the increment on return; dp receives p_S - p_0. The summary
   // adds up the iterations and keeps the worst relative residual; on failure its
   // message names the substep.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary total;
     total.converged = true;
     total.iterations = 0;
@@ -84,13 +84,15 @@ class ComposedStep {
     // Steps that take a guess of the momentum increment too (Hamiltonian steps) get
     // the previous substep's, rescaled likewise (zero for the first).
     V prev = dq, d, e = V::Zero(dq.size());
-    double prev_weight = 1.0;
+    double prev_weight = 1.0, elapsed = 0.0;  // the weights of the substeps done
     for (std::size_t k = 0; k < substeps_.size(); ++k) {
       const double w = substeps_[k].weight;
       d = prev * (w / prev_weight);
       e *= w / prev_weight;
       const V q = q0 + Q.sum, p = p0 + P.sum;
-      const StepSummary s = substeps_[k].adjoint ? dual_[index_[k]].step(q, p, d, e) : plain_[index_[k]].step(q, p, d, e);
+      const double tk = t + elapsed * h_;  // substep k starts there (earlier, after a backward substep)
+      const StepSummary s =
+          substeps_[k].adjoint ? dual_[index_[k]].step(tk, q, p, d, e) : plain_[index_[k]].step(tk, q, p, d, e);
       total.iterations += s.iterations;
       total.jacobians += s.jacobians;
       if (!(s.residual / s.scale <= total.residual / std::fmax(total.scale, 1e-300))) {
@@ -109,6 +111,7 @@ class ComposedStep {
       P.add(e);
       prev = d;
       prev_weight = w;
+      elapsed += w;
     }
     dq = Q.sum;
     dp = P.sum;
@@ -185,7 +188,7 @@ class ComposedLagrangianStep {
 
   // One step: the same contract as CompositionStep::step. The nodes start from the
   // guess split in proportion to the weights.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     const std::size_t S = substeps_.size();
     const int n = static_cast<int>(S) * N;
     std::vector<V> inc(S);  // q_k - q_{k-1}

@@ -239,7 +239,7 @@ class DynamicThetaStep {
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     const int n = K == Eigen::Dynamic ? L_.dim() : K;
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
@@ -433,7 +433,7 @@ class DynamicHamiltonianThetaStep {
 
   // One step from (q0, p0); (dq, dp) hold the starting guess on entry and the
   // increments on return.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     const int n = H_.dim();
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;

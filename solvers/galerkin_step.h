@@ -264,7 +264,7 @@ class GalerkinStep {
 
   // One step from (q0, p0); dq carries a guess of q1 - q0 on entry (used unless the
   // step continues the previous one), q1 - q0 on return; dp receives p1 - p0.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     const int s = s_;
     StepSummary sum;
     guess_measured_ = false;

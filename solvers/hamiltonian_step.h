@@ -143,7 +143,7 @@ class HamiltonianStep {
 
   // One step from (q0, p0); (dq, dp) hold the starting guess on entry and the
   // increments on return. Map domain errors are reported in the summary.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     Residual f{this, q0, p0};
     V fq, fp;
     hamiltonian_vector_field(H_, q0, p0, fq, fp);

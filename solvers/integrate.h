@@ -1,11 +1,11 @@
 // The integrate loop for one-step methods in (q, p) form, on R^n and on manifolds.
 //
 // A step on R^n provides `static constexpr int N`, `double step_size() const` and
-//   StepSummary step(const V& q, const V& p, V& dq, V& dp) const
+//   StepSummary step(double /*t*/, const V& q, const V& p, V& dq, V& dp) const
 // returning the increments; dq carries the starting guess on entry. A step on a
 // manifold M (solvers/manifold_step.h) provides `M`, `n`, `Point`, `Covector`,
 // step_size() and
-//   StepSummary step(const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const
+//   StepSummary step(double /*t*/, const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const
 // with xi the guess of q1's chart coordinates around q0. The loop
 //   - starts the first step from dq = h v with v from the inverse Legendre map
 //     (passed in by the caller), later steps from the linear extrapolation
@@ -123,14 +123,14 @@ class LoopState<S, false> {
   using Covector = Vec<double, N>;
   LoopState(const Point& q, const Covector& p, const Covector& v0, double h)
       : Q_(q), P_(p), dq_(h * v0), dq_prev_(dq_), dq_prev2_(dq_), dp_(Covector::Zero(q.rows())) {}
-  StepSummary step(const S& stepper, std::int64_t k) {
+  StepSummary step(const S& stepper, std::int64_t k, double t) {
     if constexpr (takes_guess<S>::value) {
       if (k >= 2)
         dq_ = 2.0 * dq_prev_ - dq_prev2_;
       else if (k == 1)
         dq_ = dq_prev_;
     }
-    return stepper.step(Q_.sum, P_.sum, dq_, dp_);
+    return stepper.step(t, Q_.sum, P_.sum, dq_, dp_);
   }
   // (an expression: no temporary vector, no allocation for dynamic sizes)
   bool finite() const { return (Q_.sum + dq_).allFinite() && (P_.sum + dp_).allFinite(); }
@@ -160,9 +160,9 @@ class LoopState<S, true> {
   using Covector = typename S::Covector;
   LoopState(const Point& q, const Covector& p, const Covector& v0, double h)
       : q_(q), q_prev_(q), q1_(q), p_(p), p1_(p), xi0_(h * M::tangent_coordinates(q, v0)) {}
-  StepSummary step(const S& stepper, std::int64_t k) {
+  StepSummary step(const S& stepper, std::int64_t k, double t) {
     Vec<double, S::n> xi = k == 0 ? xi0_ : Vec<double, S::n>(M::next_guess(q_prev_, q_));
-    return stepper.step(q_, p_, xi, q1_, p1_);
+    return stepper.step(t, q_, p_, xi, q1_, p1_);
   }
   bool finite() const { return q1_.allFinite() && p1_.allFinite(); }
   void commit() {
@@ -192,7 +192,7 @@ RunSummary integrate(const S& stepper, double t0, typename LoopState<S>::Point& 
   for (std::int64_t k = 0; k < steps; ++k) {
     StepSummary s;
     try {
-      s = state.step(stepper, k);
+      s = state.step(stepper, k, t0 + static_cast<double>(k) * h);
     } catch (const std::domain_error& e) {
       run.fail(step_fault(e.what()), k, t0, h);
       break;
@@ -217,13 +217,6 @@ RunSummary integrate(const S& stepper, double t0, typename LoopState<S>::Point& 
   q = state.q();
   p = state.p();
   return run;
-}
-
-// The same loop under the name the manifold steps were first integrated with.
-template <class S, class Observer>
-RunSummary integrate_manifold(const S& stepper, double t0, typename S::Point& q, typename S::Covector& p,
-                              const typename S::Covector& v0, std::int64_t steps, Observer&& observer) {
-  return integrate(stepper, t0, q, p, v0, steps, std::forward<Observer>(observer));
 }
 
 }  // namespace dvm

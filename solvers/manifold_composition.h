@@ -47,7 +47,8 @@ class ComposedPointStep {
 
   // The same contract as ManifoldStep::step; xi (the full step's chart coordinates at
   // q0) seeds each stage's guess with its fraction of the step.
-  StepSummary step(const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
+  StepSummary step(double t, const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
+    double elapsed = 0.0;  // the weights of the stages done
     Point q = q0;
     Covector p = p0;
     StepSummary total;
@@ -58,7 +59,7 @@ class ComposedPointStep {
       Vec<double, n> guess = weights_[i] * xi;
       Point qn;
       Covector pn;
-      const StepSummary s = stages_[i].step(q, p, guess, qn, pn);
+      const StepSummary s = stages_[i].step(t + elapsed * h_, q, p, guess, qn, pn);
       total.iterations += s.iterations;
       total.jacobians += s.jacobians;
       if (!s.converged) {
@@ -72,6 +73,7 @@ class ComposedPointStep {
       }
       q = qn;
       p = pn;
+      elapsed += weights_[i];
     }
     q1 = q;
     p1 = p;

@@ -319,7 +319,7 @@ class ManifoldGalerkinStep {
 
   // One step: xi holds a guess of the chart coordinates of q1 on entry (spread
   // linearly over the control points) and them on return.
-  StepSummary step(const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
+  StepSummary step(double /*t*/, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
     const V pi0 = M::covector_to_local(q0, p0);
     // starting guess: the previous step's curve extrapolated (error O(h^{S+1})) and
     // read in the chart centred at q0, when this step continues that one; otherwise

@@ -139,11 +139,11 @@ class ManifoldHamiltonianStep {
 
   // One step: xi holds the guess of the chart coordinates of q1 on entry and them on
   // return; dp (optional) returns the change of the chart momentum.
-  StepSummary step(const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1, V* dp_out = nullptr) const {
+  StepSummary step(double t, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1, V* dp_out = nullptr) const {
     const Local local = local_step(q0);
     const V pi0 = M::covector_to_local(q0, p0);
     V dq = xi, dp = V::Zero();
-    StepSummary s = local.step(V::Zero(), pi0, dq, dp);
+    StepSummary s = local.step(t, V::Zero(), pi0, dq, dp);
     if (!s.converged) return s;
     xi = dq;
     if (dp_out) *dp_out = dp;

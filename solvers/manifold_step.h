@@ -79,7 +79,7 @@ class ManifoldStep {
   };
 
   // One step: xi holds the guess on entry and the chart coordinates of q1 on return.
-  StepSummary step(const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
+  StepSummary step(double /*t*/, const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
     const Vec<double, n> p0l = M::covector_to_local(q0, p0);
     Residual f{&dl_, q0, p0l};
     const double pscale = max_abs(p0l);

@@ -58,7 +58,7 @@ class PositionMomentumStep {
   // One step from (q0, p0). `dq` holds the starting guess on entry and the
   // increment q1 - q0 on return; `dp` receives p1 - p0. Map domain errors met in
   // the solve are reported in the summary, not thrown.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     Residual f{&dl_, q0, p0};
     const double pscale = max_abs(p0);
     auto scale_of = [pscale](const V& x, const Mat<double, N, N>& J) {

@@ -73,7 +73,7 @@ class SeparableThetaNewton {
 
   // One step from (q0, p0): dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0 = h F(q_theta) (the contract of `integrate`).
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     if (!dynamic_detail::sizes_match(n_, q0, p0, dq, s)) return s;
     if (dp.size() != n_) dp.resize(n_);

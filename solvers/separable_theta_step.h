@@ -56,7 +56,7 @@ class SeparableThetaStep {
   // factored at the starting guess and formed again only where an iteration fails to
   // shrink the residual fourfold; the stopping rule and the final correction are those
   // of solve_newton (solvers/newton.h).
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     const StepOptions& opt = options_;
     const double pscale = max_abs(p0), x0 = max_abs(q0);
     StepSummary s;

@@ -222,7 +222,7 @@ class SodeStep {
   }
 
   // One step in (q, v); (dq, dv) carry the guess in and the increments out.
-  StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const {
+  StepSummary step_qv(double /*t*/, const V& q0, const V& v0, V& dq, V& dv) const {
     const V2 Y0 = stack(q0, v0);
     return solve_increments<N>(*this, Y0, std::fabs(h_) * max_abs(gamma(Y0)), options_, dq, dv);
   }
@@ -290,7 +290,9 @@ class NewmarkStep {
   Vec<T, 2 * N> residual(const Vec<T, 2 * N>& Y0, const Vec<T, 2 * N>& dY) const {
     return sode_.residual(Y0, dY);
   }
-  StepSummary step_qv(const V& q0, const V& v0, V& dq, V& dv) const { return sode_.step_qv(q0, v0, dq, dv); }
+  StepSummary step_qv(double t, const V& q0, const V& v0, V& dq, V& dv) const {
+    return sode_.step_qv(t, q0, v0, dq, dv);
+  }
 
  private:
   explicit NewmarkStep(Sode s) : sode_(std::move(s)) {}
@@ -310,12 +312,12 @@ class VelocityFormStep {
   explicit VelocityFormStep(Step s) : s_(std::move(s)) {}
   double step_size() const { return s_.step_size(); }
   const Step& inner() const { return s_; }
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     const auto& L = s_.lagrangian();
     const V v0 = legendre_inverse(L, q0, p0);
     V dv = V::Zero();
     if (last_valid_) dv = last_dv_;
-    StepSummary s = s_.step_qv(q0, v0, dq, dv);
+    StepSummary s = s_.step_qv(t, q0, v0, dq, dv);
     if (s.converged) {
       dp = legendre(L, V(q0 + dq), V(v0 + dv)) - p0;
       last_dv_ = dv;

@@ -69,7 +69,7 @@ class SphereChainStep {
   const SphereMap& map() const { return R_; }
 
   // One step: xi holds the guess on entry and the chart coordinates of q1 on return.
-  StepSummary step(const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
+  StepSummary step(double /*t*/, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
     StepSummary s;
     const int K = L_.links();
     if (q0.size() != 3 * K || p0.size() != 3 * K || xi.size() != 2 * K) {

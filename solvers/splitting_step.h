@@ -109,7 +109,7 @@ class ExplicitSplittingStep {
   // GCC may leave those calls out of line, several times slower for FPU (6 dof); with 1
   // or 2 coordinates they are inlined already and flattening made Kepler's step slower.
   // The run-time-sized step is left as it is.
-  StepSummary step(const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     if constexpr (N != Eigen::Dynamic && N >= 3)
       return step_flattened(q0, p0, dq, dp);
     else

@@ -57,7 +57,7 @@ RBState run_rb(const Step& S, const RigidBody& L, const M3& R0, const V3& Pi0, s
   M3 R = R0;
   V3 Pi = Pi0;
   const V3 w0 = manifold_legendre_inverse(L, R, Pi);
-  const RunSummary r = integrate_manifold(S, 0.0, R, Pi, w0, steps,
+  const RunSummary r = integrate(S, 0.0, R, Pi, w0, steps,
                                           [obs](std::int64_t, double, const M3& Rk, const V3& Pk, const auto&) {
                                             if (obs) (*obs)(Rk, Pk);
                                           });

@@ -47,7 +47,7 @@ inline V3 body_momentum() { return V3(0.4, -1.0, 2.0); }
 
 template <class Step, class System>
 bool run(const Step& S, const System& L, typename Step::Point& q, typename Step::Covector& p, std::int64_t steps) {
-  const RunSummary r = integrate_manifold(S, 0.0, q, p, manifold_legendre_inverse(L, q, p), steps, [](auto&&...) {});
+  const RunSummary r = integrate(S, 0.0, q, p, manifold_legendre_inverse(L, q, p), steps, [](auto&&...) {});
   return !r.failed;
 }
 
@@ -116,7 +116,7 @@ struct InChart {
         step->step_size() * M::tangent_coordinates(q, manifold_legendre_inverse(step->lagrangian(), q, p));
     typename Step::Point q1 = q;
     typename Step::Covector p1 = p;
-    const StepSummary s = step->step(q, p, xi, q1, p1);
+    const StepSummary s = step->step(0.0, q, p, xi, q1, p1);
     BOOST_TEST_REQUIRE(s.converged, s.message);
     const Vec<double, n> e1 = M::chart_inverse(c, q1);
     Mat<double, M::template Tangent<double>::RowsAtCompileTime, n> D;

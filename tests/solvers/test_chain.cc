@@ -54,11 +54,11 @@ BOOST_AUTO_TEST_CASE(dynamic_chain_step_equals_the_generic_fixed_size_step) {
       const VectorXd q0 = random_vector(n, 0.4, 3), p0 = random_vector(n, 0.6, 4);
       const ChainStep S(C, R, h);
       VectorXd dq = h * p0, dp = VectorXd::Zero(n);
-      const StepSummary s = S.step(q0, p0, dq, dp);
+      const StepSummary s = S.step(0.0, q0, p0, dq, dp);
       BOOST_TEST(s.converged);
       const PositionMomentumStep<FixedChain<n>, ThetaMap> G(FixedChain<n>(C), R, h);
       Vec<double, n> gq = q0, gp = p0, gdq = h * gp, gdp = Vec<double, n>::Zero();
-      BOOST_TEST(G.step(gq, gp, gdq, gdp).converged);
+      BOOST_TEST(G.step(0.0, gq, gp, gdq, gdp).converged);
       BOOST_TEST_CONTEXT(R.name() << (fixed ? " fixed" : " free")) {
         BOOST_TEST(max_abs(VectorXd(dq - gdq)) <= 1e-15);
         BOOST_TEST(max_abs(VectorXd(dp - gdp)) <= 1e-15);
@@ -165,7 +165,7 @@ BOOST_AUTO_TEST_CASE(accepted_step_gets_the_last_newton_correction) {
   for (double th : {0.5, 0.3}) {
     const ChainStep S(C, ThetaMap(th), h, opt);
     VectorXd dq = VectorXd::Zero(n), dp(n), g(n);
-    const StepSummary s = S.step(q0, p0, dq, dp);
+    const StepSummary s = S.step(0.0, q0, p0, dq, dp);
     BOOST_TEST_REQUIRE(s.converged);
     C.gradient(VectorXd(q0 + th * dq), g);
     const double left = VectorXd(p0 - (C.m / h) * dq - h * (1.0 - th) * g).lpNorm<Eigen::Infinity>();

@@ -11,6 +11,7 @@
 
 #include "mechanics/systems.h"
 #include "solvers/composition.h"
+#include "solvers/manifold_composition.h"
 #include "tests/displacement_check.h"
 #include "tests/verification/common.h"
 
@@ -274,10 +275,10 @@ BOOST_AUTO_TEST_CASE(adjoint_method_is_the_inverse_of_the_negative_step) {
     const PositionMomentumStep<Kepler, Adjoint<M>> fwd(K, adjoint(R), h);
     const PositionMomentumStep<Kepler, M> back(K, R, -h);
     V2 dq = h * p0, dp, dq2, dp2;
-    BOOST_TEST_REQUIRE(fwd.step(q0, p0, dq, dp).converged);
+    BOOST_TEST_REQUIRE(fwd.step(0.0, q0, p0, dq, dp).converged);
     const V2 q1 = q0 + dq, p1 = p0 + dp;
     dq2 = -dq;
-    BOOST_TEST_REQUIRE(back.step(q1, p1, dq2, dp2).converged);
+    BOOST_TEST_REQUIRE(back.step(0.0, q1, p1, dq2, dp2).converged);
     const double err = std::fmax(max_abs(V2(q1 + dq2 - q0)), max_abs(V2(p1 + dp2 - p0)));
     BOOST_TEST_MESSAGE(what << ": |Phi_{-h}(Phi*_h(z)) - z| = " << err);
     BOOST_TEST(err <= 1e-14, what);
@@ -428,7 +429,7 @@ BOOST_AUTO_TEST_CASE(composed_lagrangian_is_stationary_at_the_micro_nodes) {
   for (const Substep& s : subs) {
     const CompositionStep<Pendulum, ThetaMap> one(L, ThetaMap::explicit_euler(), h, {s});
     V1 dq = V1(s.weight * h * p[0]), dp;
-    BOOST_TEST_REQUIRE(one.step(nodes.back(), p, dq, dp).converged);
+    BOOST_TEST_REQUIRE(one.step(0.0, nodes.back(), p, dq, dp).converged);
     nodes.push_back(nodes.back() + dq);
     p += dp;
   }
@@ -524,7 +525,7 @@ BOOST_AUTO_TEST_CASE(failures_name_the_substep) {
   opt.max_iterations = 3;
   const CompositionStep<Pendulum, ThetaMap> S(L, ThetaMap::midpoint(), 40.0, substeps(find_composition("yoshida8a"), true), opt);
   V1 dq(40.0), dp;
-  const StepSummary s = S.step(V1(3.0), V1(2.0), dq, dp);
+  const StepSummary s = S.step(0.0, V1(3.0), V1(2.0), dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.message.find("substep") != std::string::npos);
   BOOST_CHECK_THROW((CompositionStep<Pendulum, ThetaMap>(L, ThetaMap::midpoint(), 0.1, {})), std::invalid_argument);
@@ -538,7 +539,7 @@ struct HandEuler {
   double h;
   bool drift_first;
   double step_size() const { return h; }
-  StepSummary step(const V1& q, const V1& p, V1& dq, V1& dp) const {
+  StepSummary step(double /*t*/, const V1& q, const V1& p, V1& dq, V1& dp) const {
     double Q = q[0], P = p[0];
     if (drift_first) {
       Q += h * P;
@@ -572,4 +573,98 @@ BOOST_AUTO_TEST_CASE(any_step_type_composes) {
   const double err = std::fmax(std::fabs(qa[0] - qb[0]), std::fabs(pa[0] - pb[0]));
   BOOST_TEST_MESSAGE("hand-written Euler pair vs explicit-euler map, kahan-li8, 50 steps: " << err);
   BOOST_TEST(err <= 1e-13);
+}
+
+namespace {
+// A step that only records when it was told it starts (t) and how long it is; q moves
+// by its length, so that q is the time the step reaches.
+struct ClockStep {
+  static constexpr int N = 1;
+  using V = V1;
+  double h;
+  std::vector<std::pair<double, double>>* log;  // (t, h) of each call
+  double step_size() const { return h; }
+  StepSummary step(double t, const V&, const V&, V& dq, V& dp) const {
+    log->emplace_back(t, h);
+    dq = V1(h);
+    dp = V1(0.0);
+    StepSummary s;
+    s.converged = true;
+    s.iterations = 1;
+    s.scale = 1.0;
+    return s;
+  }
+};
+// The same on a "manifold" (the contract of integrate's point steps): the line, whose
+// points are their own chart.
+struct Line {
+  static V1 tangent_coordinates(const V1&, const V1& v) { return v; }
+  static V1 next_guess(const V1& before, const V1& now) { return now - before; }
+};
+struct ClockPointStep {
+  using M = Line;
+  static constexpr int n = 1;
+  using Point = V1;
+  using Covector = V1;
+  ClockStep clock;
+  double step_size() const { return clock.h; }
+  StepSummary step(double t, const Point& q0, const Covector& p0, V1& xi, Point& q1, Covector& p1) const {
+    V1 dp;
+    const StepSummary s = clock.step(t, q0, p0, xi, dp);
+    q1 = q0 + xi;
+    p1 = p0 + dp;
+    return s;
+  }
+};
+}  // namespace
+
+// The step contract carries the time: the loop tells step k it starts at t0 + k h (a
+// product, not a running sum), and a composition tells each substep where it starts,
+// t plus the weights of the substeps before it times h (backward substeps included).
+// A time-dependent Lagrangian, force or control reads this t.
+BOOST_AUTO_TEST_CASE(every_step_and_substep_is_told_when_it_starts) {
+  std::vector<std::pair<double, double>> log;
+  const double t0 = 0.25, h = 0.1;
+  {
+    const ClockStep one{h, &log};
+    V1 q(t0), p(0.0);
+    BOOST_TEST_REQUIRE(!integrate(one, t0, q, p, p, 7, [](auto&&...) {}).failed);
+    BOOST_TEST_REQUIRE(log.size() == 7u);
+    for (int k = 0; k < 7; ++k) BOOST_TEST(log[k].first == t0 + k * h);  // exactly
+  }
+  for (const char* name : {"triple-jump", "suzuki5", "kahan-li8"}) {
+    const std::vector<Substep> subs = substeps(find_composition(name), true);
+    const ComposedStep<ClockStep> composed(h, subs, [&](double hk) { return ClockStep{hk, &log}; },
+                                           [&](double hk) { return ClockStep{hk, &log}; });
+    log.clear();
+    V1 q(t0), p(0.0);
+    BOOST_TEST_REQUIRE(!integrate(composed, t0, q, p, p, 3, [](auto&&...) {}).failed);
+    BOOST_TEST_REQUIRE(log.size() == 3 * subs.size(), name);
+    bool backward = false;
+    for (std::size_t i = 0; i < log.size(); ++i) {
+      const double t = log[i].first, hk = log[i].second;
+      if (i % subs.size() == 0)
+        BOOST_TEST(t == t0 + static_cast<double>(i / subs.size()) * h, name << " step " << i / subs.size());
+      else  // a substep starts where the one before it ended
+        BOOST_TEST(t == log[i - 1].first + log[i - 1].second, boost::test_tools::tolerance(1e-15));
+      backward = backward || hk < 0.0;
+    }
+    if (std::string(name) == "triple-jump") BOOST_TEST(backward);  // its middle substep goes back in time
+    // the last substep ends where the next step starts
+    BOOST_TEST(log.back().first + log.back().second == t0 + 3 * h, boost::test_tools::tolerance(1e-15));
+    BOOST_TEST(q[0] == t0 + 3 * h, boost::test_tools::tolerance(1e-15));
+  }
+  const std::vector<Substep> subs = substeps(find_composition("triple-jump"), true);
+  const ComposedPointStep<ClockPointStep> on_points(h, subs, [&](double hk) { return ClockPointStep{{hk, &log}}; },
+                                                    [&](double hk) { return ClockPointStep{{hk, &log}}; });
+  log.clear();
+  V1 q(t0), p(0.0);
+  BOOST_TEST_REQUIRE(!integrate(on_points, t0, q, p, V1(1.0), 4, [](auto&&...) {}).failed);
+  BOOST_TEST_REQUIRE(log.size() == 4 * subs.size());
+  for (std::size_t i = 0; i < log.size(); ++i) {
+    if (i % subs.size() == 0)
+      BOOST_TEST(log[i].first == t0 + static_cast<double>(i / subs.size()) * h);
+    else
+      BOOST_TEST(log[i].first == log[i - 1].first + log[i - 1].second, boost::test_tools::tolerance(1e-15));
+  }
 }

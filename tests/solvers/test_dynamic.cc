@@ -515,7 +515,7 @@ BOOST_AUTO_TEST_CASE(steps_of_fixed_size_equal_the_fixed_size_steps) {
       for (double guess : {0.0, 1.95}) {
         const VectorXd q = VectorXd::Constant(1, q0), p = VectorXd::Constant(1, 6.5);
         VectorXd da = VectorXd::Constant(1, guess), db = da, ea(1), eb(1);
-        const StepSummary sa = newton.step(q, p, da, ea), sb = fixed.step(q, p, db, eb);
+        const StepSummary sa = newton.step(0.0, q, p, da, ea), sb = fixed.step(0.0, q, p, db, eb);
         BOOST_TEST_REQUIRE((sa.converged && sb.converged));
         BOOST_TEST(std::fabs(da[0] - db[0]) <= 1e-14 * 6.5);
         BOOST_TEST(std::fabs(ea[0] - eb[0]) <= 1e-14 * 6.5);
@@ -646,10 +646,10 @@ BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
       const auto back = DynamicThetaStep<FixedAsDynamic<Kepler>>(L, ThetaMap(theta), -h).adjoint();
       BOOST_TEST(back.map().theta() == 1.0 - theta);
       VectorXd dq = h * p0, dp = VectorXd::Zero(2);
-      BOOST_TEST(S.step(q0, p0, dq, dp).converged);
+      BOOST_TEST(S.step(0.0, q0, p0, dq, dp).converged);
       const VectorXd q1 = q0 + dq, p1 = p0 + dp;
       VectorXd eq = -dq, ep = VectorXd::Zero(2);
-      BOOST_TEST(back.step(q1, p1, eq, ep).converged);
+      BOOST_TEST(back.step(0.0, q1, p1, eq, ep).converged);
       BOOST_TEST((q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
       BOOST_TEST((p1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
 
@@ -658,11 +658,11 @@ BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
       const auto tback = DynamicHamiltonianThetaStep<HD>(HD(L), ThetaMap(theta), -h).adjoint();
       dq = h * p0;
       dp.setZero();
-      BOOST_TEST(T.step(q0, p0, dq, dp).converged);
+      BOOST_TEST(T.step(0.0, q0, p0, dq, dp).converged);
       const VectorXd Q1 = q0 + dq, P1 = p0 + dp;
       eq = -dq;
       ep = -dp;
-      BOOST_TEST(tback.step(Q1, P1, eq, ep).converged);
+      BOOST_TEST(tback.step(0.0, Q1, P1, eq, ep).converged);
       BOOST_TEST((Q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
       BOOST_TEST((P1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
     }
@@ -848,7 +848,7 @@ BOOST_AUTO_TEST_CASE(a_degenerate_written_lagrangian_is_reported_not_crashed) {
         LegendreDynamicHamiltonian<WrittenDynamic>(L), ThetaMap::midpoint(), 0.1);
     VectorXd dq = VectorXd::Zero(2), dp = VectorXd::Zero(2);
     StepSummary s;
-    BOOST_CHECK_NO_THROW(s = S.step(q, p, dq, dp));
+    BOOST_CHECK_NO_THROW(s = S.step(0.0, q, p, dq, dp));
     BOOST_TEST(!s.converged);
     BOOST_TEST(s.message.find("not regular") != std::string::npos, s.message);
     VectorXd qq = q, pp = p;
@@ -862,7 +862,7 @@ BOOST_AUTO_TEST_CASE(a_degenerate_written_lagrangian_is_reported_not_crashed) {
   auto singular = [&](const auto& S) {
     VectorXd dq = VectorXd::Zero(2), dp = VectorXd::Zero(2);
     StepSummary s;
-    BOOST_CHECK_NO_THROW(s = S.step(q, p, dq, dp));
+    BOOST_CHECK_NO_THROW(s = S.step(0.0, q, p, dq, dp));
     BOOST_TEST(!s.converged);
     BOOST_TEST(s.message == "singular step Jacobian");
     VectorXd qq = q, pp = p;
@@ -888,7 +888,7 @@ BOOST_AUTO_TEST_CASE(bad_input_is_refused_at_construction_and_bad_states_reporte
   BOOST_CHECK_THROW(DynamicGalerkinStep<NBodyDynamic>(B, QuadratureKind::gauss, 2, 0.1, tiny), std::invalid_argument);
   const DynamicThetaStep<NBodyDynamic> S(B, ThetaMap::midpoint(), 0.1);
   VectorXd q = VectorXd::Zero(5), p = VectorXd::Zero(5), dq = q, dp = q;
-  const StepSummary s = S.step(q, p, dq, dp);
+  const StepSummary s = S.step(0.0, q, p, dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.message.find("the system has 6") != std::string::npos, s.message);
   // two bodies at the same point: a non-finite residual, reported
@@ -896,7 +896,7 @@ BOOST_AUTO_TEST_CASE(bad_input_is_refused_at_construction_and_bad_states_reporte
   p = VectorXd::Zero(6);
   dq = q;
   dp = q;
-  const StepSummary t = S.step(q, p, dq, dp);
+  const StepSummary t = S.step(0.0, q, p, dq, dp);
   BOOST_TEST(!t.converged);
   BOOST_TEST(!t.message.empty());
 }
@@ -916,7 +916,7 @@ template <class Step>
 long allocations_in_steps(const Step& S, const VectorXd& q0, const VectorXd& p0, const VectorXd& guess, int steps,
                           bool reset_each = false) {
   VectorXd q = q0, p = p0, dq = guess, dp = VectorXd::Zero(q0.size());
-  BOOST_TEST(S.step(q, p, dq, dp).converged);
+  BOOST_TEST(S.step(0.0, q, p, dq, dp).converged);
   q += dq;
   p += dp;
   const long e0 = dvm_test::eigen_mallocs, n0 = dvm_test::operator_news;
@@ -925,7 +925,7 @@ long allocations_in_steps(const Step& S, const VectorXd& q0, const VectorXd& p0,
   for (int k = 0; k < steps; ++k) {
     if constexpr (has_reset<Step>::value)
       if (reset_each) S.reset();  // a refresh of the Jacobian in every step
-    ok = ok && S.step(q, p, dq, dp).converged;
+    ok = ok && S.step(0.0, q, p, dq, dp).converged;
     q += dq;
     p += dp;
   }

@@ -67,8 +67,8 @@ BOOST_AUTO_TEST_CASE(one_stage_gauss_is_the_midpoint_discrete_lagrangian) {
   BOOST_TEST(std::fabs(a - b) <= 4e-16 * std::fabs(b));
   // and so do the steps
   V2 dq = h * p0, dp, dq2 = h * p0, dp2;
-  BOOST_REQUIRE(G.step(q0, p0, dq, dp).converged);
-  BOOST_REQUIRE(M.step(q0, p0, dq2, dp2).converged);
+  BOOST_REQUIRE(G.step(0.0, q0, p0, dq, dp).converged);
+  BOOST_REQUIRE(M.step(0.0, q0, p0, dq2, dp2).converged);
   BOOST_TEST(max_abs(V2(dq - dq2)) <= 2e-16 * max_abs(dq));
   BOOST_TEST(max_abs(V2(dp - dp2)) <= 2e-16 * max_abs(p0));
 }
@@ -182,7 +182,7 @@ M4 step_jacobian_by_differences(const Step& G, const V2& q0, const V2& p0, doubl
     G.reset();
     const V2 q = z.head<2>(), p = z.tail<2>();
     V2 dq = G.step_size() * p, dp;
-    BOOST_REQUIRE(G.step(q, p, dq, dp).converged);
+    BOOST_REQUIRE(G.step(0.0, q, p, dq, dp).converged);
     Vec<double, 4> out;
     out << q + dq, p + dp;
     return out;
@@ -212,7 +212,7 @@ BOOST_AUTO_TEST_CASE(one_step_map_is_symplectic_to_round_off) {
       const M4 F = step_jacobian_by_differences(G, q0, p0, 1e-5);
       G.reset();
       V2 dq = 0.1 * p0, dp;
-      BOOST_REQUIRE(G.step(q0, p0, dq, dp).converged);
+      BOOST_REQUIRE(G.step(0.0, q0, p0, dq, dp).converged);
       const M4 M = G.map_jacobian(q0, p0);
       BOOST_TEST_MESSAGE("s=" << G.stages() << ": |map_jacobian - central differences| " << max_abs(M4(M - F))
                               << " (|M| " << max_abs(F) << ")");
@@ -381,7 +381,7 @@ BOOST_AUTO_TEST_CASE(a_step_that_does_not_converge_is_reported_with_bounded_iter
   const GalerkinStep<Kepler, 4> G(K, QuadratureKind::gauss, 4, 0.5, opt);
   // a crude guess (at rest) for a fast state: two iterations cannot reach 2e-15
   V2 dq = V2::Zero(), dp;
-  const StepSummary s = G.step(V2(0.4, 0.0), V2(0.0, 2.0), dq, dp);
+  const StepSummary s = G.step(0.0, V2(0.4, 0.0), V2(0.0, 2.0), dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.iterations <= 2);
   BOOST_TEST(s.message.find("no convergence within 2 iterations") != std::string::npos);
@@ -394,7 +394,7 @@ BOOST_AUTO_TEST_CASE(a_step_that_does_not_converge_is_reported_with_bounded_iter
   StepOptions opt2;
   const GalerkinStep<Kepler, 2> C(K, QuadratureKind::gauss, 2, 1.0, opt2);
   V2 dq2(-0.2, 0.0), dp2;
-  const StepSummary c = C.step(V2(0.1, 0.0), V2(-1e-3, 0.0), dq2, dp2);
+  const StepSummary c = C.step(0.0, V2(0.1, 0.0), V2(-1e-3, 0.0), dq2, dp2);
   BOOST_TEST_MESSAGE("collision step: converged " << c.converged << ", iterations " << c.iterations << ", "
                                                   << c.message);
   BOOST_TEST(c.iterations <= opt2.max_iterations);

@@ -143,7 +143,7 @@ BOOST_AUTO_TEST_CASE(midpoint_map_gives_the_implicit_midpoint_rule) {
   const Mat<double, 2, 2> I = Mat<double, 2, 2>::Identity();
   const Mat<double, 2, 2> C = (I - 0.5 * h * A).inverse() * (I + 0.5 * h * A);
   V1 dq = V1::Zero(), dp = V1::Zero();
-  const StepSummary s = S.step(V1(0.7), V1(-0.3), dq, dp);
+  const StepSummary s = S.step(0.0, V1(0.7), V1(-0.3), dq, dp);
   BOOST_TEST(s.converged);
   const V2 z1 = C * V2(0.7, -0.3);
   BOOST_TEST(std::fabs(0.7 + dq[0] - z1[0]) <= 1e-15);
@@ -155,7 +155,7 @@ BOOST_AUTO_TEST_CASE(midpoint_map_gives_the_implicit_midpoint_rule) {
   const V1 q0(0.4), p0(0.9);
   dq.setZero();
   dp.setZero();
-  BOOST_TEST(M.step(q0, p0, dq, dp).converged);
+  BOOST_TEST(M.step(0.0, q0, p0, dq, dp).converged);
   V1 fq, fp;
   hamiltonian_vector_field(H, V1(q0 + 0.5 * dq), V1(p0 + 0.5 * dp), fq, fp);
   BOOST_TEST(std::fabs(dq[0] - 0.2 * fq[0]) <= 1e-15);
@@ -169,7 +169,7 @@ BOOST_AUTO_TEST_CASE(map_q_minus_v_q_is_explicit_for_separable_hamiltonians) {
   const HamiltonianStep<PendulumH, ThetaMap> S(PendulumH(P), ThetaMap::adjoint_euler(), h);
   const V1 q0(1.1), p0(0.4);
   V1 dq = V1::Zero(), dp = V1::Zero();
-  const StepSummary s = S.step(q0, p0, dq, dp);
+  const StepSummary s = S.step(0.0, q0, p0, dq, dp);
   BOOST_TEST(s.converged);
   const double q1 = q0[0] + h * p0[0];
   BOOST_TEST(std::fabs(q0[0] + dq[0] - q1) <= 1e-15);
@@ -209,7 +209,7 @@ double max_defect(const Step& S, const std::vector<std::pair<Vec<double, Step::N
   double d = 0.0;
   for (const auto& [q0, p0] : points) {
     Vec<double, Step::N> dq = Vec<double, Step::N>::Zero(), dp = Vec<double, Step::N>::Zero();
-    const StepSummary s = S.step(q0, p0, dq, dp);
+    const StepSummary s = S.step(0.0, q0, p0, dq, dp);
     BOOST_REQUIRE(s.converged);
     d = std::fmax(d, symplectic_defect<Step::N>(S.jacobian(q0, p0, dq, dp)));
   }
@@ -276,15 +276,15 @@ BOOST_AUTO_TEST_CASE(maps_given_directly_on_the_cotangent_bundle) {
   for (const auto& [q0, p0] : pts1) {
     const Direct D(P, OnCotangentBundle<ThetaMap>{ThetaMap(0.3)}, h);
     V1 dq = V1::Zero(), dp = V1::Zero();
-    BOOST_REQUIRE(D.step(q0, p0, dq, dp).converged);
+    BOOST_REQUIRE(D.step(0.0, q0, p0, dq, dp).converged);
     V1 fq, fp;
     hamiltonian_vector_field(P, V1(q0 + 0.3 * dq), V1(p0 + 0.3 * dp), fq, fp);
     worst = std::fmax(worst, std::fmax(std::fabs(dq[0] - h * fq[0]), std::fabs(dp[0] - h * fp[0])));
     const Direct M(P, OnCotangentBundle<ThetaMap>{ThetaMap::midpoint()}, h);
     const HamiltonianStep<PendulumH, ThetaMap> C(P, ThetaMap::midpoint(), h);
     V1 a = V1::Zero(), b = V1::Zero(), c = V1::Zero(), d = V1::Zero();
-    BOOST_REQUIRE(M.step(q0, p0, a, b).converged);
-    BOOST_REQUIRE(C.step(q0, p0, c, d).converged);
+    BOOST_REQUIRE(M.step(0.0, q0, p0, a, b).converged);
+    BOOST_REQUIRE(C.step(0.0, q0, p0, c, d).converged);
     mid = std::fmax(mid, std::fmax(std::fabs(a[0] - c[0]), std::fabs(b[0] - d[0])));
   }
   BOOST_TEST(worst <= 1e-15);
@@ -370,7 +370,7 @@ double lagrangian_step_defect(const System& L, const Map& R, double h, const Vec
   constexpr int N = System::dim, K = 3 * N;
   const PositionMomentumStep<System, Map> S(L, R, h);
   Vec<double, N> dq = Vec<double, N>::Zero(), dp = Vec<double, N>::Zero();
-  BOOST_REQUIRE(S.step(q0, p0, dq, dp).converged);
+  BOOST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
   using D = ceres::Jet<double, K>;
   Vec<D, N> a, b, c;
   for (int i = 0; i < N; ++i) {

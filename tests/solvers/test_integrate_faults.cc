@@ -23,7 +23,7 @@ struct ScalingStep {
   std::int64_t throw_at = -1;
   mutable std::int64_t calls = 0;
   double step_size() const { return 0.5; }
-  StepSummary step(const V& q, const V& p, V& dq, V& dp) const {
+  StepSummary step(double /*t*/, const V& q, const V& p, V& dq, V& dp) const {
     if (calls++ == throw_at) throw std::domain_error("outside the domain of the map");
     dq = (growth - 1.0) * q;
     dp = V::Zero();

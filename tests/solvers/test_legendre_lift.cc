@@ -105,11 +105,11 @@ BOOST_AUTO_TEST_CASE(lagrangian_method_of_the_legendre_lift_is_the_hamiltonian_m
     double dq_max = 0.0, dp_max = 0.0, p_size = 0.0;
     for (int k = 0; k < 40; ++k) {
       V2 dq = h * v, dv = V2::Zero();
-      BOOST_REQUIRE(Lag.step_qv(q, v, dq, dv).converged);
+      BOOST_REQUIRE(Lag.step_qv(0.0, q, v, dq, dv).converged);
       q += dq;
       v += dv;
       V2 dQ = dq, dP = V2::Zero();
-      BOOST_REQUIRE(Ham.step(Q, P, dQ, dP).converged);
+      BOOST_REQUIRE(Ham.step(0.0, Q, P, dQ, dP).converged);
       Q += dQ;
       P += dP;
       const V2 p = legendre(kPendulum2, q, v);

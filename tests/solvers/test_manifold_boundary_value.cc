@@ -19,7 +19,7 @@ std::vector<typename Map::Manifold::template Point<double>> shoot(
   const ManifoldStep<System, Map> S(L, R, h);
   std::vector<P> traj{q};
   const auto v0 = manifold_legendre_inverse(L, q, p);
-  const RunSummary run = integrate_manifold(S, 0.0, q, p, v0, K, [&](std::int64_t, double, const P& qk, const auto&,
+  const RunSummary run = integrate(S, 0.0, q, p, v0, K, [&](std::int64_t, double, const P& qk, const auto&,
                                                                      const StepSummary&) { traj.push_back(qk); });
   BOOST_REQUIRE(!run.failed);
   return traj;

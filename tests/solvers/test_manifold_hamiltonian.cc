@@ -50,7 +50,7 @@ double chart_defect(const Step& S, const std::vector<std::pair<typename Step::Po
     using V = typename Step::V;
     const V pi0 = Step::M::covector_to_local(q0, p0);
     V dq = V::Zero(), dp = V::Zero();
-    const StepSummary s = local.step(V::Zero(), pi0, dq, dp);
+    const StepSummary s = local.step(0.0, V::Zero(), pi0, dq, dp);
     BOOST_REQUIRE(s.converged);
     BOOST_REQUIRE(max_abs(dq) > 0.1 * h * max_abs(pi0));  // the step moved
     d = std::fmax(d, symplectic_defect<Step::n>(local.jacobian(V::Zero(), pi0, dq, dp)));
@@ -119,7 +119,7 @@ BOOST_AUTO_TEST_CASE(the_step_does_not_depend_on_the_chart) {
       const ManifoldHamiltonianStep<SphericalPendulumHamiltonian, SphereMap> S(hamiltonian_of(P), R, h);
       V2 xi = V2::Zero();
       V3 q1, p1;
-      BOOST_REQUIRE(S.step(q0, p0, xi, q1, p1).converged);
+      BOOST_REQUIRE(S.step(0.0, q0, p0, xi, q1, p1).converged);
       // in the chart centred at c
       const V2 eta0 = Sphere::chart_inverse(c, q0);
       Mat<double, 3, 2> D;
@@ -127,7 +127,7 @@ BOOST_AUTO_TEST_CASE(the_step_does_not_depend_on_the_chart) {
       const V2 pi0 = D.transpose() * p0;
       const auto local = S.local_step(c);
       V2 dq = V2::Zero(), dp = V2::Zero();
-      BOOST_REQUIRE(local.step(eta0, pi0, dq, dp).converged);
+      BOOST_REQUIRE(local.step(0.0, eta0, pi0, dq, dp).converged);
       const V3 q1c = Sphere::chart(c, V2(eta0 + dq));
       const V3 p1c = covector_from_chart_at<Sphere>(c, V2(eta0 + dq), V2(pi0 + dp));
       BOOST_TEST_MESSAGE(R.name() << ": chart difference q " << max_abs(V3(q1c - q1)) << ", p "
@@ -164,7 +164,7 @@ BOOST_AUTO_TEST_CASE(long_runs_stay_on_the_manifold_and_conserve_momentum_maps) 
       const double J0 = SphericalPendulum::vertical_momentum(q, p), E0 = S.hamiltonian()(q, p);
       double dJ = 0, defect = 0;
       std::array<double, 2> dE{0, 0};
-      const RunSummary run = integrate_manifold(S, 0.0, q, p, v0, n, [&](std::int64_t k, double, const V3& x,
+      const RunSummary run = integrate(S, 0.0, q, p, v0, n, [&](std::int64_t k, double, const V3& x,
                                                                          const V3& y, const StepSummary&) {
         dJ = std::fmax(dJ, std::fabs(SphericalPendulum::vertical_momentum(x, y) - J0));
         double& e = dE[2 * k > n ? 1 : 0];
@@ -195,7 +195,7 @@ BOOST_AUTO_TEST_CASE(long_runs_stay_on_the_manifold_and_conserve_momentum_maps) 
     const V3 m0 = q * p;
     const V3 v0 = p.cwiseQuotient(body.inertia);
     double dm = 0, defect = 0;
-    const RunSummary run = integrate_manifold(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const M3& x,
+    const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const M3& x,
                                                                            const V3& y, const StepSummary&) {
       dm = std::fmax(dm, max_abs(V3(x * y - m0)));
       defect = std::fmax(defect, SO3::point_defect(x));
@@ -244,7 +244,7 @@ BOOST_AUTO_TEST_CASE(measured_orders_on_the_spherical_pendulum) {
       const double h = 1.0 / steps;
       const ManifoldHamiltonianStep<SphericalPendulumHamiltonian, SphereMap> S(hamiltonian_of(P), R, h);
       V3 q = x0, p = v0;
-      const RunSummary run = integrate_manifold(S, 0.0, q, p, v0, steps, [](auto&&...) {});
+      const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [](auto&&...) {});
       BOOST_REQUIRE(!run.failed);
       hs.push_back(h);
       errs.push_back(std::fmax(max_abs(V3(q - xr)), max_abs(V3(p - vr))));

@@ -58,7 +58,7 @@ Run run_body(const RigidBodyInSpace& L, const Map& R, double h, std::int64_t ste
   out.p = manifold_legendre(L, out.q, v0);
   const V3 P0 = RigidBodyInSpace::linear_momentum(out.q, out.p), J0 = RigidBodyInSpace::angular_momentum(out.q, out.p);
   const double E0 = manifold_energy(L, out.q, v0);
-  out.run = integrate_manifold(S, 0.0, out.q, out.p, v0, steps, [&](std::int64_t, double t, const V12& x, const V6& p,
+  out.run = integrate(S, 0.0, out.q, out.p, v0, steps, [&](std::int64_t, double t, const V12& x, const V6& p,
                                                                     const StepSummary&) {
     out.max_defect = std::fmax(out.max_defect, SpaceBody::point_defect(x));
     out.max_dp = std::fmax(out.max_dp, max_abs(V3(RigidBodyInSpace::linear_momentum(x, p) - P0)));

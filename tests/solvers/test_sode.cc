@@ -35,7 +35,7 @@ struct CurvedRetraction {
 template <class Step>
 std::pair<V1, V1> one_step(const Step& S, const V1& q0, const V1& v0) {
   V1 dq = S.step_size() * v0, dv = V1::Zero();
-  const StepSummary s = S.step_qv(q0, v0, dq, dv);
+  const StepSummary s = S.step_qv(0.0, q0, v0, dq, dv);
   BOOST_REQUIRE(s.converged);
   return {V1(q0 + dq), V1(v0 + dv)};
 }
@@ -187,7 +187,7 @@ double newmark_spectral_radius(double wh, double gamma, double beta) {
   for (int c = 0; c < 2; ++c) {
     const V1 q0(c == 0 ? 1.0 : 0.0), v0(c == 1 ? 1.0 : 0.0);
     V1 dq = V1::Zero(), dv = V1::Zero();
-    BOOST_REQUIRE(S.step_qv(q0, v0, dq, dv).converged);
+    BOOST_REQUIRE(S.step_qv(0.0, q0, v0, dq, dv).converged);
     A(0, c) = q0[0] + dq[0];
     A(1, c) = v0[0] + dv[0];
   }
@@ -201,7 +201,7 @@ double newmark_amplitude(double wh, double gamma, double beta) {
   double amp = 1.0;
   for (int k = 0; k < 2000; ++k) {
     V1 dq = V1::Zero(), dv = V1::Zero();
-    if (!S.step_qv(q, v, dq, dv).converged) return INFINITY;
+    if (!S.step_qv(0.0, q, v, dq, dv).converged) return INFINITY;
     q += dq;
     v += dv;
     amp = std::fmax(amp, std::fabs(q[0]));
@@ -294,7 +294,7 @@ BOOST_AUTO_TEST_CASE(newmark_equals_the_classical_update) {
     double qc = 1.0, vc = 0.5;
     for (int k = 0; k < 50; ++k) {
       V1 dq = 0.05 * v, dv = V1::Zero();
-      BOOST_REQUIRE(S.step_qv(q, v, dq, dv).converged);
+      BOOST_REQUIRE(S.step_qv(0.0, q, v, dq, dv).converged);
       q += dq;
       v += dv;
       classical_newmark_pendulum(9.81 / 2.0, 0.05, gamma, beta, qc, vc);
@@ -370,7 +370,7 @@ BOOST_AUTO_TEST_CASE(newmark_one_half_one_quarter_is_sode1_through_the_midpoint_
   V1 qa(1.0), va(0.5), qb = qa, vb = va, qc = qa, vc = va, qd = qa, vd = va;
   auto advance = [](const auto& S, V1& q, V1& v) {
     V1 dq = S.step_size() * v, dv = V1::Zero();
-    BOOST_REQUIRE(S.step_qv(q, v, dq, dv).converged);
+    BOOST_REQUIRE(S.step_qv(0.0, q, v, dq, dv).converged);
     q += dq;
     v += dv;
   };
@@ -398,10 +398,10 @@ BOOST_AUTO_TEST_CASE(newmark_adjoint_is_the_inverse_of_the_backward_step) {
     const NewmarkStep<Kepler> A = S.adjoint(), B = S.with_step(-0.05);
     const V2 q0(0.7, 0.1), v0(-0.2, 1.1);
     V2 dq = 0.05 * v0, dv = V2::Zero();
-    BOOST_REQUIRE(A.step_qv(q0, v0, dq, dv).converged);
+    BOOST_REQUIRE(A.step_qv(0.0, q0, v0, dq, dv).converged);
     const V2 q1 = q0 + dq, v1 = v0 + dv;
     V2 eq = -dq, ev = -dv;
-    BOOST_REQUIRE(B.step_qv(q1, v1, eq, ev).converged);
+    BOOST_REQUIRE(B.step_qv(0.0, q1, v1, eq, ev).converged);
     BOOST_TEST_CONTEXT("gamma " << gamma << " beta " << beta) {
       BOOST_TEST(max_abs(V2(q1 + eq - q0)) <= 1e-15);
       BOOST_TEST(max_abs(V2(v1 + ev - v0)) <= 1e-15);

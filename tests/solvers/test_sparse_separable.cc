@@ -144,7 +144,7 @@ std::pair<int, int> steps_agree(const A& a, const B& b, const VectorXd& q0, cons
   VectorXd qa = q0, pa = p0, qb = q0, pb = p0, dqa = VectorXd::Zero(n), dqb = dqa, dpa(n), dpb(n);
   int ia = 0, ib = 0;
   for (int k = 0; k < 50; ++k) {
-    const StepSummary sa = a.step(qa, pa, dqa, dpa), sb = b.step(qb, pb, dqb, dpb);
+    const StepSummary sa = a.step(0.0, qa, pa, dqa, dpa), sb = b.step(0.0, qb, pb, dqb, dpb);
     BOOST_TEST_REQUIRE(sa.converged, sa.message);
     BOOST_TEST_REQUIRE(sb.converged, sb.message);
     ia += sa.jacobians;
@@ -351,7 +351,7 @@ BOOST_AUTO_TEST_CASE(a_singular_dense_jacobian_is_a_failed_step_with_its_reason)
   VectorXd q(1), p(1), dq = VectorXd::Zero(1), dp(1);
   q << 0.1;
   p << 0.2;
-  const StepSummary s = step.step(q, p, dq, dp);
+  const StepSummary s = step.step(0.0, q, p, dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.message.find("singular step Jacobian (dense LU factorisation failed)") != std::string::npos, s.message);
 }
@@ -479,7 +479,7 @@ BOOST_AUTO_TEST_CASE(a_fresh_jacobian_is_exact_one_per_step_on_stiff_steps) {
     int one_each = 0;
     for (int k = 0; k < 10; ++k) {
       step.reset();
-      const StepSummary s = step.step(q, p, dq, dp);
+      const StepSummary s = step.step(0.0, q, p, dq, dp);
       BOOST_TEST(s.converged, s.message);
       if (!s.converged) break;
       one_each += s.jacobians == 1;
@@ -548,7 +548,7 @@ BOOST_AUTO_TEST_CASE(near_singular_jacobians_and_a_singular_one_at_the_solution)
   VectorXd q(2), p(2), dq = VectorXd::Zero(2), dp(2);
   q << 0.1, 0.2;
   p << 0.2, 0.1;
-  const StepSummary s = step.step(q, p, dq, dp);
+  const StepSummary s = step.step(0.0, q, p, dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.message.find("singular step Jacobian (dense LU factorisation failed)") != std::string::npos, s.message);
   const auto exact = written(1, ExpressionSymbols::Boundary::none, "x_dot^2/2 + 128*x^2", {}, {}, {"x"});
@@ -556,7 +556,7 @@ BOOST_AUTO_TEST_CASE(near_singular_jacobians_and_a_singular_one_at_the_solution)
   const DenseSeparableThetaStep<WrittenDynamic> at_rest(E, DenseSeparableThetaStep<WrittenDynamic>::workspace(E), 0.5,
                                                          0.125);
   VectorXd z = VectorXd::Zero(1), dz = VectorXd::Zero(1), dpz(1);
-  const StepSummary r = at_rest.step(z, z, dz, dpz);
+  const StepSummary r = at_rest.step(0.0, z, z, dz, dpz);
   BOOST_TEST(r.converged, r.message);
   BOOST_TEST(dz.norm() == 0.0);
   BOOST_TEST(dpz.norm() == 0.0);

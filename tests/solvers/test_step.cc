@@ -24,7 +24,7 @@ BOOST_AUTO_TEST_CASE(midpoint_step_is_the_implicit_midpoint_rule) {
     const Mat<double, 2, 2> C = (I - 0.5 * h * A).inverse() * (I + 0.5 * h * A);
     const V1 q0(0.7), p0(-0.3);
     V1 dq = V1::Zero(), dp = V1::Zero();
-    const StepSummary s = S.step(q0, p0, dq, dp);
+    const StepSummary s = S.step(0.0, q0, p0, dq, dp);
     BOOST_TEST(s.converged);
     BOOST_TEST(s.residual <= 1e-13 * s.scale);
     const V2 z1 = C * V2(q0[0], p0[0]);
@@ -47,13 +47,13 @@ BOOST_AUTO_TEST_CASE(euler_maps_give_the_symplectic_euler_methods) {
   const V1 q0(1.1), p0(0.4);
   V1 dq = V1::Zero(), dp = V1::Zero();
   const PositionMomentumStep<Pendulum, ThetaMap> A(P, ThetaMap::adjoint_euler(), h);
-  BOOST_TEST(A.step(q0, p0, dq, dp).converged);
+  BOOST_TEST(A.step(0.0, q0, p0, dq, dp).converged);
   const double qa = q0[0] + h * p0[0];
   BOOST_TEST(std::fabs(q0[0] + dq[0] - qa) <= 1e-15);
   BOOST_TEST(std::fabs(p0[0] + dp[0] - (p0[0] - h * std::sin(qa))) <= 1e-15);
   dq.setZero();
   const PositionMomentumStep<Pendulum, ThetaMap> E(P, ThetaMap::explicit_euler(), h);
-  BOOST_TEST(E.step(q0, p0, dq, dp).converged);
+  BOOST_TEST(E.step(0.0, q0, p0, dq, dp).converged);
   const double pe = p0[0] - h * std::sin(q0[0]);
   BOOST_TEST(std::fabs(p0[0] + dp[0] - pe) <= 1e-15);
   BOOST_TEST(std::fabs(q0[0] + dq[0] - (q0[0] + h * pe)) <= 1e-15);
@@ -71,9 +71,9 @@ BOOST_AUTO_TEST_CASE(generic_and_closed_form_paths_agree) {
   const PositionMomentumStep<Kepler, ThetaMap> C(Kepler(), ThetaMap(0.3), h, tiny);
   const V2 q0(0.4, 0.1), p0(0.2, 1.9);
   V2 dqa = h * p0, dqb = h * p0, dqc = h * p0, dpa, dpb, dpc;
-  BOOST_TEST(A.step(q0, p0, dqa, dpa).converged);
-  BOOST_TEST(B.step(q0, p0, dqb, dpb).converged);
-  BOOST_TEST(C.step(q0, p0, dqc, dpc).converged);
+  BOOST_TEST(A.step(0.0, q0, p0, dqa, dpa).converged);
+  BOOST_TEST(B.step(0.0, q0, p0, dqb, dpb).converged);
+  BOOST_TEST(C.step(0.0, q0, p0, dqc, dpc).converged);
   BOOST_TEST(max_abs(dqa - dqb) <= 1e-15);
   BOOST_TEST(max_abs(dpa - dpb) <= 1e-14);
   BOOST_TEST(max_abs(dqa - dqc) <= 1e-15);
@@ -86,7 +86,7 @@ BOOST_AUTO_TEST_CASE(a_step_that_cannot_converge_is_reported) {
   opt.max_iterations = 1;
   const PositionMomentumStep<Pendulum, ThetaMap> S(Pendulum(), ThetaMap::midpoint(), 0.5, opt);
   V1 dq(1.0), dp;
-  const StepSummary s = S.step(V1(2.0), V1(0.3), dq, dp);
+  const StepSummary s = S.step(0.0, V1(2.0), V1(0.3), dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.iterations == 1);
   BOOST_TEST(s.residual > opt.residual_tolerance * s.scale);
@@ -95,14 +95,14 @@ BOOST_AUTO_TEST_CASE(a_step_that_cannot_converge_is_reported) {
   opt.solver = SolverKind::tiny;
   const PositionMomentumStep<Pendulum, ThetaMap> T(Pendulum(), ThetaMap::midpoint(), 0.5, opt);
   dq = V1(1.0);
-  BOOST_TEST(!T.step(V1(2.0), V1(0.3), dq, dp).converged);
+  BOOST_TEST(!T.step(0.0, V1(2.0), V1(0.3), dq, dp).converged);
 }
 
 BOOST_AUTO_TEST_CASE(non_finite_states_are_reported) {
   // Kepler started at the singularity q = 0: the residual is not finite.
   const PositionMomentumStep<Kepler, ThetaMap> S(Kepler(), ThetaMap::explicit_euler(), 0.1);
   V2 dq = V2::Zero(), dp = V2::Zero();
-  const StepSummary s = S.step(V2::Zero(), V2(1.0, 0.0), dq, dp);
+  const StepSummary s = S.step(0.0, V2::Zero(), V2(1.0, 0.0), dq, dp);
   BOOST_TEST(!s.converged);
   BOOST_TEST(s.message.find("non-finite") != std::string::npos);
 }

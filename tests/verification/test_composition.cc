@@ -124,7 +124,7 @@ Mat2 engine_matrix(const std::vector<Substep>& subs, double theta, double x) {
   for (int c = 0; c < 2; ++c) {
     const V1 q(c == 0 ? 1.0 : 0.0), p(c == 0 ? 0.0 : 1.0);
     V1 dq = x * p, dp;
-    BOOST_REQUIRE(S.step(q, p, dq, dp).converged);
+    BOOST_REQUIRE(S.step(0.0, q, p, dq, dp).converged);
     M(0, c) = q[0] + dq[0];
     M(1, c) = p[0] + dp[0];
   }

@@ -94,7 +94,7 @@ RunSummary run_manifold(const System& L, const Map& R, double h, std::int64_t st
                         typename Map::Manifold::template Tangent<double>& p) {
   const ManifoldStep<System, Map> S(L, R, h);
   const auto v0 = manifold_legendre_inverse(L, q, p);
-  return integrate_manifold(S, 0.0, q, p, v0, steps, [](auto&&...) {});
+  return integrate(S, 0.0, q, p, v0, steps, [](auto&&...) {});
 }
 
 const std::vector<double> kSteps = {0.1, 0.05, 0.025, 0.0125, 0.00625};
@@ -213,7 +213,7 @@ BOOST_AUTO_TEST_CASE(sphere_stays_on_the_manifold_with_bounded_energy_and_noethe
     // a tenth of that under AddressSanitizer, see long_horizon)
     const std::int64_t n = long_horizon(kind == RetractionKind::projection ? 1000000 : 100000);
     double defect = 0, e_first = 0, e_second = 0, dJ = 0;
-    const RunSummary r = integrate_manifold(S, 0.0, q, p, v0, n, [&](std::int64_t k, double, const V3& x, const V3& pk, const auto&) {
+    const RunSummary r = integrate(S, 0.0, q, p, v0, n, [&](std::int64_t k, double, const V3& x, const V3& pk, const auto&) {
       defect = std::fmax(defect, Sphere::point_defect(x) + Sphere::tangent_defect(x, pk));
       dJ = std::fmax(dJ, std::fabs(SphericalPendulum::vertical_momentum(x, pk) - J0));
       if (k % 10 == 0) {
@@ -246,7 +246,7 @@ BOOST_AUTO_TEST_CASE(rigid_body_and_heavy_top_momenta_and_orthogonality) {
     const double E0 = L(R, w0);
     double dm = 0, defect = 0, de = 0;
     const std::int64_t n = long_horizon(kind == RetractionKind::cayley ? 1000000 : 100000);
-    const RunSummary r = integrate_manifold(S, 0.0, R, Pi, w0, n, [&](std::int64_t k, double, const M3& Rk, const V3& Pk, const auto&) {
+    const RunSummary r = integrate(S, 0.0, R, Pi, w0, n, [&](std::int64_t k, double, const M3& Rk, const V3& Pk, const auto&) {
       if (k % 10 != 0) return;
       dm = std::fmax(dm, max_abs(RigidBody::spatial_momentum(Rk, Pk) - m0));
       defect = std::fmax(defect, SO3::point_defect(Rk));
@@ -268,7 +268,7 @@ BOOST_AUTO_TEST_CASE(rigid_body_and_heavy_top_momenta_and_orthogonality) {
   const double J0 = HeavyTop::vertical_momentum(R, Pi);
   double dJ = 0;
   const std::int64_t n_top = long_horizon(100000);
-  const RunSummary r = integrate_manifold(S, 0.0, R, Pi, w0, n_top, [&](std::int64_t, double, const M3& Rk, const V3& Pk, const auto&) {
+  const RunSummary r = integrate(S, 0.0, R, Pi, w0, n_top, [&](std::int64_t, double, const M3& Rk, const V3& Pk, const auto&) {
     dJ = std::fmax(dJ, std::fabs(HeavyTop::vertical_momentum(Rk, Pk) - J0));
   });
   BOOST_TEST(!r.failed);
@@ -299,7 +299,7 @@ BOOST_AUTO_TEST_CASE(spherical_chain) {
   const ManifoldStep<SphericalChain<2>, SpherePowerMap<2>> S(C2, SpherePowerMap<2>(map), 0.005);
   double dJ = 0, dE = 0, defect = 0;
   const std::int64_t n = 20000;
-  const RunSummary r = integrate_manifold(S, 0.0, q, p, v, n, [&](std::int64_t k, double, const V6& x, const V6& pk, const auto&) {
+  const RunSummary r = integrate(S, 0.0, q, p, v, n, [&](std::int64_t k, double, const V6& x, const V6& pk, const auto&) {
     dJ = std::fmax(dJ, std::fabs(SphericalChain<2>::vertical_momentum(x, pk) - J0));
     defect = std::fmax(defect, SpherePower<2>::point_defect(x) + SpherePower<2>::tangent_defect(x, pk));
     if (k % 20 == 0) dE = std::fmax(dE, std::fabs(manifold_energy(C2, x, manifold_legendre_inverse(C2, x, pk)) - E0));
@@ -329,7 +329,7 @@ BOOST_AUTO_TEST_CASE(compositions_on_manifolds_reach_their_orders) {
       using Step = ComposedManifoldStep<std::decay_t<decltype(L)>, std::decay_t<decltype(map)>>;
       const Step S(L, map, h, sub);
       const auto v0 = manifold_legendre_inverse(L, q, p);
-      const RunSummary r = integrate_manifold(S, 0.0, q, p, v0, std::llround(1.0 / h), [](auto&&...) {});
+      const RunSummary r = integrate(S, 0.0, q, p, v0, std::llround(1.0 / h), [](auto&&...) {});
       // a step too large for a method with big substeps may fail (reported, not
       // passed on); that h then drops out of the fit, which needs three points
       if (r.failed) BOOST_TEST_MESSAGE(scheme << ", h = " << h << ": " << r.failure.message);
@@ -416,7 +416,7 @@ BOOST_AUTO_TEST_CASE(order_eight_compositions_on_the_sphere) {
       const double h = T / n;
       V3 q = x0, p = p0;
       const ComposedManifoldStep<SphericalPendulum, SphereMap> S(L, map, h, sub);
-      const RunSummary r = integrate_manifold(S, 0.0, q, p, manifold_legendre_inverse(L, q, p), n, [](auto&&...) {});
+      const RunSummary r = integrate(S, 0.0, q, p, manifold_legendre_inverse(L, q, p), n, [](auto&&...) {});
       const double e = r.failed ? NAN : std::fmax(max_abs(q - xr), max_abs(p - pr));
       if (e > 1e-13 && e < 1e-9) {
         hs.push_back(h);
