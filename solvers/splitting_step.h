@@ -56,6 +56,46 @@ template <class S, class V>
 struct has_force<S, V, std::void_t<decltype(std::declval<const S&>().force(std::declval<const V&>(), std::declval<V&>()))>>
     : std::true_type {};
 
+// One operation of an explicit splitting step: kick p += c F(q), or drift q += c M^{-1} p.
+struct SplittingOp {
+  bool kick;
+  double c;
+};
+
+// The kicks and drifts of the Euler map theta (0: kick then drift; 1: drift then kick)
+// composed by `substeps` at step h, two of a kind in a row merged into one (one force).
+// Throws std::invalid_argument for another theta, no substeps or a zero or non-finite
+// weight.
+inline std::vector<SplittingOp> splitting_sequence(double theta, const std::vector<Substep>& substeps, double h) {
+  if (!(theta == 0.0 || theta == 1.0))
+    throw std::invalid_argument("explicit splitting steps exist for theta = 0 and theta = 1 only");
+  if (substeps.empty()) throw std::invalid_argument("a composition needs at least one substep");
+  std::vector<SplittingOp> ops;
+  auto push = [&ops](bool kick, double c) {
+    if (!ops.empty() && ops.back().kick == kick)
+      ops.back().c += c;
+    else
+      ops.push_back({kick, c});
+  };
+  for (const Substep& s : substeps) {
+    if (!(s.weight != 0.0) || !std::isfinite(s.weight))
+      throw std::invalid_argument("composition substeps must have nonzero finite weights");
+    const double th = s.adjoint ? 1.0 - theta : theta;
+    const double c = s.weight * h;
+    push(th == 0.0, c);  // explicit Euler (theta 0) kicks first, its adjoint drifts first
+    push(th != 0.0, c);
+  }
+  return ops;
+}
+
+// The forces a step of the sequence evaluates in a long run: its kicks, less the first
+// where a step starts and ends with a kick (the last force of a step serves the next).
+inline int splitting_forces_per_step(const std::vector<SplittingOp>& ops) {
+  int kicks = 0;
+  for (const SplittingOp& o : ops) kicks += o.kick;
+  return kicks - (ops.size() > 1 && ops.front().kick && ops.back().kick ? 1 : 0);
+}
+
 template <class S>
 class ExplicitSplittingStep {
   static_assert(is_separable_v<S>, "explicit splitting steps need a system that declares a separable structure");
@@ -70,24 +110,9 @@ class ExplicitSplittingStep {
   // velocity; M is constant).
   ExplicitSplittingStep(S L, double theta, double h, const std::vector<Substep>& substeps, const V& q_ref)
       : L_(std::move(L)), h_(h), n_(system_dim(L_)) {
-    if (!(theta == 0.0 || theta == 1.0))
-      throw std::invalid_argument("explicit splitting steps exist for theta = 0 and theta = 1 only");
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
-    if (substeps.empty()) throw std::invalid_argument("a composition needs at least one substep");
     if (q_ref.size() != n_) throw std::invalid_argument("explicit splitting step: q_ref has the wrong size");
-    for (const Substep& s : substeps) {
-      if (!(s.weight != 0.0) || !std::isfinite(s.weight))
-        throw std::invalid_argument("composition substeps must have nonzero finite weights");
-      const double th = s.adjoint ? 1.0 - theta : theta;
-      const double c = s.weight * h;
-      if (th == 0.0) {
-        push(true, c);
-        push(false, c);
-      } else {
-        push(false, c);
-        push(true, c);
-      }
-    }
+    ops_ = splitting_sequence(theta, substeps, h);
     fsal_ = ops_.front().kick && ops_.back().kick;
     q_ = force_ = dLdv_ = zero_ = vel_ = p_ = V::Zero(n_);
     end_q_ = V::Constant(n_, std::numeric_limits<double>::quiet_NaN());
@@ -137,16 +162,7 @@ class ExplicitSplittingStep {
     return s;
   }
   static constexpr bool closed_velocity = N == Eigen::Dynamic ? has_dynamic_velocity<S>::value : has_velocity<S>::value;
-  struct Op {
-    bool kick;  // kick: p += c F(q); drift: q += c M^{-1} p
-    double c;
-  };
-  void push(bool kick, double c) {
-    if (!ops_.empty() && ops_.back().kick == kick)
-      ops_.back().c += c;
-    else
-      ops_.push_back({kick, c});
-  }
+  using Op = SplittingOp;
   // The kicks and drifts from (q0, p0), the increments into dq, dp; q, p, v, F, dLdv are
   // workspace (F holds the previous step's last force on entry).
   void run_ops(const V& q0, const V& p0, V& dq, V& dp, V& q, V& p, V& v, V& F, V& dLdv) const {

@@ -9,6 +9,7 @@
 #include "examples/dvm/commands.h"
 #include "solvers/runtime/json.h"
 #include "solvers/runtime/registry.h"
+#include "solvers/splitting_step.h"
 #include "solvers/stability.h"
 
 namespace dvm::cli {
@@ -19,6 +20,7 @@ struct MethodRow {
   CompositionScheme scheme;
   double threshold_verlet;     // basic method from map explicit-euler (Stormer-Verlet)
   bool midpoint_unconditional;  // basic method midpoint: stable for every h omega
+  int forces_verlet;            // forces a step with map explicit-euler on a separable system
   bool splitting() const { return scheme.kind == CompositionKind::rkn_splitting; }  // no midpoint
 };
 
@@ -29,7 +31,8 @@ std::vector<MethodRow> method_rows() {
   for (const CompositionScheme& s : list) {
     const bool splitting = s.kind == CompositionKind::rkn_splitting;  // kicks and drifts: no midpoint stages
     rows.push_back({s, composition_threshold(0.0, substeps(s, false)),
-                    !splitting && std::isinf(composition_threshold(0.5, substeps(s, true)))});
+                    !splitting && std::isinf(composition_threshold(0.5, substeps(s, true))),
+                    splitting_forces_per_step(splitting_sequence(0.0, substeps(s, false), 1.0))});
   }
   return rows;
 }
@@ -39,6 +42,7 @@ std::vector<MethodRow> method_rows() {
 int methods_command(bool json) {
   const std::vector<MethodRow> rows = method_rows();
   const double euler = composition_threshold(0.0, {{1.0, false}});
+  const int euler_forces = splitting_forces_per_step(splitting_sequence(0.0, {{1.0, false}}, 1.0));
   if (json) {
     std::string out = "[\n";
     {
@@ -48,6 +52,7 @@ int methods_command(bool json) {
           .num("stages", 1)
           .str("symmetric", "as the map")
           .num("stability_threshold_explicit_euler", euler)
+          .num("forces_per_step_explicit_euler", euler_forces)
           .boolean("midpoint_unconditionally_stable", true)
           .str("citation", NoComposition::citation);
       out += "  " + j.dump(4) + ",\n";
@@ -59,7 +64,8 @@ int methods_command(bool json) {
           .num("order", r.scheme.order)
           .num("stages", r.scheme.stages)
           .boolean("symmetric", r.scheme.symmetric)
-          .num("stability_threshold_explicit_euler", r.threshold_verlet);
+          .num("stability_threshold_explicit_euler", r.threshold_verlet)
+          .num("forces_per_step_explicit_euler", r.forces_verlet);
       if (r.splitting())  // refused with map = "midpoint"; stages count the forces of a step
         j.raw("midpoint_unconditionally_stable", "null")
             .str("applies_to", "separable systems, map explicit-euler or adjoint-euler");
@@ -94,20 +100,24 @@ int methods_command(bool json) {
     std::cout << out << "]\n";
     return 0;
   }
-  std::printf("%-16s %-5s %-6s %-9s %-13s %-9s %s\n", "name", "order", "stages", "symmetric", "threshold(SV)",
-              "midpoint", "source");
-  std::printf("%-16s %-5s %-6d %-9s %-13.6f %-9s %s\n", "none", "map", 1, "as map", euler, "stable",
-              "the map's own step (threshold: explicit-euler)");
+  std::printf("%-16s %-5s %-6s %-9s %-13s %-10s %-9s %s\n", "name", "order", "stages", "symmetric",
+              "threshold(SV)", "forces(SV)", "midpoint", "source");
+  std::printf("%-16s %-5s %-6d %-9s %-13.6f %-10d %-9s %s\n", "none", "map", 1, "as map", euler, euler_forces,
+              "stable", "the map's own step (threshold and forces: explicit-euler)");
   for (const MethodRow& r : rows)
-    std::printf("%-16s %-5d %-6d %-9s %-13.6f %-9s %s\n", r.scheme.name.c_str(), r.scheme.order, r.scheme.stages,
-                r.scheme.symmetric ? "yes" : "no", r.threshold_verlet,
+    std::printf("%-16s %-5d %-6d %-9s %-13.6f %-10d %-9s %s\n", r.scheme.name.c_str(), r.scheme.order,
+                r.scheme.stages, r.scheme.symmetric ? "yes" : "no", r.threshold_verlet, r.forces_verlet,
                 r.splitting() ? "refused" : r.midpoint_unconditional ? "stable" : "LIMITED",
                 r.scheme.citation.c_str());
   std::printf(
       "\nthreshold(SV): largest stable h*omega on q'' = -omega^2 q with map = \"explicit-euler\" (or\n"
       "\"adjoint-euler\"), whose symmetric basic method is Stormer-Verlet; found from |trace| < 2 of\n"
-      "the one-step matrix. midpoint: with map = \"midpoint\" every composition is stable for all\n"
-      "h*omega (each stage is a Cayley transform). triple-jump:<order> takes any even order 2..%d.\n"
+      "the one-step matrix. forces(SV): force evaluations (gradients of the potential) a step\n"
+      "takes with that map on a separable system, kicks merged and the last force of a step\n"
+      "reused by the next; the cost of a step in its units. midpoint: with map = \"midpoint\"\n"
+      "every composition is stable for all h*omega (each stage is a Cayley transform); a step\n"
+      "then solves one implicit equation per stage, each Newton iteration a gradient and a\n"
+      "Hessian of L. triple-jump:<order> takes any even order 2..%d.\n"
       "blanes-moan4 and blanes-moan6 are splittings into kicks and drifts (stages: forces a step):\n"
       "their order holds on separable systems (L = v^T M v / 2 - V(q)) with map = \"explicit-euler\"\n"
       "or \"adjoint-euler\" (the same method), lagrangian or hamiltonian form; other maps, forms\n"

@@ -513,6 +513,34 @@ BOOST_AUTO_TEST_CASE(velocity_verlet_takes_one_force_per_step) {
   }
 }
 
+// The forces a step costs, as `dvm methods` reports them (splitting_forces_per_step of
+// the step's own sequence), counted in a run: every composition with the explicit Euler
+// map, and its adjoint, takes that many gradients a step after the first. A symmetric
+// composition of S Stormer-Verlet stages costs S forces (merged kicks, the last force
+// reused), and the splittings list their forces as their stages.
+BOOST_AUTO_TEST_CASE(forces_per_step_are_the_forces_a_run_evaluates) {
+  FullMass L;
+  const V2 q0(0.7, -0.2), p0(0.1, 0.3);
+  std::vector<CompositionScheme> schemes = composition_schemes();
+  for (int order : {6, 8}) schemes.push_back(find_composition("triple-jump:" + std::to_string(order)));
+  for (const CompositionScheme& c : schemes)
+    for (double theta : {0.0, 1.0}) {
+      const std::vector<Substep> sub = substeps(c, false);
+      const int per_step = splitting_forces_per_step(splitting_sequence(theta, sub, 0.01));
+      BOOST_TEST(per_step == c.stages, c.name);
+      const ExplicitSplittingStep<FullMass> S(L, theta, 0.01, sub, q0);
+      *L.forces = 0;
+      V2 q = q0, p = p0;
+      const V2 v0 = V2::Zero();
+      BOOST_TEST_REQUIRE(!integrate(S, 0.0, q, p, v0, 40, [](auto&&...) {}).failed);
+      // the first step also takes the force its last kick hands on
+      BOOST_TEST(*L.forces == 40 * per_step + (S.first_same_as_last() ? 1 : 0), c.name << " theta " << theta);
+    }
+  // Euler alone: one force a step
+  BOOST_TEST(splitting_forces_per_step(splitting_sequence(0.0, single_substep(), 0.01)) == 1);
+  BOOST_TEST(splitting_forces_per_step(splitting_sequence(1.0, single_substep(), 0.01)) == 1);
+}
+
 BOOST_AUTO_TEST_CASE(a_full_mass_matrix_gives_the_generic_steps) {
   // the solve with M = [[2, 0.5], [0.5, 1]] against Newton on the same discrete Lagrangian
   const FullMass L;
