@@ -9,6 +9,19 @@
 
 namespace dvm::factories {
 
+// What the kernels of a manifold group build besides the lagrangian form with every map
+// and composition of its space: the one statement of it, read by the registry (its
+// SystemCapabilities, hence validate(), listings and messages) and by the kernels
+// (make_manifold_run instantiates exactly these parts).
+struct KernelParts {
+  bool hamiltonian;     // integrator.form = "hamiltonian"
+  bool galerkin;        // integrator.method = "galerkin"
+  bool boundary_value;  // problem.kind = "boundary-value"
+};
+inline constexpr KernelParts kSphereParts{true, true, true};          // S^2: spherical pendulum, written
+inline constexpr KernelParts kRotationParts{true, true, false};       // SO(3): rigid body, heavy top, written
+inline constexpr KernelParts kSpherePowerParts{false, false, false};  // (S^2)^K: spherical chain, written
+
 std::unique_ptr<Run> harmonic(const Problem&, const Method&);
 std::unique_ptr<Run> pendulum(const Problem&, const Method&);
 std::unique_ptr<Run> duffing(const Problem&, const Method&);

@@ -21,6 +21,7 @@
 #include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/manifold_systems.h"
 #include "mechanics/written_manifold.h"
+#include "solvers/runtime/factories.h"
 #include "solvers/manifold_boundary_value.h"
 #include "solvers/manifold_composition.h"
 #include "solvers/manifold_galerkin_step.h"
@@ -364,14 +365,16 @@ std::unique_ptr<Run> manifold_galerkin_run(const View& view, const S& L, const M
   throw InputError("integrator.stages: expected a whole number from 1 to 6");
 }
 
-// Which parts of the method are built for this system (the rest was refused by
-// validate() and is not instantiated): the Hamiltonian form, Galerkin, boundary values.
+// Which parts of the method are built for this system (Parts, factories.h: the rest was
+// refused by validate(), which reads the same constant, and is not instantiated): the
+// Hamiltonian form, Galerkin, boundary values.
 // The steps integrate L; the run reports as `Shown` (its name, columns, energy and
 // momentum maps): a system that is a special case of another one (the free rigid body
 // is the heavy top with m g = 0, to the bit) runs the other's steps, instantiated once.
-template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue, class Shown = S>
+template <const factories::KernelParts& Parts, class S, class Map, class Shown = S>
 std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& pr, const Method& me,
                                        const Shown& shown) {
+  constexpr bool Hamiltonian = Parts.hamiltonian, Galerkin = Parts.galerkin, BoundaryValue = Parts.boundary_value;
   static_assert(std::is_same_v<typename Shown::Manifold, typename S::Manifold>, "shown on another manifold");
   using View = ManifoldView<Shown, Map>;
   using Mf = typename Map::Manifold;
@@ -425,9 +428,9 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   return composed([&](double hk, const Map& Rk) { return ManifoldStep<S, Map>(L, Rk, hk, opt); });
 }
 
-template <class S, class Map, bool Hamiltonian, bool Galerkin, bool BoundaryValue>
+template <const factories::KernelParts& Parts, class S, class Map>
 std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& pr, const Method& me) {
-  return make_manifold_run<S, Map, Hamiltonian, Galerkin, BoundaryValue, S>(L, R, pr, me, L);
+  return make_manifold_run<Parts, S, Map, S>(L, R, pr, me, L);
 }
 
 }  // namespace dvm::kernels

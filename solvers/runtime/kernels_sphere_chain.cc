@@ -120,11 +120,11 @@ std::unique_ptr<Run> spherical_chain(const Problem& pr, const Method& me) {
     constexpr int K = decltype(k)::value;
     const SphericalChain<K> L(Vec<double, K>::Constant(P.at("m")), Vec<double, K>::Constant(P.at("l")), P.at("g"));
     if constexpr (K == 1) {  // (S^2)^1 is written as S^2 (kernels_sphere.cc): no written branch
-      return kernels::make_manifold_run<SphericalChain<1>, SpherePowerMap<1>, false, false, false>(
+      return kernels::make_manifold_run<kSpherePowerParts, SphericalChain<1>, SpherePowerMap<1>>(
           L, SpherePowerMap<1>(f), pr, me);
     } else {
       using Sys = kernels::BuiltinOrWritten<SphericalChain<K>>;
-      return kernels::make_manifold_run<Sys, SpherePowerMap<K>, false, false, false, SphericalChain<K>>(
+      return kernels::make_manifold_run<kSpherePowerParts, Sys, SpherePowerMap<K>, SphericalChain<K>>(
           kernels::as_builtin(L), SpherePowerMap<K>(f), pr, me, L);
     }
   };
@@ -137,7 +137,7 @@ std::unique_ptr<Run> written_sphere_power(const Problem& pr, const Method& me) {
     constexpr int K = decltype(k)::value;
     using Sys = kernels::BuiltinOrWritten<SphericalChain<K>>;
     const WrittenManifoldLagrangian<SpherePower<K>> L(pr.written);
-    return kernels::make_manifold_run<Sys, SpherePowerMap<K>, false, false, false,
+    return kernels::make_manifold_run<kSpherePowerParts, Sys, SpherePowerMap<K>,
                                       WrittenManifoldLagrangian<SpherePower<K>>>(
         kernels::as_written<SphericalChain<K>>(L), SpherePowerMap<K>(f), pr, me, L);
   };

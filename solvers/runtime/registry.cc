@@ -1,5 +1,7 @@
 #include "solvers/runtime/registry.h"
 
+#include <utility>
+
 #include "solvers/runtime/factories.h"
 
 namespace dvm {
@@ -49,6 +51,19 @@ SystemCapabilities run_time_sized() {
           "the fixed-size systems",
           false,
           false};
+}
+
+// Systems on S^2, (S^2)^K and SO(3): every map and composition of the space in the
+// lagrangian form, and the parts its kernels build (factories.h, the one statement of
+// them); `note` says why the rest is missing.
+SystemCapabilities manifold_caps(const factories::KernelParts& parts, std::string note) {
+  SystemCapabilities c;
+  c.forms = {Form::lagrangian};
+  if (parts.hamiltonian) c.forms.push_back(Form::hamiltonian);
+  c.galerkin = parts.galerkin;
+  c.boundary_value = parts.boundary_value;
+  c.note = std::move(note);
+  return c;
 }
 
 }  // namespace
@@ -230,8 +245,7 @@ const std::vector<SystemEntry>& system_registry() {
        Space::sphere,
        3,
        {{"m", 1.0, "mass"}, {"l", 1.0, "length"}, {"g", 1.0, "gravitational acceleration"}},
-       {{Form::lagrangian, Form::hamiltonian}, true, true, true, true,
-        "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)"},
+       manifold_caps(factories::kSphereParts, "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)"),
        factories::spherical_pendulum,
        ""},
       {"spherical-chain",
@@ -242,9 +256,9 @@ const std::vector<SystemEntry>& system_registry() {
         {"m", 1.0, "mass at the end of each link"},
         {"l", 1.0, "length of each link"},
         {"g", 1.0, "gravitational acceleration"}},
-       {{Form::lagrangian}, true, true, false, false,
-        "the spherical chain runs the lagrangian form only (it has no written-out Hamiltonian) and no Galerkin "
-        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)"},
+       manifold_caps(factories::kSpherePowerParts,
+                     "the spherical chain runs the lagrangian form only (it has no written-out Hamiltonian) and no Galerkin "
+        "method (the chart step is built for the spherical pendulum, the rigid body and the heavy top)"),
        factories::spherical_chain,
        "3 per link"},
       {"rigid-body",
@@ -254,8 +268,7 @@ const std::vector<SystemEntry>& system_registry() {
        {{"I1", 1.0, "principal moment of inertia"},
         {"I2", 2.0, "principal moment of inertia"},
         {"I3", 3.0, "principal moment of inertia"}},
-       {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
-        "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"},
+       manifold_caps(factories::kRotationParts, "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"),
        factories::rigid_body,
        ""},
       {"heavy-top",
@@ -270,8 +283,7 @@ const std::vector<SystemEntry>& system_registry() {
         {"chi1", 0.0, "centre of mass, body frame"},
         {"chi2", 0.0, "centre of mass, body frame"},
         {"chi3", 1.0, "centre of mass, body frame"}},
-       {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
-        "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"},
+       manifold_caps(factories::kRotationParts, "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"),
        factories::heavy_top,
        ""},
       {"chain",
@@ -352,21 +364,19 @@ const SystemEntry& written_system_entry(Space space, int factors) {
   // its Hamiltonian form needs the written H (validate checks that it is given).
   static const SystemEntry sphere = {
       "lagrangian", "written in the scene in x, x_dot (the embedded unit vector)", Space::sphere, 3, {},
-      {{Form::lagrangian, Form::hamiltonian}, true, true, true, true,
-       "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)", true, true},
+      manifold_caps(factories::kSphereParts, "on S^2 the forms are lagrangian and hamiltonian (the SODE and Newmark forms are built on R^n)"),
       factories::written_sphere, ""};
   static const SystemEntry rotation = {
       "lagrangian", "written in the scene in R, w (the body angular velocity)", Space::rotation, 3, {},
-      {{Form::lagrangian, Form::hamiltonian}, true, true, true, false,
-       "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2", true, true},
+      manifold_caps(factories::kRotationParts, "on SO(3) the forms are lagrangian and hamiltonian; boundary-value problems run on R^n and S^2"),
       factories::written_rotation, ""};
   // On (S^2)^K it runs the spherical chain's steps, and what they run.
   static const SystemEntry sphere_power = {
       "lagrangian", "written in the scene in x1, x1_dot, ..., xK, xK_dot (K embedded unit vectors)", Space::sphere,
       0, {},
-      {{Form::lagrangian}, true, true, false, false,
-       "on (S^2)^K the written Lagrangian runs the spherical chain's steps: the lagrangian form with every S^2 map "
-       "and composition; no hamiltonian form, Galerkin method or boundary values"},
+      manifold_caps(factories::kSpherePowerParts,
+                    "on (S^2)^K the written Lagrangian runs the spherical chain's steps: the lagrangian form with every S^2 map "
+       "and composition; no hamiltonian form, Galerkin method or boundary values"),
       factories::written_sphere_power, "3 per factor"};
   switch (space) {
     case Space::euclidean: return rn;
