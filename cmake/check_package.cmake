@@ -1,6 +1,6 @@
 # The installed package, as a user meets it (run by CTest as library_package):
-# install this build into a fresh prefix, configure examples/library against it with
-# find_package(dvm), build it and run it.
+# install this build into a fresh prefix, run the installed program on a shipped scene,
+# configure examples/library against it with find_package(dvm), build it and run it.
 #   cmake -DBUILD_DIR=... -DSOURCE_DIR=... -DWORK_DIR=... -P check_package.cmake
 file(REMOVE_RECURSE "${WORK_DIR}")
 file(MAKE_DIRECTORY "${WORK_DIR}")
@@ -12,6 +12,10 @@ function(step)
   message(STATUS "${out}")
 endfunction()
 step(${CMAKE_COMMAND} --install "${BUILD_DIR}" --prefix "${WORK_DIR}/prefix")
+if(NOT EXISTS "${WORK_DIR}/prefix/bin/dvm")
+  message(FATAL_ERROR "cmake --install put no dvm program in ${WORK_DIR}/prefix/bin")
+endif()
+step("${WORK_DIR}/prefix/bin/dvm" run "${SOURCE_DIR}/examples/scenes/pendulum.toml" --no-output --quiet)
 step(${CMAKE_COMMAND} -S "${SOURCE_DIR}/examples/library" -B "${WORK_DIR}/build"
      -DCMAKE_PREFIX_PATH=${WORK_DIR}/prefix)
 step(${CMAKE_COMMAND} --build "${WORK_DIR}/build")

@@ -56,7 +56,7 @@ const char* kVersionHelp =
 
 const char* kRunHelp =
     "usage: dvm run SCENE.toml [--set section.key=value]... [--csv PATH] [--npy PATH]\n"
-    "               [--json] [--quiet]\n"
+    "               [--no-output] [--json] [--quiet]\n"
     "\n"
     "Integrates the scene with the position-momentum form of the discrete Lagrangian\n"
     "L_d(q0, q1) = h L(R_d^{-1}(q0, q1) / h) of the scene's discretization map.\n"
@@ -81,8 +81,12 @@ const char* kRunHelp =
     "              for q0, q1, ...), on SO(3) pi1, pi2, pi3.\n"
     "              PATH - (or /dev/stdout) writes to standard output, and the\n"
     "              summary goes to standard error\n"
-    "  --json      print a JSON summary (steps, t_final, q_initial, p_initial, q_final,\n"
-    "              p_final, energy_initial, energy_final, max_abs_energy_error,\n"
+    "  --json      print a JSON summary (json_version, steps, t_final, q_initial,\n"
+    "              p_initial, q_final, p_final, energy_initial, energy_final,\n"
+    "              max_abs_energy_error, invariants (each quantity the system\n"
+    "              conserves besides the energy, by name: its initial value and\n"
+    "              max_abs_error; json_version 1 also had them as\n"
+    "              <name>_initial and max_abs_<name>_error),\n"
     "              wall_seconds, order (the order the method is built to have),\n"
     "              solver_iterations (iterations of the step equations' solves,\n"
     "              summed over the steps: Newton iterations, fixed-point sweeps, or\n"
@@ -102,6 +106,8 @@ const char* kRunHelp =
     "              rows x columns, the CSV's columns as --csv states them),\n"
     "              overriding [output] npy; their names go beside it in PATH.json,\n"
     "              {\"columns\": [...], \"npy\": FILE} (none when PATH is a stream)\n"
+    "  --no-output write no rows: the scene's [output] csv and npy are not written\n"
+    "              (refused beside --csv or --npy)\n"
     "  --quiet     print nothing on success and no progress (errors still go to\n"
     "              stderr); progress (step, time, rate, time left) is shown on\n"
     "              stderr only when stderr is a terminal\n"
@@ -522,8 +528,11 @@ int cmd_run(const std::vector<std::string>& args) {
       if (o.npy.empty()) usage_error("--npy needs a file name", kRunHelp);
     } else if (a == "--quiet") {
       o.quiet = true;
+    } else if (a == "--no-output") {
+      o.no_output = true;
     } else if (!a.empty() && a[0] == '-') {
-      usage_error(unknown_option(a, {"--set", "--csv", "--npy", "--json", "--quiet", "--help"}), kRunHelp);
+      usage_error(unknown_option(a, {"--set", "--csv", "--npy", "--no-output", "--json", "--quiet", "--help"}),
+                  kRunHelp);
     } else if (scene.empty()) {
       scene = a;
     } else {
@@ -531,12 +540,18 @@ int cmd_run(const std::vector<std::string>& args) {
     }
   }
   if (scene.empty()) usage_error("run needs a scene file", kRunHelp);
-  const dvm::Scene s = load_scene(scene, sets);
+  if (o.no_output && !(o.csv.empty() && o.npy.empty()))
+    usage_error(std::string("--no-output and ") + (o.csv.empty() ? "--npy" : "--csv") +
+                    ": one asks for no rows, the other for a file of them; give one",
+                kRunHelp);
+  dvm::Scene s = load_scene(scene, sets);
+  if (o.no_output) s.csv.clear(), s.npy.clear();
   // a row interval given on the command line for a run that writes no rows
   if (s.csv.empty() && s.npy.empty() && o.csv.empty() && o.npy.empty())
     for (const std::string& set : sets)
       if (set.rfind("output.every=", 0) == 0)
-        throw InputError("--set output.every: this run writes no rows (no --csv or --npy, no [output] csv or npy), "
+        throw InputError("--set output.every: this run writes no rows (no --csv or --npy, no [output] csv or npy, "
+                         "or --no-output), "
                          "so a row interval would change nothing");
   return run_scene(s, o);
 }

@@ -35,7 +35,6 @@ struct ChainView : kernels::FlatStateView {
     InvariantReport r;
     r.name = "total momentum";
     r.initial = {I0[0]};
-    r.legacy_key = "total_momentum";
     return {r};
   }
   double point_defect(const Point&) const { return -1.0; }

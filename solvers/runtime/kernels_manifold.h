@@ -180,16 +180,14 @@ std::vector<std::string> momentum_columns(const SphericalChain<K>&) {
 // The name of the conserved momentum in the report (and its historical JSON keys).
 template <class S>
 std::string momentum_name(const S&) {
-  return std::is_same_v<S, RigidBody> ? "spatial_angular_momentum" : "vertical_angular_momentum";
+  return std::is_same_v<S, RigidBody> ? "spatial angular momentum" : "vertical angular momentum";
 }
 template <class S>
 std::vector<InvariantReport> momentum_reports(const S& L, const double* I0) {
   InvariantReport r;
   r.name = momentum_name(L);
   for (int i = 0; i < static_cast<int>(momentum_columns(L).size()); ++i) r.initial.push_back(I0[i]);
-  r.legacy_key = momentum_name(L);
   r.array = true;
-  std::replace(r.name.begin(), r.name.end(), '_', ' ');
   return {r};
 }
 

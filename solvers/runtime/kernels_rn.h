@@ -56,22 +56,21 @@ std::vector<InvariantReport> invariant_names(const S&) {
 template <class S, int N>
 void invariant_values(const S&, const Vec<double, N>&, const Vec<double, N>&, double*) {}
 
-inline InvariantReport scalar_invariant(const std::string& name, const std::string& legacy = "") {
+inline InvariantReport scalar_invariant(const std::string& name) {
   InvariantReport r;
   r.name = name;
   r.initial.assign(1, 0.0);
-  r.legacy_key = legacy;
   return r;
 }
 
 inline std::vector<InvariantReport> invariant_names(const Kepler&) {
-  return {scalar_invariant("angular momentum", "angular_momentum")};
+  return {scalar_invariant("angular momentum")};
 }
 inline void invariant_values(const Kepler&, const Vec<double, 2>& q, const Vec<double, 2>& p, double* out) {
   out[0] = Kepler::angular_momentum(q, p);
 }
 inline std::vector<InvariantReport> invariant_names(const ChargedParticle&) {
-  return {scalar_invariant("angular momentum", "angular_momentum")};
+  return {scalar_invariant("angular momentum")};
 }
 inline void invariant_values(const ChargedParticle&, const Vec<double, 2>& q, const Vec<double, 2>& p, double* out) {
   out[0] = ChargedParticle::angular_momentum(q, p);

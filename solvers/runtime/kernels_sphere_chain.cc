@@ -48,7 +48,6 @@ struct SphereChainView : kernels::FlatStateView {
     InvariantReport r;
     r.name = "vertical angular momentum";
     r.initial = {I0[0]};
-    r.legacy_key = "vertical_angular_momentum";
     r.array = true;
     return {r};
   }

@@ -30,11 +30,7 @@ struct InvariantReport {
   std::string name;              // "angular momentum", "p_phi (cyclic)", ...
   std::vector<double> initial;   // its components at t = 0
   double max_abs_error = 0.0;    // max over the run and the components of |I(t) - I(0)|
-  // The JSON keys it was reported under before the "invariants" object existed:
-  // "<key>_initial" and "max_abs_<key>_error" (empty: none). The value is an array when
-  // `array` is set.
-  std::string legacy_key;
-  bool array = false;
+  bool array = false;            // reported as an array (a vector quantity, or one per link)
 };
 
 struct RunReport {

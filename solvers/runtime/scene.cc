@@ -1026,11 +1026,15 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   r.only_keys(out, "output", {"csv", "every", "npy", "monitor_every"});
   if (const toml::node* c = out.get("npy")) {
     s.npy = r.string(*c, "output.npy");
-    if (s.npy.empty()) throw InputError(r.where(c, "output.npy") + ": expected a file name, got an empty string");
+    if (s.npy.empty())
+      throw InputError(r.where(c, "output.npy") +
+                       ": expected a file name, got an empty string (dvm run --no-output writes no rows)");
   }
   if (const toml::node* c = out.get("csv")) {
     s.csv = r.string(*c, "output.csv");
-    if (s.csv.empty()) throw InputError(r.where(c, "output.csv") + ": expected a file name, got an empty string");
+    if (s.csv.empty())
+      throw InputError(r.where(c, "output.csv") +
+                       ": expected a file name, got an empty string (dvm run --no-output writes no rows)");
   }
   if (const toml::node* e = out.get("every")) s.every = r.integer(*e, "output.every", 1);
   if (const toml::node* e = out.get("monitor_every")) {

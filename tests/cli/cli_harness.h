@@ -35,9 +35,9 @@ inline std::string dvm_binary() {
   return other && *other ? other : DVM_BINARY;
 }
 
-// Runs dvm with the arguments (each single-quoted for the shell).
-inline Output dvm(const std::vector<std::string>& args) {
-  std::string cmd = "'" + dvm_binary() + "'";
+// Runs a program with the arguments (each single-quoted for the shell).
+inline Output run_program(const std::string& program, const std::vector<std::string>& args) {
+  std::string cmd = "'" + program + "'";
   for (const auto& a : args) {
     std::string q = "'";
     for (char c : a) q += c == '\'' ? std::string("'\\''") : std::string(1, c);
@@ -54,6 +54,9 @@ inline Output dvm(const std::vector<std::string>& args) {
   const int st = pclose(pipe);
   return {WIFEXITED(st) ? WEXITSTATUS(st) : -1, out, slurp(err_path)};
 }
+
+// Runs dvm with the arguments.
+inline Output dvm(const std::vector<std::string>& args) { return run_program(dvm_binary(), args); }
 
 inline std::string scene(const std::string& name) { return std::string(DVM_SCENES) + "/" + name; }
 
@@ -114,6 +117,28 @@ inline std::vector<double> json_array(const std::string& text, const std::string
   if (!m) return out;
   BOOST_REQUIRE_MESSAGE(m->is_array(), key << " is not an array: " << m->dump());
   for (const Json& x : *m) out.push_back(json_double(x));
+  return out;
+}
+
+// A conserved quantity of the report's "invariants" object, by name: its max_abs_error,
+// and its initial value (one number, or the components of an array). NaN or empty where
+// the report has no such quantity.
+inline double invariant_error(const std::string& text, const std::string& name) {
+  const Json j = parse_json(text);
+  const auto inv = j.find("invariants");
+  if (inv == j.end() || !inv->contains(name)) return NAN;
+  return json_double((*inv)[name].at("max_abs_error"));
+}
+inline std::vector<double> invariant_initial(const std::string& text, const std::string& name) {
+  const Json j = parse_json(text);
+  const auto inv = j.find("invariants");
+  std::vector<double> out;
+  if (inv == j.end() || !inv->contains(name)) return out;
+  const Json& x = (*inv)[name].at("initial");
+  if (x.is_array())
+    for (const Json& e : x) out.push_back(json_double(e));
+  else
+    out.push_back(json_double(x));
   return out;
 }
 

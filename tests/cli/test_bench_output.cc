@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -81,6 +82,34 @@ BOOST_AUTO_TEST_CASE(charts_program_writes_well_formed_csv) {
     }
   }
   BOOST_TEST(converged > 100);
+  // The error slopes on the harmonic oscillator (exact solution) are the methods' orders:
+  // between the coarsest and the finest step of each method's sweep whose errors lie in
+  // [1e-13, 0.1], log(e1/e2)/log(h1/h2) is at least the order less 0.25 (at least 5.75
+  // for orders above 6, which the tiny sweep's steps need not reach asymptotically) and
+  // at most the order plus 0.5. A composition that lost a stage would fall to order 1 or 2.
+  {
+    std::map<std::string, std::vector<std::pair<double, double>>> sweeps;  // method -> (h, error)
+    std::map<std::string, int> order;
+    for (const auto& r : wp) {
+      if (r[0] != "harmonic" || r[11] != "1") continue;
+      const double e = std::strtod(r[8].c_str(), nullptr);
+      if (!(e >= 1e-13 && e <= 0.1)) continue;
+      sweeps[r[1]].emplace_back(std::strtod(r[6].c_str(), nullptr), e);
+      order[r[1]] = std::atoi(r[3].c_str());
+    }
+    int fitted = 0;
+    for (auto& [method, points] : sweeps) {
+      if (points.size() < 2) continue;
+      std::sort(points.begin(), points.end());
+      const double slope = std::log(points.back().second / points.front().second) /
+                           std::log(points.back().first / points.front().first);
+      const int p = order[method];
+      BOOST_TEST(slope >= std::min(p, 6) - 0.25, method << ": order " << p << ", slope " << slope);
+      BOOST_TEST(slope <= p + 0.5, method << ": order " << p << ", slope " << slope);
+      ++fitted;
+    }
+    BOOST_TEST(fitted >= 30);
+  }
   for (const char* p : {"harmonic", "pendulum", "kepler", "henon-heiles", "fpu", "outer-solar-system", "rigid-body"}) {
     bool seen = false;
     for (const auto& r : wp) seen = seen || r[0] == p;

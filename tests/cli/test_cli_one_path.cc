@@ -15,6 +15,7 @@
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -514,11 +515,12 @@ BOOST_AUTO_TEST_CASE(converge_refuses_or_flags_what_it_cannot_measure) {
   BOOST_TEST(study.value("fit_note", "").find("not determined") != std::string::npos, chaos.out);
 }
 
-// Every space writes .npy (never nothing with exit 0), with the CSV's columns.
+// Every space writes .npy (never nothing with exit 0), with the CSV's columns, and its
+// last row is the run's final state: t_final, q_final (the stored position), p_final.
 BOOST_AUTO_TEST_CASE(npy_is_written_on_every_space) {
   for (const char* name : {"spherical-pendulum.toml", "rigid-body.toml", "spherical-chain.toml", "chain.toml"}) {
     const std::string npy = temp_dir() + "/" + name + ".npy", csv = temp_dir() + "/" + name + ".csv";
-    const Output o = dvm({"run", scene(name), "--quiet", "--npy", npy, "--csv", csv, "--set", "integrator.t_end=1.0"});
+    const Output o = dvm({"run", scene(name), "--json", "--npy", npy, "--csv", csv, "--set", "integrator.t_end=1.0"});
     BOOST_TEST_CONTEXT(name << "\n" << o.err) {
       BOOST_TEST(o.status == 0);
       const std::string data = slurp(npy);
@@ -532,7 +534,16 @@ BOOST_AUTO_TEST_CASE(npy_is_written_on_every_space) {
       const long rows = std::strtol(data.c_str() + shape + 10, nullptr, 10);
       const long cols = std::strtol(data.c_str() + data.find(',', shape) + 1, nullptr, 10);
       BOOST_TEST(cols == columns);
-      BOOST_TEST(static_cast<std::size_t>(rows * cols * 8 + 128) == data.size());
+      BOOST_REQUIRE(static_cast<std::size_t>(rows * cols * 8 + 128) == data.size());
+      // the last row, little-endian float64 (the header says '<f8'), against the report
+      BOOST_TEST(data.find("'descr': '<f8'") != std::string::npos);
+      std::vector<double> last(cols);
+      std::memcpy(last.data(), data.data() + data.size() - 8 * cols, 8 * cols);
+      std::vector<double> expect = {json_number(o.out, "t_final")};
+      for (const char* key : {"q_final", "p_final"})
+        for (double x : json_array(o.out, key)) expect.push_back(x);
+      BOOST_REQUIRE(expect.size() <= last.size());
+      for (std::size_t i = 0; i < expect.size(); ++i) BOOST_TEST(last[i] == expect[i], "column " << i);
     }
   }
 }
@@ -1246,14 +1257,15 @@ BOOST_AUTO_TEST_CASE(readme_commands_and_options_are_in_the_help) {
   BOOST_TEST(checked >= 10);  // the synopsis alone names more options than that
 }
 
-// Every command README.md shows in a fenced shell block runs: each `dvm ...` line
+// A smoke test: every command README.md shows in a fenced shell block runs (exit 0; what
+// the commands print is checked by the suites of their features): each `dvm ...` line
 // (a synopsis with placeholders such as SCENE.toml excepted) exits 0 with dvm the
 // built binary, in a scratch folder holding a copy of the shipped scenes as
 // examples/scenes and the README's own scenes (a toml block whose first line is
 // "# NAME.toml"), where the files they write land; `make run` is the Makefile's run
 // target, whose dvm command is run the same way (without make), and whose scene is
 // the one the README's comment names.
-BOOST_AUTO_TEST_CASE(readme_commands_run) {
+BOOST_AUTO_TEST_CASE(readme_commands_run_smoke_test) {
   namespace fs = std::filesystem;
   const std::string readme = slurp(repo_file("README.md"));
   const std::string dir = temp_dir() + "/readme";
