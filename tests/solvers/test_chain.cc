@@ -139,6 +139,17 @@ BOOST_AUTO_TEST_CASE(large_chains_solve) {
   for (int i = 0; i < n; ++i) q[i] = 0.5 * std::sin(M_PI * (i + 1) / (n + 1.0));
   const double E0 = C.energy(q, p);
   const ChainStep S(C, ThetaMap::midpoint(), 0.02);
+  {
+    // the first step solves the midpoint equations at this size, to round-off:
+    // p0 - (m/h) dq - (h/2) grad V(q0 + dq/2) = 0 and p1 - p0 = -h grad V(q0 + dq/2)
+    VectorXd dq = 0.02 * p, dp(n), g(n);
+    BOOST_TEST_REQUIRE(S.step(0.0, q, p, dq, dp).converged);
+    C.gradient(VectorXd(q + 0.5 * dq), g);
+    const double scale = p.lpNorm<Eigen::Infinity>();
+    BOOST_TEST(VectorXd(p - (C.m / 0.02) * dq - 0.01 * g).lpNorm<Eigen::Infinity>() <= 1e-13 * scale);
+    BOOST_TEST(VectorXd(dp + 0.02 * g).lpNorm<Eigen::Infinity>() <= 1e-15 * scale);
+    BOOST_TEST(dq.lpNorm<Eigen::Infinity>() >= 1e-3);  // it moved
+  }
   const RunSummary run = integrate(S, 0.0, q, p, p, 20, [](auto&&...) {});
   BOOST_TEST(!run.failed);
   BOOST_TEST(run.max_step_iterations <= 5);
