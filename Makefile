@@ -21,17 +21,18 @@ JOBS  ?= 2
 # ccache, when installed, speeds up rebuilds of the test and sanitizer builds
 LAUNCHER := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 
-# The test tree (build-test/): everything ctest runs, built by clang++-14 at -O1, in
-# 620 s at -j 2 where g++ at -O3 takes 1413 s (tests/README.md, "Build and CI cost").
-# clang spends most of its time optimising and g++ most of it instantiating templates,
-# so clang gains most from -O1 (763 s at -O3). Results do not depend on the level:
-# without -ffast-math and without FMA on x86-64's baseline, every level computes the
-# same IEEE operations; the suites take 57 s instead of 50.
+# The test tree (build-test/): everything ctest runs, built by clang++-14 at -O1, which
+# compiles it faster than g++ at -O3 (tests/README.md, "Build and CI cost"): clang
+# spends most of its time optimising and g++ most of it instantiating templates, so
+# clang gains most from a lower level. Results do not depend on the level: without
+# -ffast-math and without FMA on x86-64's baseline, every level computes the same IEEE
+# operations; the suites run a little slower than at -O3.
 # The program users run (`make`, `make run`) and the benchmark programs (`make bench`,
 # `make charts`) stay on g++ at -O3 in build/, so the per-step costs the charts publish
-# do not change: neither compiler's code is faster everywhere (clang's on the Newton
-# midpoint step, g++'s on TinySolver and on the Galerkin steps of 6 stages). Every suite
-# passes with both; `make test TEST_CXX=g++ TEST_FLAGS="-O3 -DNDEBUG"
+# are those of the shipped build: neither compiler's code is faster everywhere (clang's
+# on the Newton midpoint step, g++'s on TinySolver and on the Galerkin steps of 6
+# stages; bench_midpoint_step and bench_galerkin_kepler built by each show it). Every
+# suite passes with both; `make test TEST_CXX=g++ TEST_FLAGS="-O3 -DNDEBUG"
 # TEST_BUILD=build-test-gcc` runs them on the shipped build.
 TEST_BUILD ?= build-test
 TEST_CXX   ?= clang++-14
@@ -41,12 +42,12 @@ TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14)
 
 SAN_BUILD := build-sanitize
 SAN_CXX   := clang++-14
-# clang-14 compiles our template-heavy test files in about two thirds of g++'s time with
-# half its memory; -gline-tables-only keeps file:line in the symbolized stack traces
-# without full debug information (which doubled compile time and memory).
-# -O2, not -O1: the heavy suites run 2.2 to 2.7 times faster (test_product 311 -> 123 s,
-# test_composition_verification 347 -> 130 s; the -O1 times were taken on a busier
-# machine) for a build that took 26 min at -j 2.
+# clang-14 compiles our template-heavy test files faster than g++ and in less memory;
+# -gline-tables-only keeps file:line in the symbolized stack traces without full debug
+# information (which costs much more compile time and memory).
+# -O2, not -O1: the heavy suites (test_product, test_composition_verification) run much
+# faster under the sanitizers, which is worth the longer build; time `make sanitize`
+# with each to compare (CPU time, /usr/bin/time).
 # toml++'s internal debug assertions are off, as in the shipped (NDEBUG, g++) build, where
 # they are no-ops: the sanitizers and fuzzers check what ships. (Without NDEBUG this also
 # keeps TOML_ASSERT_ASSUME from becoming clang's __builtin_assume.) Several of them fail
