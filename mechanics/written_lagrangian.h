@@ -37,6 +37,9 @@
 
 namespace dvm {
 
+// The most quantities a scene may ask to monitor ([system] invariants).
+constexpr int kMaxWrittenInvariants = 8;
+
 struct WrittenSystem {
   // Where the point lives: R^n (any number of coordinates), S^2 or a power (S^2)^K
   // (the embedded unit vectors, three coordinates each), SO(3) (the rotation matrix;
@@ -59,6 +62,9 @@ struct WrittenSystem {
   Expression lagrangian;   // in q (block 0) and v (block 1)
   Expression energy;       // optional: q, v, p (blocks 0, 1, 2)
   Expression hamiltonian;  // optional: q (block 0) and p (block 2)
+  // Quantities the scene asks to monitor besides the energy ([system] invariants: a
+  // name and an expression in q, v and p, blocks 0, 1, 2, as the energy's), in order.
+  std::vector<std::pair<std::string, Expression>> invariants;
   // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
   int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
 

@@ -57,9 +57,17 @@ inline void dynamic_invariant_values(const NBodyDynamic&, const Eigen::VectorXd&
   const auto m = NBodyDynamic::momenta(q, p);
   for (int i = 0; i < 6; ++i) out[i] = m[static_cast<std::size_t>(i)];
 }
-// A coordinate that L does not depend on is cyclic: its momentum is conserved.
+// The scene's own invariants ([system] invariants, in its order), then the momentum of
+// each coordinate that L does not depend on (cyclic: conserved), up to
+// kMaxInvariantValues in all.
 inline std::vector<InvariantReport> dynamic_invariant_names(const WrittenDynamic& L) {
   std::vector<InvariantReport> out;
+  for (const auto& [name, expression] : L.system()->invariants) {
+    InvariantReport r;
+    r.name = name;
+    r.initial = {0.0};
+    out.push_back(r);
+  }
   for (int i = 0; i < L.dim() && static_cast<int>(out.size()) < kMaxInvariantValues; ++i)
     if (L.cyclic(i)) {
       InvariantReport r;
@@ -69,9 +77,25 @@ inline std::vector<InvariantReport> dynamic_invariant_names(const WrittenDynamic
     }
   return out;
 }
-inline void dynamic_invariant_values(const WrittenDynamic& L, const Eigen::VectorXd&, const Eigen::VectorXd& p,
+// The scene's own invariants, also written as CSV columns after the energy (none for n
+// bodies).
+inline std::size_t own_invariant_count(const NBodyDynamic&) { return 0; }
+inline std::size_t own_invariant_count(const WrittenDynamic& L) { return L.system()->invariants.size(); }
+inline int written_invariant_values(const NBodyDynamic&, const Eigen::VectorXd&, const Eigen::VectorXd&, double*) {
+  return 0;
+}
+// The scene's invariants at (q, p) (v = FL^{-1}(q, p) for the expressions), into out.
+inline int written_invariant_values(const WrittenDynamic& L, const Eigen::VectorXd& q, const Eigen::VectorXd& p,
+                                    double* out) {
+  const auto& own = L.system()->invariants;
+  if (own.empty()) return 0;
+  const Eigen::VectorXd v = legendre_inverse(L, q, p);
+  for (std::size_t i = 0; i < own.size(); ++i) out[i] = own[i].second(q.data(), v.data(), p.data());
+  return static_cast<int>(own.size());
+}
+inline void dynamic_invariant_values(const WrittenDynamic& L, const Eigen::VectorXd& q, const Eigen::VectorXd& p,
                                      double* out) {
-  int k = 0;
+  int k = written_invariant_values(L, q, p, out);
   for (int i = 0; i < L.dim() && k < kMaxInvariantValues; ++i)
     if (L.cyclic(i)) out[k++] = p[i];
 }
@@ -113,13 +137,16 @@ struct DynamicView {
     for (int i = 0; i < n(); ++i)
       c.push_back(names.empty() ? "p" + std::to_string(i) : "p_" + names[static_cast<std::size_t>(i)]);
     c.push_back("energy");
+    const std::vector<InvariantReport> named = dynamic_invariant_names(L);  // the scene's own first
+    for (std::size_t i = 0; i < own_invariant_count(L); ++i) c.push_back(named[i].name);
     return c;
   }
-  int row_size() const { return 2 * n() + 2; }
+  int row_size() const { return 2 * n() + 2 + static_cast<int>(own_invariant_count(L)); }
   void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const {
     row[0] = t;
     for (int i = 0; i < n(); ++i) row[1 + i] = q[i], row[1 + n() + i] = p[i];
     row[2 * n() + 1] = E;
+    if (own_invariant_count(L) > 0) written_invariant_values(L, q, p, row + 2 * n() + 2);
   }
   double energy(const Point& q, const Covector& p) const { return dynamic_energy(L, q, legendre_inverse(L, q, p), p); }
   int invariant_count() const { return static_cast<int>(dynamic_invariant_names(L).size()); }

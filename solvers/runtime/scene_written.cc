@@ -296,6 +296,32 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   parse("lagrangian", WrittenSystem::Kind::lagrangian, w->lagrangian, true);
   parse("energy", WrittenSystem::Kind::energy, w->energy, false);
   parse("hamiltonian", WrittenSystem::Kind::hamiltonian, w->hamiltonian, false);
+  // [system] invariants = { name = "expression in q, v and p", ... }: monitored and
+  // reported like the energy (Lagrangians written on R^n)
+  if (const toml::node* inv = sys.get("invariants")) {
+    const std::string key = "system.invariants";
+    if (!inv->is_table())
+      throw InputError(key_where(path, *inv, key) + ": expected a table of name = \"expression\" (in the "
+                                                    "coordinates, their velocities _dot and momenta p_)");
+    if (w->space != WrittenSystem::Space::euclidean)
+      throw InputError(key_where(path, *inv, key) +
+                       ": invariants of one's own are monitored for Lagrangians written on R^n; on S^2 and SO(3) "
+                       "the runs monitor the momentum maps of the symmetries found in the text");
+    const toml::table& t = *inv->as_table();
+    if (t.size() > static_cast<std::size_t>(kMaxWrittenInvariants))
+      throw InputError(key_where(path, *inv, key) + ": got " + std::to_string(t.size()) + " invariants, expected at most " +
+                       std::to_string(kMaxWrittenInvariants));
+    for (const auto& [name, node] : t) {
+      const std::string k = key + "." + std::string(name.str());
+      if (!node.is_string()) throw InputError(key_where(path, node, k) + ": expected a string (an expression)");
+      try {
+        w->invariants.emplace_back(std::string(name.str()),
+                                   Expression::parse(*node.value<std::string>(), w->symbols(WrittenSystem::Kind::energy)));
+      } catch (const ExpressionError& e) {
+        throw InputError(string_location(path, node, e.offset) + ": in " + k + ": " + e.what());
+      }
+    }
+  }
   const toml::node* L = sys.get("lagrangian");
   pr.written_where = key_where(path, *L, "system.lagrangian");
   if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
