@@ -104,6 +104,56 @@ BOOST_AUTO_TEST_CASE(no_output_leaves_the_scenes_files_unwritten) {
   BOOST_TEST(file_exists(npy));
 }
 
+// With a row every 7 of 100 steps the CSV holds t_0, every 7th step and the last, which
+// is the run's final state as the JSON reports it.
+BOOST_AUTO_TEST_CASE(the_last_row_is_written_when_the_steps_are_not_a_multiple_of_every) {
+  const std::string path = write_scene("every7.toml", kGood), csv = temp_dir() + "/every7.csv";
+  const Output o = dvm({"run", path, "--json", "--csv", csv, "--set", "output.every=7"});
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  std::ifstream f(csv);
+  std::string line;
+  std::getline(f, line);
+  std::vector<double> ts;
+  double t = 0, q = 0, p = 0;
+  while (std::getline(f, line)) {
+    BOOST_TEST_REQUIRE(std::sscanf(line.c_str(), "%lf,%lf,%lf", &t, &q, &p) == 3);
+    ts.push_back(t);
+  }
+  BOOST_TEST_REQUIRE(ts.size() == 16u);  // steps 0, 7, ..., 98, then 100
+  BOOST_TEST(ts[14] == 0.98, boost::test_tools::tolerance(1e-14));
+  BOOST_TEST(t == json_number(o.out, "t_final"));
+  BOOST_TEST(q == json_first(o.out, "q_final"));
+  BOOST_TEST(p == json_first(o.out, "p_final"));
+}
+
+// A convergence study whose runs fail: exit 3, the failed runs marked and left out of
+// the fit, the others measured, and the first failure told (step, time, why).
+BOOST_AUTO_TEST_CASE(a_convergence_study_with_a_failing_run_exits_3_and_keeps_the_rest) {
+  const Output o = dvm({"converge", scene("pendulum.toml"), "--steps-list", "2,100,200", "--t-end", "20", "--set",
+                        "integrator.max_iterations=3", "--json"});
+  BOOST_TEST(o.status == 3, o.err);
+  const Json j = parse_json(o.out);
+  BOOST_TEST_REQUIRE(j.at("runs").size() == 3u);
+  BOOST_TEST(j.at("runs")[0].value("excluded", "") == "failed");
+  BOOST_TEST(j.at("runs")[0].at("error").is_null());
+  BOOST_TEST(j.at("runs")[2].value("fitted", false));
+  BOOST_TEST(json_double(j.at("runs")[2].at("error")) < 1e-2);
+  const std::string failure = j.value("failure", "");
+  BOOST_TEST(failure.find("the run with 2 steps") != std::string::npos, failure);
+  BOOST_TEST(failure.find("no convergence within 3 iterations") != std::string::npos, failure);
+}
+
+// dvm check-map exits 1 when an identity does not hold to the tolerance: at 1e-30 the
+// round-off of the inverse's round trip fails it.
+BOOST_AUTO_TEST_CASE(check_map_exits_1_when_an_identity_fails) {
+  const Output o = dvm({"check-map", "midpoint", "--tolerance", "1e-30"});
+  BOOST_TEST(o.status == 1, o.out << o.err);
+  BOOST_TEST(!parse_json(o.out).value("passed", true));
+  const Output ok = dvm({"check-map", "midpoint"});
+  BOOST_TEST(ok.status == 0, ok.out << ok.err);
+  BOOST_TEST(parse_json(ok.out).value("passed", false));
+}
+
 BOOST_AUTO_TEST_CASE(csv_columns_rows_and_thinning) {
   const std::string path = write_scene("good.toml", kGood);
   const std::string csv = temp_dir() + "/good.csv";

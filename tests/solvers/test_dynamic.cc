@@ -982,3 +982,75 @@ BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
                  DenseSeparableThetaStep<NBodyDynamic>(B, DenseSeparableThetaStep<NBodyDynamic>::workspace(B), 0.5, h), q,
                  p, g3, 5, true) == 0);
 }
+
+namespace {
+// A scalar equation for newton_drive: F(x) = a (x^2 - c) (domain: all x), or, with
+// logarithm = true, F(x) = log(x / c) (domain x > 0; NaN outside; Newton's method from x
+// stays in it while x < e c).
+struct ScalarEquation {
+  using Vector = Eigen::Matrix<double, 1, 1>;
+  using Matrix = Eigen::Matrix<double, 1, 1>;
+  double a = 1.0, c = 4.0;
+  bool logarithm = false;
+  int outside = 0;  // residuals asked for outside the domain
+  double f(double x) const { return logarithm ? std::log(x / c) : a * (x * x - c); }
+  double df(double x) const { return logarithm ? 1.0 / x : 2.0 * a * x; }
+  void residual(const Vector& x, Vector& r) {
+    outside += logarithm && !(x[0] > 0.0);
+    r[0] = f(x[0]);
+  }
+  double jacobian(const Vector& x, Vector& r, Matrix& J) {
+    r[0] = f(x[0]);
+    J(0, 0) = df(x[0]);
+    return std::isfinite(J(0, 0)) ? std::fabs(J(0, 0)) : INFINITY;
+  }
+  double scale(const Vector& x, double Jmax) const { return std::fabs(c) + Jmax * std::fabs(x[0]); }
+  double offset() const { return 0.0; }
+};
+}  // namespace
+
+// The driver's refresh of a kept Jacobian and its failure messages: a Jacobian kept from
+// another equation that throws the iterate out of the domain (a NaN residual) makes the
+// driver start again from the guess with a fresh Jacobian, and it converges; an
+// equation with no root ends with the iteration count and the Jacobians formed in its
+// message; a zero Jacobian is reported as singular.
+BOOST_AUTO_TEST_CASE(the_driver_restarts_from_the_guess_and_names_its_failures) {
+  using V = ScalarEquation::Vector;
+  using M = ScalarEquation::Matrix;
+  DenseLUOf<1> lu(1);
+  DriverState state;
+  V x, r, dx, start;
+  M J;
+  StepOptions opt;
+  // 0.05 (x^2 - 4) = 0 from 3: the factorisation of J = 0.1 x near x = 2 is kept
+  ScalarEquation first{0.05, 4.0, false, 0};
+  x[0] = 3.0;
+  StepSummary s = newton_drive(first, lu, Refresh::across_steps, opt, x, r, dx, J, state, start);
+  BOOST_TEST_REQUIRE(s.converged);
+  BOOST_TEST(x[0] == 2.0, boost::test_tools::tolerance(1e-15));
+  BOOST_TEST_REQUIRE(state.valid);
+  // log(x / 0.5) = 0 from 1 with that Jacobian: the first update, log(2) / 0.2 or so,
+  // lands at x < 0; Newton's method from 1 itself stays in the domain
+  ScalarEquation second{1.0, 0.5, true, 0};
+  x[0] = 1.0;
+  s = newton_drive(second, lu, Refresh::across_steps, opt, x, r, dx, J, state, start);
+  BOOST_TEST(s.converged, s.message);
+  BOOST_TEST(x[0] == 0.5, boost::test_tools::tolerance(1e-14));
+  BOOST_TEST(second.outside == 1);  // the kept Jacobian's iterate, once
+  BOOST_TEST(s.jacobians >= 1);
+  BOOST_TEST(s.iterations >= 2);  // the kept Jacobian's iterate, then Newton from the guess
+  // x^2 + 1 = 0 has no real root
+  ScalarEquation none{1.0, -1.0, false, 0};
+  x[0] = 0.7;
+  opt.max_iterations = 12;
+  s = newton_drive(none, lu, Refresh::every_iteration, opt, x, r, dx, J, state, start);
+  BOOST_TEST(!s.converged);
+  BOOST_TEST(s.message.find("no convergence within 12 iterations") != std::string::npos, s.message);
+  BOOST_TEST(s.message.find("Jacobians formed") != std::string::npos, s.message);
+  // at x = 0 the Jacobian of x^2 - 4 is zero (and the residual is not)
+  ScalarEquation flat{1.0, 4.0, false, 0};
+  x[0] = 0.0;
+  s = newton_drive(flat, lu, Refresh::every_iteration, opt, x, r, dx, J, state, start);
+  BOOST_TEST(!s.converged);
+  BOOST_TEST(s.message.find("singular step Jacobian") != std::string::npos, s.message);
+}

@@ -813,3 +813,42 @@ BOOST_AUTO_TEST_CASE(written_systems_of_10_100_and_1000_coordinates_run_every_me
     BOOST_TEST(explicit_steps == 8);  // two explicit maps x four compositions, lagrangian form
   }
 }
+
+// The first-same-as-last reuse is guarded: a step started from a state that is not where
+// the last step ended evaluates its first force afresh, so that it gives what a new step
+// object gives, to the bit; and the constructor refuses what has no explicit step.
+BOOST_AUTO_TEST_CASE(a_step_from_an_unrelated_state_does_not_reuse_the_last_force) {
+  FullMass L;
+  const V2 q0(0.7, -0.2), p0(0.1, 0.3), q1(-0.4, 0.5), p1(0.2, -0.1);
+  const std::vector<Substep> sv = substeps(find_composition("stormer-verlet"), false);
+  const ExplicitSplittingStep<FullMass> S(L, 1.0, 0.01, sv, q0), fresh(L, 1.0, 0.01, sv, q0);
+  BOOST_TEST_REQUIRE(S.first_same_as_last());
+  V2 dq = V2::Zero(), dp = V2::Zero(), eq = V2::Zero(), ep = V2::Zero();
+  BOOST_TEST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
+  *L.forces = 0;
+  BOOST_TEST_REQUIRE(S.step(0.01, q1, p1, dq, dp).converged);  // not q0 + dq
+  BOOST_TEST(*L.forces == 2);  // the first kick's force taken at q1, then the last kick's
+  BOOST_TEST_REQUIRE(fresh.step(0.01, q1, p1, eq, ep).converged);
+  BOOST_TEST(dq == eq, boost::test_tools::per_element());
+  BOOST_TEST(dp == ep, boost::test_tools::per_element());
+  // and from where it ended, the force is reused: one gradient
+  const V2 q2 = q1 + dq, p2 = p1 + dp;
+  *L.forces = 0;
+  BOOST_TEST_REQUIRE(S.step(0.02, q2, p2, dq, dp).converged);
+  BOOST_TEST(*L.forces == 1);
+
+  const auto refused = [&](auto make, const char* what) {
+    try {
+      make();
+      BOOST_ERROR(what << ": not refused");
+    } catch (const std::invalid_argument& e) {
+      BOOST_TEST_MESSAGE(what << ": " << e.what());
+    }
+  };
+  refused([&] { ExplicitSplittingStep<FullMass>(L, 0.5, 0.01, sv, q0); }, "theta 1/2");
+  refused([&] { ExplicitSplittingStep<FullMass>(L, 0.0, 0.0, sv, q0); }, "h = 0");
+  refused([&] { ExplicitSplittingStep<FullMass>(L, 0.0, NAN, sv, q0); }, "h = NaN");
+  refused([&] { ExplicitSplittingStep<FullMass>(L, 0.0, 0.01, {}, q0); }, "no substeps");
+  refused([&] { ExplicitSplittingStep<FullMass>(L, 0.0, 0.01, {{0.0, false}}, q0); }, "a zero weight");
+  refused([&] { ExplicitSplittingStep<FullMass>(L, 0.0, 0.01, {{INFINITY, false}}, q0); }, "an infinite weight");
+}
