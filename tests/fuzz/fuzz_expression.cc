@@ -6,8 +6,11 @@
 // Hessian evaluated, in doubles and in Jets).
 //
 // Any input must parse or throw ExpressionError; evaluation must not crash or run
-// into undefined behaviour (non-finite values are fine: log(-1) is NaN). Run by
+// into undefined behaviour (non-finite values are fine: log(-1) is NaN). Where it has
+// them, the reverse-mode gradient must agree with the forward-mode (Jet) derivatives and
+// the derivative program's gradient with the reverse mode's (differential checks). Run by
 // `make fuzz`; seed corpus in tests/fuzz/corpus/expression.
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <string>
@@ -17,6 +20,18 @@
 
 #include "mechanics/derivative_program.h"
 #include "mechanics/expression.h"
+
+// Two computations of the same derivatives must agree where both are finite and below
+// 1e8 in size: to 1e-6 relative to the larger of 1 and their sizes. (Texts that cancel
+// larger terms, or overflow, are not compared.)
+static void agree(const double* a, const double* b, int n) {
+  for (int i = 0; i < n; ++i) {
+    if (!std::isfinite(a[i]) || !std::isfinite(b[i])) continue;
+    const double size = std::fmax(1.0, std::fmax(std::fabs(a[i]), std::fabs(b[i])));
+    if (size > 1e8) continue;
+    if (std::fabs(a[i] - b[i]) > 1e-6 * size) __builtin_trap();
+  }
+}
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string text(reinterpret_cast<const char*>(data), size);
@@ -44,19 +59,28 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   using J = ceres::Jet<double, 4>;
   const J qj[5] = {J(0.3, 0), J(-0.7, 1), J(0.1), J(0.2), J(-0.4)},
           vj[5] = {J(1.1, 2), J(0.2, 3), J(-0.3), J(0.5), J(0.9)}, pj[5] = {J(0.5), J(-1.5), J(1), J(2), J(3)};
-  volatile double d = e(qj, vj, pj).v[0];
+  const J forward = e(qj, vj, pj);
+  volatile double d = forward.v[0];
   (void)d;
   bool momenta = false;  // the gradient takes blocks 0 and 1 only
   for (int i = 0; i < 5; ++i) momenta = momenta || e.uses(2, i);
   if (!momenta) {
     double g0[5] = {0, 0, 0, 0, 0}, g1[5] = {0, 0, 0, 0, 0};
     e.gradient(q, v, g0, g1);
-    // the symbolic derivatives (none are built for texts with blocks)
+    // differential: the reverse-mode gradient against the forward-mode Jet derivatives
+    // in x, y, x_dot, y_dot, where both are finite and of moderate size (the two sum the
+    // same chain-rule products in different orders: round-off apart, far less than the
+    // tolerance unless the text cancels huge terms, which the size bound keeps out)
+    const double reverse[4] = {g0[0], g0[1], g1[0], g1[1]};
+    agree(reverse, forward.v.data(), 4);
+    // the symbolic derivatives (none are built for texts with blocks), against the tape
     if (const auto program = dvm::DerivativeProgram::build(e, 5)) {
       std::vector<double> work = program->workspace();
-      double h[3][25];
-      program->gradient(q, v, g0, g1, work.data());
-      program->hessian(q, v, g0, g1, h[0], 5, h[1], 5, h[2], 5, work.data());
+      double h[3][25], p0[5], p1[5];
+      program->gradient(q, v, p0, p1, work.data());
+      agree(g0, p0, 5);
+      agree(g1, p1, 5);
+      program->hessian(q, v, p0, p1, h[0], 5, h[1], 5, h[2], 5, work.data());
       std::vector<J> slots(program->slots());
       J gj0[5], gj1[5];
       program->gradient_any(qj, vj, gj0, gj1, slots.data());
