@@ -10,6 +10,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
 #include <fstream>
 #include <random>
 #include <string>
@@ -428,6 +429,12 @@ BOOST_AUTO_TEST_CASE(compiled_programs_give_the_interpreters_results_to_the_bit)
                  Hi.data() + 2 * ld * n, ld, w.data());
       C->hessian(a.data(), b.data(), hc.data(), hc.data() + n, Hc.data(), ld, Hc.data() + ld * n, ld,
                  Hc.data() + 2 * ld * n, ld, nullptr);
+      // the compiled code reads every input before it writes an output: the gradient
+      // written over its own inputs is the same
+      std::vector<double> over(a.data(), a.data() + n);
+      over.insert(over.end(), b.data(), b.data() + n);
+      C->gradient(over.data(), over.data() + n, over.data(), over.data() + n, nullptr);
+      BOOST_TEST(same_bits(over.data(), gc.data(), 2 * n), text.L << ": gradient over its inputs");
       BOOST_TEST_CONTEXT(text.L << " at point " << k) {
         BOOST_TEST(same_bits(gi.data(), gc.data(), 2 * n));
         BOOST_TEST(same_bits(hi.data(), hc.data(), 2 * n));
@@ -528,6 +535,51 @@ BOOST_AUTO_TEST_CASE(what_cannot_be_compiled_is_refused) {
     const dvm_test::ScopedEnv cc("DVM_CC", "");
     BOOST_TEST(default_c_compiler() == "cc");
   }
+}
+
+// What compiling can meet on a machine, each refused with what to do and nothing left
+// behind: $TMPDIR that does not exist or holds a quote, a compiler killed by a signal,
+// compiled code that cannot be loaded; the scratch directory is gone after a success
+// and after each failure.
+BOOST_AUTO_TEST_CASE(native_compilation_failures_name_their_cause_and_leave_nothing) {
+  BOOST_TEST_REQUIRE(compiler_runs());
+  const auto s = written({"x"}, "x_dot^2/2 - x^4");
+  const auto P = DerivativeProgram::build(s->lagrangian, 1);
+  BOOST_TEST_REQUIRE(P != nullptr);
+  char pattern[] = "/tmp/dvm-test-native-XXXXXX";
+  BOOST_TEST_REQUIRE(::mkdtemp(pattern) != nullptr);
+  const std::string tmp = pattern;
+  const auto empty = [&] { return std::filesystem::is_empty(tmp); };
+  const auto refused = [&](const std::string& cc, const std::string& says) {
+    try {
+      compile_programs({P.get()}, cc);
+      BOOST_ERROR("compiled with '" << cc << "'");
+    } catch (const NativeCodeError& e) {
+      BOOST_TEST(std::string(e.what()).find(says) != std::string::npos, e.what());
+    }
+    BOOST_TEST(empty(), "files left behind after '" << cc << "'");
+  };
+  {
+    const dvm_test::ScopedEnv t("TMPDIR", tmp);
+    BOOST_TEST_REQUIRE(!compile_programs({P.get()}).empty());  // a success leaves nothing
+    BOOST_TEST(empty());
+    refused("kill -KILL $$; true", "was killed by signal 9");
+    // a "compiler" that writes something that is not a shared object where -o says
+    const std::string fake = tmp + "-fake-cc.sh";
+    std::ofstream(fake) << "#!/bin/sh\nwhile [ \"$1\" != -o ]; do shift; done\necho 'not an object' > \"$2\"\n";
+    std::filesystem::permissions(fake, std::filesystem::perms::owner_all);
+    refused(fake, "cannot load the compiled code");
+    std::filesystem::remove(fake);
+  }
+  {
+    const dvm_test::ScopedEnv t("TMPDIR", tmp + "/missing");
+    refused(default_c_compiler(), "set TMPDIR to a writable directory");
+  }
+  {
+    const dvm_test::ScopedEnv t("TMPDIR", tmp + "/it's");
+    refused(default_c_compiler(), "TMPDIR contains a quote");
+  }
+  std::filesystem::remove_all(tmp);
 }
 
 namespace {

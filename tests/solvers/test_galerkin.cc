@@ -242,10 +242,11 @@ BOOST_AUTO_TEST_CASE(one_step_map_is_symplectic_to_round_off) {
   }
 }
 
-BOOST_AUTO_TEST_CASE(energy_error_stays_bounded_over_a_million_steps) {
+BOOST_AUTO_TEST_CASE(energy_error_stays_bounded_over_a_hundred_thousand_steps) {
   // Pendulum from q = 1.5 at rest, h = 0.1, s = 1 (midpoint) and s = 2 (order 4):
   // the energy error oscillates at O(h^{2s}) with no drift. The maximum over the
-  // first 10^4 steps (several hundred periods) and over all 10^6 are compared.
+  // first 10^3 steps (about 13 periods) and over all 10^5 are compared: a drift linear
+  // in t would make the second a hundred times the first.
   const Pendulum P(1.0, 1.0, 1.0);
   auto run = [&](auto stage_tag) {
     constexpr int S = decltype(stage_tag)::value;
@@ -254,16 +255,16 @@ BOOST_AUTO_TEST_CASE(energy_error_stays_bounded_over_a_million_steps) {
     V1 q(1.5), p(0.0);
     const double E0 = -std::cos(1.5);
     double early = 0.0, all = 0.0;
-    const RunSummary r = integrate(G, 0.0, q, p, V1(0.0), 1000000, [&](std::int64_t k, double, const V1& qk,
+    const RunSummary r = integrate(G, 0.0, q, p, V1(0.0), 100000, [&](std::int64_t k, double, const V1& qk,
                                                                       const V1& pk, const StepSummary&) {
       const double e = std::fabs(0.5 * pk[0] * pk[0] - std::cos(qk[0]) - E0);
       all = std::fmax(all, e);
-      if (k <= 10000) early = all;
+      if (k <= 1000) early = all;
     });
     BOOST_REQUIRE(!r.failed);
-    BOOST_TEST_MESSAGE("s=" << S << ": max energy error, first 1e4 steps " << early << ", all 1e6 steps " << all
+    BOOST_TEST_MESSAGE("s=" << S << ": max energy error, first 1e3 steps " << early << ", all 1e5 steps " << all
                             << ", iterations per step "
-                            << static_cast<double>(r.solver_iterations) / 1e6 << ", Jacobians "
+                            << static_cast<double>(r.solver_iterations) / 1e5 << ", Jacobians "
                             << G.jacobian_updates());
     BOOST_TEST(all <= 1.2 * early);
     return all;

@@ -258,8 +258,15 @@ BOOST_AUTO_TEST_CASE(units_do_not_matter) {
       BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-13 * max_abs(b.p_final));
     }
   }
-  const RunReport big = run(chain_problem(20000, 1e-5, 1, 1e-5, 1e-5), method("sphere-exp"));
-  BOOST_TEST(!big.failed, big.loop.failure.message);
+  // 20000 links: the step moves every link and keeps what it must (unit vectors, the
+  // vertical angular momentum by discrete Noether, the energy to the step's accuracy)
+  const RunReport big = run(chain_problem(20000, 1e-5, 2, 1e-5, 1e-5), method("sphere-exp"));
+  BOOST_TEST_REQUIRE(!big.failed, big.loop.failure.message);
+  BOOST_TEST(max_diff(big.q_final, big.q_initial) >= 1e-6);
+  BOOST_TEST(big.max_point_defect <= 1e-14);
+  BOOST_TEST_REQUIRE(big.invariants.size() == 1u);
+  BOOST_TEST(big.invariants[0].max_abs_error <= 1e-10 * std::fabs(big.invariants[0].initial.at(0)));
+  BOOST_TEST(big.max_abs_energy_error <= 1e-9 * std::fabs(big.energy_initial));
 }
 
 // The same run from the initial velocity and from the momentum it gives.
