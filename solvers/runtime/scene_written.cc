@@ -314,6 +314,13 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     for (const auto& [name, node] : t) {
       const std::string k = key + "." + std::string(name.str());
       if (!node.is_string()) throw InputError(key_where(path, node, k) + ": expected a string (an expression)");
+      // each names a CSV column: not one the run already writes
+      bool taken = name.str() == "t" || name.str() == "energy";
+      for (const std::string& coordinate : w->coordinates)
+        taken = taken || name.str() == coordinate || name.str() == "p_" + coordinate;
+      if (taken)
+        throw InputError(key_where(path, node, k) + ": '" + std::string(name.str()) +
+                         "' names a column the run writes already (t, the coordinates, their momenta p_..., energy)");
       try {
         w->invariants.emplace_back(std::string(name.str()),
                                    Expression::parse(*node.value<std::string>(), w->symbols(WrittenSystem::Kind::energy)));

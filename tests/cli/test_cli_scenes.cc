@@ -182,6 +182,8 @@ BOOST_AUTO_TEST_CASE(invariants_of_ones_own_are_monitored_like_the_energy) {
       {std::string(kepler).replace(kepler.find("L = \"x*p_y"), 5, "L = 3, Q = \"x*p_y"), "system.invariants.L"},
       {std::string(kepler).replace(kepler.find("x*p_y - y*p_x"), 13, "x*p_y - y*"), "system.invariants.L"},
       {std::string(kepler).replace(kepler.find("x*p_y - y*p_x"), 13, "x*p_z"), "p_z"},
+      {std::string(kepler).replace(kepler.find("Lv = "), 5, "p_x = "), "'p_x' names a column"},
+      {std::string(kepler).replace(kepler.find("Lv = "), 5, "energy = "), "'energy' names a column"},
   };
   for (const Bad& b : bad) {
     const Output e = dvm({"run", write_scene("bad-invariants.toml", b.text)});
