@@ -327,9 +327,9 @@ const char* kMethodsHelp =
     "evaluations a step then takes on a separable system (JSON\n"
     "forces_per_step_explicit_euler: kicks merged, the last force of a step reused by\n"
     "the next), whether the composition of midpoint steps is stable for every h*omega,\n"
-    "and the source of the\n"
-    "coefficients. Then the Galerkin discrete Lagrangians ([integrator] method =\n"
-    "\"galerkin\"): quadrature, stages, quadrature points and order.\n"
+    "and the source of the coefficients. Then the Galerkin discrete Lagrangians\n"
+    "([integrator] method = \"galerkin\"): quadrature, stages, quadrature points and\n"
+    "order.\n"
     "\n"
     "example:\n"
     "  dvm methods --json\n";
@@ -550,7 +550,10 @@ int cmd_run(const std::vector<std::string>& args) {
                     ": one asks for no rows, the other for a file of them; give one",
                 kRunHelp);
   dvm::Scene s = load_scene(scene, sets);
-  if (o.no_output) s.csv.clear(), s.npy.clear();
+  if (o.no_output) {
+    s.csv.clear();
+    s.npy.clear();
+  }
   // a row interval given on the command line for a run that writes no rows
   if (s.csv.empty() && s.npy.empty() && o.csv.empty() && o.npy.empty())
     for (const std::string& set : sets)

@@ -78,7 +78,9 @@ inline std::vector<InvariantReport> dynamic_invariant_names(const WrittenDynamic
   return out;
 }
 // The scene's own invariants, also written as CSV columns after the energy (none for n
-// bodies).
+// bodies). The run's buffers hold kMaxInvariantValues values: the scene reader's limit
+// must not exceed it.
+static_assert(kMaxWrittenInvariants <= kMaxInvariantValues, "[system] invariants would overrun the run's buffers");
 inline std::size_t own_invariant_count(const NBodyDynamic&) { return 0; }
 inline std::size_t own_invariant_count(const WrittenDynamic& L) { return L.system()->invariants.size(); }
 inline int written_invariant_values(const NBodyDynamic&, const Eigen::VectorXd&, const Eigen::VectorXd&, double*) {
