@@ -48,6 +48,7 @@
 #pragma once
 
 #include <array>
+#include <optional>
 #include <string>
 #include <utility>
 
@@ -131,6 +132,67 @@ struct MovingChart<Sphere, T> {
   }
 };
 
+// The moving chart centred at q0, eps seeded as the first dim directions of a Jet at
+// eps = 0, in the two Jet types that ManifoldGalerkinStep's gradient uses: 2 dim
+// directions (eps, xs) for the end coordinates, 3 dim (eps, eta, nu) at the nodes. It
+// depends on q0 alone, so a step builds it once for all its residuals.
+template <class M>
+struct SeededCharts {
+  static constexpr int n = M::dim;
+  using J2 = ceres::Jet<double, 2 * n>;
+  using J3 = ceres::Jet<double, 3 * n>;
+  typename M::template Point<double> q0;
+  MovingChart<M, J2> end;
+  MovingChart<M, J3> node;
+  explicit SeededCharts(const typename M::template Point<double>& c)
+      : q0(c), end(c, seeded_zero<J2>()), node(c, seeded_zero<J3>()) {}
+
+ private:
+  template <class J>
+  static Vec<J, n> seeded_zero() {
+    Vec<J, n> e;
+    for (int a = 0; a < n; ++a) e[a] = J(0.0, a);
+    return e;
+  }
+};
+
+// The derivatives of L along the moving chart at eps = 0, for `points` chart points and
+// velocities (eta_i, nu_i): out[i] holds dL/d(eps, eta, nu) there. Not inlined, and
+// independent of the Galerkin stage count: compiled once per system, whatever S is.
+template <class System>
+[[gnu::noinline]] void chart_lagrangian_gradients(const System& L,
+                                                  const SeededCharts<typename System::Manifold>& charts, int points,
+                                                  const Vec<double, System::Manifold::dim>* eta,
+                                                  const Vec<double, System::Manifold::dim>* nu,
+                                                  Vec<double, 3 * System::Manifold::dim>* out) {
+  constexpr int n = System::Manifold::dim;
+  using J3 = ceres::Jet<double, 3 * n>;
+  for (int i = 0; i < points; ++i) {
+    Vec<J3, n> e, v;
+    for (int a = 0; a < n; ++a) {
+      e[a] = J3(eta[i][a], n + a);
+      v[a] = J3(nu[i][a], 2 * n + a);
+    }
+    const auto xv = charts.node.point_tangent(e, v);
+    out[i] = L(xv.first, xv.second).v;
+  }
+}
+
+// The Jacobian of the end coordinates Y_S(eps, xs) (MovingChart::end_coordinates) at
+// eps = 0: columns 0..dim-1 in eps, dim..2 dim-1 in xs.
+template <class M>
+[[gnu::noinline]] Mat<double, M::dim, 2 * M::dim> end_coordinates_jacobian(const SeededCharts<M>& charts,
+                                                                          const Vec<double, M::dim>& xs) {
+  constexpr int n = M::dim;
+  using J2 = ceres::Jet<double, 2 * n>;
+  Vec<J2, n> x;
+  for (int a = 0; a < n; ++a) x[a] = J2(xs[a], n + a);
+  const Vec<J2, n> ys = charts.end.end_coordinates(charts.q0, x);
+  Mat<double, n, 2 * n> J;
+  for (int a = 0; a < n; ++a) J.row(a) = ys[a].v.transpose();
+  return J;
+}
+
 // Replace the double at the bottom of a (possibly nested) Jet.
 template <class T>
 void set_bottom_value(T& t, double v) {
@@ -162,9 +224,10 @@ void set_bottom_value(T& t, double v) {
 // X_1, .., X_{S-1} and the coordinates of chart(q0, X_S),
 //   p0 + dA/deps = 0,   dA/dX_j = 0 (j = 1..S-1)   at eps = 0,   p1 = dA/dX_S
 // (internal control points are stationary, so how they move with eps does not
-// matter). One Jet of dimension dim + S dim gives all of them; the Jacobian in X
-// (central differences of them) is factored and reused across iterations and steps while the
-// iteration contracts, as in solvers/galerkin_step.h.
+// matter). The chain rule gives all of them from derivatives of L at the quadrature
+// nodes (action_gradient); the Jacobian in X (central differences of them) is factored
+// and reused across iterations and steps while the iteration contracts, as in
+// solvers/galerkin_step.h.
 template <class System, int S>
 class ManifoldGalerkinStep {
   static_assert(S >= 1 && S <= kGalerkinMaxStages, "Galerkin stages 1..6");
@@ -333,17 +396,54 @@ class ManifoldGalerkinStep {
  private:
   // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{S-1}) at eps = 0 and pi1 = dA/dX_S.
   void residual(const Point& q0, const V& pi0, V& pi1) const {
-    using D = ceres::Jet<double, K>;
-    Vec<D, n> eps;
-    Vec<D, SN> X;
-    for (int a = 0; a < n; ++a) eps[a] = seed<double, K>(0.0, a);
-    for (int k = 0; k < SN; ++k) X[k] = seed<double, K>(X_[k], n + k);
-    const D A = action<D>(q0, eps, X);
-    R_ = A.v.template head<SN>();
+    action_gradient(q0, X_, G_);
+    R_ = G_.template head<SN>();
     R_.template head<n>() += pi0;
-    pi1 = A.v.template tail<n>();
+    pi1 = G_.template tail<n>();
   }
 
+ public:
+  // The gradient of the action A(eps, X) at eps = 0, in the order (eps, X_1, .., X_S).
+  // By the chain rule, node by node: L along the moving chart is differentiated at each
+  // quadrature node in one Jet of 3 dim directions (eps, eta, nu), and the end
+  // coordinates Y_S(eps, X_S) in one of 2 dim, both in functions that do not depend on
+  // S, so that L is compiled once per system whatever the stage count
+  // (differentiating action() in a Jet of dim + S dim directions compiles L's
+  // derivatives once per stage count, most of the compile time of the manifold
+  // kernels). Equal to the gradient of action() to round-off
+  // (tests/solvers/test_galerkin_manifold.cc).
+  void action_gradient(const Point& q0, const XV& X, Vec<double, K>& G) const {
+    if (!charts_ || !(charts_->q0 == q0)) charts_.emplace(q0);
+    std::array<V, S + 1> Y;
+    for (int j = 1; j <= S; ++j) Y[j] = X.template segment<n>((j - 1) * n);
+    std::array<V, S + 2> eta, nu;
+    for (int i = 0; i < quad_.points; ++i) {
+      eta[i].setZero();
+      nu[i].setZero();
+      for (int j = 1; j <= S; ++j) {
+        eta[i] += A_[i][j] * Y[j];
+        nu[i] += (B_[i][j] / h_) * Y[j];
+      }
+    }
+    std::array<Vec<double, 3 * n>, S + 2> dl;
+    detail::chart_lagrangian_gradients(L_, *charts_, quad_.points, eta.data(), nu.data(), dl.data());
+    // dA/deps through the chart (G's head) and dA/dY_j as if the Y_j were free
+    G.setZero();
+    for (int i = 0; i < quad_.points; ++i) {
+      const double w = h_ * b_[i];
+      G.template head<n>() += w * dl[i].template head<n>();
+      for (int j = 1; j <= S; ++j)
+        G.template segment<n>(j * n) +=
+            (w * A_[i][j]) * dl[i].template segment<n>(n) + (w * B_[i][j] / h_) * dl[i].template segment<n>(2 * n);
+    }
+    // Y_S = Y_S(eps, X_S): dA/deps += (dY_S/deps)^T dA/dY_S, dA/dX_S = (dY_S/dX_S)^T dA/dY_S
+    const Mat<double, n, 2 * n> J = detail::end_coordinates_jacobian(*charts_, Y[S]);
+    const V gS = G.template tail<n>();
+    G.template head<n>() += J.template leftCols<n>().transpose() * gS;
+    G.template tail<n>() = J.template rightCols<n>().transpose() * gS;
+  }
+
+ private:
   // The Jacobian dR/dX at the current X_, inverted, by central differences of the
   // residual (each column from two residuals in Jets of the first order). The Jacobian
   // only steers the iteration: its error (relative ~1e-10) slows the contraction to a
@@ -387,6 +487,8 @@ class ManifoldGalerkinStep {
   mutable Point prev_centre_ = M::sample_point(), prev_end_ = M::sample_point();
   mutable bool have_prev_ = false;
   mutable XV X_ = XV::Zero(), R_ = XV::Zero(), delta_ = XV::Zero();
+  mutable Vec<double, K> G_ = Vec<double, K>::Zero();
+  mutable std::optional<detail::SeededCharts<M>> charts_;  // at the centre of the last gradient
   mutable Mat<double, SN, SN> J_ = Mat<double, SN, SN>::Zero(), Jinv_ = Mat<double, SN, SN>::Zero();
   double contraction_ = 0.25;
   mutable double Jmax_ = 0.0;

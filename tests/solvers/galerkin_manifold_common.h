@@ -141,4 +141,25 @@ double defect_in_chart(const Step& G, const typename Step::Point& c, const Vec<d
   return symplectic_defect<n>(fd_jacobian<2 * n>(f, z0, 1e-5));
 }
 
+// max over the components of |g - g_ref| / max|g_ref|, where g is the step's gradient
+// of the action A(eps, X) at eps = 0 (the chain rule, node by node) and g_ref the
+// gradient of action() in one Jet of all its arguments, at control points X spread
+// about a step of chart length ~0.1 from q0 (each component perturbed by a fixed
+// pattern so that the curve is not a straight line).
+template <class Step>
+double gradient_against_jets(const Step& G, const typename Step::Point& q0) {
+  constexpr int n = Step::n, SN = Step::SN, K = Step::K;
+  using J = ceres::Jet<double, K>;
+  Vec<double, SN> X;
+  for (int k = 0; k < SN; ++k) X[k] = 0.1 * (k / n + 1) / (SN / n) + 0.013 * std::sin(1.7 * k + 0.4);
+  Vec<J, n> eps;
+  Vec<J, SN> XJ;
+  for (int a = 0; a < n; ++a) eps[a] = seed<double, K>(0.0, a);
+  for (int k = 0; k < SN; ++k) XJ[k] = seed<double, K>(X[k], n + k);
+  const Vec<double, K> ref = G.template action<J>(q0, eps, XJ).v;
+  Vec<double, K> g;
+  G.action_gradient(q0, X, g);
+  return max_abs(Vec<double, K>(g - ref)) / max_abs(ref);
+}
+
 }  // namespace gm

@@ -44,6 +44,20 @@ BOOST_AUTO_TEST_CASE(sphere_orders_are_2s_for_s_1_to_4) {
   check_sphere_order<4>(T, {25, 28, 32, 36, 40, 45}, qr, pr);
 }
 
+BOOST_AUTO_TEST_CASE(sphere_action_gradient_is_that_of_the_action) {
+  auto check = [](auto stages, QuadratureKind kind) {
+    constexpr int S = decltype(stages)::value;
+    const ManifoldGalerkinStep<SphericalPendulum, S> G(pendulum(), kind, 0.3);
+    const double d = gradient_against_jets(G, pendulum_point());
+    BOOST_TEST_MESSAGE("s=" << S << ": relative difference " << d);
+    BOOST_TEST(d <= 1e-13, "s=" << S);
+  };
+  check(std::integral_constant<int, 1>(), QuadratureKind::gauss);
+  check(std::integral_constant<int, 2>(), QuadratureKind::gauss);
+  check(std::integral_constant<int, 3>(), QuadratureKind::lobatto);
+  check(std::integral_constant<int, 6>(), QuadratureKind::gauss);
+}
+
 BOOST_AUTO_TEST_CASE(sphere_generating_step_is_symplectic_and_the_chart_step_is_not) {
   const V3 c = pendulum_point();
   const V2 e0(0.05, -0.03);

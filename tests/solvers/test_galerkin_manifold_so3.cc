@@ -35,6 +35,19 @@ BOOST_AUTO_TEST_CASE(so3_orders_are_2s_for_s_1_to_4) {
   check_so3_order<4>(T, {8, 9, 10, 11, 13, 14, 16}, qr, pr);
 }
 
+BOOST_AUTO_TEST_CASE(so3_action_gradient_is_that_of_the_action) {
+  auto check = [](auto stages, QuadratureKind kind) {
+    constexpr int S = decltype(stages)::value;
+    const ManifoldGalerkinStep<HeavyTop, S> G(top(), kind, 0.3);
+    const double d = gradient_against_jets(G, body_point());
+    BOOST_TEST_MESSAGE("s=" << S << ": relative difference " << d);
+    BOOST_TEST(d <= 1e-13, "s=" << S);
+  };
+  check(std::integral_constant<int, 1>(), QuadratureKind::gauss);
+  check(std::integral_constant<int, 2>(), QuadratureKind::lobatto);
+  check(std::integral_constant<int, 4>(), QuadratureKind::gauss);
+}
+
 BOOST_AUTO_TEST_CASE(so3_generating_step_is_symplectic_and_the_chart_step_is_not) {
   const M3 c = body_point();
   const V3 e0(0.05, -0.03, 0.02);
