@@ -144,6 +144,24 @@ BOOST_AUTO_TEST_CASE(a_convergence_study_with_a_failing_run_exits_3_and_keeps_th
   BOOST_TEST(failure.find("no convergence within 3 iterations") != std::string::npos, failure);
 }
 
+// A convergence study whose reference run fails: exit 2 (as --help says), the reference
+// named with its step and the reason, and no table. The explicit-Euler runs of 2 and 4
+// steps over t = 100 complete (no solver); the Galerkin s = 6 reference from the
+// largest count, h = 25, finds no Newton solution.
+BOOST_AUTO_TEST_CASE(a_convergence_study_whose_reference_fails_exits_2_and_says_why) {
+  const Output o = dvm({"converge", scene("pendulum.toml"), "--steps-list", "2,4", "--t-end", "100", "--set",
+                        "integrator.map=explicit-euler", "--json"});
+  BOOST_TEST(o.status == 2, o.out << o.err);
+  BOOST_TEST(o.out.empty(), o.out);
+  BOOST_TEST(o.err.find("the reference run (galerkin gauss s=6") != std::string::npos, o.err);
+  BOOST_TEST(o.err.find("the run with 4 steps (h = 25) failed at step 0") != std::string::npos, o.err);
+  BOOST_TEST(o.err.find("no convergence within 25 iterations") != std::string::npos, o.err);
+  // the same study against a reference that converges (steps of 1): measured, exit 0
+  const Output ok = dvm({"converge", scene("pendulum.toml"), "--steps-list", "50,100", "--t-end", "100", "--set",
+                         "integrator.map=explicit-euler", "--json"});
+  BOOST_TEST(ok.status == 0, ok.err);
+}
+
 // dvm check-map exits 1 when an identity does not hold to the tolerance: at 1e-30 the
 // round-off of the inverse's round trip fails it.
 BOOST_AUTO_TEST_CASE(check_map_exits_1_when_an_identity_fails) {

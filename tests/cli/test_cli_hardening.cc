@@ -772,18 +772,6 @@ BOOST_AUTO_TEST_CASE(a_convergence_study_beyond_its_work_limit_is_refused_before
   BOOST_TEST(dvm({"converge", h, "--steps-list", "100,200", "--max-steps", "300"}).status == 0);
 }
 
-BOOST_AUTO_TEST_CASE(the_harness_removes_its_temporary_folder) {
-  std::string path;
-  {
-    const TempDir t;
-    path = t.path();
-    std::filesystem::create_directory(path + "/sub");
-    std::ofstream(path + "/sub/file.txt") << "x\n";
-    BOOST_TEST(std::filesystem::is_directory(path));
-  }
-  BOOST_TEST(!std::filesystem::exists(path));
-}
-
 // A key that the method or problem chosen does not use is refused, naming it, rather
 // than run without it: method = "galerkin" and form = "newmark" take no map, so a map
 // or theta given with --set beside them (or a theta written in the same file as the
