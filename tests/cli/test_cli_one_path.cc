@@ -19,6 +19,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <regex>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -1394,6 +1395,68 @@ BOOST_AUTO_TEST_CASE(documentation_states_what_is) {
   report.clear();
   for (const auto& f : numbered) report += "\n  " + f;
   BOOST_TEST(numbered.empty(), "issue numbers in the sources:" << report);
+}
+
+// What a scene cannot state is said where a new user reads: in the tutorial section,
+// beside the first scene of one's own, and first among the known limitations (not
+// inside a paragraph on performance).
+BOOST_AUTO_TEST_CASE(readme_says_what_a_scene_cannot_state_beside_the_tutorial) {
+  const std::string readme = slurp(repo_file("README.md"));
+  auto section = [&](const std::string& heading) {
+    const auto at = readme.find("\n## " + heading);
+    BOOST_REQUIRE_MESSAGE(at != std::string::npos, heading);
+    return readme.substr(at, readme.find("\n## ", at + 1) - at);
+  };
+  const std::string tutorial = section("Five minutes");
+  for (const char* w : {"forces", "constraints", "depends on time"})
+    BOOST_TEST(tutorial.find(w) != std::string::npos, "the tutorial section does not say: " << w);
+  const std::string limits = section("Known limitations");
+  const auto first = limits.find("\n- ");
+  BOOST_REQUIRE(first != std::string::npos);
+  const std::string bullet = limits.substr(first, limits.find("\n- ", first + 1) - first);
+  for (const char* w : {"forces", "constraints", "time-dependent"})
+    BOOST_TEST(bullet.find(w) != std::string::npos, "the first known limitation does not say: " << w);
+}
+
+// Documentation quotes no measured time: a duration (a number and a unit of time) in a
+// .md file is a measurement that goes stale with the next change of code or machine.
+// Measurements live in generated benchmark output (examples/charts: ratios.md, the
+// table_*.md files and the section of its README between the charts markers); a bound
+// the code enforces or a target ("at least 20 ms", "at most 8 minutes") is a rule.
+BOOST_AUTO_TEST_CASE(documentation_quotes_no_measured_time) {
+  namespace fs = std::filesystem;
+  const std::string root = fs::canonical(repo_file("")).string();
+  // a number, then a unit of time: "113 s", "24.4 ns", "2.5 minutes" (not the order
+  // "2s", nor "s = 4")
+  const std::regex duration(R"((^|[^\w.])[0-9]+(\.[0-9]+)?( ?(ns|us|ms)| (s|seconds|min|minutes|hours))([^\w^=]|$))");
+  std::vector<std::string> found;
+  int files = 0;
+  for (const fs::path& file : checkout_files(root)) {
+    if (file.extension() != ".md") continue;
+    const std::string rel = file.string().substr(root.size() + 1), name = file.filename().string();
+    if (rel.rfind("examples/charts/", 0) == 0 && (name == "ratios.md" || name.rfind("table_", 0) == 0)) continue;
+    ++files;
+    bool generated = false;
+    const auto ls = lines_of(slurp(file.string()));
+    for (std::size_t i = 0; i < ls.size(); ++i) {
+      if (ls[i].find("<!-- charts:begin -->") != std::string::npos) generated = true;
+      if (ls[i].find("<!-- charts:end -->") != std::string::npos) generated = false;
+      if (generated) continue;
+      for (std::sregex_iterator m(ls[i].begin(), ls[i].end(), duration), end; m != end; ++m) {
+        const std::string before = ls[i].substr(0, static_cast<std::size_t>(m->position(0) + m->length(1)));
+        auto ends_with = [&](const std::string& w) {
+          return before.size() >= w.size() && before.compare(before.size() - w.size(), w.size(), w) == 0;
+        };
+        if (ends_with("at least ") || ends_with("at most ")) continue;
+        found.push_back(rel + ":" + std::to_string(i + 1) + ": " + ls[i]);
+        break;
+      }
+    }
+  }
+  BOOST_TEST(files >= 8);
+  std::string report;
+  for (const auto& f : found) report += "\n  " + f;
+  BOOST_TEST(found.empty(), "measured times in the documentation:" << report);
 }
 
 namespace {
