@@ -219,7 +219,7 @@ Entry dvm_run(double T) {
     Recorder rec(out);
     const RunReport r = make_run(pr, me)->execute(&rec);
     std::filesystem::remove(out.csv);
-    if (r.failed || r.step_path != "gauss-collocation") {
+    if (r.failed || r.step_path != StepPath::gauss_collocation) {
       q.setConstant(NAN);
       return std::pair<double, double>(NAN, NAN);
     }

@@ -167,9 +167,9 @@ int main(int argc, char** argv) {
         out.monitor_every = every;
         Recorder rec(out);
         const RunReport rep = run->execute(&rec);
-        if (rep.failed || rep.step_path != "explicit-splitting") {
+        if (rep.failed || rep.step_path != StepPath::explicit_splitting) {
           std::fprintf(stderr, "bench_nbody: the dvm run failed or did not take the explicit steps (%s)\n",
-                       rep.step_path.c_str());
+                       to_string(rep.step_path));
           return 3;
         }
         (every == 1 ? dvm1 : dvm100) = std::fmin(every == 1 ? dvm1 : dvm100, rep.wall_seconds);

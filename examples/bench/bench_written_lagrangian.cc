@@ -162,7 +162,7 @@ RunResult measure_run(const std::string& system, const std::map<std::string, dou
       best.timing.ns_per_step = ns;
       best.timing.state = rep.q_final;
       best.timing.state.insert(best.timing.state.end(), rep.p_final.begin(), rep.p_final.end());
-      best.step_path = rep.step_path.empty() ? "generic" : rep.step_path;
+      best.step_path = rep.step_path == StepPath::none ? "generic" : to_string(rep.step_path);
     }
   }
   return best;

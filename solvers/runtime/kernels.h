@@ -327,7 +327,7 @@ void report_structure(RunReport& r, const S& L, const V& q, const V& v0, const P
     r.structure = structure_name(s);
     r.structure_source = "sampled";
   }
-  r.step_path = "generic";
+  r.step_path = StepPath::generic;
 }
 
 // A splitting into kicks and drifts (CompositionKind::rkn_splitting) has its order on a
@@ -356,7 +356,7 @@ template <class View, class S, class Map>
 std::unique_ptr<Run> splitting_run(const View& view, const S& L, const Map& R, const Method& me, double h,
                                    const typename View::Point& q, const typename View::Covector& p,
                                    const typename View::Covector& v0, RunReport base, std::int64_t steps) {
-  base.step_path = "explicit-splitting";
+  base.step_path = StepPath::explicit_splitting;
   return stepper_run(view, ExplicitSplittingStep<S>(L, R.theta(), h, method_substeps(me, R.symmetric()), q), q, p, v0,
                      base, steps);
 }
@@ -384,7 +384,7 @@ template <class View, class Step>
 std::unique_ptr<Run> collocation_run(const View& view, Step step, const typename View::Point& q,
                                      const typename View::Covector& p, const typename View::Covector& v0,
                                      RunReport base, std::int64_t steps) {
-  base.step_path = "gauss-collocation";
+  base.step_path = StepPath::gauss_collocation;
   return stepper_run(view, std::move(step), q, p, v0, base, steps);
 }
 

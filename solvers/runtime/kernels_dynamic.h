@@ -206,7 +206,7 @@ inline void report_structure(RunReport& r, const WrittenDynamic& L, const Eigen:
   }
   r.structure = structure_name(s);
   r.structure_source = "expression";
-  r.step_path = "generic";
+  r.step_path = StepPath::generic;
   const DerivativeProgram* d = L.derivative_program();
   r.derivatives = !d ? "tape" : d->has_hessian() ? "program" : "gradient-program";
   r.compiled = L.compiled();
@@ -350,7 +350,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
           auto run_fixed = [&](auto k) {
             constexpr int K = decltype(k)::value;
             using Step = ExplicitSplittingStep<WrittenSeparableOf<K>>;
-            base.step_path = "explicit-splitting";
+            base.step_path = StepPath::explicit_splitting;
             base.interpreted.clear();  // the force alone (U's program, compiled with L's)
             const Vec<double, K> qk = q, pk = p, vk = v0;
             const DynamicView<Sys, K> fixed{view.L, view.names, view.sigma0, view.constant_hessian};
@@ -395,7 +395,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       }
       if (H) {
         auto make = [&](double hk, const ThetaMap& Rk) { return SparseSeparableThetaStep(L, H, Rk.theta(), hk, opt); };
-        base.step_path = "separable-sparse-newton";
+        base.step_path = StepPath::separable_sparse_newton;
         base.hessian_colours = H->colours();
         if (base.compiled) base.interpreted = "the sparse Hessian of U (in Jets, by colours)";
         return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
@@ -405,7 +405,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     using Step = DenseSeparableThetaStep<Sys>;
     const auto work = Step::workspace(L);
     auto make = [&](double hk, const ThetaMap& Rk) { return Step(L, work, Rk.theta(), hk, opt); };
-    base.step_path = "separable-dense-newton";
+    base.step_path = StepPath::separable_dense_newton;
     return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
   }
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
@@ -446,7 +446,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       return run_fixed(std::integral_constant<int, 2>());
     }
   }
-  if (keep) base.step_path = "kept-jacobian-newton";
+  if (keep) base.step_path = StepPath::kept_jacobian_newton;
   auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt, keep); };
   return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }

@@ -347,7 +347,7 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
         if (separable_newton_applies(me)) {
           // any theta (a theta per stage included): Newton on the structured equation
           auto make = [&](double hk, const ThetaMap& Rk) { return SeparableThetaStep<S>(L, Rk.theta(), hk, opt, q); };
-          base.step_path = "separable-newton";
+          base.step_path = StepPath::separable_newton;
           return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
         }
       }

@@ -64,7 +64,7 @@ std::unique_ptr<Run> sphere_chain_run(const Problem& pr, const Method& me, const
   const SphereChainView view{{}, L, work->solver};
   RunReport base = kernels::base_report(pr, me, L.name());
   base.manifold = DynamicSpherePower::name;
-  base.step_path = "sphere-chain-banded-newton";
+  base.step_path = StepPath::sphere_chain_banded_newton;
   const Eigen::VectorXd q = Eigen::Map<const Eigen::VectorXd>(pr.q.data(), 3 * links);
   Eigen::VectorXd p, v0;
   try {

@@ -10,6 +10,23 @@
 
 namespace dvm {
 
+const char* to_string(StepPath p) {
+  switch (p) {
+    case StepPath::none: return "";
+    case StepPath::generic: return "generic";
+    case StepPath::explicit_splitting: return "explicit-splitting";
+    case StepPath::gauss_collocation: return "gauss-collocation";
+    case StepPath::separable_newton: return "separable-newton";
+    case StepPath::separable_sparse_newton: return "separable-sparse-newton";
+    case StepPath::separable_dense_newton: return "separable-dense-newton";
+    case StepPath::kept_jacobian_newton: return "kept-jacobian-newton";
+    case StepPath::sphere_chain_banded_newton: return "sphere-chain-banded-newton";
+  }
+  return "";
+}
+
+std::ostream& operator<<(std::ostream& o, StepPath p) { return o << (p == StepPath::none ? "none" : to_string(p)); }
+
 std::unique_ptr<Run> make_run(const Problem& problem, const Method& method) {
   validate(problem, method);
   try {
@@ -129,7 +146,7 @@ std::string report_json(const RunReport& r) {
   if (!r.lift.empty()) j.str("lift", r.lift);
   j.str("problem", r.boundary_value ? "boundary-value" : "initial-value");
   if (!r.structure.empty()) j.str("structure", r.structure).str("structure_source", r.structure_source);
-  if (!r.step_path.empty()) j.str("step_path", r.step_path);
+  if (r.step_path != StepPath::none) j.str("step_path", to_string(r.step_path));
   if (!r.derivatives.empty()) j.str("derivatives", r.derivatives);
   if (!r.derivatives.empty()) j.boolean("compiled", r.compiled);
   if (r.compiled) j.num("compile_seconds", r.compile_seconds).str("interpreted", r.interpreted);
@@ -197,16 +214,22 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
         std::fprintf(to, "  largest distance from %s: %.1e\n", r.manifold.c_str(), r.max_point_defect);
       if (!r.structure.empty()) {
         std::string how = "by the generic path";
-        if (r.step_path == "explicit-splitting") how = "explicit (kicks and drifts, no solve)";
-        if (r.step_path == "separable-newton") how = "by Newton on the structured equation (Jacobian M/h + Hess V)";
-        if (r.step_path == "separable-sparse-newton")
-          how = "by Newton on the structured equation, sparse Jacobian (Hess V in " +
-                std::to_string(r.hessian_colours) + " colours)";
-        if (r.step_path == "separable-dense-newton")
-          how = "by Newton on the structured equation, dense Jacobian kept across steps";
-        if (r.step_path == "kept-jacobian-newton") how = "by Newton, the Jacobian (L's Hessian) kept across steps";
-        if (r.step_path == "gauss-collocation")
-          how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
+        switch (r.step_path) {
+          case StepPath::explicit_splitting: how = "explicit (kicks and drifts, no solve)"; break;
+          case StepPath::separable_newton: how = "by Newton on the structured equation (Jacobian M/h + Hess V)"; break;
+          case StepPath::separable_sparse_newton:
+            how = "by Newton on the structured equation, sparse Jacobian (Hess V in " +
+                  std::to_string(r.hessian_colours) + " colours)";
+            break;
+          case StepPath::separable_dense_newton:
+            how = "by Newton on the structured equation, dense Jacobian kept across steps";
+            break;
+          case StepPath::kept_jacobian_newton: how = "by Newton, the Jacobian (L's Hessian) kept across steps"; break;
+          case StepPath::gauss_collocation:
+            how = "by Gauss collocation on the stage forces (" + std::to_string(r.newton_steps) + " by Newton)";
+            break;
+          default: break;
+        }
         if (r.derivatives == "program") how += "; derivatives by a program differentiated once";
         if (r.derivatives == "gradient-program") how += "; gradient by a program differentiated once";
         if (r.derivatives == "tape") how += "; derivatives by reverse mode on the tape";
@@ -217,7 +240,7 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
           if (!r.interpreted.empty()) how += " (interpreted: " + r.interpreted + ")";
         }
         std::fprintf(to, "  structure %s (%s); steps %s\n", r.structure.c_str(), r.structure_source.c_str(), how.c_str());
-      } else if (r.step_path == "sphere-chain-banded-newton") {
+      } else if (r.step_path == StepPath::sphere_chain_banded_newton) {
         std::fprintf(to, "  steps by Newton on the chain's equation, banded Jacobian (O(n) a step)\n");
       }
       std::fprintf(to,

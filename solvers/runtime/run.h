@@ -16,6 +16,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <memory>
+#include <ostream>
 #include <string>
 #include <vector>
 
@@ -24,6 +25,39 @@
 #include "solvers/runtime/recorder.h"
 
 namespace dvm {
+
+// How a run's steps use the structure of their equation (JSON step_path, named by
+// to_string):
+//   generic                     the step of the form and map as written (Newton on the
+//                               whole equation, or the method's own solve)
+//   explicit-splitting          kicks and drifts, no solve (solvers/splitting_step.h)
+//   gauss-collocation           Gauss collocation iterated on the stage forces
+//                               (solvers/collocation_step.h)
+//   separable-newton            Newton on the structured equation, Jacobian M/h + Hess U
+//                               (solvers/separable_theta_step.h)
+//   separable-sparse-newton     the same with the sparse Hessian of a written potential
+//                               (solvers/sparse_separable_step.h)
+//   separable-dense-newton      the same with a dense Hessian of U kept across steps, n
+//                               bodies (solvers/dense_separable_step.h)
+//   kept-jacobian-newton        a Lagrangian of run-time size that is not separable,
+//                               its Jacobian kept across steps (Refresh::across_steps,
+//                               solvers/newton_driver.h)
+//   sphere-chain-banded-newton  the spherical chain's own step, banded Jacobian
+//                               (solvers/sphere_chain_step.h)
+// none: not reported (the manifold steps other than the chain's).
+enum class StepPath {
+  none,
+  generic,
+  explicit_splitting,
+  gauss_collocation,
+  separable_newton,
+  separable_sparse_newton,
+  separable_dense_newton,
+  kept_jacobian_newton,
+  sphere_chain_banded_newton,
+};
+const char* to_string(StepPath p);  // "" for none
+std::ostream& operator<<(std::ostream& o, StepPath p);
 
 // A conserved quantity monitored along the run (besides the energy).
 struct InvariantReport {
@@ -48,15 +82,9 @@ struct RunReport {
   std::string method_label;  // for the text table
   // R^n, fixed size: the system's structure ("separable", "mechanical", "general"),
   // whether the system declares it ("declared", checked at startup) or it was read off
-  // the Lagrangian at sample points ("sampled"), and how each step is taken:
-  // "explicit-splitting" (kicks and drifts, no solve), "separable-newton" (Newton on the
-  // structured equation, solvers/separable_theta_step.h), "separable-sparse-newton" (the
-  // same with the sparse Hessian of a written potential, solvers/sparse_separable_step.h),
-  // "separable-dense-newton" (the same with a dense Hessian of U, n bodies,
-  // solvers/dense_separable_step.h), "kept-jacobian-newton" (a Lagrangian that is not
-  // separable, of run-time size, its Jacobian kept across steps, Refresh::across_steps of solvers/newton_driver.h),
-  // "gauss-collocation" or "generic". Empty: not reported.
-  std::string structure, structure_source, step_path;
+  // the Lagrangian at sample points ("sampled"), and how each step is taken (StepPath).
+  std::string structure, structure_source;
+  StepPath step_path = StepPath::none;
   // How a Lagrangian written on R^n is differentiated: "program" (gradient and Hessian
   // differentiated symbolically once, mechanics/derivative_program.h),
   // "gradient-program" (the gradient so, the Hessian by forward over reverse mode on the

@@ -311,7 +311,7 @@ BOOST_AUTO_TEST_CASE(agrees_with_the_compiled_steps) {
                                ", " + me.composition;
       BOOST_TEST_REQUIRE(!a.failed, what << ": " << a.message);
       BOOST_TEST_REQUIRE(!b.failed, what << ": " << b.message);
-      BOOST_TEST(a.step_path == "sphere-chain-banded-newton", what);
+      BOOST_TEST(a.step_path == StepPath::sphere_chain_banded_newton, what);
       BOOST_TEST(b.step_path != a.step_path, what);
       BOOST_TEST(max_diff(a.q_final, b.q_final) <= tol, what << ": q differs by " << max_diff(a.q_final, b.q_final));
       BOOST_TEST(max_diff(a.p_final, b.p_final) <= 10 * tol * std::fmax(1.0, max_abs(b.p_final)),

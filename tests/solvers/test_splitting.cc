@@ -243,8 +243,8 @@ BOOST_AUTO_TEST_CASE(explicit_steps_equal_the_generic_path_on_every_separable_bu
       BOOST_TEST_CONTEXT(pr.system->name << ", " << me.map->name << ", " << me.composition) {
         BOOST_TEST(!a.failed);
         BOOST_TEST(!b.failed);
-        BOOST_TEST(a.step_path == "explicit-splitting");
-        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(a.step_path == StepPath::explicit_splitting);
+        BOOST_TEST(b.step_path == StepPath::generic);
         BOOST_TEST(a.solver_iterations == 0);
         BOOST_TEST(b.solver_iterations > 0);
         BOOST_TEST(a.structure == "separable");
@@ -278,8 +278,8 @@ BOOST_AUTO_TEST_CASE(implicit_theta_maps_on_separable_systems_equal_the_generic_
       BOOST_TEST_CONTEXT(pr.system->name << ", " << me.label()) {
         BOOST_TEST(!a.failed);
         BOOST_TEST(!b.failed);
-        BOOST_TEST(a.step_path == "separable-newton");
-        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(a.step_path == StepPath::separable_newton);
+        BOOST_TEST(b.step_path == StepPath::generic);
         BOOST_TEST(a.jacobians <= b.jacobians);
         BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
         BOOST_TEST(max_diff(a.p_final, b.p_final) <= 1e-11 * std::fmax(1.0, max_abs(b.p_final)));
@@ -349,8 +349,8 @@ BOOST_AUTO_TEST_CASE(splittings_are_one_method_and_refused_where_their_order_fai
         me.theta = 1.0;
         return me;
       }());
-      BOOST_TEST(a.step_path == "explicit-splitting");
-      BOOST_TEST(h.step_path == "generic");
+      BOOST_TEST(a.step_path == StepPath::explicit_splitting);
+      BOOST_TEST(h.step_path == StepPath::generic);
       // the same kicks and drifts: equal to the last bit from either Euler map
       BOOST_TEST(max_diff(a.q_final, b.q_final) == 0.0);
       BOOST_TEST(max_diff(a.p_final, b.p_final) == 0.0);
@@ -418,8 +418,8 @@ BOOST_AUTO_TEST_CASE(galerkin_gauss_on_separable_systems_is_collocation_on_the_s
       BOOST_TEST_CONTEXT(pr.system->name << ", s = " << s) {
         BOOST_TEST(!a.failed, a.loop.failure.message);
         BOOST_TEST(!b.failed);
-        BOOST_TEST(a.step_path == "gauss-collocation");
-        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(a.step_path == StepPath::gauss_collocation);
+        BOOST_TEST(b.step_path == StepPath::generic);
         BOOST_TEST(a.newton_steps == 0);
         BOOST_TEST(b.newton_steps == -1);
         BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
@@ -427,9 +427,9 @@ BOOST_AUTO_TEST_CASE(galerkin_gauss_on_separable_systems_is_collocation_on_the_s
       }
     }
   const Problem kepler = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
-  BOOST_TEST(run(kepler, galerkin(3, QuadratureKind::lobatto)).step_path == "generic");
+  BOOST_TEST(run(kepler, galerkin(3, QuadratureKind::lobatto)).step_path == StepPath::generic);
   BOOST_TEST(run(builtin("double-pendulum", {0.5, 1.0}, {0.1, -0.3}), galerkin(3, QuadratureKind::gauss)).step_path ==
-             "generic");
+             StepPath::generic);
   const std::string j = report_json(run(kepler, galerkin(6, QuadratureKind::gauss)));
   BOOST_TEST(j.find("\"step_path\": \"gauss-collocation\"") != std::string::npos, j);
   BOOST_TEST(j.find("\"newton_steps\": 0") != std::string::npos, j);
@@ -439,21 +439,21 @@ BOOST_AUTO_TEST_CASE(implicit_maps_take_the_structured_newton_step_and_tiny_the_
   const Problem pr = builtin("kepler", {0.4, 0.0}, {0.0, 2.0});
   Method mid;
   mid.map = &find_map_entry("midpoint", "test");
-  BOOST_TEST(run(pr, mid).step_path == "generic");  // 2 coordinates: the generic step
+  BOOST_TEST(run(pr, mid).step_path == StepPath::generic);  // 2 coordinates: the generic step
   const Problem fpu = builtin("fpu", {0.2, 0.2 + 1.0 / 50, 0.0, 0.0, 0.0, 0.0}, {0, 0, 0, 0, 0, 0});
-  BOOST_TEST(run(fpu, mid).step_path == "separable-newton");
+  BOOST_TEST(run(fpu, mid).step_path == StepPath::separable_newton);
   Method mid_tiny = mid;
   mid_tiny.solver = SolverKind::tiny;
-  BOOST_TEST(run(fpu, mid_tiny).step_path == "generic");
+  BOOST_TEST(run(fpu, mid_tiny).step_path == StepPath::generic);
   Method tiny;
   tiny.map = &find_map_entry("explicit-euler", "test");
   tiny.theta = 0.0;
   tiny.solver = SolverKind::tiny;
-  BOOST_TEST(run(pr, tiny).step_path == "generic");
+  BOOST_TEST(run(pr, tiny).step_path == StepPath::generic);
   Method ham = tiny;
   ham.solver = SolverKind::newton;
   ham.form = Form::hamiltonian;
-  BOOST_TEST(run(pr, ham).step_path == "generic");
+  BOOST_TEST(run(pr, ham).step_path == StepPath::generic);
 }
 
 BOOST_AUTO_TEST_CASE(structure_is_reported_for_every_system_on_rn) {
@@ -469,14 +469,14 @@ BOOST_AUTO_TEST_CASE(structure_is_reported_for_every_system_on_rn) {
   const RunReport ws = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 - x^2*y"), {0.3, 0.1}, {0.0, 0.2}), me);
   BOOST_TEST(ws.structure == "separable");
   BOOST_TEST(ws.structure_source == "expression");
-  BOOST_TEST(ws.step_path == "generic");  // midpoint on 2 coordinates: L's Hessian each iteration
+  BOOST_TEST(ws.step_path == StepPath::generic);  // midpoint on 2 coordinates: L's Hessian each iteration
   BOOST_TEST(ws.derivatives == "program");
   // from 3 coordinates: Newton on the structured equation with the sparse Hess V
   const RunReport w3 =
       run(written_problem(written({"x", "y", "z"}, "(x_dot^2 + y_dot^2 + z_dot^2)/2 - x^2*y - z^4"), {0.3, 0.1, 0.2},
                           {0.0, 0.2, 0.1}),
           me);
-  BOOST_TEST(w3.step_path == "separable-sparse-newton");
+  BOOST_TEST(w3.step_path == StepPath::separable_sparse_newton);
   const RunReport wm = run(
       written_problem(written({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a) + cos(b)"),
                       {0.5, 1.0}, {0.1, -0.3}),
@@ -636,8 +636,8 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
       const RunReport a = run(t.written, me), b = run(t.written, generic);
       BOOST_TEST_CONTEXT(t.name << ", " << me.map->name << ", " << me.composition) {
         BOOST_TEST(!a.failed);
-        BOOST_TEST(a.step_path == "explicit-splitting");
-        BOOST_TEST(b.step_path == "generic");
+        BOOST_TEST(a.step_path == StepPath::explicit_splitting);
+        BOOST_TEST(b.step_path == StepPath::generic);
         BOOST_TEST(a.structure == "separable");
         BOOST_TEST(a.structure_source == "expression");
         BOOST_TEST(max_diff(a.q_final, b.q_final) <= 1e-11 * std::fmax(1.0, max_abs(b.q_final)));
@@ -661,18 +661,18 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
       ee);
   BOOST_TEST(m.structure == "mechanical");
   BOOST_TEST(m.structure_source == "expression");
-  BOOST_TEST(m.step_path == "generic");
+  BOOST_TEST(m.step_path == StepPath::generic);
   const RunReport g = run(written_problem(written({"x", "y"}, "(x_dot^2 + y_dot^2)/2 + (x*y_dot - y*x_dot)/2"),
                                           {1.0, 0.2}, {0.0, 1.0}),
                           ee);
   BOOST_TEST(g.structure == "general");
-  BOOST_TEST(g.step_path == "generic");
+  BOOST_TEST(g.step_path == StepPath::generic);
   // a quadratic form in v that is not positive definite is not separable (nor mechanical)
   const RunReport ind = run(written_problem(written({"x", "y"}, "(x_dot^2 - y_dot^2)/2 - x^2 - y^4"), {0.3, 0.1},
                                             {0.1, 0.2}),
                             ee);
   BOOST_TEST(ind.structure == "general");
-  BOOST_TEST(ind.step_path == "generic");
+  BOOST_TEST(ind.step_path == StepPath::generic);
 
   // The pendulum has 1 coordinate, Kepler and the full mass matrix 2: their explicit steps
   // and runs are compiled for that size (WrittenSeparableOf<K>). Stormer-Verlet by them
@@ -713,7 +713,7 @@ BOOST_AUTO_TEST_CASE(written_separable_lagrangians_take_the_explicit_steps) {
       BOOST_TEST_CONTEXT(t.name << ", " << me.map->name << ", " << me.composition) {
         BOOST_TEST(!a.compiled);
         BOOST_TEST(b.compiled);
-        BOOST_TEST(b.step_path == "explicit-splitting");
+        BOOST_TEST(b.step_path == StepPath::explicit_splitting);
         BOOST_TEST(max_diff(a.q_final, b.q_final) == 0.0);
         BOOST_TEST(max_diff(a.p_final, b.p_final) == 0.0);
       }
@@ -783,15 +783,15 @@ BOOST_AUTO_TEST_CASE(written_systems_of_10_100_and_1000_coordinates_run_every_me
         }
         const RunReport r = run(pr, me);
         ++ran;
-        explicit_steps += r.step_path == "explicit-splitting";
+        explicit_steps += r.step_path == StepPath::explicit_splitting;
         BOOST_TEST(!r.failed);
-        if (r.step_path == "explicit-splitting" && (!big || me.composition == "none")) {
+        if (r.step_path == StepPath::explicit_splitting && (!big || me.composition == "none")) {
           // the kicks and drifts give the generic path's solution (Newton on each
           // substep's discrete Legendre equations), to round-off
           Method generic = me;
           generic.use_structure = false;
           const RunReport g = run(pr, generic);
-          BOOST_TEST(g.step_path != "explicit-splitting");
+          BOOST_TEST(g.step_path != StepPath::explicit_splitting);
           double d = 0.0, size = 0.0;
           for (std::size_t i = 0; i < r.q_final.size() && i < g.q_final.size(); ++i) {
             d = std::fmax(d, std::fabs(r.q_final[i] - g.q_final[i]) + std::fabs(r.p_final[i] - g.p_final[i]));
