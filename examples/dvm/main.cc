@@ -456,7 +456,7 @@ const char* kSweepHelp =
     "              one line saying so; without it the CSV table goes to stdout\n"
     "  --json      print the JSON table on stdout (with or without --out)\n"
     "  --max-runs M  the largest sweep accepted (default 1e6): a larger one is\n"
-    "              refused before any run\n"
+    "              refused before any run\n"    "  --help      this text (also 'dvm help sweep')\n"
     "\n"
     "CSV columns: index, each varied key (its value), status (ok, failed or refused),\n"
     "code (what dvm run would exit with: 0, 3 or 2), message (why it failed or was\n"
