@@ -41,6 +41,18 @@ std::string set_value(const Json& v) {
   return v.dump();
 }
 
+// `dvm run --json --no-output` of a row alone: the scene, the extra arguments, then
+// --set KEY=VALUE for each of the row's values.
+Output run_alone(const std::string& scene, const Json& row, std::vector<std::string> extra = {}) {
+  std::vector<std::string> args = {"run", scene, "--json", "--no-output"};
+  args.insert(args.end(), extra.begin(), extra.end());
+  for (const auto& [key, value] : row.at("values").items()) {
+    args.push_back("--set");
+    args.push_back(key + "=" + set_value(value));
+  }
+  return dvm(args);
+}
+
 // A run's JSON without the fields that measure time.
 Json untimed(Json j) {
   j.erase("wall_seconds");
@@ -117,12 +129,7 @@ BOOST_AUTO_TEST_CASE(a_sweep_equals_the_runs_done_one_by_one_on_1_and_2_threads)
     // the same row on two threads, to the bit
     BOOST_TEST(untimed(row.at("run")) == untimed(b.at("rows").at(i).at("run")));
     // and the same run done alone
-    std::vector<std::string> run = {"run", s, "--json", "--no-output"};
-    for (const auto& [key, value] : row.at("values").items()) {
-      run.push_back("--set");
-      run.push_back(key + "=" + set_value(value));
-    }
-    const Output r = dvm(run);
+    const Output r = run_alone(s, row);
     BOOST_TEST_REQUIRE(r.status == 0, r.err);
     BOOST_TEST(untimed(parse_json(r.out)) == untimed(row.at("run")), "row " << i);
   }
@@ -235,12 +242,7 @@ BOOST_AUTO_TEST_CASE(error_against_the_exact_solution_is_that_of_the_final_state
   BOOST_TEST(j.at("references").at(0).at("reference").get<std::string>().find("exact") != std::string::npos);
   for (std::size_t i = 0; i < 4; ++i) {
     const Json& row = j.at("rows").at(i);
-    std::vector<std::string> run = {"run", s, "--json", "--no-output", "--set", "system.params.omega=2.0"};
-    for (const auto& [key, value] : row.at("values").items()) {
-      run.push_back("--set");
-      run.push_back(key + "=" + set_value(value));
-    }
-    const Output r = dvm(run);
+    const Output r = run_alone(s, row, {"--set", "system.params.omega=2.0"});
     BOOST_TEST_REQUIRE(r.status == 0, r.err);
     const Json rj = parse_json(r.out);
     const double t = rj.at("t_final").get<double>();
