@@ -37,8 +37,9 @@ LAUNCHER := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPIL
 TEST_BUILD ?= build-test
 TEST_CXX   ?= clang++-14
 TEST_FLAGS ?= -O1 -DNDEBUG
-# nlohmann-json3-dev: the end-to-end suites parse the program's JSON with it
-TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14)
+# nlohmann-json3-dev: the end-to-end suites parse the program's JSON with it;
+# libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own)
+TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev)
 
 SAN_BUILD := build-sanitize
 SAN_CXX   := clang++-14
@@ -60,7 +61,7 @@ SAN_ENV   := ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:strict_string_checks=1
              ASAN_SYMBOLIZER_PATH=/usr/bin/llvm-symbolizer-14
 
 # llvm-14 (only recommended by clang-14) holds llvm-symbolizer-14: file:line in the stack traces
-FUZZ_PKGS    := clang-14 libclang-rt-14-dev llvm-14 nlohmann-json3-dev
+FUZZ_PKGS    := clang-14 libclang-rt-14-dev llvm-14 nlohmann-json3-dev libomp-14-dev
 FUZZ_SECONDS ?= 60
 # inputs up to 256 KiB: the corpus holds deep and long cases (15000 parentheses, sums of
 # 20000 terms, nested arrays) that a small -max_len would cut short

@@ -4,7 +4,10 @@
 #include <cstdio>
 #include <algorithm>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -14,6 +17,8 @@
 #include "solvers/runtime/json.h"
 #include "solvers/runtime/registry.h"
 #include "solvers/runtime/run.h"
+#include "solvers/runtime/output.h"
+#include "solvers/runtime/sweep.h"
 
 using namespace dvm::cli;
 using dvm::InputError;
@@ -37,6 +42,7 @@ const char* kUsage =
     "  systems            list the built-in systems, their parameters and defaults\n"
     "  check-map NAME     check the identities of a discretization map, as JSON\n"
     "  converge SCENE     run a scene at several step sizes: errors and observed order\n"
+    "  sweep SCENE        run a scene over lists or ranges of values of its keys: a table\n"
     "  version            print the version and the git revision it was built from\n"
     "  help [COMMAND]     print this list, or the help of COMMAND\n"
     "\n"
@@ -409,6 +415,92 @@ const char* kConvergeHelp =
     "example:\n"
     "  dvm converge examples/scenes/duffing.toml --steps-list 100,200,400,800 --t-end 10\n";
 
+const char* kSweepHelp =
+    "usage: dvm sweep SCENE.toml --vary KEY=SPEC... [--zip] [--set section.key=value]...\n"
+    "                 [--error] [--jobs N] [--out PATH] [--json] [--max-runs M]\n"
+    "\n"
+    "Runs the scene once for every combination of the varied values, each run as\n"
+    "'dvm run SCENE --no-output --set KEY=VALUE ...' runs it (the same reader, checks\n"
+    "and results to the bit), and prints one table: a row per run, in the sweep's\n"
+    "order (the last --vary varies fastest), whatever the order the runs finish in.\n"
+    "\n"
+    "  --vary KEY=SPEC  a scene key (any key --set takes, e.g. integrator.step,\n"
+    "              integrator.map, integrator.composition, system.params.g,\n"
+    "              initial.q) and its values, SPEC one of:\n"
+    "                [v1, v2, ...]      a list of TOML values: [0.1, 0.05],\n"
+    "                                   [\"midpoint\", \"theta\"] (bare words are strings:\n"
+    "                                   [midpoint, theta]), [[0.5], [1.0]]\n"
+    "                a:b:n              n points from a to b, equally spaced\n"
+    "                log:a:b:n          n points from a to b (> 0), equal ratios\n"
+    "                uniform:a:b:n:seed n samples in [a, b), seeded (the same values on\n"
+    "                                   every machine for a seed)\n"
+    "                v                  one value\n"
+    "              Both ends are points of a range; with ends written as whole numbers,\n"
+    "              the points within round-off of a whole number are whole numbers\n"
+    "              (integrator.steps=log:100:1600:5 gives 100, 200, 400, 800, 1600)\n"
+    "  --zip       row i takes the i-th value of every key (equal lengths), instead of\n"
+    "              every combination\n"
+    "  --set k=v   a key of every run (applied before the varied keys; a key is\n"
+    "              either set or varied)\n"
+    "  --error     each run's error at its final time, max(|q - q_ref|, |p - p_ref|)\n"
+    "              as in dvm converge, against the exact solution where the system has\n"
+    "              one (at the run's own final time), else against the reference of\n"
+    "              dvm converge (its higher-order run, refined against the errors of\n"
+    "              the runs it serves), computed once per distinct problem: the runs\n"
+    "              with the same values outside [integrator] and [output] and the same\n"
+    "              time span steps x step. Initial-value problems only\n"
+    "  --jobs N    run on N threads (default: the processors available); the table\n"
+    "              does not depend on N\n"
+    "  --out PATH  write the table to PATH.csv and PATH.json (each complete or not\n"
+    "              at all: written to a temporary beside it, then renamed) and print\n"
+    "              one line saying so; without it the CSV table goes to stdout\n"
+    "  --json      print the JSON table on stdout (with or without --out)\n"
+    "  --max-runs M  the largest sweep accepted (default 1e6): a larger one is\n"
+    "              refused before any run\n"    "  --help      this text (also 'dvm help sweep')\n"
+    "\n"
+    "CSV columns: index, each varied key (its value), status (ok, failed or refused),\n"
+    "code (what dvm run would exit with: 0, 3 or 2), message (why it failed or was\n"
+    "refused), error (with --error; empty where there is none), system, map, form,\n"
+    "composition, method, step, steps, t_final, wall_seconds, cpu_seconds (the\n"
+    "run's thread), energy_initial, energy_final, max_abs_energy_error,\n"
+    "solver_iterations, jacobians, max_step_iterations, order, failed_step and\n"
+    "failed_time (a failed run), q_final[k] and p_final[k] (as many as the longest\n"
+    "final state; empty beyond a shorter one). Numbers have 17 significant digits.\n"
+    "A refused row has only its index, values, status, code and message.\n"
+    "JSON: {json_version, scene, set, vary (each key, its spec and values), combine\n"
+    "(product or zip), runs, ok, failed, refused, references (with --error: each\n"
+    "distinct problem's t_end, reference, accuracy, rows, and failure when the\n"
+    "reference run failed), rows: [{index, values, status, code, message, error and\n"
+    "reference (with --error), cpu_seconds, run (the object of dvm run --json, or\n"
+    "null for a refused row)}]}.\n"
+    "\n"
+    "Before any run, every row's scene is read and its run built. A value that every\n"
+    "run it takes part in refuses (an unknown key, a value of the wrong type, a map\n"
+    "no varied system takes), or a sweep whose every run is refused, is bad input:\n"
+    "exit 2 naming the key and the value, with the message of the first refusal\n"
+    "(file, key, what was expected), and nothing runs. A value refused in some\n"
+    "combinations only (a map on the systems of another space) makes those rows\n"
+    "status refused, code 2; they do not change the exit status, and stderr counts\n"
+    "them. A run that fails numerically is a row with status failed, code 3, and\n"
+    "the rest of the sweep runs on.\n"
+    "The scene's [output] files are not written; of [output], only monitor_every\n"
+    "may be set or varied. With system.compile, every run compiles its derivatives\n"
+    "(twice: when checked and when run).\n"
+    "\n"
+    "Exit status: 0 when every run that was not refused completed; 3 when some run\n"
+    "failed numerically or a reference run failed (the table is still complete); 2\n"
+    "for bad input of the sweep (a malformed or empty SPEC, a key varied twice, zipped\n"
+    "lists of different lengths, more than M runs, a value no run accepts, an --out\n"
+    "that cannot be written), with nothing run.\n"
+    "\n"
+    "examples:\n"
+    "  dvm sweep examples/scenes/pendulum.toml --error --out study \\\n"
+    "      --vary 'integrator.step=[0.04, 0.02, 0.01]' \\\n"
+    "      --vary 'integrator.composition=[none, suzuki5]'\n"
+    "  dvm sweep examples/scenes/harmonic.toml --json --zip \\\n"
+    "      --vary system.params.omega=1:4:4 \\\n"
+    "      --vary 'initial.q=[[1.0], [0.5], [0.25], [0.125]]'\n";
+
 // The run help with the registries' names filled in, and what each system runs.
 std::string run_help() {
   std::string h = kRunHelp;
@@ -486,6 +578,7 @@ std::string run_help() {
                         : help == kSystemsHelp  ? "systems"
                         : help == kCheckHelp    ? "check-map"
                         : help == kConvergeHelp ? "converge"
+                        : help == kSweepHelp    ? "sweep"
                                                 : "version";
   std::cerr << "dvm: " << msg << "\nsee 'dvm " << command << " --help'\n";
   std::exit(2);
@@ -724,6 +817,122 @@ int cmd_converge(const std::vector<std::string>& args) {
   return run_scene(load_scene(scene, sets), o);
 }
 
+int cmd_sweep(const std::vector<std::string>& args) {
+  dvm::SweepOptions o;
+  o.jobs = dvm::default_jobs();
+  std::vector<std::string> varies;
+  std::string scene, out;
+  bool json = false;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&](const char* name) -> std::string {
+      if (i + 1 >= args.size()) usage_error(std::string(name) + " needs a value", kSweepHelp);
+      return args[++i];
+    };
+    if (is_help(a)) {
+      std::cout << kSweepHelp;
+      return 0;
+    } else if (a == "--vary") {
+      varies.push_back(value("--vary"));
+    } else if (a.rfind("--vary=", 0) == 0) {
+      varies.push_back(a.substr(7));
+    } else if (a == "--set") {
+      o.sets.push_back(value("--set"));
+    } else if (a.rfind("--set=", 0) == 0) {
+      o.sets.push_back(a.substr(6));
+    } else if (a == "--zip") {
+      o.zip = true;
+    } else if (a == "--error") {
+      o.error = true;
+    } else if (a == "--json") {
+      json = true;
+    } else if (a == "--jobs") {
+      const std::string text = value("--jobs");
+      const double n = parse_number("--jobs", text, kSweepHelp);
+      if (n != std::floor(n) || n < 1 || n > 4096)
+        usage_error("--jobs: got '" + text + "', expected a whole number from 1 to 4096", kSweepHelp);
+      o.jobs = static_cast<int>(n);
+    } else if (a == "--max-runs") {
+      const std::string text = value("--max-runs");
+      o.max_runs = parse_number("--max-runs", text, kSweepHelp);
+      if (o.max_runs != std::floor(o.max_runs) || o.max_runs < 1 || o.max_runs > 1e15)
+        usage_error("--max-runs: got '" + text + "', expected a whole number from 1 to 1e15", kSweepHelp);
+    } else if (a == "--out") {
+      out = value("--out");
+      if (out.empty()) usage_error("--out needs a path (PATH.csv and PATH.json are written)", kSweepHelp);
+    } else if (!a.empty() && a[0] == '-') {
+      usage_error(unknown_option(a, {"--vary", "--zip", "--set", "--error", "--jobs", "--out", "--json",
+                                     "--max-runs", "--help"}),
+                  kSweepHelp);
+    } else if (scene.empty()) {
+      scene = a;
+    } else {
+      usage_error("more than one scene file given ('" + scene + "', '" + a + "')", kSweepHelp);
+    }
+  }
+  if (scene.empty()) usage_error("sweep needs a scene file", kSweepHelp);
+  if (varies.empty()) usage_error("sweep needs at least one --vary KEY=SPEC", kSweepHelp);
+  for (const std::string& v : varies) o.axes.push_back(dvm::parse_vary(v, o.max_runs));
+  dvm::sweep_size(o);
+  // the scene read once (as dvm run reads it: its messages for a missing or huge file)
+  {
+    std::error_code ec;
+    if (std::filesystem::is_directory(scene, ec))
+      throw InputError(scene + ": is a directory; expected a scene file (TOML text)");
+    std::ifstream in(scene, std::ios::binary);
+    if (!in) throw InputError(scene + ": cannot open the scene file");
+    std::ostringstream text;
+    text << in.rdbuf();
+    o.scene_text = text.str();
+    if (o.scene_text.size() > dvm::kMaxSceneBytes)
+      throw InputError(scene + ": the scene is larger than 16 MiB, the most dvm reads; expected a smaller scene");
+    o.scene_path = scene;
+  }
+  // the table's files, checked and opened before any run
+  dvm::OutputFile csv, js;
+  if (!out.empty()) {
+    for (const std::string& f : {out + ".csv", out + ".json"}) {
+      std::error_code ec;
+      if (std::filesystem::equivalent(f, scene, ec))
+        throw InputError("--out " + out + ": '" + f + "' is the scene file; expected another path");
+    }
+    csv.open(out + ".csv", "--out (" + out + ".csv)", 0.0);
+    js.open(out + ".json", "--out (" + out + ".json)", 0.0);
+  }
+  const dvm::SweepReport rep = dvm::run_sweep(o);
+  const std::string json_text = dvm::sweep_json(o, rep);
+  bool write_failed = false;
+  if (!out.empty()) {
+    const std::string csv_text = dvm::sweep_csv(o, rep);
+    std::fwrite(csv_text.data(), 1, csv_text.size(), csv.get());
+    std::fwrite(json_text.data(), 1, json_text.size(), js.get());
+    std::string kept;
+    write_failed = !dvm::finish_outputs(true, {&csv, &js}, kept);
+  }
+  if (json)
+    std::cout << json_text;
+  else if (out.empty())
+    std::cout << dvm::sweep_csv(o, rep);
+  else if (!write_failed)
+    std::cout << "wrote " << out << ".csv and " << out << ".json: " << rep.runs << " runs, " << rep.ok << " ok, "
+              << rep.failed << " failed, " << rep.refused << " refused\n";
+  std::cout.flush();
+  if (rep.refused > 0)
+    std::cerr << "dvm: sweep: " << rep.refused << " of " << rep.runs
+              << " runs refused (status refused in the table; their message says why)\n";
+  if (rep.failed > 0)
+    std::cerr << "dvm: sweep: " << rep.failed << " of " << rep.runs
+              << " runs failed numerically (status failed in the table; their message says where)\n";
+  bool reference_failed = false;
+  for (const dvm::SweepReference& r : rep.references)
+    if (!r.failure.empty()) {
+      reference_failed = true;
+      std::cerr << "dvm: sweep: the reference of " << r.rows.size() << " runs failed, their error is empty: "
+                << r.failure << "\n";
+    }
+  return rep.failed > 0 || reference_failed || write_failed ? 3 : 0;
+}
+
 int cmd_version(const std::vector<std::string>& args) {
   for (const auto& a : args) {
     if (is_help(a)) {
@@ -817,9 +1026,10 @@ int main(int argc, char** argv) {
     if (command == "systems") return cmd_systems(args);
     if (command == "methods") return cmd_methods(args);
     if (command == "converge") return cmd_converge(args);
+    if (command == "sweep") return cmd_sweep(args);
     usage_error("unknown command '" + command + "'" +
                     dvm::did_you_mean(command, {"run", "maps", "methods", "systems", "check-map", "converge",
-                                                "version", "help"}),
+                                                "sweep", "version", "help"}),
                 kUsage);
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";

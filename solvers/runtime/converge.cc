@@ -18,24 +18,6 @@ namespace dvm {
 
 namespace {
 
-struct State {
-  std::vector<double> q, p;
-};
-
-double distance(const State& a, const State& b) {
-  double d = 0.0;
-  for (std::size_t i = 0; i < a.q.size() && i < b.q.size(); ++i) d = std::fmax(d, std::fabs(a.q[i] - b.q[i]));
-  for (std::size_t i = 0; i < a.p.size() && i < b.p.size(); ++i) d = std::fmax(d, std::fabs(a.p[i] - b.p[i]));
-  return d;
-}
-
-double size_of(const State& a) {
-  double s = 0.0;
-  for (double x : a.q) s = std::fmax(s, std::fabs(x));
-  for (double x : a.p) s = std::fmax(s, std::fabs(x));
-  return s;
-}
-
 Problem with_grid(const Problem& pr, double T, std::int64_t n) {
   Problem out = pr;
   out.step = T / static_cast<double>(n);
@@ -44,7 +26,7 @@ Problem with_grid(const Problem& pr, double T, std::int64_t n) {
 }
 
 // Runs the problem with n steps to T; false (with the message) if the run failed.
-bool final_state(const Problem& pr, const Method& me, double T, std::int64_t n, State& out, std::int64_t& iterations,
+bool final_state(const Problem& pr, const Method& me, double T, std::int64_t n, FinalState& out, std::int64_t& iterations,
                  std::string& failure) {
   const auto run = make_run(with_grid(pr, T, n), me);
   const RunReport r = run->execute(nullptr);
@@ -89,6 +71,68 @@ Method reference_method(const Problem& pr, const Method& me, int& order, std::st
 }
 
 }  // namespace
+
+double state_distance(const FinalState& a, const FinalState& b) {
+  double d = 0.0;
+  for (std::size_t i = 0; i < a.q.size() && i < b.q.size(); ++i) d = std::fmax(d, std::fabs(a.q[i] - b.q[i]));
+  for (std::size_t i = 0; i < a.p.size() && i < b.p.size(); ++i) d = std::fmax(d, std::fabs(a.p[i] - b.p[i]));
+  return d;
+}
+
+double final_state_size(const FinalState& a) {
+  double s = 0.0;
+  for (double x : a.q) s = std::fmax(s, std::fabs(x));
+  for (double x : a.p) s = std::fmax(s, std::fabs(x));
+  return s;
+}
+
+Reference reference_solution(const Problem& pr, const Method& me, double T, std::int64_t n_start,
+                             const std::vector<FinalState>& measured, bool show) {
+  Reference out;
+  std::vector<double> exact_q, exact_p;
+  const auto run0 = make_run(with_grid(pr, T, n_start), me);
+  if (run0->exact(T, exact_q, exact_p)) {
+    out.state.q = exact_q;
+    out.state.p = exact_p;
+    out.exact = true;
+    out.description = "exact solution";
+    out.accuracy = exact_accuracy(out.state);
+    return out;
+  }
+  int order = 0;
+  std::string name;
+  const Method rm = reference_method(pr, me, order, name);
+  std::int64_t n = n_start;
+  FinalState r1, r2;
+  std::int64_t it = 0;
+  std::string failure;
+  if (!final_state(pr, rm, T, n, r1, it, failure))
+    throw InputError("converge: the reference run (" + name + ") failed: " + failure);
+  double d = INFINITY;
+  for (int level = 0; level < 5; ++level) {
+    n *= 2;
+    if (show) {
+      std::fprintf(stderr, "\r  converge: reference run (%lld steps)          ", static_cast<long long>(n));
+      std::fflush(stderr);
+    }
+    if (!final_state(pr, rm, T, n, r2, it, failure))
+      throw InputError("converge: the reference run (" + name + ") failed: " + failure);
+    d = state_distance(r1, r2);
+    double smallest = INFINITY;
+    for (const FinalState& f : measured) smallest = std::fmin(smallest, state_distance(f, r2));
+    // round-off of a run of n steps: about eps sqrt(n) times the solution's size
+    const double floor = 64.0 * std::numeric_limits<double>::epsilon() * std::sqrt(static_cast<double>(n)) *
+                         std::fmax(1.0, final_state_size(r2));
+    if (d <= std::fmax(1e-2 * smallest, floor)) break;
+    r1 = r2;
+  }
+  out.state = r2;
+  out.description = name + " with " + std::to_string(n) + " steps";
+  out.accuracy = d;
+  return out;
+}
+
+double exact_accuracy(const FinalState& exact) { return 1e-15 * std::fmax(1.0, final_state_size(exact)); }
 
 ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptions& o) {
   if (pr.boundary_value)
@@ -141,7 +185,7 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
   rep.t_end = T;
 
   // the runs of the study
-  std::vector<State> finals(list.size());
+  std::vector<FinalState> finals(list.size());
   std::vector<bool> ok(list.size(), false);
   const bool show = isatty(fileno(stderr));
   for (std::size_t i = 0; i < list.size(); ++i) {
@@ -160,54 +204,21 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
   }
 
   // the reference
-  State ref;
-  std::vector<double> exact_q, exact_p;
-  const auto run0 = make_run(with_grid(pr, T, list.front()), me);
-  if (run0->exact(T, exact_q, exact_p)) {
-    ref.q = exact_q;
-    ref.p = exact_p;
-    rep.reference = "exact solution";
-    rep.reference_accuracy = 1e-15 * std::fmax(1.0, size_of(ref));
-  } else {
-    int order = 0;
-    std::string name;
-    const Method rm = reference_method(pr, me, order, name);
-    std::int64_t n = *std::max_element(list.begin(), list.end());
-    State r1, r2;
-    std::int64_t it = 0;
-    std::string failure;
-    if (!final_state(pr, rm, T, n, r1, it, failure))
-      throw InputError("converge: the reference run (" + name + ") failed: " + failure);
-    double d = INFINITY;
-    for (int level = 0; level < 5; ++level) {
-      n *= 2;
-      if (show) {
-        std::fprintf(stderr, "\r  converge: reference run (%lld steps)          ", static_cast<long long>(n));
-        std::fflush(stderr);
-      }
-      if (!final_state(pr, rm, T, n, r2, it, failure))
-        throw InputError("converge: the reference run (" + name + ") failed: " + failure);
-      d = distance(r1, r2);
-      double smallest = INFINITY;
-      for (std::size_t i = 0; i < finals.size(); ++i)
-        if (ok[i]) smallest = std::fmin(smallest, distance(finals[i], r2));
-      // round-off of a run of n steps: about eps sqrt(n) times the solution's size
-      const double floor = 64.0 * std::numeric_limits<double>::epsilon() * std::sqrt(static_cast<double>(n)) *
-                           std::fmax(1.0, size_of(r2));
-      if (d <= std::fmax(1e-2 * smallest, floor)) break;
-      r1 = r2;
-    }
-    ref = r2;
-    rep.reference = name + " with " + std::to_string(n) + " steps";
-    rep.reference_accuracy = d;
-  }
+  std::vector<FinalState> measured;
+  for (std::size_t i = 0; i < finals.size(); ++i)
+    if (ok[i]) measured.push_back(finals[i]);
+  const Reference reference =
+      reference_solution(pr, me, T, *std::max_element(list.begin(), list.end()), measured, show);
+  const FinalState& ref = reference.state;
+  rep.reference = reference.description;
+  rep.reference_accuracy = reference.accuracy;
   if (show) std::fprintf(stderr, "\r%*s\r", 60, "");
-  rep.scale = size_of(ref);
+  rep.scale = final_state_size(ref);
 
   // errors, orders, the fit
   for (std::size_t i = 0; i < rep.rows.size(); ++i) {
     ConvergeRow& row = rep.rows[i];
-    row.error = ok[i] ? distance(finals[i], ref) : NAN;
+    row.error = ok[i] ? state_distance(finals[i], ref) : NAN;
     if (!ok[i])
       row.excluded = "failed";
     else if (!(row.error > 10.0 * rep.reference_accuracy))

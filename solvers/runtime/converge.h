@@ -74,6 +74,33 @@ struct ConvergeReport {
   std::string failure;        // the first run that failed (empty: none)
 };
 
+// The final state of a run as errors measure it: q in embedding coordinates
+// (RunReport::q_embedded), p as stored (RunReport::p_final).
+struct FinalState {
+  std::vector<double> q, p;
+};
+// max(|q - q'|, |p - p'|), the max norm over both (the error above).
+double state_distance(const FinalState& a, const FinalState& b);
+// The largest entry of q and p in absolute value (the solution's size).
+double final_state_size(const FinalState& a);
+// The accuracy stated for an exact solution: round-off of its closed form.
+double exact_accuracy(const FinalState& exact);
+
+// The reference of a problem at time T, as described above.
+struct Reference {
+  FinalState state;
+  bool exact = false;       // the exact solution (else a refined higher-order run)
+  std::string description;  // "exact solution", or the method and its step count
+  double accuracy = 0.0;
+};
+// The exact solution at T where the run of (problem, method) has one; else the
+// reference method's runs from n_start steps, doubled until two successive runs agree
+// to a hundredth of the smallest distance from the `measured` final states (or to
+// round-off, or 5 doublings). show: the reference run under way on stderr. Throws
+// InputError when a reference run fails or make_run refuses the problem.
+Reference reference_solution(const Problem& problem, const Method& method, double T, std::int64_t n_start,
+                             const std::vector<FinalState>& measured, bool show = false);
+
 // Throws InputError for a boundary-value problem, fewer than two step counts, equal
 // step counts, more steps in all than options.max_total_steps, or anything make_run
 // refuses. Shows which run is under way on stderr when stderr is a terminal.

@@ -1,0 +1,142 @@
+// A sweep: one scene run many times, each run with some of its keys set to other
+// values, every run a row of one table.
+//
+//   varied keys   k_1 .. k_m, each with a list of values v_j1 .. v_jn_j
+//   runs          the cross product (n_1 x ... x n_m rows, the last key varying
+//                 fastest) or, zipped, row i takes the i-th value of every key
+//   row i         the scene read with --set k_j=v_j(i) for every key (after the
+//                 sweep's own --set overrides): the same reader, the same messages and
+//                 the same run as `dvm run --set ...`, so a row equals that run to the bit
+//
+// A value list is written as a TOML array ([0.1, 0.2], ["midpoint", "theta"]), a
+// linear range a:b:n, a geometric range log:a:b:n (n points, both ends included) or n
+// seeded uniform samples uniform:a:b:n:seed in [a, b). Samples come from std::mt19937_64
+// (its output is fixed by the standard) through the top 53 bits of each draw, so the
+// values are the same on every platform.
+//
+// The rows are independent: run_row(i) reads row i's scene and runs it with nothing
+// shared with other rows, so rows may run on threads (run_sweep, OpenMP) or on other
+// processes, in any order, with the same results. Rows that no run can read are bad
+// input of the sweep; see run_sweep.
+//
+// Errors (SweepOptions::error): each run's final state against a reference (the one of
+// dvm converge, solvers/runtime/converge.h) computed once per distinct problem: the
+// rows that share their values outside [integrator] and [output] and their time span
+// T = steps x step. Where the system has an exact solution, each run is measured
+// against it at its own final time.
+#pragma once
+
+#include <cstddef>
+#include <cmath>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "solvers/runtime/converge.h"
+#include "solvers/runtime/run.h"
+
+namespace dvm {
+
+// One value of a varied key, in the three spellings the sweep needs.
+struct SweepValue {
+  std::string toml;  // as --set takes it: 0.1, 100, "midpoint", [0.5, 0.0]
+  std::string json;  // in the JSON table
+  std::string cell;  // in the CSV table (a string without its quotes)
+};
+
+struct SweepAxis {
+  std::string key;   // section.key, as --set names it
+  std::string spec;  // as given
+  std::vector<SweepValue> values;
+};
+
+// Parses "KEY=SPEC". Throws InputError naming the key for a malformed or empty spec,
+// a range of more than max_values points, a log range with an end <= 0.
+SweepAxis parse_vary(const std::string& arg, double max_values);
+
+struct SweepOptions {
+  std::string scene_path;
+  std::string scene_text;         // the scene file's text (read once)
+  std::vector<std::string> sets;  // --set overrides of every run, before the varied keys
+  std::vector<SweepAxis> axes;
+  bool zip = false;
+  bool error = false;  // measure each run's error against a reference
+  int jobs = 1;        // threads
+  double max_runs = kDefaultMaxRuns;
+  static constexpr double kDefaultMaxRuns = 1e6;
+};
+
+// The threads a sweep runs on by default: the processors this process may use.
+int default_jobs();
+
+// Checks the options (at least one key, no key twice or also given by --set, no
+// [output] key but output.monitor_every, zipped lists of equal lengths, at most
+// max_runs rows) and returns the number of rows. Throws InputError.
+std::size_t sweep_size(const SweepOptions& options);
+
+// The varied values of row i: an index into each axis's values.
+std::vector<std::size_t> sweep_values(const SweepOptions& options, std::size_t i);
+// Row i's overrides: the sweep's --set, then one per varied key.
+std::vector<std::string> sweep_overrides(const SweepOptions& options, std::size_t i);
+
+enum class RowStatus { ok, failed, refused };
+const char* to_string(RowStatus s);
+
+struct SweepRow {
+  std::size_t index = 0;
+  RowStatus status = RowStatus::ok;
+  int code = 0;         // as `dvm run` would exit: 0, 2 (refused), 3 (failed)
+  std::string message;  // why the run failed or was refused ("" for ok)
+  bool ran = false;     // report holds the run's report
+  RunReport report;
+  double cpu_seconds = 0.0;  // CPU time of the run's thread during execute()
+  // errors (SweepOptions::error)
+  std::string problem;      // the key of its distinct problem
+  double t_end = 0.0;       // steps x step of the problem
+  FinalState final_state;   // as the error measures it
+  double error = NAN;       // NaN: none (a failed or refused run, or a failed reference)
+  double reference_accuracy = NAN;  // an exact solution's (the others are the reference's)
+  int reference = -1;       // index into SweepReport::references
+};
+
+// Reads row i's scene and builds its run without running it; "" when it can run,
+// else the message of the refusal (as `dvm run` prints it after "dvm: ").
+std::string check_row(const SweepOptions& options, std::size_t i);
+// Runs row i: never throws; a refusal or a failure is the row's status. With
+// options.error and an exact solution the row's error is set here; otherwise the
+// error needs the other rows of its problem (attach_errors).
+SweepRow run_row(const SweepOptions& options, std::size_t i);
+
+struct SweepReference {
+  double t_end = 0.0;
+  std::string description;  // "exact solution at each run's final time", or the reference run
+  double accuracy = NAN;    // the largest over its rows for exact solutions
+  std::string failure;      // the reference run failed: why ("" when it did not)
+  std::vector<std::size_t> rows;
+};
+
+struct SweepReport {
+  std::size_t runs = 0, ok = 0, failed = 0, refused = 0;
+  std::vector<SweepRow> rows;  // in the sweep's order
+  std::vector<SweepReference> references;
+};
+
+// The sweep on options.jobs threads:
+//   1. every row is checked (check_row); a value of a varied key that every row it
+//      takes part in refuses is bad input: InputError naming the key and the value,
+//      nothing runs;
+//   2. the other rows run (run_row), refused ones stay rows with status refused;
+//   3. with options.error, the references and the errors of the rows without an
+//      exact solution (attach_errors).
+// The report is the same for any number of threads.
+SweepReport run_sweep(const SweepOptions& options);
+
+// The references of the rows not yet measured, one per distinct problem (on
+// options.jobs threads), and their rows' errors.
+void attach_errors(const SweepOptions& options, std::vector<SweepRow>& rows, std::vector<SweepReference>& references);
+
+// The table as CSV (a header row, then one row per run) and as JSON.
+std::string sweep_csv(const SweepOptions& options, const SweepReport& report);
+std::string sweep_json(const SweepOptions& options, const SweepReport& report);
+
+}  // namespace dvm

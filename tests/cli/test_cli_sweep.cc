@@ -1,0 +1,318 @@
+// dvm sweep: a table of runs of one scene over values of its keys.
+//
+// Each row must be the run `dvm run --json --set KEY=VALUE ...` gives, to the bit, on
+// one thread or several; failed and refused runs are rows with their status; --error
+// must be the distance of the final state from the exact solution (or from the
+// reference of dvm converge); bad input of the sweep exits 2 naming the key, before
+// anything runs or is written.
+#define BOOST_TEST_MODULE cli_sweep
+#include <boost/test/unit_test.hpp>
+
+#include "tests/cli/cli_harness.h"
+
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace {
+
+using namespace cli_test;
+
+// A pendulum released at 1 rad, 40 steps of 0.05 (t_end 2).
+const char* kPendulum =
+    "[system]\nbuiltin = \"pendulum\"\n"
+    "[initial]\nq = [1.0]\np = [0.0]\n"
+    "[integrator]\nmap = \"midpoint\"\nstep = 0.05\nt_end = 2.0\n"
+    "[output]\ncsv = \"never-written.csv\"\n";
+
+// A harmonic oscillator without parameters (a sweep may give them).
+const char* kHarmonic =
+    "[system]\nbuiltin = \"harmonic\"\n"
+    "[initial]\nq = [1.0]\np = [0.5]\n"
+    "[integrator]\nmap = \"midpoint\"\nstep = 0.1\nsteps = 30\n";
+
+// The value of a row as --set takes it: strings quoted, numbers and arrays as JSON
+// writes them (a JSON number is read back to the same double).
+std::string set_value(const Json& v) {
+  if (v.is_string()) return "\"" + v.get<std::string>() + "\"";
+  return v.dump();
+}
+
+// `dvm run --json --no-output` of a row alone: the scene, the extra arguments, then
+// --set KEY=VALUE for each of the row's values.
+Output run_alone(const std::string& scene, const Json& row, std::vector<std::string> extra = {}) {
+  std::vector<std::string> args = {"run", scene, "--json", "--no-output"};
+  args.insert(args.end(), extra.begin(), extra.end());
+  for (const auto& [key, value] : row.at("values").items()) {
+    args.push_back("--set");
+    args.push_back(key + "=" + set_value(value));
+  }
+  return dvm(args);
+}
+
+// A run's JSON without the fields that measure time.
+Json untimed(Json j) {
+  j.erase("wall_seconds");
+  j.erase("compile_seconds");
+  return j;
+}
+
+// The CSV as rows of cells (no cell in these tests holds a comma or a quote, except
+// messages, which are compared through the JSON).
+std::vector<std::vector<std::string>> csv_rows(const std::string& text) {
+  std::vector<std::vector<std::string>> rows;
+  std::istringstream in(text);
+  std::string line;
+  while (std::getline(in, line)) {
+    std::vector<std::string> cells;
+    std::string cell;
+    bool quoted = false;
+    for (char c : line) {
+      if (c == '"') quoted = !quoted;
+      else if (c == ',' && !quoted) cells.push_back(cell), cell.clear();
+      else cell += c;
+    }
+    cells.push_back(cell);
+    rows.push_back(cells);
+  }
+  return rows;
+}
+
+std::size_t column(const std::vector<std::string>& head, const std::string& name) {
+  for (std::size_t k = 0; k < head.size(); ++k)
+    if (head[k] == name) return k;
+  BOOST_FAIL("no column " << name);
+  return 0;
+}
+
+// Runs the sweep with --out and --json; returns the parsed JSON (stdout) and checks
+// that PATH.json holds the same text.
+Json sweep_json(std::vector<std::string> args, const std::string& out, int status) {
+  args.push_back("--json");
+  args.push_back("--out");
+  args.push_back(out);
+  const Output o = dvm(args);
+  BOOST_TEST_REQUIRE(o.status == status, o.err);
+  BOOST_TEST(slurp(out + ".json") == o.out);
+  return parse_json(o.out);
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(a_sweep_equals_the_runs_done_one_by_one_on_1_and_2_threads) {
+  const std::string s = write_scene("pendulum.toml", kPendulum);
+  const std::vector<std::string> args = {"sweep", s, "--vary", "integrator.step=log:0.025:0.1:3", "--vary",
+                                         "integrator.composition=[none, suzuki5]", "--vary",
+                                         "system.params.g=[1.0, 9.81]"};
+  std::vector<std::string> one = args, two = args;
+  one.insert(one.end(), {"--jobs", "1"});
+  two.insert(two.end(), {"--jobs", "2"});
+  const Json a = sweep_json(one, temp_dir() + "/one", 0);
+  const Json b = sweep_json(two, temp_dir() + "/two", 0);
+  BOOST_TEST_REQUIRE(a.at("rows").size() == 12u);
+  BOOST_TEST(a.at("ok").get<int>() == 12);
+  // the log range: both ends exact, equal ratios between
+  const Json& steps = a.at("vary").at(0).at("values");
+  BOOST_TEST(steps.at(0).get<double>() == 0.025);
+  BOOST_TEST(steps.at(1).get<double>() == std::exp(std::log(0.025) + (std::log(0.1) - std::log(0.025)) * 0.5));
+  BOOST_TEST(steps.at(2).get<double>() == 0.1);
+  for (std::size_t i = 0; i < 12; ++i) {
+    const Json& row = a.at("rows").at(i);
+    BOOST_TEST(row.at("index").get<std::size_t>() == i);
+    BOOST_TEST(row.at("status") == "ok");
+    // the sweep's order: the last key varies fastest
+    BOOST_TEST(row.at("values").at("system.params.g") == a.at("vary").at(2).at("values").at(i % 2));
+    BOOST_TEST(row.at("values").at("integrator.step") == steps.at(i / 4));
+    // the same row on two threads, to the bit
+    BOOST_TEST(untimed(row.at("run")) == untimed(b.at("rows").at(i).at("run")));
+    // and the same run done alone
+    const Output r = run_alone(s, row);
+    BOOST_TEST_REQUIRE(r.status == 0, r.err);
+    BOOST_TEST(untimed(parse_json(r.out)) == untimed(row.at("run")), "row " << i);
+  }
+  // the CSV holds the same numbers (17 digits), in the same order
+  const auto csv = csv_rows(slurp(temp_dir() + "/two.csv"));
+  BOOST_TEST_REQUIRE(csv.size() == 13u);
+  const std::vector<std::string>& head = csv.front();
+  for (std::size_t i = 0; i < 12; ++i) {
+    const std::vector<std::string>& c = csv[i + 1];
+    BOOST_TEST_REQUIRE(c.size() == head.size());
+    const Json& run = a.at("rows").at(i).at("run");
+    BOOST_TEST(std::stod(c[column(head, "index")]) == static_cast<double>(i));
+    BOOST_TEST(c[column(head, "status")] == "ok");
+    BOOST_TEST(c[column(head, "integrator.composition")] == a.at("rows").at(i).at("values").at("integrator.composition"));
+    BOOST_TEST(std::strtod(c[column(head, "q_final[0]")].c_str(), nullptr) == run.at("q_final").at(0).get<double>());
+    BOOST_TEST(std::strtod(c[column(head, "p_final[0]")].c_str(), nullptr) == run.at("p_final").at(0).get<double>());
+    BOOST_TEST(std::strtod(c[column(head, "max_abs_energy_error")].c_str(), nullptr) ==
+               run.at("max_abs_energy_error").get<double>());
+    BOOST_TEST(std::stoll(c[column(head, "solver_iterations")]) == run.at("solver_iterations").get<long long>());
+  }
+  // the scene's [output] file is not written by a sweep
+  BOOST_TEST(!file_exists("never-written.csv"));
+}
+
+BOOST_AUTO_TEST_CASE(linear_ranges_and_seeded_samples_follow_their_definitions) {
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  const Json j = sweep_json({"sweep", s, "--zip", "--vary", "system.params.omega=uniform:0.5:2:5:42", "--vary",
+                             "initial.p=[[0.0], [0.1], [0.2], [0.3], [0.4]]", "--vary", "integrator.steps=10:50:5"},
+                            temp_dir() + "/samples", 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 5u);
+  std::mt19937_64 engine(42);
+  for (std::size_t i = 0; i < 5; ++i) {
+    const double u = static_cast<double>(engine() >> 11) * std::ldexp(1.0, -53);
+    const Json& v = j.at("rows").at(i).at("values");
+    BOOST_TEST(v.at("system.params.omega").get<double>() == 0.5 + 1.5 * u);
+    // ends written as whole numbers: whole-number points, as integrator.steps needs
+    BOOST_TEST(v.at("integrator.steps").is_number_integer());
+    BOOST_TEST(v.at("integrator.steps").get<int>() == 10 + 10 * static_cast<int>(i));
+    BOOST_TEST(j.at("rows").at(i).at("run").at("steps").get<int>() == 10 + 10 * static_cast<int>(i));
+  }
+}
+
+BOOST_AUTO_TEST_CASE(failed_runs_are_rows_and_the_sweep_exits_3) {
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  const std::string out = temp_dir() + "/failing";
+  // one Newton iteration cannot solve the midpoint step; 25 can
+  const Json j = sweep_json({"sweep", s, "--jobs", "2", "--vary", "integrator.max_iterations=[1, 25, 1]"}, out, 3);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 3u);
+  BOOST_TEST(j.at("failed").get<int>() == 2);
+  BOOST_TEST(j.at("ok").get<int>() == 1);
+  for (std::size_t i : {0u, 2u}) {
+    const Json& row = j.at("rows").at(i);
+    BOOST_TEST(row.at("status") == "failed");
+    BOOST_TEST(row.at("code").get<int>() == 3);
+    BOOST_TEST(row.at("message").get<std::string>().find("step 0 ") != std::string::npos, row.dump());
+    BOOST_TEST(row.at("run").at("status") == "failed");
+    BOOST_TEST(row.at("run").at("failure").at("step").get<int>() == 0);
+  }
+  BOOST_TEST(j.at("rows").at(1).at("status") == "ok");
+  BOOST_TEST(j.at("rows").at(1).at("code").get<int>() == 0);
+  const auto csv = csv_rows(slurp(out + ".csv"));
+  BOOST_TEST_REQUIRE(csv.size() == 4u);
+  BOOST_TEST(csv[1][column(csv[0], "status")] == "failed");
+  BOOST_TEST(csv[1][column(csv[0], "failed_step")] == "0");
+  BOOST_TEST(csv[2][column(csv[0], "status")] == "ok");
+  BOOST_TEST(csv[2][column(csv[0], "failed_step")] == "");
+}
+
+BOOST_AUTO_TEST_CASE(combinations_refused_in_some_rows_only_are_rows_refused) {
+  // omega is a parameter of harmonic only, g of pendulum only: two of the four
+  // combinations are refused, and every value runs in one of the others
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  const std::string out = temp_dir() + "/refused";
+  const Json j = sweep_json({"sweep", s, "--vary", "system.builtin=[harmonic, pendulum]", "--vary",
+                             "system.params=[{ omega = 2.0 }, { g = 2.0 }]"},
+                            out, 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 4u);
+  BOOST_TEST(j.at("refused").get<int>() == 2);
+  const std::vector<std::string> expected = {"ok", "refused", "refused", "ok"};
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Json& row = j.at("rows").at(i);
+    BOOST_TEST(row.at("status") == expected[i]);
+    if (expected[i] != "refused") continue;
+    BOOST_TEST(row.at("code").get<int>() == 2);
+    BOOST_TEST(row.at("run").is_null());
+    BOOST_TEST(row.at("message").get<std::string>().find("system.params.") != std::string::npos, row.dump());
+  }
+  BOOST_TEST(j.at("rows").at(0).at("values").at("system.params").at("omega").get<double>() == 2.0);
+  const Output plain = dvm({"sweep", s, "--vary", "system.builtin=[harmonic, pendulum]", "--vary",
+                            "system.params=[{ omega = 2.0 }, { g = 2.0 }]"});
+  BOOST_TEST(plain.status == 0);
+  BOOST_TEST(plain.err.find("2 of 4 runs refused") != std::string::npos, plain.err);
+  // without --out, the CSV table on stdout: the same rows as the file
+  const auto printed = csv_rows(plain.out), written = csv_rows(slurp(out + ".csv"));
+  BOOST_TEST_REQUIRE(printed.size() == 5u);
+  BOOST_TEST_REQUIRE(written.size() == 5u);
+  BOOST_TEST(printed[0] == written[0]);
+  for (std::size_t i = 1; i < 5; ++i)
+    BOOST_TEST(printed[i][column(printed[0], "status")] == expected[i - 1]);
+}
+
+BOOST_AUTO_TEST_CASE(error_against_the_exact_solution_is_that_of_the_final_state) {
+  // harmonic, omega = 2: q(t) = q0 cos(2t) + p0/2 sin(2t), p(t) = -2 q0 sin(2t) + p0 cos(2t)
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  const Json j = sweep_json({"sweep", s, "--error", "--set", "system.params.omega=2.0", "--vary",
+                             "integrator.composition=[none, suzuki5]", "--vary", "integrator.step=[0.1, 0.05]"},
+                            temp_dir() + "/exact", 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 4u);
+  BOOST_TEST_REQUIRE(j.at("references").size() == 2u);  // two time spans: 30 x 0.1 and 30 x 0.05
+  BOOST_TEST(j.at("references").at(0).at("reference").get<std::string>().find("exact") != std::string::npos);
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Json& row = j.at("rows").at(i);
+    const Output r = run_alone(s, row, {"--set", "system.params.omega=2.0"});
+    BOOST_TEST_REQUIRE(r.status == 0, r.err);
+    const Json rj = parse_json(r.out);
+    const double t = rj.at("t_final").get<double>();
+    const double q = rj.at("q_final").at(0).get<double>(), p = rj.at("p_final").at(0).get<double>();
+    const double qe = std::cos(2 * t) + 0.25 * std::sin(2 * t), pe = -2 * std::sin(2 * t) + 0.5 * std::cos(2 * t);
+    const double error = std::fmax(std::fabs(q - qe), std::fabs(p - pe));
+    // the closed form evaluated two ways differs by round-off only
+    BOOST_TEST(std::fabs(row.at("error").get<double>() - error) <= 1e-14, row.at("error").get<double>() << " vs " << error);
+    BOOST_TEST(error > 1e-10);  // a real error, not round-off
+    BOOST_TEST(row.at("reference").get<int>() == (i % 2 == 0 ? 0 : 1));
+  }
+  // the CSV's error column is the JSON's
+  const auto csv = csv_rows(slurp(temp_dir() + "/exact.csv"));
+  for (std::size_t i = 0; i < 4; ++i)
+    BOOST_TEST(std::strtod(csv[i + 1][column(csv[0], "error")].c_str(), nullptr) ==
+               j.at("rows").at(i).at("error").get<double>());
+}
+
+BOOST_AUTO_TEST_CASE(error_without_an_exact_solution_is_that_of_dvm_converge) {
+  // the pendulum to t = 2 with 40 and 80 steps: the runs and the reference of dvm
+  // converge --steps-list 40,80, so the same errors to the bit
+  const std::string s = write_scene("pendulum.toml", kPendulum);
+  const Json j = sweep_json({"sweep", s, "--error", "--jobs", "2", "--vary", "integrator.step=[0.05, 0.025]"},
+                            temp_dir() + "/converge", 0);
+  const Output c = dvm({"converge", s, "--json", "--steps-list", "40,80", "--t-end", "2"});
+  BOOST_TEST_REQUIRE(c.status == 0, c.err);
+  const Json cj = parse_json(c.out);
+  BOOST_TEST_REQUIRE(j.at("references").size() == 1u);
+  BOOST_TEST(j.at("references").at(0).at("reference") == cj.at("reference"));
+  BOOST_TEST(j.at("references").at(0).at("accuracy").get<double>() == cj.at("reference_accuracy").get<double>());
+  for (std::size_t i = 0; i < 2; ++i)
+    BOOST_TEST(j.at("rows").at(i).at("error").get<double>() == cj.at("runs").at(i).at("error").get<double>());
+}
+
+BOOST_AUTO_TEST_CASE(bad_input_exits_2_naming_the_key_and_runs_nothing) {
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  struct Case {
+    std::vector<std::string> vary;
+    std::vector<std::string> expect;
+  };
+  const std::vector<Case> cases = {
+      {{"--vary", "integrator.step=0.1:0.2:0"}, {"integrator.step", "empty range"}},
+      {{"--vary", "integrator.step=[]"}, {"integrator.step", "empty list"}},
+      {{"--vary", "integrator.step=0.01:0.1:1000000000"}, {"integrator.step", "1000000", "--max-runs"}},
+      {{"--vary", "integrator.step=0.01:0.1:1000", "--vary", "system.params.omega=1:2:1001"},
+       {"1001000 runs", "limit of 1000000", "--max-runs"}},
+      {{"--vary", "integrator.stpe=[0.1, 0.2]"}, {"integrator.stpe", "unknown key", "did you mean \"step\""}},
+      {{"--vary", "integrator.step=[0.1, \"fast\"]"}, {"integrator.step", "\"fast\"", "expected a number"}},
+      {{"--vary", "integrator.steps=[10, 2.5]"}, {"integrator.steps", "2.5", "whole number"}},
+      {{"--vary", "integrator.step=log:0:1:3"}, {"integrator.step", "ends > 0"}},
+      {{"--vary", "integrator.step=0.1:0.2"}, {"integrator.step", "a:b:n"}},
+      {{"--zip", "--vary", "integrator.step=[0.1, 0.2]", "--vary", "integrator.steps=[1, 2, 3]"},
+       {"integrator.steps", "equal lengths"}},
+      {{"--vary", "integrator.step=[0.1]", "--vary", "integrator.step=[0.2]"}, {"integrator.step", "twice"}},
+      {{"--vary", "output.csv=[\"a.csv\"]"}, {"output.csv", "no trajectories"}},
+  };
+  for (const Case& c : cases) {
+    const std::string out = temp_dir() + "/bad";
+    std::vector<std::string> args = {"sweep", s, "--out", out};
+    args.insert(args.end(), c.vary.begin(), c.vary.end());
+    const Output o = dvm(args);
+    BOOST_TEST(o.status == 2, c.vary.back() << ": " << o.err);
+    for (const std::string& e : c.expect) BOOST_TEST(o.err.find(e) != std::string::npos, c.vary.back() << ": " << o.err);
+    BOOST_TEST(o.out.empty(), o.out);
+    BOOST_TEST(!file_exists(out + ".csv"));
+    BOOST_TEST(!file_exists(out + ".json"));
+  }
+  // a raised limit admits the sweep the default refuses
+  const Output raised = dvm({"sweep", s, "--max-runs", "3", "--vary", "integrator.step=[0.1, 0.2, 0.3, 0.4]"});
+  BOOST_TEST(raised.status == 2);
+  BOOST_TEST(raised.err.find("limit of 3") != std::string::npos, raised.err);
+  BOOST_TEST(dvm({"sweep", s, "--max-runs", "4", "--vary", "integrator.step=[0.1, 0.2, 0.3, 0.4]"}).status == 0);
+}
