@@ -27,10 +27,11 @@ Problem with_grid(const Problem& pr, double T, std::int64_t n) {
 
 // Runs the problem with n steps to T; false (with the message) if the run failed.
 bool final_state(const Problem& pr, const Method& me, double T, std::int64_t n, FinalState& out, std::int64_t& iterations,
-                 std::string& failure) {
+                 std::string& failure, double* wall_seconds = nullptr) {
   const auto run = make_run(with_grid(pr, T, n), me);
   const RunReport r = run->execute(nullptr);
   iterations = r.solver_iterations;
+  if (wall_seconds) *wall_seconds = r.wall_seconds;
   if (r.failed) {
     std::ostringstream m;
     m.precision(17);
@@ -198,7 +199,7 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
     row.steps = list[i];
     row.h = T / static_cast<double>(list[i]);
     std::string failure;
-    ok[i] = final_state(pr, me, T, list[i], finals[i], row.iterations, failure);
+    ok[i] = final_state(pr, me, T, list[i], finals[i], row.iterations, failure, &row.wall_seconds);
     if (!ok[i] && rep.failure.empty()) rep.failure = failure;
     rep.rows.push_back(row);
   }
@@ -301,7 +302,8 @@ int print_converge(const ConvergeReport& r, bool json) {
       const ConvergeRow& c = r.rows[i];
       Json::Object o;
       o.num("steps", static_cast<double>(c.steps)).num("h", c.h).num("error", c.error).num("order", c.order);
-      o.num("iterations", static_cast<double>(c.iterations)).boolean("fitted", c.excluded.empty());
+      o.num("iterations", static_cast<double>(c.iterations)).num("wall_seconds", c.wall_seconds);
+      o.boolean("fitted", c.excluded.empty());
       if (!c.excluded.empty()) o.str("excluded", c.excluded);
       rows += "    " + o.dump(6) + (i + 1 < r.rows.size() ? ",\n" : "\n");
     }
@@ -316,14 +318,14 @@ int print_converge(const ConvergeReport& r, bool json) {
   } else {
     std::printf("%s with %s to t = %g; reference: %s (accuracy %.1e)\n", r.system.c_str(), r.method_label.c_str(),
                 r.t_end, r.reference.c_str(), r.reference_accuracy);
-    std::printf("  %12s %14s %14s %8s %12s\n", "steps", "h", "error", "order", "iterations");
+    std::printf("  %12s %14s %14s %8s %12s %10s\n", "steps", "h", "error", "order", "iterations", "wall s");
     for (const ConvergeRow& c : r.rows) {
       // no number where there is none: the first row has no run before it, a failed run no error
       char error[32] = "-", order[32] = "-";
       if (std::isfinite(c.error)) std::snprintf(error, sizeof error, "%.6e", c.error);
       if (std::isfinite(c.order)) std::snprintf(order, sizeof order, "%.3f", c.order);
-      std::printf("  %12lld %14.6e %14s %8s %12lld%s%s\n", static_cast<long long>(c.steps), c.h, error, order,
-                  static_cast<long long>(c.iterations), c.excluded.empty() ? "" : "   not fitted: ",
+      std::printf("  %12lld %14.6e %14s %8s %12lld %10.3e%s%s\n", static_cast<long long>(c.steps), c.h, error, order,
+                  static_cast<long long>(c.iterations), c.wall_seconds, c.excluded.empty() ? "" : "   not fitted: ",
                   c.excluded.c_str());
     }
     if (std::isnan(r.fitted_order))

@@ -47,6 +47,9 @@ struct ConvergeRow {
   // printed "-" in the table and null in the JSON
   double h = 0.0, error = 0.0, order = 0.0;
   std::int64_t iterations = 0;
+  // the run's time in its integration loop (RunReport::wall_seconds; the run's
+  // construction, and the reference runs, not counted)
+  double wall_seconds = 0.0;
   // "" when the row enters the fit; else why not ("reference", "pre-asymptotic", "failed")
   std::string excluded;
 };

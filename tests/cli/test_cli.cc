@@ -144,6 +144,24 @@ BOOST_AUTO_TEST_CASE(a_convergence_study_with_a_failing_run_exits_3_and_keeps_th
   BOOST_TEST(failure.find("no convergence within 3 iterations") != std::string::npos, failure);
 }
 
+// A convergence study reports each run's wall time (its integration loop): present,
+// positive and finite in every JSON row and as a column of the text table. (Its value
+// is a measurement, not judged here.)
+BOOST_AUTO_TEST_CASE(a_convergence_study_reports_the_wall_time_of_each_run) {
+  const Output o = dvm({"converge", scene("pendulum.toml"), "--steps-list", "100,200,400", "--t-end", "10", "--json"});
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  const Json j = parse_json(o.out);
+  BOOST_TEST_REQUIRE(j.at("runs").size() == 3u);
+  for (const Json& r : j.at("runs")) {
+    BOOST_TEST_REQUIRE(r.contains("wall_seconds"));
+    const double w = json_double(r.at("wall_seconds"));
+    BOOST_TEST((std::isfinite(w) && w > 0.0), w);
+  }
+  const Output t = dvm({"converge", scene("pendulum.toml"), "--steps-list", "100,200", "--t-end", "10"});
+  BOOST_TEST(t.status == 0, t.err);
+  BOOST_TEST(t.out.find("wall s") != std::string::npos, t.out);
+}
+
 // A convergence study whose reference run fails: exit 2 (as --help says), the reference
 // named with its step and the reason, and no table. The explicit-Euler runs of 2 and 4
 // steps over t = 100 complete (no solver); the Galerkin s = 6 reference from the
