@@ -107,7 +107,7 @@ test: test-deps
 # bench_chain, bench_nbody and bench_sphere_chain are built too and run by hand
 # (examples/bench/README.md)
 BENCH_PROGRAMS := bench_midpoint_step bench_written_lagrangian bench_ratios bench_galerkin_kepler bench_chain bench_nbody \
-  bench_sphere_chain
+  bench_sphere_chain bench_sweep
 bench: deps
 	$(call configure,ON)
 	cmake --build $(BUILD) -j $(JOBS) --target $(BENCH_PROGRAMS)
@@ -115,6 +115,7 @@ bench: deps
 	./$(BUILD)/examples/bench_written_lagrangian
 	./$(BUILD)/examples/bench_ratios
 	./$(BUILD)/examples/bench_galerkin_kepler
+	./$(BUILD)/examples/bench_sweep
 
 CHARTS := examples/charts
 charts: deps
