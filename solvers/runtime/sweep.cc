@@ -28,22 +28,11 @@ namespace {
 
 // ---- values: TOML text, JSON, CSV cell ----------------------------------------------
 
+// A TOML basic string: JSON's escapes are TOML's too, and TOML also escapes DEL.
 std::string toml_string(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    const unsigned char u = static_cast<unsigned char>(c);
-    if (c == '"' || c == '\\') {
-      out += '\\';
-      out += c;
-    } else if (u < 0x20 || u == 0x7f) {
-      char buf[8];
-      std::snprintf(buf, sizeof buf, "\\u%04x", u);
-      out += buf;
-    } else {
-      out += c;
-    }
-  }
-  return out + "\"";
+  std::string out;
+  for (char c : Json::string(s)) out += c == '\x7f' ? std::string("\\u007f") : std::string(1, c);
+  return out;
 }
 
 // A float as TOML reads it back to the same double: the shortest digits, and a
