@@ -316,3 +316,70 @@ BOOST_AUTO_TEST_CASE(bad_input_exits_2_naming_the_key_and_runs_nothing) {
   BOOST_TEST(raised.err.find("limit of 3") != std::string::npos, raised.err);
   BOOST_TEST(dvm({"sweep", s, "--max-runs", "4", "--vary", "integrator.step=[0.1, 0.2, 0.3, 0.4]"}).status == 0);
 }
+
+// The linear stability thresholds that `dvm methods` lists for the compositions of
+// the explicit Euler maps (stability_threshold_explicit_euler: h omega below which
+// the splitting is stable on q'' = -omega^2 q, from the trace of a product of 2 x 2
+// matrices, solvers/stability.h) are where the steps dvm takes lose stability. One
+// sweep takes one step of each composition from (q, p) = (1, 0) and (0, 1) on the
+// harmonic oscillator (omega = 1), so that the two final states are the columns of
+// the one-step matrix M of the step dvm runs (kicks and drifts); at the listed
+// threshold h* its trace is +-2 (|tr M| / 2 = 1 to round-off), and at every h of a
+// grid below it (20 points from h*/20, and 0.99 h*, 0.999 h*) |tr M| / 2 < 1: h* is
+// the first h where the step stops being stable. A threshold listed 0.1 % too low or
+// too high fails it.
+BOOST_AUTO_TEST_CASE(the_stability_thresholds_of_dvm_methods_are_those_of_the_steps_dvm_takes) {
+  const Output m = dvm({"methods", "--json"});
+  BOOST_TEST_REQUIRE(m.status == 0, m.err);
+  struct Point {
+    std::string composition;
+    double threshold, h;
+  };
+  std::vector<Point> points;
+  for (const Json& r : parse_json(m.out)) {
+    if (!r.contains("stability_threshold_explicit_euler")) continue;
+    const double t = json_double(r.at("stability_threshold_explicit_euler"));
+    BOOST_TEST_REQUIRE((std::isfinite(t) && t > 0.0), r.dump());
+    const std::string c = r.at("name").get<std::string>();
+    for (int k = 1; k <= 20; ++k) points.push_back({c, t, t * k / 20.0});
+    for (double f : {0.99, 0.999}) points.push_back({c, t, t * f});
+  }
+  BOOST_TEST_REQUIRE(points.size() >= 20u * 22u);  // none, stormer-verlet and the 20 compositions
+  // zipped lists: each point twice, from (1, 0) and from (0, 1)
+  std::ostringstream comps, steps, qs, ps;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    for (int unit = 0; unit < 2; ++unit) {
+      const char* sep = i + unit == 0 ? "[" : ", ";
+      comps << sep << '"' << points[i].composition << '"';
+      steps << sep << Json(points[i].h).dump();
+      qs << sep << (unit == 0 ? "[1.0]" : "[0.0]");
+      ps << sep << (unit == 0 ? "[0.0]" : "[1.0]");
+    }
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  const Json j = sweep_json({"sweep", s, "--zip", "--set", "integrator.map=explicit-euler", "--set", "integrator.steps=1",
+                             "--set", "system.params={ omega = 1.0 }", "--vary", "integrator.composition=" + comps.str() + "]",
+                             "--vary", "integrator.step=" + steps.str() + "]", "--vary", "initial.q=" + qs.str() + "]",
+                             "--vary", "initial.p=" + ps.str() + "]"},
+                            temp_dir() + "/trace", 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 2 * points.size());
+  int at_threshold = 0;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Json& a = j.at("rows").at(2 * i);
+    const Json& b = j.at("rows").at(2 * i + 1);
+    BOOST_TEST_REQUIRE(a.at("status") == "ok", a.dump());
+    BOOST_TEST_REQUIRE(b.at("status") == "ok", b.dump());
+    // tr M = dq1/dq0 + dp1/dp0
+    const double tr = json_double(a.at("run").at("q_final")[0]) + json_double(b.at("run").at("p_final")[0]);
+    const Point& pt = points[i];
+    BOOST_TEST_CONTEXT(pt.composition << ": h = " << pt.h << " = " << pt.h / pt.threshold << " h*, |tr M| / 2 = "
+                                      << std::fabs(tr) / 2) {
+      if (pt.h == pt.threshold) {
+        ++at_threshold;
+        BOOST_TEST(std::fabs(std::fabs(tr) / 2 - 1.0) <= 1e-9);
+      } else {
+        BOOST_TEST(std::fabs(tr) / 2 < 1.0 - 1e-12);
+      }
+    }
+  }
+  BOOST_TEST(at_threshold >= 22);
+}
