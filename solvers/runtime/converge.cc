@@ -108,7 +108,7 @@ Reference reference_solution(const Problem& pr, const Method& me, double T, std:
   std::int64_t it = 0;
   std::string failure;
   if (!final_state(pr, rm, T, n, r1, it, failure))
-    throw InputError("converge: the reference run (" + name + ") failed: " + failure);
+    throw InputError("the reference run (" + name + ") failed: " + failure);
   double d = INFINITY;
   for (int level = 0; level < 5; ++level) {
     n *= 2;
@@ -117,7 +117,7 @@ Reference reference_solution(const Problem& pr, const Method& me, double T, std:
       std::fflush(stderr);
     }
     if (!final_state(pr, rm, T, n, r2, it, failure))
-      throw InputError("converge: the reference run (" + name + ") failed: " + failure);
+      throw InputError("the reference run (" + name + ") failed: " + failure);
     d = state_distance(r1, r2);
     double smallest = INFINITY;
     for (const FinalState& f : measured) smallest = std::fmin(smallest, state_distance(f, r2));
