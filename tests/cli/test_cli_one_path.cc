@@ -1422,12 +1422,13 @@ BOOST_AUTO_TEST_CASE(readme_says_what_a_scene_cannot_state_beside_the_tutorial) 
 // .md file is a measurement that goes stale with the next change of code or machine.
 // Measurements live in generated benchmark output (examples/charts: ratios.md, the
 // table_*.md files and the section of its README between the charts markers); a bound
-// the code enforces or a target ("at least 20 ms", "at most 8 minutes") is a rule.
+// the code enforces or a target, written "at least N <unit>" or "at most N <unit>", is a
+// rule.
 BOOST_AUTO_TEST_CASE(documentation_quotes_no_measured_time) {
   namespace fs = std::filesystem;
   const std::string root = fs::canonical(repo_file("")).string();
-  // a number, then a unit of time: "113 s", "24.4 ns", "2.5 minutes" (not the order
-  // "2s", nor "s = 4")
+  // a number, then a unit of time: "N s", "N.M ns", "N minutes" (not the order "2s",
+  // nor "s = 4")
   const std::regex duration(R"((^|[^\w.])[0-9]+(\.[0-9]+)?( ?(ns|us|ms)| (s|seconds|min|minutes|hours))([^\w^=]|$))");
   std::vector<std::string> found;
   int files = 0;
