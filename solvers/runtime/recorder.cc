@@ -6,6 +6,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <new>
+#include <stdexcept>
 #include <utility>
 
 #include "solvers/runtime/errors.h"
@@ -30,6 +32,31 @@ bool same_file(const std::string& a, const std::string& b) {
 
 void Recorder::open(const std::vector<std::string>& columns, double rows) {
   columns_ = static_cast<int>(columns.size());
+  names_ = columns;
+  if (spec_.memory) {
+    // the whole table reserved now: refused before the run if it cannot be held
+    const double bytes = rows * static_cast<double>(columns_) * sizeof(double);
+    const double memory = static_cast<double>(sysconf(_SC_PHYS_PAGES)) * static_cast<double>(sysconf(_SC_PAGE_SIZE));
+    char what[160];
+    std::snprintf(what, sizeof what, "the run's %.0f rows of %d columns kept in memory (%.3g bytes)", rows, columns_,
+                  bytes);
+    if (memory > 0.0 && bytes > memory) {
+      char more[240];
+      std::snprintf(more, sizeof more, "%s are more than this machine's memory (%.3g bytes)", what, memory);
+      throw InputError(std::string("output.every: ") + more +
+                       "; expected fewer rows (a larger output.every, or fewer steps)");
+    }
+    memory_.clear();
+    try {
+      memory_.reserve(static_cast<std::size_t>(rows) * static_cast<std::size_t>(columns_));
+    } catch (const std::bad_alloc&) {
+      throw InputError(std::string("output.every: ") + what +
+                       " could not be allocated; expected fewer rows (a larger output.every, or fewer steps)");
+    } catch (const std::length_error&) {
+      throw InputError(std::string("output.every: ") + what +
+                       " could not be allocated; expected fewer rows (a larger output.every, or fewer steps)");
+    }
+  }
   if (!spec_.csv.empty() && !spec_.npy.empty() && same_file(spec_.csv, spec_.npy))
     throw InputError(spec_.csv_source + " '" + spec_.csv + "' and " + spec_.npy_source + " '" + spec_.npy +
                      "' name the same file; expected two different paths");
@@ -84,6 +111,7 @@ void Recorder::open(const std::vector<std::string>& columns, double rows) {
 }
 
 void Recorder::row(const double* x) {
+  if (spec_.memory) memory_.insert(memory_.end(), x, x + columns_);
   if (csv_) {
     for (int i = 0; i < columns_; ++i) std::fprintf(csv_.get(), i ? ",%.17g" : "%.17g", x[i]);
     std::fputc('\n', csv_.get());
@@ -121,6 +149,7 @@ bool Recorder::finish(bool complete, std::string& kept) {
 }
 
 void Recorder::progress(std::int64_t k, std::int64_t total, double h) {
+  if (spec_.poll && (k & (kPollSteps - 1)) == 0) spec_.poll(k, total);
   if (!progress_on_ || k == 0 || (k & 1023) != 0) return;
   const auto now = std::chrono::steady_clock::now();
   if (std::chrono::duration<double>(now - last_).count() < progress_interval_) return;

@@ -8,10 +8,22 @@
 // a little-endian float64 array of shape rows x columns (format version 1.0, header
 // rewritten with the row count when the file is finished), its column names beside it
 // in PATH.json (written, kept or discarded with it; not for a stream such as -).
+//
+// Rows may also be kept in memory (OutputSpec::memory): one contiguous row-major
+// buffer of doubles, reserved for the run's rows when the run opens the recorder and
+// handed over whole by take_rows() (a binding wraps it as an array without copying).
+//
+// A run calls progress(k, ...) after every step; OutputSpec::poll, when set, is called
+// from there every kPollSteps steps. It is the hook of a caller that must act while a
+// run is in progress (check for an interrupt, show progress): an exception it throws
+// stops the run and leaves Run::execute (the temporaries of the files are removed, no
+// rows are lost from memory). It must not throw std::domain_error, which the
+// integrate loop takes for a failed step.
 #pragma once
 
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -30,7 +42,14 @@ struct OutputSpec {
   // it matters (n bodies: the energy costs as much as a force).
   std::int64_t monitor_every = 1;
   bool progress = false;                // progress on stderr when it is a terminal
+  bool memory = false;                  // rows kept in memory (Recorder::take_rows)
+  // Called as poll(k, steps) at every kPollSteps-th step k of an initial-value run (not
+  // during the single solve of a boundary-value problem); see above.
+  std::function<void(std::int64_t, std::int64_t)> poll;
 };
+
+// The steps between two calls of OutputSpec::poll (a power of 2).
+constexpr std::int64_t kPollSteps = 64;
 
 // The file beside a .npy file written to a path that holds its column names, as JSON
 // {"columns": [...], "npy": FILE NAME}: PATH.json.
@@ -47,14 +66,19 @@ class Recorder {
   // file, an output naming one of the inputs, a .npy that cannot be rewound (a pipe).
   void open(const std::vector<std::string>& columns, double rows);
   bool wants(std::int64_t k, std::int64_t last) const { return k % spec_.every == 0 || k == last; }
-  // Whether rows go anywhere (a CSV or a .npy file).
-  bool writes_rows() const { return !spec_.csv.empty() || !spec_.npy.empty(); }
+  // Whether rows go anywhere (a CSV or a .npy file, or memory).
+  bool writes_rows() const { return !spec_.csv.empty() || !spec_.npy.empty() || spec_.memory; }
   void row(const double* values);
   // Renames the files onto their paths (complete) or onto PATH.partial; returns false
   // after printing any write error to stderr. `kept` lists the .partial files.
   bool finish(bool complete, std::string& kept);
   const OutputSpec& spec() const { return spec_; }
   std::int64_t every() const { return spec_.every; }
+  // The column names the run declared (open), and with OutputSpec::memory the rows it
+  // wrote: rows() / columns().size() of them, row-major. take_rows() moves them out.
+  const std::vector<std::string>& columns() const { return names_; }
+  const std::vector<double>& rows() const { return memory_; }
+  std::vector<double> take_rows() { return std::move(memory_); }
 
   // Progress on stderr (step, time, rate, time left), only when asked and stderr is
   // a terminal; cheap to call every step. A line is written at every 1024th step k > 0
@@ -70,6 +94,8 @@ class Recorder {
   OutputSpec spec_;
   OutputFile csv_, npy_, npy_names_;  // npy_names_: the .npy's column names (PATH.json)
   int columns_ = 0;
+  std::vector<std::string> names_;
+  std::vector<double> memory_;  // OutputSpec::memory: the rows written so far
   long long npy_rows_ = 0;
   bool progress_on_ = false, progress_shown_ = false;
   double progress_interval_ = 0.25;  // seconds between progress lines (DVM_PROGRESS_INTERVAL)

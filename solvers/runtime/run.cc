@@ -1,6 +1,7 @@
 #include "solvers/runtime/run.h"
 
 #include <cmath>
+#include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
 
@@ -110,28 +111,47 @@ std::string failure_json(const RunSummary& run) {
   return f.dump(4);
 }
 
-// The message on stderr for a run stopped by a failed step: a solve that did not
-// converge (with its residual), a non-finite state, or a map or Legendre transform
-// outside its domain.
-void print_failure(const RunReport& r) {
-  const RunSummary& run = r.loop;
-  const auto& f = run.failure;
-  const bool solve = f.iterations > 0 && std::isfinite(f.residual) && std::isfinite(f.scale);
-  if (solve)
-    std::fprintf(stderr,
-                 "dvm: step %lld (t = %s -> %s) did not converge: residual %.3e against scale %.3e after %d "
-                 "iterations (%s)",
-                 static_cast<long long>(run.failed_step), shortest(run.failed_time).c_str(),
-                 shortest(run.failed_time + r.step).c_str(), f.residual, f.scale, f.iterations, f.message.c_str());
-  else  // (a non-finite residual is named in the message already)
-    std::fprintf(stderr, "dvm: step %lld (t = %s -> %s) failed: %s%s", static_cast<long long>(run.failed_step),
-                 shortest(run.failed_time).c_str(), shortest(run.failed_time + r.step).c_str(), f.message.c_str(),
-                 std::isfinite(f.residual) ? (" (residual " + sci(f.residual) + ")").c_str() : "");
-  std::fprintf(stderr, "; stopped after %lld completed steps%s%s\n", static_cast<long long>(run.steps_done),
-               r.kept.empty() ? "" : "; their rows are in ", r.kept.c_str());
+// printf into a string, of any length
+std::string format(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+std::string format(const char* fmt, ...) {
+  va_list args, again;
+  va_start(args, fmt);
+  va_copy(again, args);
+  const int n = std::vsnprintf(nullptr, 0, fmt, args);
+  va_end(args);
+  std::string out(static_cast<std::size_t>(n > 0 ? n : 0) + 1, '\0');
+  std::vsnprintf(out.data(), out.size(), fmt, again);
+  va_end(again);
+  out.resize(out.size() - 1);
+  return out;
 }
 
 }  // namespace
+
+std::string run_failure_message(const RunReport& r) {
+  if (!r.failed) return "";
+  if (r.boundary_value)
+    return format("the boundary-value problem did not converge after %lld Ceres iterations: largest discrete "
+                  "Euler-Lagrange residual %.3e against scale %.3e (%s)%s%s",
+                  static_cast<long long>(r.solver_iterations), r.max_del_residual, r.residual_scale, r.message.c_str(),
+                  r.kept.empty() ? "" : "; the nodes are in ", r.kept.c_str());
+  // a step that failed: a solve that did not converge (with its residual), a non-finite
+  // state, or a map or Legendre transform outside its domain
+  const RunSummary& run = r.loop;
+  const auto& f = run.failure;
+  const bool solve = f.iterations > 0 && std::isfinite(f.residual) && std::isfinite(f.scale);
+  std::string out;
+  if (solve)
+    out = format("step %lld (t = %s -> %s) did not converge: residual %.3e against scale %.3e after %d iterations (%s)",
+                 static_cast<long long>(run.failed_step), shortest(run.failed_time).c_str(),
+                 shortest(run.failed_time + r.step).c_str(), f.residual, f.scale, f.iterations, f.message.c_str());
+  else  // (a non-finite residual is named in the message already)
+    out = format("step %lld (t = %s -> %s) failed: %s%s", static_cast<long long>(run.failed_step),
+                 shortest(run.failed_time).c_str(), shortest(run.failed_time + r.step).c_str(), f.message.c_str(),
+                 std::isfinite(f.residual) ? (" (residual " + sci(f.residual) + ")").c_str() : "");
+  return out + format("; stopped after %lld completed steps%s%s", static_cast<long long>(run.steps_done),
+                      r.kept.empty() ? "" : "; their rows are in ", r.kept.c_str());
+}
 
 std::string report_json(const RunReport& r) {
   Json::Object j;
@@ -253,15 +273,7 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
     }
     for (const std::string& f : r.written) std::fprintf(to, "  wrote %s\n", f.c_str());
   }
-  if (!r.failed) return;
-  if (r.boundary_value)
-    std::fprintf(stderr,
-                 "dvm: the boundary-value problem did not converge after %lld Ceres iterations: largest discrete "
-                 "Euler-Lagrange residual %.3e against scale %.3e (%s)%s%s\n",
-                 static_cast<long long>(r.solver_iterations), r.max_del_residual, r.residual_scale, r.message.c_str(),
-                 r.kept.empty() ? "" : "; the nodes are in ", r.kept.c_str());
-  else
-    print_failure(r);
+  if (r.failed) std::fprintf(stderr, "dvm: %s\n", run_failure_message(r).c_str());
 }
 
 }  // namespace dvm

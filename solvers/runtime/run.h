@@ -175,6 +175,11 @@ void print_report(const RunReport& report, bool json, bool quiet, std::FILE* to 
 // The JSON object of a report (the "failure" object included).
 std::string report_json(const RunReport& report);
 
+// What a failed run prints on stderr (after "dvm: "): the step, its times, the
+// residual and why it stopped, or the boundary-value solve's residuals; "" for a run
+// that did not fail.
+std::string run_failure_message(const RunReport& report);
+
 // x with the fewest significant digits (15 to 17) that read back as x.
 std::string shortest(double x);
 
