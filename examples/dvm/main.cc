@@ -15,6 +15,7 @@
 #include "solvers/runtime/scene.h"
 #include "solvers/runtime/converge.h"
 #include "solvers/runtime/json.h"
+#include "solvers/runtime/listings.h"
 #include "solvers/runtime/registry.h"
 #include "solvers/runtime/run.h"
 #include "solvers/runtime/output.h"
@@ -673,21 +674,7 @@ int cmd_maps(const std::vector<std::string>& args) {
   }
   const auto& maps = dvm::map_registry();
   if (json) {
-    std::string out = "[\n";
-    for (std::size_t i = 0; i < maps.size(); ++i) {
-      const dvm::MapEntry& m = maps[i];
-      Json::Object j;
-      j.str("name", m.name)
-          .str("formula", m.formula)
-          .boolean("symmetric", m.symmetric(m.theta) && !m.takes_theta)
-          .num("order", m.takes_theta ? 1 : m.order(m.theta))
-          .boolean("closed_form_inverse", m.closed_inverse)
-          .str("space", dvm::to_string(m.space))
-          .str("note", m.note)
-          .boolean("takes_theta", m.takes_theta);
-      out += "  " + j.dump(4) + (i + 1 < maps.size() ? ",\n" : "\n");
-    }
-    std::cout << out << "]\n";
+    std::cout << dvm::maps_json();
   } else {
     std::printf("%-24s %-6s %-9s %-5s %-8s %s\n", "name", "space", "symmetric", "order", "inverse", "formula");
     for (const auto& m : maps)
@@ -712,26 +699,7 @@ int cmd_systems(const std::vector<std::string>& args) {
   }
   const auto& systems = dvm::system_registry();
   if (json) {
-    std::string out = "[\n";
-    for (std::size_t i = 0; i < systems.size(); ++i) {
-      const dvm::SystemEntry& sy = systems[i];
-      Json::Object j;
-      j.str("name", sy.name).num("dim", sy.dim).str("lagrangian", sy.lagrangian).str("space", dvm::to_string(sy.space));
-      Json::Object ps;
-      for (const auto& p : sy.params) ps.num(p.name, p.default_value);
-      j.raw("params", ps.dump(6));
-      std::string forms = "[";
-      for (std::size_t k = 0; k < sy.caps.forms.size(); ++k)
-        forms += (k ? ", " : "") + Json::string(dvm::to_string(sy.caps.forms[k]));
-      j.raw("forms", forms + "]")
-          .boolean("retraction_maps", sy.caps.retraction_maps)
-          .boolean("written_maps", sy.caps.written_maps)
-          .boolean("composition", sy.caps.composition)
-          .boolean("galerkin", sy.caps.galerkin)
-          .boolean("boundary_value", sy.caps.boundary_value);
-      out += "  " + j.dump(4) + (i + 1 < systems.size() ? ",\n" : "\n");
-    }
-    std::cout << out << "]\n";
+    std::cout << dvm::systems_json();
   } else {
     for (const auto& sy : systems) {
       std::printf("%-17s %s coordinates on %s\n  %s\n", sy.name.c_str(),

@@ -1,110 +1,29 @@
 // `dvm methods`: the composition methods, with their order, stages, symmetry and the
-// linear stability threshold of each, computed here from the trace of the one-step
-// matrix on q'' = -omega^2 q (solvers/stability.h); then the Galerkin discrete
-// Lagrangians ([integrator] method = "galerkin", solvers/galerkin_step.h) with their
-// orders.
+// linear stability threshold of each (solvers/runtime/listings.h: from the trace of the
+// one-step matrix on q'' = -omega^2 q); then the Galerkin discrete Lagrangians
+// ([integrator] method = "galerkin", solvers/galerkin_step.h) with their orders.
 #include <cstdio>
 #include <iostream>
 
 #include "examples/dvm/commands.h"
-#include "solvers/runtime/json.h"
+#include "solvers/runtime/listings.h"
 #include "solvers/runtime/registry.h"
-#include "solvers/splitting_step.h"
-#include "solvers/stability.h"
 
 namespace dvm::cli {
 
-namespace {
-
-struct MethodRow {
-  CompositionScheme scheme;
-  double threshold_verlet;     // basic method from map explicit-euler (Stormer-Verlet)
-  bool midpoint_unconditional;  // basic method midpoint: stable for every h omega
-  int forces_verlet;            // forces a step with map explicit-euler on a separable system
-  bool splitting() const { return scheme.kind == CompositionKind::rkn_splitting; }  // no midpoint
-};
-
-std::vector<MethodRow> method_rows() {
-  std::vector<CompositionScheme> list = composition_schemes();
-  for (int p = 6; p <= RecursiveTripleJump::max_order; p += 2) list.push_back(find_composition("triple-jump:" + std::to_string(p)));
-  std::vector<MethodRow> rows;
-  for (const CompositionScheme& s : list) {
-    const bool splitting = s.kind == CompositionKind::rkn_splitting;  // kicks and drifts: no midpoint stages
-    rows.push_back({s, composition_threshold(0.0, substeps(s, false)),
-                    !splitting && std::isinf(composition_threshold(0.5, substeps(s, true))),
-                    splitting_forces_per_step(splitting_sequence(0.0, substeps(s, false), 1.0))});
-  }
-  return rows;
-}
-
-}  // namespace
-
 int methods_command(bool json) {
-  const std::vector<MethodRow> rows = method_rows();
-  const double euler = composition_threshold(0.0, {{1.0, false}});
-  const int euler_forces = splitting_forces_per_step(splitting_sequence(0.0, {{1.0, false}}, 1.0));
   if (json) {
-    std::string out = "[\n";
-    {
-      Json::Object j;
-      j.str("name", "none")
-          .str("order", "that of the map")
-          .num("stages", 1)
-          .str("symmetric", "as the map")
-          .num("stability_threshold_explicit_euler", euler)
-          .num("forces_per_step_explicit_euler", euler_forces)
-          .boolean("midpoint_unconditionally_stable", true)
-          .str("citation", NoComposition::citation);
-      out += "  " + j.dump(4) + ",\n";
-    }
-    for (std::size_t i = 0; i < rows.size(); ++i) {
-      const MethodRow& r = rows[i];
-      Json::Object j;
-      j.str("name", r.scheme.name)
-          .num("order", r.scheme.order)
-          .num("stages", r.scheme.stages)
-          .boolean("symmetric", r.scheme.symmetric)
-          .num("stability_threshold_explicit_euler", r.threshold_verlet)
-          .num("forces_per_step_explicit_euler", r.forces_verlet);
-      if (r.splitting())  // refused with map = "midpoint"; stages count the forces of a step
-        j.raw("midpoint_unconditionally_stable", "null")
-            .str("applies_to", "separable systems, map explicit-euler or adjoint-euler");
-      else
-        j.boolean("midpoint_unconditionally_stable", r.midpoint_unconditional);
-      j.str("citation", r.scheme.citation);
-      out += "  " + j.dump(4) + ",\n";
-    }
-    const auto& galerkin = galerkin_registry();
-    for (std::size_t i = 0; i < galerkin.size(); ++i) {
-      const GalerkinEntry& g = galerkin[i];
-      Json::Object j;
-      j.str("name", "galerkin")
-          .str("quadrature", to_string(g.quadrature))
-          .num("stages", g.stages)
-          .num("points", g.points)
-          .num("order", g.order)
-          .boolean("symmetric", true)
-          .str("citation", g.citation);
-      out += "  " + j.dump(4) + ",\n";
-    }
-    // the lifts of the map (integrator.lift), named "lift <name>" apart from the compositions
-    const auto& lifts = lift_registry();
-    for (std::size_t i = 0; i < lifts.size(); ++i) {
-      const LiftEntry& l = lifts[i];
-      std::string forms;
-      for (Form f : l.forms) forms += (forms.empty() ? "" : ", ") + std::string(to_string(f));
-      Json::Object j;
-      j.str("name", "lift " + l.name).str("lift", l.name).str("forms", forms).str("description", l.description);
-      out += "  " + j.dump(4) + (i + 1 < lifts.size() ? ",\n" : "\n");
-    }
-    std::cout << out << "]\n";
+    std::cout << methods_json();
     return 0;
   }
+  const std::vector<CompositionListing> rows = composition_listings();
+  const double euler = euler_threshold();
+  const int euler_forces = euler_forces_per_step();
   std::printf("%-16s %-5s %-6s %-9s %-13s %-10s %-9s %s\n", "name", "order", "stages", "symmetric",
               "threshold(SV)", "forces(SV)", "midpoint", "source");
   std::printf("%-16s %-5s %-6d %-9s %-13.6f %-10d %-9s %s\n", "none", "map", 1, "as map", euler, euler_forces,
               "stable", "the map's own step (threshold and forces: explicit-euler)");
-  for (const MethodRow& r : rows)
+  for (const CompositionListing& r : rows)
     std::printf("%-16s %-5d %-6d %-9s %-13.6f %-10d %-9s %s\n", r.scheme.name.c_str(), r.scheme.order,
                 r.scheme.stages, r.scheme.symmetric ? "yes" : "no", r.threshold_verlet, r.forces_verlet,
                 r.splitting() ? "refused" : r.midpoint_unconditional ? "stable" : "LIMITED",
