@@ -38,8 +38,11 @@ TEST_BUILD ?= build-test
 TEST_CXX   ?= clang++-14
 TEST_FLAGS ?= -O1 -DNDEBUG
 # nlohmann-json3-dev: the end-to-end suites parse the program's JSON with it;
-# libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own)
-TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev)
+# libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own);
+# python3-dev, pybind11-dev: the Python module (examples/python), built for Debian's
+# /usr/bin/python3; python3-numpy, python3-pytest: its arrays and its tests
+TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev) \
+              python3-dev pybind11-dev python3-numpy python3-pytest
 
 SAN_BUILD := build-sanitize
 SAN_CXX   := clang++-14
@@ -85,8 +88,10 @@ deps:
 # else: the test suites build in their own tree (`make test`), the benchmark programs
 # with `make bench` and `make charts`.
 .DEFAULT_GOAL := build
-# (the test suites are configured in their own tree only: build/ needs none of their packages)
-configure = cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DDVM_BUILD_BENCH=$(1) -DDVM_BUILD_TESTS=OFF
+# (the test suites are configured in their own tree only: build/ needs none of their packages;
+# nor the Python module, which the test tree builds: build/'s libraries stay compiled as
+# they were without it, not as position-independent code)
+configure = cmake -S . -B $(BUILD) -DCMAKE_BUILD_TYPE=Release -DDVM_BUILD_BENCH=$(1) -DDVM_BUILD_TESTS=OFF -DDVM_PYTHON=OFF
 
 build: deps
 	$(call configure,OFF)

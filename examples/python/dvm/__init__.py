@@ -1,0 +1,406 @@
+"""dvm: discrete variational mechanics from Python.
+
+The same engine as the ``dvm`` program, in process: a scene (a TOML file or text) or
+a system, a method and an initial state go through the program's scene reader and
+checks, run in the library's compiled kernels, and come back as numpy arrays that hold
+the rows a run of ``dvm run`` writes to its CSV file, to the bit.
+
+    >>> import dvm
+    >>> r = dvm.run(dvm.load_scene("examples/scenes/kepler.toml"))
+    >>> r.q.shape, r.max_abs_energy_error
+
+    >>> kepler = dvm.System(builtin="kepler", params={"mu": 1.0})
+    >>> r = dvm.integrate(kepler, dvm.Method(map="midpoint"), q0=[0.4, 0], p0=[0, 2],
+    ...                   h=0.01, t_end=10)
+
+Errors: bad input raises :class:`InputError` (a ValueError) with the program's
+message, which names the scene key and, for a file, its line and column; a run that
+fails numerically raises :class:`StepFailure`, carrying the step, the time, the
+residual and the trajectory up to the failure. A run releases the GIL (threads run in
+parallel) and stops with KeyboardInterrupt on Ctrl-C.
+
+The listings :func:`systems`, :func:`maps` and :func:`methods` are those of
+``dvm systems --json``, ``dvm maps --json`` and ``dvm methods --json``.
+"""
+
+import json as _json
+import math as _math
+import os as _os
+import re as _re
+
+from . import _dvm
+
+__all__ = [
+    "InputError", "StepFailure", "Scene", "Result", "System", "Method",
+    "load_scene", "run", "integrate", "systems", "maps", "methods",
+]
+
+
+# ---- errors ------------------------------------------------------------------------
+
+class InputError(ValueError):
+    """Bad input, refused before a run: the program's message (``dvm run`` prints it
+    after ``dvm: `` and exits with status 2).
+
+    Attributes, parsed from the message where it has them (else None):
+      key     the scene key the message names ('integrator.step', 'initial.q', ...)
+      source  the scene's path (or the name of a scene given as text)
+      line, column   the position of the key in the scene file (None for a key given
+              by an override or an argument)
+    """
+
+    # "SOURCE:LINE:COLUMN: ..." or "SOURCE (from --set): ..." (a position, or none for an
+    # override), "SOURCE: key '...'", "SOURCE: missing key '...'"
+    _SOURCE = _re.compile(r"^(?P<source>.+?)(?::(?P<line>\d+):(?P<column>\d+)| \(from --set\))?: "
+                          r"(?=key '|missing key '|character \d+ of the value|in [a-z_]+\.)")
+    _KEY = _re.compile(r"(?:^|: )(?:key '|missing key '|in )(?P<key>[A-Za-z_]\w*(?:\.[\w\[\]]+)+)")
+    _LEADING = _re.compile(r"^(?:--set )?(?P<key>[A-Za-z_]\w*(?:\.\w+)+):")
+
+    def __init__(self, message):
+        super().__init__(message)
+        self.message = message
+        self.key = self.source = self.line = self.column = None
+        m = self._SOURCE.match(message)
+        if m:
+            self.source = m.group("source")
+            if m.group("line"):
+                self.line, self.column = int(m.group("line")), int(m.group("column"))
+        m = self._KEY.search(message) or self._LEADING.match(message)
+        if m:
+            self.key = m.group("key")
+
+
+class StepFailure(RuntimeError):
+    """A run that stopped because a step failed (a solve that did not converge, a
+    non-finite state, a map or Legendre transform outside its domain), or a
+    boundary-value problem that did not converge.
+
+    The message is what ``dvm run`` prints on stderr (after ``dvm: ``; the program then
+    exits with status 3). Attributes:
+      step      the index k of the step k -> k+1 that failed (None for boundary values)
+      time      t_k, the time that step starts at (None for boundary values)
+      residual  the residual of the failed solve (None where there is none)
+      result    the :class:`Result` of the run up to the failure: its rows up to the
+                last completed step, and the report (``result.status == "failed"``,
+                ``result.failure`` the report's failure object)
+    """
+
+    def __init__(self, message, result):
+        super().__init__(message)
+        self.message = message
+        self.result = result
+        failure = result.report.get("failure") or {}
+        self.step = failure.get("step")
+        self.time = failure.get("time")
+        self.residual = failure.get("residual")
+        if result.report.get("problem") == "boundary-value":
+            self.residual = result.report.get("max_del_residual")
+        if isinstance(self.step, float) and self.step.is_integer():
+            self.step = int(self.step)
+
+
+def _call(f, *args):
+    try:
+        return f(*args)
+    except _dvm._InputError as e:
+        raise InputError(str(e)) from None
+
+
+# ---- values as the scene reader reads them ------------------------------------------
+
+def _toml(value, where):
+    """A Python value written as one TOML value (numbers exactly: repr round-trips)."""
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        value = value.tolist()  # numpy arrays and scalars
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        if _math.isnan(value):
+            return "nan"
+        if _math.isinf(value):
+            return "inf" if value > 0 else "-inf"
+        return repr(value)
+    if isinstance(value, str):
+        out = ['"']
+        for c in value:
+            if c == '"':
+                out.append('\\"')
+            elif c == "\\":
+                out.append("\\\\")
+            elif c == "\n":
+                out.append("\\n")
+            elif c == "\t":
+                out.append("\\t")
+            elif ord(c) < 0x20 or ord(c) == 0x7F:
+                out.append("\\u%04x" % ord(c))
+            else:
+                out.append(c)
+        out.append('"')
+        return "".join(out)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v, where) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{ " + ", ".join(_toml(str(k), where) + " = " + _toml(v, where) for k, v in value.items()) + " }"
+    raise TypeError(f"{where}: a {type(value).__name__} is not a scene value; expected a number, a string, "
+                    "a bool, a list or a dict")
+
+
+def _overrides(keys):
+    """{'integrator.step': 0.01, 'system': {'params': {'mu': 2}}} -> ["integrator.step=0.01",
+    "system.params.mu=2"]: nested dicts name sections and tables, as dotted keys do."""
+    out = []
+
+    def add(prefix, value):
+        if isinstance(value, dict) and value:
+            for k, v in value.items():
+                add(prefix + "." + str(k), v)
+        else:
+            out.append(prefix + "=" + _toml(value, prefix))
+
+    for k, v in keys.items():
+        add(str(k), v)
+    return out
+
+
+# ---- scenes and runs ------------------------------------------------------------------
+
+class Scene:
+    """A scene read and validated by the scene reader of the dvm program (use
+    :func:`load_scene`). Read-only attributes: ``path``, ``system`` (its name),
+    ``dim``, ``step``, ``steps``, ``every``, ``monitor_every``, ``boundary_value``,
+    ``method`` (a label), ``csv`` and ``npy`` (the scene's [output] files, which
+    :func:`run` does not write)."""
+
+    def __init__(self, handle, overrides):
+        self._handle = handle
+        self.overrides = list(overrides)
+
+    def __getattr__(self, name):
+        if name.startswith("_"):
+            raise AttributeError(name)
+        return getattr(self._handle, name)
+
+    def __repr__(self):
+        return (f"<dvm.Scene {self.path!r}: {self.system}, {self.method}, h = {self.step!r}, "
+                f"{self.steps} steps>")
+
+
+def load_scene(source, **overrides):
+    """Reads and checks a scene as ``dvm run`` does.
+
+    source: a path (str or os.PathLike) of a scene file, or the scene's TOML text
+    (a str holding a newline).
+    overrides: scene keys and values, applied as ``dvm run --set KEY=VALUE`` applies
+    them (then the whole scene is checked): a dotted key through a dict,
+    ``load_scene(p, **{"integrator.step": 0.01})``, or a section as a dict,
+    ``load_scene(p, integrator={"step": 0.01, "map": "theta"})``.
+
+    Returns a :class:`Scene`. Raises :class:`InputError` with the program's message.
+    """
+    sets = _overrides(overrides)
+    if isinstance(source, _os.PathLike):
+        source = _os.fspath(source)
+    if not isinstance(source, str):
+        raise TypeError("load_scene: expected a path or the text of a scene, got " + type(source).__name__)
+    is_text = "\n" in source
+    handle = _call(_dvm._load_scene, source, is_text, "<scene text>" if is_text else source, sets)
+    return Scene(handle, sets)
+
+
+class Result:
+    """The outcome of a run.
+
+    Arrays (numpy float64 views into ``data``, no copy of a row):
+      data      every row written (rows x columns): the initial state, every ``every``-th
+                step and the last, as the CSV file of ``dvm run`` holds them
+      columns   the column names (the CSV header)
+      t         the times, shape (rows,)
+      q, p      the state as stored, shape (rows, len(q_final)) and (rows, len(p_final))
+                (R^n: coordinates; S^2: unit vectors; SO(3): the quaternion w, x, y, z
+                and the body angular momentum)
+      energy    the energy at each row, shape (rows,)
+      result["name"]  any column by name (e.g. the conserved momenta the rows of the
+                      manifold systems carry after the energy)
+
+    Every field of the JSON report of ``dvm run --json`` is an attribute of the same
+    name, as json.loads reads it: ``status``, ``system``, ``steps``, ``t_final``,
+    ``q_final``, ``max_abs_energy_error``, ``invariants`` (each conserved quantity's
+    initial value and largest error), ``failure`` for a failed run, ... (``report`` is
+    the whole dict).
+    """
+
+    def __init__(self, report, columns, data):
+        self.report = report
+        self.columns = list(columns)
+        self.data = data
+        nq, npp = len(report.get("q_final") or []), len(report.get("p_final") or [])
+        if self.columns and self.columns[1 + nq + npp] != "energy":
+            raise RuntimeError(f"dvm: unexpected columns {self.columns} for {nq} + {npp} state numbers")
+        self.t = data[:, 0]
+        self.q = data[:, 1:1 + nq]
+        self.p = data[:, 1 + nq:1 + nq + npp]
+        self.energy = data[:, 1 + nq + npp]
+
+    def __getattr__(self, name):
+        report = self.__dict__.get("report", {})
+        if name in report:
+            return report[name]
+        raise AttributeError(f"'Result' has no attribute '{name}' (its report's fields: {', '.join(report)})")
+
+    def __getitem__(self, name):
+        try:
+            return self.data[:, self.columns.index(name)]
+        except ValueError:
+            raise KeyError(f"{name!r}: not a column; the columns are {self.columns}") from None
+
+    def __dir__(self):
+        return sorted(set(super().__dir__()) | set(self.report))
+
+    def __repr__(self):
+        return (f"<dvm.Result {self.report.get('status')}: {self.report.get('system')}, {self.report.get('steps')} "
+                f"steps to t = {self.report.get('t_final')}, {self.data.shape[0]} rows x {self.data.shape[1]} columns>")
+
+
+def run(scene, progress=None):
+    """Runs a scene (from :func:`load_scene`) as ``dvm run`` does and returns its
+    :class:`Result`: the rows its CSV would hold (``[output] every`` applies; no file is
+    written) and its report.
+
+    progress: None, or a function called as progress(step, steps) from the run's
+    thread about every 0.05 s while it runs (an exception it raises stops the run).
+
+    The GIL is released while the run integrates. Raises :class:`StepFailure` when a
+    step fails (its ``result`` holds the rows up to it), KeyboardInterrupt on Ctrl-C,
+    :class:`InputError` for a run the runtime refuses.
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError("run: expected a dvm.Scene (from dvm.load_scene), got " + type(scene).__name__)
+    report_text, failure, columns, data = _call(_dvm._run, scene._handle, scene.every, scene.monitor_every, progress)
+    result = Result(_json.loads(report_text), columns, data)
+    if failure:
+        raise StepFailure(failure, result)
+    return result
+
+
+# ---- systems, methods, integrate ------------------------------------------------------
+
+class System:
+    """A mechanical system: a built-in one, or a Lagrangian written as scenes write it.
+
+        System(builtin="kepler", params={"mu": 1.0})
+        System(coordinates=["th1", "th2"], lagrangian="...", params={...})
+        System(coordinates=["x", "y", "z"], lagrangian="...", space="S^2")
+
+    Every keyword is a key of the scene's [system] section (``dvm run --help`` lists
+    them: builtin, params, lagrangian, coordinates, energy, hamiltonian, name, masses,
+    space, ends, definitions, compile, invariants); they are checked by the scene reader
+    when the system runs, with its messages.
+    """
+
+    def __init__(self, builtin=None, **keys):
+        self.keys = dict(keys)
+        if builtin is not None:
+            self.keys["builtin"] = builtin
+
+    def __repr__(self):
+        return "dvm.System(" + ", ".join(f"{k}={v!r}" for k, v in self.keys.items()) + ")"
+
+
+class Method:
+    """How a system is integrated: the keys of the scene's [integrator] section.
+
+        Method(map="midpoint")
+        Method(map="explicit-euler", composition="kahan-li8")
+        Method(galerkin=6)                  # method = "galerkin", stages = 6
+        Method(galerkin=4, quadrature="lobatto")
+        Method(form="hamiltonian", map="theta", theta=0.3)
+
+    Keys: map, theta, form, lift, composition, weights, thetas, method, stages,
+    quadrature, gamma, beta, solver, max_iterations, tolerance, use_structure (see
+    ``dvm run --help``); ``written_map`` is the scene's [map] section (map = "written").
+    The step and the number of steps are arguments of :func:`integrate`.
+    """
+
+    def __init__(self, galerkin=None, written_map=None, **keys):
+        self.keys = dict(keys)
+        if galerkin is not None:
+            self.keys.setdefault("method", "galerkin")
+            self.keys["stages"] = galerkin
+        self.written_map = written_map
+
+    def __repr__(self):
+        return "dvm.Method(" + ", ".join(f"{k}={v!r}" for k, v in self.keys.items()) + ")"
+
+
+def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=None, t_end=None, every=1,
+              monitor_every=None, initial=None, problem=None, progress=None):
+    """Integrates ``system`` with ``method`` and returns a :class:`Result`.
+
+    q0: the initial configuration ([initial] q; SO(3): give ``initial={"rotation": ...,
+    "omega": ...}`` instead); p0 or v0: the initial momentum or velocity; h: the step;
+    steps or t_end: how far; every: the steps between two rows kept (the initial state
+    and the last are always kept); monitor_every: the steps between evaluations of the
+    energy and invariants (default 1); initial, problem: further keys of the scene's
+    [initial] and [problem] sections (problem={"kind": "boundary-value", "q_final": ...,
+    "steps": K} for a boundary-value problem); progress: as in :func:`run`.
+
+    The arguments become the keys of a scene read by the program's scene reader, so a
+    refused value raises :class:`InputError` with the program's message (naming the
+    scene key: 'initial.q', 'integrator.step', ...; "(from --set)" stands for the
+    arguments). Raises :class:`StepFailure` when a step fails.
+    """
+    if not isinstance(system, System):
+        raise TypeError("integrate: expected a dvm.System, got " + type(system).__name__)
+    if method is None:
+        method = Method()
+    if not isinstance(method, Method):
+        raise TypeError("integrate: expected a dvm.Method, got " + type(method).__name__)
+    keys = {"system": dict(system.keys), "integrator": dict(method.keys)}
+    ini = dict(initial or {})
+    for name, value in (("q", q0), ("p", p0), ("v", v0)):
+        if value is not None:
+            ini[name] = value
+    if ini:
+        keys["initial"] = ini
+    for name, value in (("step", h), ("steps", steps), ("t_end", t_end)):
+        if value is not None:
+            keys["integrator"][name] = value
+    output = {}
+    if every != 1:
+        output["every"] = every
+    if monitor_every is not None:
+        output["monitor_every"] = monitor_every
+    if output:
+        keys["output"] = output
+    if problem:
+        keys["problem"] = dict(problem)
+    if method.written_map is not None:
+        keys["map"] = dict(method.written_map)
+    # the sections present (even empty), so that a message names a missing key, not a
+    # missing section
+    text = "[system]\n[initial]\n[integrator]\n"
+    handle = _call(_dvm._load_scene, text, True, "dvm.integrate", _overrides(keys))
+    return run(Scene(handle, []), progress=progress)
+
+
+# ---- listings -----------------------------------------------------------------------
+
+def systems():
+    """The built-in systems as ``dvm systems --json`` lists them: a list of dicts (name,
+    dim, lagrangian, space, params with defaults, forms, and what each runs)."""
+    return _json.loads(_dvm._systems_json())
+
+
+def maps():
+    """The discretization maps as ``dvm maps --json`` lists them: a list of dicts (name,
+    formula, symmetric, order, closed_form_inverse, space, note, takes_theta)."""
+    return _json.loads(_dvm._maps_json())
+
+
+def methods():
+    """The methods as ``dvm methods --json`` lists them: the compositions (order,
+    stages, symmetry, stability threshold with the explicit Euler map, forces a step),
+    the Galerkin discrete Lagrangians and the lifts, a list of dicts."""
+    return _json.loads(_dvm._methods_json())
