@@ -1,10 +1,10 @@
-// dvm._dvm: the extension module under the Python package dvm (examples/python/dvm).
+// dvm._dvm: the extension module under the Python package dvm (examples/python/src/dvm).
 //
 // It binds the runtime layer as the dvm program uses it: load_scene (the one scene
 // reader, with its messages), make_run and Run::execute with a Recorder that keeps the
 // rows in memory, report_json and run_failure_message (what `dvm run --json` prints and
 // what a failed run says on stderr), and the listings of the registries. The Python
-// side (dvm/__init__.py) turns these into the documented API.
+// side (src/dvm/__init__.py) turns these into the documented API.
 //
 // A run releases the GIL: make_run (which may compile a written Lagrangian) and the
 // whole integrate loop run without it. The recorder's poll hook (solvers/runtime/

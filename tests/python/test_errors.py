@@ -164,3 +164,12 @@ def test_a_failed_boundary_value_problem(tmp_path):
                                integrator={"step": 2.0, "max_iterations": 3}))
     assert str(e.value) == err[len("dvm: "):].rstrip("\n")
     assert e.value.step is None and e.value.residual == report["max_del_residual"]
+
+
+def test_rows_that_do_not_fit_in_memory():
+    # every row of 10^15 steps: refused before the run, naming output.every
+    with pytest.raises(dvm.InputError) as e:
+        dvm.integrate(dvm.System(builtin="kepler"), dvm.Method(map="midpoint"), q0=[0.4, 0.0], p0=[0.0, 2.0],
+                      h=1e-3, steps=10**15)
+    assert e.value.key == "output.every"
+    assert "more than this machine's memory" in str(e.value)

@@ -51,6 +51,26 @@ def test_python_runs_while_a_run_integrates():
     assert len(inside) > 1000, (len(inside), span)
 
 
+def test_runs_on_threads_equal_runs_in_turn():
+    def one(h):
+        return dvm.integrate(KEPLER, dvm.Method(map="midpoint", composition="suzuki5"), q0=[0.4, 0.0],
+                             p0=[0.0, 2.0], h=h, steps=20000, every=100)
+    steps = [0.001, 0.002, 0.003, 0.004]
+    alone = [one(h).data for h in steps]
+    together = [None] * len(steps)
+
+    def worker(i):
+        together[i] = one(steps[i]).data
+
+    threads = [threading.Thread(target=worker, args=(i,)) for i in range(len(steps))]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    for a, b in zip(alone, together):
+        assert a.shape == b.shape and a.tobytes() == b.tobytes()
+
+
 def test_two_threads_integrate_in_parallel():
     assert os.cpu_count() >= 2
     steps = steps_for(1.5)

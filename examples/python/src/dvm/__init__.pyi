@@ -1,4 +1,4 @@
-# Type stubs of the package dvm (examples/python/dvm/__init__.py) for editors and type
+# Type stubs of the package dvm (examples/python/src/dvm/__init__.py) for editors and type
 # checkers; the docstrings are in __init__.py.
 import os
 from typing import Any, Callable, Dict, List, Mapping, Optional, Sequence, Union
