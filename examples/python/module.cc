@@ -25,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "solvers/runtime/converge.h"
 #include "solvers/runtime/errors.h"
 #include "solvers/runtime/listings.h"
 #include "solvers/runtime/recorder.h"
@@ -85,6 +86,18 @@ py::tuple run(const dvm::Scene& scene, std::int64_t every, std::int64_t monitor_
   return py::make_tuple(dvm::report_json(report), dvm::run_failure_message(report), columns, data);
 }
 
+// A convergence study of a scene's run (dvm converge): the JSON `dvm converge --json`
+// prints. steps_list empty, t_end 0: the study's defaults.
+std::string converge(const dvm::Scene& scene, const std::vector<std::int64_t>& steps_list, double t_end,
+                     double max_total_steps) {
+  dvm::ConvergeOptions o;
+  o.steps_list = steps_list;
+  o.t_end = t_end;
+  o.max_total_steps = max_total_steps;
+  py::gil_scoped_release release;
+  return dvm::converge_json(dvm::converge(scene.problem, scene.method, o));
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_dvm, m) {
@@ -108,6 +121,9 @@ PYBIND11_MODULE(_dvm, m) {
         "Reads a scene (a file, or text named `name` in messages) with --set overrides.");
   m.def("_run", &run, py::arg("scene"), py::arg("every"), py::arg("monitor_every"), py::arg("progress"),
         "Runs a scene: (report JSON, failure message, columns, rows).");
+  m.def("_converge", &converge, py::arg("scene"), py::arg("steps_list"), py::arg("t_end"), py::arg("max_total_steps"),
+        "A convergence study: the JSON of `dvm converge --json`.");
+  m.attr("_converge_max_total_steps") = dvm::ConvergeOptions::kDefaultMaxTotalSteps;
   m.def("_systems_json", &dvm::systems_json, "`dvm systems --json`");
   m.def("_maps_json", &dvm::maps_json, "`dvm maps --json`");
   m.def("_methods_json", &dvm::methods_json, "`dvm methods --json`");

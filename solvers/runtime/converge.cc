@@ -287,34 +287,38 @@ ConvergeReport converge(const Problem& pr, const Method& me, const ConvergeOptio
   return rep;
 }
 
+std::string converge_json(const ConvergeReport& r) {
+  Json::Object j;
+  j.str("system", r.system).str("map", r.map).str("form", r.form);
+  if (!r.lift.empty()) j.str("lift", r.lift);
+  j.str("composition", r.composition);
+  if (!r.weights.empty()) j.arr("weights", r.weights);
+  if (!r.thetas.empty()) j.arr("thetas", r.thetas);
+  if (r.galerkin) j.str("method", "galerkin").num("stages", r.stages).str("quadrature", r.quadrature);
+  j.num("t_end", r.t_end).str("reference", r.reference).num("reference_accuracy", r.reference_accuracy);
+  std::string rows = "[\n";
+  for (std::size_t i = 0; i < r.rows.size(); ++i) {
+    const ConvergeRow& c = r.rows[i];
+    Json::Object o;
+    o.num("steps", static_cast<double>(c.steps)).num("h", c.h).num("error", c.error).num("order", c.order);
+    o.num("iterations", static_cast<double>(c.iterations)).num("wall_seconds", c.wall_seconds);
+    o.boolean("fitted", c.excluded.empty());
+    if (!c.excluded.empty()) o.str("excluded", c.excluded);
+    rows += "    " + o.dump(6) + (i + 1 < r.rows.size() ? ",\n" : "\n");
+  }
+  j.raw("runs", rows + "  ]").num("fitted_order", r.fitted_order).num("map_order", r.map_order);
+  j.num("method_order", r.method_order);
+  if (!r.fit_note.empty()) j.str("fit_note", r.fit_note);
+  std::string warnings = "[";
+  for (std::size_t i = 0; i < r.warnings.size(); ++i) warnings += (i ? ", " : "") + Json::string(r.warnings[i]);
+  j.raw("warnings", warnings + "]");
+  if (!r.failure.empty()) j.str("failure", r.failure);
+  return j.dump();
+}
+
 int print_converge(const ConvergeReport& r, bool json) {
   if (json) {
-    Json::Object j;
-    j.str("system", r.system).str("map", r.map).str("form", r.form);
-    if (!r.lift.empty()) j.str("lift", r.lift);
-    j.str("composition", r.composition);
-    if (!r.weights.empty()) j.arr("weights", r.weights);
-    if (!r.thetas.empty()) j.arr("thetas", r.thetas);
-    if (r.galerkin) j.str("method", "galerkin").num("stages", r.stages).str("quadrature", r.quadrature);
-    j.num("t_end", r.t_end).str("reference", r.reference).num("reference_accuracy", r.reference_accuracy);
-    std::string rows = "[\n";
-    for (std::size_t i = 0; i < r.rows.size(); ++i) {
-      const ConvergeRow& c = r.rows[i];
-      Json::Object o;
-      o.num("steps", static_cast<double>(c.steps)).num("h", c.h).num("error", c.error).num("order", c.order);
-      o.num("iterations", static_cast<double>(c.iterations)).num("wall_seconds", c.wall_seconds);
-      o.boolean("fitted", c.excluded.empty());
-      if (!c.excluded.empty()) o.str("excluded", c.excluded);
-      rows += "    " + o.dump(6) + (i + 1 < r.rows.size() ? ",\n" : "\n");
-    }
-    j.raw("runs", rows + "  ]").num("fitted_order", r.fitted_order).num("map_order", r.map_order);
-    j.num("method_order", r.method_order);
-    if (!r.fit_note.empty()) j.str("fit_note", r.fit_note);
-    std::string warnings = "[";
-    for (std::size_t i = 0; i < r.warnings.size(); ++i) warnings += (i ? ", " : "") + Json::string(r.warnings[i]);
-    j.raw("warnings", warnings + "]");
-    if (!r.failure.empty()) j.str("failure", r.failure);
-    std::cout << j.dump() << "\n";
+    std::cout << converge_json(r) << "\n";
   } else {
     std::printf("%s with %s to t = %g; reference: %s (accuracy %.1e)\n", r.system.c_str(), r.method_label.c_str(),
                 r.t_end, r.reference.c_str(), r.reference_accuracy);

@@ -111,5 +111,7 @@ ConvergeReport converge(const Problem& problem, const Method& method, const Conv
 
 // The table (or JSON) on stdout; returns the exit status (3 when a run failed).
 int print_converge(const ConvergeReport& report, bool json);
+// The JSON object `dvm converge --json` prints.
+std::string converge_json(const ConvergeReport& report);
 
 }  // namespace dvm

@@ -140,3 +140,43 @@ def test_docstrings():
     for f in (dvm, dvm.load_scene, dvm.run, dvm.integrate, dvm.System, dvm.Method, dvm.Result, dvm.InputError,
               dvm.StepFailure, dvm.systems, dvm.maps, dvm.methods):
         assert f.__doc__ and len(f.__doc__) > 80, f
+
+
+@pytest.mark.parametrize("name, steps, t_end", [("harmonic.toml", [100, 200, 400], 1.0),
+                                                ("pendulum.toml", [100, 200, 400], 1.0),
+                                                ("kepler-composition.toml", [20, 40, 80], 2.0)])
+def test_converge_equals_dvm_converge(name, steps, t_end, tmp_path):
+    status, out, err = program(["converge", scene(name), "--steps-list", ",".join(map(str, steps)), "--t-end",
+                                repr(t_end), "--json"], str(tmp_path))
+    assert status == 0, err
+    expected = json.loads(out)
+    study = dvm.converge(dvm.load_scene(scene(name)), steps=steps, t_end=t_end)
+    assert set(study.report) == set(expected)
+    for k, v in expected.items():
+        if k == "runs":
+            assert len(study.runs) == len(v)
+            for a, b in zip(study.runs, v):
+                assert {x: y for x, y in a.items() if x != "wall_seconds"} == \
+                       {x: y for x, y in b.items() if x != "wall_seconds"}
+        else:
+            assert getattr(study, k) == v, k
+    assert list(study.steps) == steps and study.steps.dtype == np.int64
+    assert same_bits(study.h, np.array([r["h"] for r in expected["runs"]]))
+    assert same_bits(study.error, np.array([r["error"] for r in expected["runs"]]))
+    assert np.isnan(study.order[0]) and same_bits(study.order[1:], np.array([r["order"] for r in expected["runs"][1:]]))
+
+
+@pytest.mark.parametrize("kwargs, args", [
+    ({"steps": [100]}, ["--steps-list", "100"]),
+    ({"steps": [100, 100]}, ["--steps-list", "100,100"]),
+    ({"steps": [100, 0]}, ["--steps-list", "100,0"]),
+    ({"steps": [100, 200], "t_end": -1.0}, ["--steps-list", "100,200", "--t-end", "-1.0"]),
+    ({"steps": [100, 200], "max_steps": 250}, ["--steps-list", "100,200", "--max-steps", "250"]),
+], ids=["one count", "twice", "zero", "t_end", "max_steps"])
+def test_converge_refuses_as_the_program(kwargs, args, tmp_path):
+    code, _, err = program(["converge", scene("harmonic.toml")] + args, str(tmp_path))
+    assert code == 2 and err.startswith("dvm: "), err
+    expected = err[len("dvm: "):].split("\n")[0]
+    with pytest.raises(dvm.InputError) as e:
+        dvm.converge(dvm.load_scene(scene("harmonic.toml")), **kwargs)
+    assert str(e.value) == expected

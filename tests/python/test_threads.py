@@ -71,6 +71,26 @@ def test_runs_on_threads_equal_runs_in_turn():
         assert a.shape == b.shape and a.tobytes() == b.tobytes()
 
 
+def test_one_scene_run_on_threads():
+    # make_run builds each run's own state (workspaces of written Lagrangians and maps
+    # included): one Scene object serves runs on several threads at once
+    from conftest import scene
+    for name in ("pendulum_written.toml", "spherical_pendulum_written_map.toml", "heavy_top_written.toml"):
+        s = dvm.load_scene(scene(name))
+        alone = dvm.run(s).data
+        out = [None] * 3
+
+        def worker(i):
+            out[i] = dvm.run(s).data
+
+        threads = [threading.Thread(target=worker, args=(i,)) for i in range(3)]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()
+        assert all(o.tobytes() == alone.tobytes() for o in out), name
+
+
 def test_two_threads_integrate_in_parallel():
     assert os.cpu_count() >= 2
     steps = steps_for(1.5)

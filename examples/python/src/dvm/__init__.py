@@ -32,7 +32,7 @@ from . import _dvm
 
 __all__ = [
     "InputError", "StepFailure", "Scene", "Result", "System", "Method",
-    "load_scene", "run", "integrate", "systems", "maps", "methods",
+    "load_scene", "run", "integrate", "converge", "Convergence", "systems", "maps", "methods",
 ]
 
 
@@ -82,7 +82,8 @@ class StepFailure(RuntimeError):
       residual  the residual of the failed solve (None where there is none)
       result    the :class:`Result` of the run up to the failure: its rows up to the
                 last completed step, and the report (``result.status == "failed"``,
-                ``result.failure`` the report's failure object)
+                ``result.failure`` the report's failure object); from
+                :func:`converge`, the :class:`Convergence` of the study
     """
 
     def __init__(self, message, result):
@@ -90,6 +91,8 @@ class StepFailure(RuntimeError):
         self.message = message
         self.result = result
         failure = result.report.get("failure") or {}
+        if not isinstance(failure, dict):  # a study's failure is its message
+            failure = {}
         self.step = failure.get("step")
         self.time = failure.get("time")
         self.residual = failure.get("residual")
@@ -383,6 +386,81 @@ def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=N
     text = "[system]\n[initial]\n[integrator]\n"
     handle = _call(_dvm._load_scene, text, True, "dvm.integrate", _overrides(keys))
     return run(Scene(handle, []), progress=progress)
+
+
+# ---- convergence studies ----------------------------------------------------------------
+
+class Convergence:
+    """A convergence study (:func:`converge`): every field of ``dvm converge --json`` as
+    an attribute (``t_end``, ``reference``, ``reference_accuracy``, ``runs``,
+    ``fitted_order``, ``map_order``, ``method_order``, ``fit_note``, ``warnings``, ...;
+    ``report`` is the whole dict), and the runs' columns as numpy arrays ``steps``,
+    ``h``, ``error``, ``order`` (NaN where the JSON has null: the first run's order)."""
+
+    def __init__(self, report):
+        import numpy as np
+        self.report = report
+        runs = report.get("runs") or []
+
+        def column(name):
+            return np.array([np.nan if r.get(name) is None else r[name] for r in runs], dtype=np.float64)
+
+        self.steps = np.array([int(r["steps"]) for r in runs], dtype=np.int64)
+        self.h, self.error, self.order = column("h"), column("error"), column("order")
+
+    def __getattr__(self, name):
+        report = self.__dict__.get("report", {})
+        if name in report:
+            return report[name]
+        raise AttributeError(f"'Convergence' has no attribute '{name}' (its fields: {', '.join(report)})")
+
+    def __repr__(self):
+        return (f"<dvm.Convergence {self.report.get('system')}, {len(self.steps)} runs, fitted order "
+                f"{self.report.get('fitted_order')}>")
+
+
+def _is_whole(value, least):
+    return (not isinstance(value, bool) and isinstance(value, (int, float)) and _math.isfinite(value)
+            and value == int(value) and value >= least)
+
+
+def converge(scene, steps=None, t_end=None, max_steps=None):
+    """A convergence study of a scene's run, as ``dvm converge`` makes it: the run at
+    several step counts N to the time T (h = T/N), the error of each at T against the
+    exact solution or a refined higher-order reference, the observed orders and a
+    fitted order. Returns a :class:`Convergence`.
+
+    steps: the step counts (``--steps-list``; default the scene's count times 1, 2, 4,
+    8); t_end: T (``--t-end``; default the scene's span); max_steps: the most steps the
+    runs may take together (``--max-steps``). Messages name them as the program's
+    options. Raises :class:`InputError` for input the program refuses and
+    :class:`StepFailure` when a run of the study fails (``dvm converge`` exits with
+    status 3 then).
+    """
+    if not isinstance(scene, Scene):
+        raise TypeError("converge: expected a dvm.Scene (from dvm.load_scene), got " + type(scene).__name__)
+    steps_list = []
+    if steps is not None:
+        for n in steps:
+            if not _is_whole(n, 1):
+                raise InputError(f"--steps-list: '{n}' is not a whole number of steps >= 1")
+            if n > 9e15:
+                raise InputError(f"--steps-list: '{n}' is more steps than a run can count (at most 9e15)")
+            steps_list.append(int(n))
+        if len(steps_list) < 2:
+            raise InputError("--steps-list needs at least two step counts")
+    if t_end is None:
+        t_end = 0.0
+    elif isinstance(t_end, bool) or not isinstance(t_end, (int, float)) or not (t_end > 0) or _math.isinf(t_end):
+        raise InputError("--t-end: expected a positive number")
+    if max_steps is not None and not _is_whole(max_steps, 1):
+        raise InputError(f"--max-steps: got '{max_steps}', expected a whole number >= 1")
+    total = _dvm._converge_max_total_steps if max_steps is None else max_steps
+    report = _json.loads(_call(_dvm._converge, scene._handle, steps_list, float(t_end), float(total)))
+    study = Convergence(report)
+    if report.get("failure"):
+        raise StepFailure("a run of the convergence study did not converge: " + report["failure"], study)
+    return study
 
 
 # ---- listings -----------------------------------------------------------------------

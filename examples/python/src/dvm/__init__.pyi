@@ -42,7 +42,7 @@ class Result:
 
 class StepFailure(RuntimeError):
     message: str
-    result: Result
+    result: Union[Result, "Convergence"]
     step: Optional[int]
     time: Optional[float]
     residual: Optional[float]
@@ -79,6 +79,20 @@ def integrate(system: System, method: Optional[Method] = ..., *, q0: Optional[_V
               steps: Optional[int] = ..., t_end: Optional[float] = ..., every: int = ...,
               monitor_every: Optional[int] = ..., initial: Optional[Mapping[str, _Value]] = ...,
               problem: Optional[Mapping[str, _Value]] = ..., progress: _Progress = ...) -> Result: ...
+class Convergence:
+    report: Dict[str, Any]
+    steps: npt.NDArray[np.int64]
+    h: npt.NDArray[np.float64]
+    error: npt.NDArray[np.float64]
+    order: npt.NDArray[np.float64]
+    runs: List[Dict[str, Any]]
+    fitted_order: Optional[float]
+    reference: str
+    reference_accuracy: float
+    def __getattr__(self, name: str) -> Any: ...
+
+def converge(scene: Scene, steps: Optional[Sequence[int]] = ..., t_end: Optional[float] = ...,
+             max_steps: Optional[int] = ...) -> Convergence: ...
 def systems() -> List[Dict[str, Any]]: ...
 def maps() -> List[Dict[str, Any]]: ...
 def methods() -> List[Dict[str, Any]]: ...
