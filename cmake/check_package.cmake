@@ -26,7 +26,12 @@ if(PYTHON)
   if(NOT EXISTS "${WORK_DIR}/prefix/${PYTHON_DIR}/dvm/__init__.py")
     message(FATAL_ERROR "cmake --install put no Python package dvm in ${WORK_DIR}/prefix/${PYTHON_DIR}")
   endif()
-  step(${CMAKE_COMMAND} -E env "PYTHONPATH=${WORK_DIR}/prefix/${PYTHON_DIR}" ${PYTHON} -c
-       "import dvm, os; assert os.path.dirname(dvm.__file__) == os.path.realpath('${WORK_DIR}/prefix/${PYTHON_DIR}/dvm'), dvm.__file__; r = dvm.run(dvm.load_scene('${SOURCE_DIR}/examples/scenes/pendulum.toml')); assert r.status == 'ok' and r.steps == 10000, r; print('installed module:', r)")
+  # (lines, not semicolons: a semicolon would split the argument as a CMake list)
+  string(CONCAT code "import dvm, os\n"
+         "assert os.path.dirname(dvm.__file__) == os.path.realpath('${WORK_DIR}/prefix/${PYTHON_DIR}/dvm'), dvm.__file__\n"
+         "r = dvm.run(dvm.load_scene('${SOURCE_DIR}/examples/scenes/pendulum.toml'))\n"
+         "assert r.status == 'ok' and r.steps == 10000 and r.q.shape == (1001, 1), r\n"
+         "print('installed module:', r)\n")
+  step(${CMAKE_COMMAND} -E env "PYTHONPATH=${WORK_DIR}/prefix/${PYTHON_DIR}" ${PYTHON} -c "${code}")
 endif()
 file(REMOVE_RECURSE "${WORK_DIR}")
