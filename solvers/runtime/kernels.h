@@ -17,7 +17,7 @@
 //   hamiltonian       HamiltonianStep<LegendreH<S>, Map>  ManifoldHamiltonianStep<H, Map>
 //   sode1 / sode2     SodeStep<S, tangent lift of Map>    (refused)
 //   newmark           NewmarkStep<S>                      (refused)
-//   galerkin          GalerkinStep<S>                     ManifoldGalerkinStep<S, s>
+//   galerkin          GalerkinStep<S>                     ManifoldGalerkinStep<S> (s at run time)
 //     Gauss quadrature on a separable S (Method::use_structure):
 //                     SeparableGaussStep<S> (collocation, fixed point on the stage forces)
 //   composition       ComposedStep<Step> of any of these, adjoint stages from the
