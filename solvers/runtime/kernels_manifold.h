@@ -331,7 +331,7 @@ void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifol
   if constexpr (is_written<S>::value) {
     // a Lagrangian written in the scene: its velocity Hessian where the run starts, and
     // the written Hamiltonian against the Legendre transform of L there
-    require_regular_hessian<Mf::dim>(manifold_velocity_hessian(L, q, v0), where);
+    require_regular_hessian(manifold_velocity_hessian(L, q, v0), where);
     if (L.has_hamiltonian()) {
       const double H = hamiltonian_of(L)(q, p), E = manifold_energy(L, q, v0);
       if (!(std::fabs(H - E) <= 1e-9 * std::fmax(1.0, std::fabs(E)))) {
