@@ -1,5 +1,8 @@
 // dvm: simulate a mechanical system from its Lagrangian with a variational
 // integrator derived from a discretization map.
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <algorithm>
@@ -513,6 +516,17 @@ const char* kSweepHelp =
     "may be set or varied. With system.compile, every run compiles its derivatives\n"
     "(twice: when checked and when run).\n"
     "\n"
+    "Under mpirun (OpenMPI), 'mpirun -n R dvm sweep ...' runs the rows on R ranks:\n"
+    "rank 0 checks the rows, hands out one row at a time to whichever rank asks (so\n"
+    "that costly and cheap runs spread evenly), runs rows itself on a second\n"
+    "thread, gathers the rows, computes the references of --error and alone writes\n"
+    "or prints the table: the table of the same sweep on threads. --jobs is refused\n"
+    "there. A process counts as started by mpirun when OpenMPI's variable\n"
+    "OMPI_COMM_WORLD_SIZE is set, and only then is MPI initialised: a sweep started\n"
+    "otherwise does not touch it. MPI is optional when dvm is built (Debian's\n"
+    "libopenmpi-dev); a dvm built without it refuses to run under mpirun (exit 2).\n"
+    "@MPI@\n"
+    "\n"
     "Exit status: 0 when every run that was not refused completed; 3 when some run\n"
     "failed numerically or a reference run failed (the table is still complete); 2\n"
     "for bad input of the sweep (a malformed or empty SPEC, a key varied twice, zipped\n"
@@ -877,9 +891,44 @@ int sweep_summary(const dvm::SweepOptions& o, const dvm::SweepReport& rep, const
   return rep.failed > 0 || reference_failed || write_failed ? 3 : 0;
 }
 
+// Under mpirun, the ranks other than 0 say nothing while the sweep is read and set
+// up (rank 0 says it once): their standard error goes to /dev/null until then, and
+// their standard output for good (rank 0 prints the table).
+class QuietRank {
+ public:
+  QuietRank() {
+    const char* rank = std::getenv("OMPI_COMM_WORLD_RANK");
+    if (!dvm::launched_by_mpirun() || !rank || std::string(rank) == "0") return;
+    std::fflush(stdout);
+    std::fflush(stderr);
+    const int null = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+    if (null < 0) return;
+    saved_ = ::dup(2);
+    ::dup2(null, 1);
+    ::dup2(null, 2);
+    ::close(null);
+  }
+  void speak() {
+    if (saved_ < 0) return;
+    std::fflush(stderr);
+    ::dup2(saved_, 2);
+    ::close(saved_);
+    saved_ = -1;
+  }
+  // (not speak(): a message of bad input, printed by main after this, is rank 0's)
+  ~QuietRank() {
+    if (saved_ >= 0) ::close(saved_);
+  }
+
+ private:
+  int saved_ = -1;
+};
+
 int cmd_sweep(const std::vector<std::string>& args) {
+  QuietRank quiet;
+  const bool mpirun = dvm::launched_by_mpirun();
   dvm::SweepOptions o;
-  o.jobs = dvm::default_jobs();
+  o.jobs = mpirun ? 1 : dvm::default_jobs();
   std::vector<std::string> varies;
   std::string scene, out;
   bool json = false, resume = false;
@@ -890,7 +939,11 @@ int cmd_sweep(const std::vector<std::string>& args) {
       return args[++i];
     };
     if (is_help(a)) {
-      std::cout << kSweepHelp;
+      std::string help = kSweepHelp;
+      const auto at = help.find("@MPI@");
+      if (at != std::string::npos)
+        help.replace(at, 5, dvm::sweep_mpi_built() ? "This dvm was built with MPI." : "This dvm was built without MPI.");
+      std::cout << help;
       return 0;
     } else if (a == "--vary") {
       varies.push_back(value("--vary"));
@@ -911,6 +964,10 @@ int cmd_sweep(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else if (a == "--jobs") {
+      if (mpirun)
+        usage_error("--jobs: under mpirun each rank runs one run at a time (rank 0 a second thread that hands "
+                    "out the rows); set the number of ranks with mpirun -n",
+                    kSweepHelp);
       const std::string text = value("--jobs");
       const double n = parse_number("--jobs", text, kSweepHelp);
       if (n != std::floor(n) || n < 1 || n > 4096)
@@ -939,11 +996,15 @@ int cmd_sweep(const std::vector<std::string>& args) {
   if (resume && out.empty()) usage_error("--resume needs --out PATH: the table PATH.json it resumes", kSweepHelp);
   for (const std::string& v : varies) o.axes.push_back(dvm::parse_vary(v, o.max_runs));
   dvm::sweep_size(o);
-  // the scene read, the table's files checked and the table to resume read
+  // MPI from here on under mpirun (every rank has read the same arguments)
+  dvm::SweepRanks ranks;
+  const bool root = ranks.rank() == 0;
+  // rank 0 reads the scene (the others get its text), checks the table's files and
+  // reads the table it resumes
   bool streamed = false;
   dvm::SweepRows done;
   std::string setup_error;
-  try {
+  if (root) try {
     {  // the scene read once (as dvm run reads it: its messages for a missing or huge file)
       std::error_code ec;
       if (std::filesystem::is_directory(scene, ec))
@@ -983,16 +1044,19 @@ int cmd_sweep(const std::vector<std::string>& args) {
     setup_error = e.what();
     if (setup_error.empty()) setup_error = "sweep: bad input";
   }
-  if (!setup_error.empty()) {
-    std::cerr << "dvm: " << setup_error << "\n";
+  if (ranks.share(setup_error.empty() ? 1 : 0) == 0) {
+    if (root) std::cerr << "dvm: " << setup_error << "\n";
     return 2;
   }
+  o.scene_text = ranks.share(o.scene_text);
+  o.scene_path = scene;
+  quiet.speak();
 
   int code = 0;
   try {
     std::string flush_error;
     dvm::SweepFlush flush;
-    if (!out.empty() && !streamed)
+    if (root && !out.empty() && !streamed)
       flush = [&](const dvm::SweepReport& finished) {
         const std::string why = dvm::write_sweep_table(o, finished, out);
         if (!why.empty() && flush_error.empty()) {
@@ -1000,13 +1064,17 @@ int cmd_sweep(const std::vector<std::string>& args) {
           std::cerr << "dvm: sweep: " << why << " (tried again at the end)\n";
         }
       };
-    const dvm::SweepReport rep = dvm::run_sweep(o, done, flush);
-    code = sweep_summary(o, rep, out, json);
+    const dvm::SweepReport rep = dvm::run_sweep(o, done, flush, ranks);
+    if (root) code = sweep_summary(o, rep, out, json);
   } catch (const InputError& e) {
-    std::cerr << "dvm: " << e.what() << "\n";
+    if (root) std::cerr << "dvm: " << e.what() << "\n";
     code = 2;
+  } catch (const std::exception& e) {
+    std::cerr << "dvm: internal error: " << e.what() << "\n";
+    if (ranks.size() > 1) ranks.abort(3);
+    code = 3;
   }
-  return code;
+  return ranks.share(code);
 }
 
 int cmd_version(const std::vector<std::string>& args) {

@@ -19,6 +19,9 @@
 #include <sstream>
 
 #include <omp.h>
+#ifdef DVM_WITH_MPI
+#include <mpi.h>
+#endif
 #include <toml++/toml.h>
 
 #include "solvers/runtime/errors.h"
@@ -1316,5 +1319,170 @@ SweepRows read_sweep_table(const SweepOptions& o, const std::string& path) {
   }
   return out;
 }
+
+// ---- ranks (MPI) ---------------------------------------------------------------------
+
+bool launched_by_mpirun() { return std::getenv("OMPI_COMM_WORLD_SIZE") != nullptr; }
+
+#ifdef DVM_WITH_MPI
+
+bool sweep_mpi_built() { return true; }
+
+SweepRanks::SweepRanks() {
+  if (!launched_by_mpirun()) return;
+  // only the main thread calls MPI (rank 0's second thread runs rows)
+  int provided = 0;
+  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+  mpi_ = true;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
+  MPI_Comm_size(MPI_COMM_WORLD, &size_);
+}
+
+SweepRanks::~SweepRanks() {
+  if (mpi_) MPI_Finalize();
+}
+
+std::string SweepRanks::share(const std::string& on_rank0) const {
+  if (!mpi_) return on_rank0;
+  unsigned long long n = on_rank0.size();
+  MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, MPI_COMM_WORLD);
+  std::string text = rank_ == 0 ? on_rank0 : std::string(n, '\0');
+  // in pieces that an int counts
+  for (unsigned long long at = 0; at < n; at += 1ull << 30) {
+    const int piece = static_cast<int>(std::min<unsigned long long>(n - at, 1ull << 30));
+    MPI_Bcast(text.data() + at, piece, MPI_CHAR, 0, MPI_COMM_WORLD);
+  }
+  return text;
+}
+
+int SweepRanks::share(int on_rank0) const {
+  int v = on_rank0;
+  if (mpi_) MPI_Bcast(&v, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  return v;
+}
+
+void SweepRanks::abort(int code) const {
+  if (mpi_) MPI_Abort(MPI_COMM_WORLD, code);
+  std::exit(code);
+}
+
+namespace {
+
+constexpr int kTagAsk = 1;    // worker -> 0: the text of the row it ran ("" at first)
+constexpr int kTagIndex = 2;  // 0 -> worker: the next row to run, or -1: none left
+
+// Rank 0's side: answers the other ranks until each has been told that no row is
+// left, taking rows from `next` as its own thread does.
+void serve(const SweepOptions& o, const std::vector<long long>& runs, std::atomic<std::size_t>& next,
+           Gather& gather, int ranks) {
+  int working = ranks - 1;
+  std::string text;
+  while (working > 0) {
+    int waiting = 0;
+    MPI_Status st;
+    MPI_Iprobe(MPI_ANY_SOURCE, kTagAsk, MPI_COMM_WORLD, &waiting, &st);
+    if (!waiting) {
+      // (OpenMPI's blocking receive would spin on a core that rank 0's rows need)
+      const timespec pause{0, 200000};
+      nanosleep(&pause, nullptr);
+      continue;
+    }
+    int length = 0;
+    MPI_Get_count(&st, MPI_CHAR, &length);
+    text.assign(static_cast<std::size_t>(length), '\0');
+    MPI_Recv(text.data(), length, MPI_CHAR, st.MPI_SOURCE, kTagAsk, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    if (!text.empty()) gather.add(sweep_row_from_json(o, text));
+    const std::size_t t = next++;
+    const long long index = t < runs.size() ? runs[t] : -1;
+    MPI_Send(&index, 1, MPI_LONG_LONG, st.MPI_SOURCE, kTagIndex, MPI_COMM_WORLD);
+    if (index < 0) --working;
+  }
+}
+
+// The other ranks' side: ask, run, send the row back with the next question.
+void work(const SweepOptions& o) {
+  std::string text;
+  while (true) {
+    MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, 0, kTagAsk, MPI_COMM_WORLD);
+    long long index = -1;
+    MPI_Recv(&index, 1, MPI_LONG_LONG, 0, kTagIndex, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    if (index < 0) return;
+    text = sweep_row_json(o, run_row(o, static_cast<std::size_t>(index)));
+  }
+}
+
+}  // namespace
+
+SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepFlush& flush, const SweepRanks& ranks) {
+  if (ranks.size() == 1) return run_sweep(o, done, flush);
+  if (ranks.rank() != 0) {
+    if (ranks.share(0) == 1) work(o);  // rank 0 found no bad input
+    return SweepReport{};
+  }
+  const std::size_t n = sweep_size(o);
+  match_thread_stacks();
+  const std::vector<long long> todo = rows_to_run(n, done);
+  // 1. checked on rank 0 alone; the other ranks wait for the outcome
+  std::vector<std::string> refusals;
+  try {
+    refusals = check_rows(o, done, todo, 1);
+  } catch (...) {
+    ranks.share(0);
+    throw;
+  }
+  ranks.share(1);
+  // 2. refused rows at once; the others handed out one at a time
+  Gather gather(n, done, flush);
+  std::vector<long long> runs;
+  for (long long k : todo) {
+    if (refusals[static_cast<std::size_t>(k)].empty())
+      runs.push_back(k);
+    else
+      gather.add(refused_row(static_cast<std::size_t>(k), refusals[static_cast<std::size_t>(k)]));
+  }
+  std::atomic<std::size_t> next{0};
+  std::string failure;
+#pragma omp parallel num_threads(2)
+  {
+    if (omp_get_thread_num() == 0) {
+      try {
+        serve(o, runs, next, gather, ranks.size());
+      } catch (const std::exception& e) {
+        failure = e.what();
+      }
+    } else {
+      for (std::size_t t = next++; t < runs.size(); t = next++)
+        gather.add(run_row(o, static_cast<std::size_t>(runs[t])));
+    }
+  }
+  if (!failure.empty()) {
+    std::fprintf(stderr, "dvm: internal error: sweep: a row from another rank: %s\n", failure.c_str());
+    ranks.abort(3);
+  }
+  SweepReport rep = gather.finish();
+  // 3. errors against references, on rank 0
+  if (o.error) attach_errors(o, rep.rows, rep.references);
+  return rep;
+}
+
+#else
+
+bool sweep_mpi_built() { return false; }
+
+SweepRanks::SweepRanks() {
+  if (launched_by_mpirun())
+    throw InputError("sweep: started by mpirun (OMPI_COMM_WORLD_SIZE is set), but this dvm was built without MPI; "
+                     "rebuild with Debian's libopenmpi-dev installed, or run without mpirun (--jobs N threads)");
+}
+SweepRanks::~SweepRanks() = default;
+std::string SweepRanks::share(const std::string& on_rank0) const { return on_rank0; }
+int SweepRanks::share(int on_rank0) const { return on_rank0; }
+void SweepRanks::abort(int code) const { std::exit(code); }
+
+SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepFlush& flush, const SweepRanks&) {
+  return run_sweep(o, done, flush);
+}
+
+#endif
 
 }  // namespace dvm

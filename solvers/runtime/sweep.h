@@ -186,4 +186,52 @@ SweepRow sweep_row_from_json(const SweepOptions& options, const std::string& tex
 // The hash of the scene's text a table carries (FNV-1a, 64 bits, in hex).
 std::string scene_digest(const std::string& text);
 
+// ---- ranks (MPI) -------------------------------------------------------------------
+// A sweep started by OpenMPI's mpirun runs its rows on every rank: rank 0 checks the
+// rows, hands out the index of the next row to run to whichever rank asks (ranks
+// ask when they start and when they finish a row, so that cheap and costly rows
+// spread evenly), runs rows itself on a second thread meanwhile, gathers the rows
+// (each sent as the text of its row in the JSON table) and alone writes the table.
+// The rows are those of the same sweep on threads, so the table is the same.
+//
+// MPI is an optional part of the build (DVM_WITH_MPI, only this library's sweep.cc
+// is compiled against it). A process is taken as started by mpirun when OpenMPI's
+// environment variable OMPI_COMM_WORLD_SIZE is set: only then is MPI initialised, so
+// a process started otherwise never touches MPI.
+
+// Whether this library was built with MPI.
+bool sweep_mpi_built();
+// Whether OMPI_COMM_WORLD_SIZE is set.
+bool launched_by_mpirun();
+
+// The ranks of this process's launch: MPI initialised for the lifetime of the object
+// when launched by mpirun (InputError when this library was built without MPI), a
+// single rank 0 otherwise.
+class SweepRanks {
+ public:
+  SweepRanks();
+  ~SweepRanks();
+  SweepRanks(const SweepRanks&) = delete;
+  SweepRanks& operator=(const SweepRanks&) = delete;
+  bool mpi() const { return mpi_; }  // whether MPI was initialised
+  int rank() const { return rank_; }
+  int size() const { return size_; }
+  // Rank 0's value on every rank (every rank calls it, in the same order).
+  std::string share(const std::string& on_rank0) const;
+  int share(int on_rank0) const;
+  // Ends every rank's process with the code (after a failure that leaves some rank
+  // waiting for the others).
+  [[noreturn]] void abort(int code) const;
+
+ private:
+  bool mpi_ = false;
+  int rank_ = 0, size_ = 1;
+};
+
+// run_sweep over the ranks (one of them, ranks.size() 1: run_sweep above). Every rank
+// calls it; rank 0 returns the report (it throws the InputError of step 1, after
+// telling the others), the other ranks an empty report (runs 0).
+SweepReport run_sweep(const SweepOptions& options, const SweepRows& done, const SweepFlush& flush,
+                      const SweepRanks& ranks);
+
 }  // namespace dvm
