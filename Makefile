@@ -38,8 +38,11 @@ TEST_BUILD ?= build-test
 TEST_CXX   ?= clang++-14
 TEST_FLAGS ?= -O1 -DNDEBUG
 # nlohmann-json3-dev: the end-to-end suites parse the program's JSON with it;
-# libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own)
-TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev)
+# libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own);
+# libopenmpi-dev and openmpi-bin: dvm sweep under mpirun, which test_cli_sweep_mpi runs
+# (MPI is optional for `make`: without it dvm builds as well and refuses mpirun)
+TEST_PKGS  := nlohmann-json3-dev libopenmpi-dev openmpi-bin \
+              $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev)
 
 SAN_BUILD := build-sanitize
 SAN_CXX   := clang++-14

@@ -30,6 +30,7 @@ bool same_file(const std::string& a, const std::string& b) {
 
 void Recorder::open(const std::vector<std::string>& columns, double rows) {
   columns_ = static_cast<int>(columns.size());
+  if (sink_) columns_names_ = columns;
   if (!spec_.csv.empty() && !spec_.npy.empty() && same_file(spec_.csv, spec_.npy))
     throw InputError(spec_.csv_source + " '" + spec_.csv + "' and " + spec_.npy_source + " '" + spec_.npy +
                      "' name the same file; expected two different paths");
@@ -92,6 +93,7 @@ void Recorder::row(const double* x) {
     std::fwrite(x, sizeof(double), static_cast<std::size_t>(columns_), npy_.get());
     ++npy_rows_;
   }
+  if (sink_) sink_(columns_names_, x);
 }
 
 // Magic, version 1.0, header length (little endian), then a Python dict literal padded
