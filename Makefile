@@ -39,10 +39,13 @@ TEST_CXX   ?= clang++-14
 TEST_FLAGS ?= -O1 -DNDEBUG
 # nlohmann-json3-dev: the end-to-end suites parse the program's JSON with it;
 # libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own);
+# libopenmpi-dev and openmpi-bin: dvm sweep under mpirun, which test_cli_sweep_mpi runs
+# (MPI is optional for `make`: without it dvm builds as well and refuses mpirun);
 # python3-dev, pybind11-dev: the Python module (examples/python), built for Debian's
 # /usr/bin/python3; python3-numpy, python3-pytest, python3-matplotlib: its arrays, its
 # tests and the chart of its example
-TEST_PKGS  := nlohmann-json3-dev $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev) \
+TEST_PKGS  := nlohmann-json3-dev libopenmpi-dev openmpi-bin \
+              $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev) \
               python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib
 
 SAN_BUILD := build-sanitize

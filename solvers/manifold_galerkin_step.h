@@ -44,7 +44,7 @@
 //
 // Every point is produced by the chart, so it lies on the manifold to round-off.
 // Both keep a factored Jacobian across steps (simplified Newton: refreshed when the
-// iteration contracts poorly), fixed sizes throughout, no allocation per step.
+// iteration contracts poorly) and allocate nothing per step.
 #pragma once
 
 #include <array>
@@ -205,7 +205,7 @@ void set_bottom_value(T& t, double v) {
 }  // namespace detail
 
 // The Galerkin discrete Lagrangian on S^2 or SO(3) as a generating function (the
-// second construction above). With F(c; q0, q1) the Galerkin action (degree-S
+// second construction above). With F(c; q0, q1) the Galerkin action (degree-s
 // curves, the quadrature of `kind`) in the chart centred at c,
 //
 //   L_d(q0, q1) = F(q0; q0, q1),   p0 = -D1 L_d(q0, q1),   p1 = D2 L_d(q0, q1),
@@ -216,35 +216,41 @@ void set_bottom_value(T& t, double v) {
 // L (g chart(c, eta) = chart(g c, A eta) with A linear: rotations on S^2, left
 // multiplication on SO(3)), L_d is invariant and the momentum map is conserved
 // exactly (discrete Noether). The local error is that of the Galerkin action,
-// O(h^{2S+1}), so the order is 2S.
+// O(h^{2s+1}), so the order is 2s.
 //
-// The step, in the chart centred at q0 with unknowns X_1..X_S (coordinates of the
-// control points; X_S those of q1): with A(eps, X) the quadrature of the action along
+// The step, in the chart centred at q0 with unknowns X_1..X_s (coordinates of the
+// control points; X_s those of q1): with A(eps, X) the quadrature of the action along
 // the curve whose control points are, in the chart centred at chart(q0, eps), 0,
-// X_1, .., X_{S-1} and the coordinates of chart(q0, X_S),
-//   p0 + dA/deps = 0,   dA/dX_j = 0 (j = 1..S-1)   at eps = 0,   p1 = dA/dX_S
+// X_1, .., X_{s-1} and the coordinates of chart(q0, X_s),
+//   p0 + dA/deps = 0,   dA/dX_j = 0 (j = 1..s-1)   at eps = 0,   p1 = dA/dX_s
 // (internal control points are stationary, so how they move with eps does not
 // matter). The chain rule gives all of them from derivatives of L at the quadrature
 // nodes (action_gradient); the Jacobian in X (central differences of them) is factored
 // and reused across iterations and steps while the iteration contracts, as in
 // solvers/galerkin_step.h.
-template <class System, int S>
+//
+// The stage count s (1..kGalerkinMaxStages) is a run-time argument: the vectors and
+// matrices of the stage system have run-time sizes in storage of the largest size
+// (no allocation), so that a system compiles one step for every s. The arithmetic that
+// costs (L and its derivatives at the nodes, the chart) has fixed sizes either way.
+template <class System>
 class ManifoldGalerkinStep {
-  static_assert(S >= 1 && S <= kGalerkinMaxStages, "Galerkin stages 1..6");
-
  public:
   using M = typename System::Manifold;
   static constexpr int n = M::dim;
-  static constexpr int SN = S * n;
-  static constexpr int K = n + SN;
+  static constexpr int max_SN = kGalerkinMaxStages * n;
   using Point = typename M::template Point<double>;
   using Covector = typename M::template Tangent<double>;
   using V = Vec<double, n>;
-  using XV = Vec<double, SN>;
+  // the control points X (s n), the action's gradient (n + s n), the Jacobian (s n)^2
+  using XV = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, max_SN, 1>;
+  using GV = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, max_SN + n, 1>;
+  using JM = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, max_SN, max_SN>;
 
-  ManifoldGalerkinStep(System L, QuadratureKind kind, double h, StepOptions options = {})
-      : L_(std::move(L)), quad_(kind, S), h_(h), options_(options) {
+  ManifoldGalerkinStep(System L, QuadratureKind kind, int stages, double h, StepOptions options = {})
+      : L_(std::move(L)), quad_(kind, checked_stages(stages)), S_(stages), SN_(stages * n), h_(h), options_(options) {
     if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    const int S = S_;
     for (int i = 0; i < quad_.points; ++i) {
       b_[i] = static_cast<double>(quad_.b[i]);
       for (int j = 0; j <= S; ++j) {
@@ -271,19 +277,25 @@ class ManifoldGalerkinStep {
           if (m != k) l *= (t - static_cast<long double>(m) / S) / (static_cast<long double>(k - m) / S);
         E_[j][k] = static_cast<double>(l);
       }
+    Xprev_ = X_ = R_ = delta_ = XV::Zero(SN_);
+    G_ = GV::Zero(n + SN_);
+    J_ = Jinv_ = JM::Zero(SN_, SN_);
   }
 
   double step_size() const { return h_; }
-  int stages() const { return S; }
-  int order() const { return 2 * S; }
+  int stages() const { return S_; }
+  int order() const { return 2 * S_; }
   const System& lagrangian() const { return L_; }
   long jacobian_updates() const { return jacobian_updates_; }
 
-  // The quadrature of the action, A(eps, X), for any scalar.
-  template <class T>
-  T action(const Point& q0, const Vec<T, n>& eps, const Vec<T, SN>& X) const {
+  // The quadrature of the action, A(eps, X), for any scalar (X: s n control-point
+  // coordinates, of fixed or run-time size).
+  template <class T, int R>
+  T action(const Point& q0, const Vec<T, n>& eps, const Vec<T, R>& X) const {
+    if (X.size() != SN_) throw std::invalid_argument("ManifoldGalerkinStep::action: X has the wrong size");
+    const int S = S_;
     const detail::MovingChart<M, T> chart(q0, eps);
-    std::array<Vec<T, n>, S + 1> Y;
+    std::array<Vec<T, n>, kGalerkinMaxStages + 1> Y;
     for (int j = 1; j < S; ++j) Y[j] = X.template segment<n>((j - 1) * n);
     const Vec<T, n> xs = X.template segment<n>((S - 1) * n);
     Y[S] = chart.end_coordinates(q0, xs);
@@ -311,6 +323,7 @@ class ManifoldGalerkinStep {
   // One step: xi holds a guess of the chart coordinates of q1 on entry (spread
   // linearly over the control points) and them on return.
   StepSummary step(double /*t*/, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
+    const int S = S_;
     const V pi0 = M::covector_to_local(q0, p0);
     // starting guess: the previous step's curve extrapolated (error O(h^{S+1})) and
     // read in the chart centred at q0, when this step continues that one; otherwise
@@ -347,7 +360,7 @@ class ManifoldGalerkinStep {
         }
         const NewtonVerdict verdict = newton_verdict(sum, dxn, max_abs(X_), options_);
         if (verdict == NewtonVerdict::converged) {
-          X_.noalias() -= Jinv_ * R_;  // the correction already paid for
+          X_.noalias() -= Jinv_.lazyProduct(R_);  // the correction already paid for
           residual(q0, pi0, pi1);      // p1 at the corrected nodes
           xi = X_.template segment<n>((S - 1) * n);
           leave_chart<M>(q0, xi, pi1, sum, q1, p1);
@@ -367,7 +380,7 @@ class ManifoldGalerkinStep {
           dxn = INFINITY;
           continue;
         }
-        delta_.noalias() = Jinv_ * R_;
+        delta_.noalias() = Jinv_.lazyProduct(R_);
         X_ -= delta_;
         const double d = max_abs(delta_);
         if (!std::isfinite(d)) {
@@ -394,38 +407,45 @@ class ManifoldGalerkinStep {
   }
 
  private:
-  // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{S-1}) at eps = 0 and pi1 = dA/dX_S.
+  static int checked_stages(int s) {
+    if (s < 1 || s > kGalerkinMaxStages)
+      throw std::invalid_argument("Galerkin stages must be 1.." + std::to_string(kGalerkinMaxStages) + ", got " +
+                                  std::to_string(s));
+    return s;
+  }
+
+  // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{s-1}) at eps = 0 and pi1 = dA/dX_s.
   void residual(const Point& q0, const V& pi0, V& pi1) const {
     action_gradient(q0, X_, G_);
-    R_ = G_.template head<SN>();
+    R_ = G_.head(SN_);
     R_.template head<n>() += pi0;
     pi1 = G_.template tail<n>();
   }
 
  public:
-  // The gradient of the action A(eps, X) at eps = 0, in the order (eps, X_1, .., X_S).
-  // By the chain rule, node by node: L along the moving chart is differentiated at each
-  // quadrature node in one Jet of 3 dim directions (eps, eta, nu), and the end
-  // coordinates Y_S(eps, X_S) in one of 2 dim, both in functions that do not depend on
-  // S, so that L is compiled once per system whatever the stage count
-  // (differentiating action() in a Jet of dim + S dim directions compiles L's
-  // derivatives once per stage count, most of the compile time of the manifold
-  // kernels). Equal to the gradient of action() to round-off
-  // (tests/solvers/test_galerkin_manifold.cc).
-  void action_gradient(const Point& q0, const XV& X, Vec<double, K>& G) const {
+  // The gradient of the action A(eps, X) at eps = 0, in the order (eps, X_1, .., X_s)
+  // (X: s n values; G: n + s n). By the chain rule, node by node: L along the moving
+  // chart is differentiated at each quadrature node in one Jet of 3 dim directions
+  // (eps, eta, nu), and the end coordinates Y_s(eps, X_s) in one of 2 dim, both in
+  // functions that do not depend on s (differentiating action() in a Jet of
+  // dim + s dim directions would compile L's derivatives once per stage count). Equal
+  // to the gradient of action() to round-off (tests/solvers/test_galerkin_manifold.cc).
+  void action_gradient(const Point& q0, const Eigen::Ref<const Eigen::VectorXd>& X, Eigen::Ref<Eigen::VectorXd> G) const {
+    if (X.size() != SN_ || G.size() != n + SN_)
+      throw std::invalid_argument("ManifoldGalerkinStep::action_gradient: X or G has the wrong size");
+    const int S = S_;
     if (!charts_ || !(charts_->q0 == q0)) charts_.emplace(q0);
-    std::array<V, S + 1> Y;
-    for (int j = 1; j <= S; ++j) Y[j] = X.template segment<n>((j - 1) * n);
-    std::array<V, S + 2> eta, nu;
+    std::array<V, kGalerkinMaxStages + 2> eta, nu;
     for (int i = 0; i < quad_.points; ++i) {
       eta[i].setZero();
       nu[i].setZero();
       for (int j = 1; j <= S; ++j) {
-        eta[i] += A_[i][j] * Y[j];
-        nu[i] += (B_[i][j] / h_) * Y[j];
+        const V Yj = X.template segment<n>((j - 1) * n);
+        eta[i] += A_[i][j] * Yj;
+        nu[i] += (B_[i][j] / h_) * Yj;
       }
     }
-    std::array<Vec<double, 3 * n>, S + 2> dl;
+    std::array<Vec<double, 3 * n>, kGalerkinMaxStages + 2> dl;
     detail::chart_lagrangian_gradients(L_, *charts_, quad_.points, eta.data(), nu.data(), dl.data());
     // dA/deps through the chart (G's head) and dA/dY_j as if the Y_j were free
     G.setZero();
@@ -436,8 +456,8 @@ class ManifoldGalerkinStep {
         G.template segment<n>(j * n) +=
             (w * A_[i][j]) * dl[i].template segment<n>(n) + (w * B_[i][j] / h_) * dl[i].template segment<n>(2 * n);
     }
-    // Y_S = Y_S(eps, X_S): dA/deps += (dY_S/deps)^T dA/dY_S, dA/dX_S = (dY_S/dX_S)^T dA/dY_S
-    const Mat<double, n, 2 * n> J = detail::end_coordinates_jacobian(*charts_, Y[S]);
+    // Y_s = Y_s(eps, X_s): dA/deps += (dY_s/deps)^T dA/dY_s, dA/dX_s = (dY_s/dX_s)^T dA/dY_s
+    const Mat<double, n, 2 * n> J = detail::end_coordinates_jacobian(*charts_, V(X.template tail<n>()));
     const V gS = G.template tail<n>();
     G.template head<n>() += J.template leftCols<n>().transpose() * gS;
     G.template tail<n>() = J.template rightCols<n>().transpose() * gS;
@@ -448,15 +468,14 @@ class ManifoldGalerkinStep {
   // residual (each column from two residuals in Jets of the first order). The Jacobian
   // only steers the iteration: its error (relative ~1e-10) slows the contraction to a
   // rate near that, and the solution is the zero of the residual, which is exact, to the
-  // iteration's tolerance. (Nested Jets gave it exactly but instantiated the action in a
-  // second-order Jet type per stage count, most of the compile time of the manifold
-  // kernels.)
+  // iteration's tolerance. (Nested Jets would give it exactly, at the price of L's
+  // second derivatives compiled in a Jet type of its own.)
   void refresh(const Point& q0, const V& pi0) const {
     const XV X0 = X_;
     const double size = std::fmax(max_abs(X0), 1e-300);
     XV Rp, Rm;
     V pi1;
-    for (int k = 0; k < SN; ++k) {
+    for (int k = 0; k < SN_; ++k) {
       const double dk = 6e-6 * std::fmax(std::fabs(X0[k]), size);  // ~ cbrt(machine epsilon)
       X_[k] = X0[k] + dk;
       residual(q0, pi0, pi1);
@@ -469,7 +488,7 @@ class ManifoldGalerkinStep {
     }
     if (!std::isfinite(max_abs(J_))) throw std::domain_error("non-finite Galerkin Jacobian");
     Jmax_ = max_abs(J_);
-    const Eigen::PartialPivLU<Mat<double, SN, SN>> lu(J_);
+    const Eigen::PartialPivLU<JM> lu(J_);
     if (!(lu.rcond() > 1e-13)) throw std::domain_error("singular Galerkin step Jacobian");
     Jinv_ = lu.inverse();
     lu_valid_ = true;
@@ -478,18 +497,19 @@ class ManifoldGalerkinStep {
 
   System L_;
   Quadrature quad_;
+  int S_, SN_;
   double h_;
   StepOptions options_;
-  std::array<double, S + 2> b_{};
-  std::array<std::array<double, S + 1>, S + 2> A_{}, B_{};
-  std::array<std::array<double, S + 1>, S + 1> E_{};
-  mutable XV Xprev_ = XV::Zero();
+  std::array<double, kGalerkinMaxStages + 2> b_{};
+  std::array<std::array<double, kGalerkinMaxStages + 1>, kGalerkinMaxStages + 2> A_{}, B_{};
+  std::array<std::array<double, kGalerkinMaxStages + 1>, kGalerkinMaxStages + 1> E_{};
+  mutable XV Xprev_;
   mutable Point prev_centre_ = M::sample_point(), prev_end_ = M::sample_point();
   mutable bool have_prev_ = false;
-  mutable XV X_ = XV::Zero(), R_ = XV::Zero(), delta_ = XV::Zero();
-  mutable Vec<double, K> G_ = Vec<double, K>::Zero();
+  mutable XV X_, R_, delta_;
+  mutable GV G_;
   mutable std::optional<detail::SeededCharts<M>> charts_;  // at the centre of the last gradient
-  mutable Mat<double, SN, SN> J_ = Mat<double, SN, SN>::Zero(), Jinv_ = Mat<double, SN, SN>::Zero();
+  mutable JM J_, Jinv_;
   double contraction_ = 0.25;
   mutable double Jmax_ = 0.0;
   mutable bool lu_valid_ = false;

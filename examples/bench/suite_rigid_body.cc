@@ -83,7 +83,7 @@ RBRun composed(const SO3Map& map, const std::string& scheme) {
 template <int S>
 RBRun galerkin() {
   return [](const RigidBody& L, const M3& R0, const V3& Pi0, double h, std::int64_t steps, const RBObserver* obs) {
-    const ManifoldGalerkinStep<RigidBody, S> G(L, QuadratureKind::gauss, h);
+    const ManifoldGalerkinStep<RigidBody> G(L, QuadratureKind::gauss, S, h);
     return run_rb(G, L, R0, Pi0, steps, obs);
   };
 }

@@ -1,5 +1,8 @@
 // dvm: simulate a mechanical system from its Lagrangian with a variational
 // integrator derived from a discretization map.
+#include <fcntl.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdio>
 #include <algorithm>
@@ -420,7 +423,8 @@ const char* kConvergeHelp =
 
 const char* kSweepHelp =
     "usage: dvm sweep SCENE.toml --vary KEY=SPEC... [--zip] [--set section.key=value]...\n"
-    "                 [--error] [--jobs N] [--out PATH] [--json] [--max-runs M]\n"
+    "                 [--error] [--max-error] [--jobs N] [--out PATH [--resume]]\n"
+    "                 [--json] [--max-runs M]\n"
     "\n"
     "Runs the scene once for every combination of the varied values, each run as\n"
     "'dvm run SCENE --no-output --set KEY=VALUE ...' runs it (the same reader, checks\n"
@@ -452,30 +456,53 @@ const char* kSweepHelp =
     "              the runs it serves), computed once per distinct problem: the runs\n"
     "              with the same values outside [integrator] and [output] and the same\n"
     "              time span steps x step. Initial-value problems only\n"
+    "  --max-error also the largest error along the run (column max_error, after\n"
+    "              error; implies --error): the largest max(|q - q(t)|, |p - p(t)|)\n"
+    "              over every step, t = 0 included, against the exact solution, so\n"
+    "              a run whose system has none is refused. The run's energy is then\n"
+    "              monitored at every step (as when dvm run writes every row)\n"
     "  --jobs N    run on N threads (default: the processors available); the table\n"
     "              does not depend on N\n"
-    "  --out PATH  write the table to PATH.csv and PATH.json (each complete or not\n"
-    "              at all: written to a temporary beside it, then renamed) and print\n"
-    "              one line saying so; without it the CSV table goes to stdout\n"
+    "  --out PATH  write the table to PATH.csv and PATH.json as runs finish and at\n"
+    "              the end, and print one line saying so; without it the CSV table\n"
+    "              goes to stdout. Each write replaces a file whole (a temporary\n"
+    "              beside it, then renamed), so the files always hold a complete\n"
+    "              table of the rows finished so far (in the sweep's order; the\n"
+    "              JSON's runs is the sweep's size). The table is written again\n"
+    "              after a run finishes, unless the last write took more than a\n"
+    "              tenth of the time since it; the errors against reference runs\n"
+    "              are filled in at the end\n"
+    "  --resume    with --out: keep the rows of PATH.json and run only the runs it\n"
+    "              has no row for (a failed or refused row is kept, not run again);\n"
+    "              the table is then that of a sweep never stopped. A table of\n"
+    "              another sweep (another scene path or text, --set, varied keys or\n"
+    "              values, --zip, --error or --max-error) is refused with exit 2\n"
+    "              naming what differs; with no PATH.json yet, every run runs\n"
     "  --json      print the JSON table on stdout (with or without --out)\n"
     "  --max-runs M  the largest sweep accepted (default 1e6): a larger one is\n"
     "              refused before any run\n"    "  --help      this text (also 'dvm help sweep')\n"
     "\n"
     "CSV columns: index, each varied key (its value), status (ok, failed or refused),\n"
     "code (what dvm run would exit with: 0, 3 or 2), message (why it failed or was\n"
-    "refused), error (with --error; empty where there is none), system, map, form,\n"
-    "composition, method, step, steps, t_final, wall_seconds, cpu_seconds (the\n"
-    "run's thread), energy_initial, energy_final, max_abs_energy_error,\n"
-    "solver_iterations, jacobians, max_step_iterations, order, failed_step and\n"
-    "failed_time (a failed run), q_final[k] and p_final[k] (as many as the longest\n"
-    "final state; empty beyond a shorter one). Numbers have 17 significant digits.\n"
+    "refused), error (with --error; empty where there is none), max_error (with\n"
+    "--max-error), system, map, form, composition, method, step, steps, t_final,\n"
+    "wall_seconds, cpu_seconds (the run's thread), energy_initial, energy_final,\n"
+    "max_abs_energy_error, solver_iterations, jacobians, max_step_iterations,\n"
+    "order, failed_step and failed_time (a failed run), q_final[k] and p_final[k]\n"
+    "(as many as the longest final state; empty beyond a shorter one). Numbers\n"
+    "have 17 significant digits.\n"
     "A refused row has only its index, values, status, code and message.\n"
-    "JSON: {json_version, scene, set, vary (each key, its spec and values), combine\n"
-    "(product or zip), runs, ok, failed, refused, references (with --error: each\n"
+    "JSON: {json_version, scene, scene_digest (FNV-1a hash of the scene's text, in\n"
+    "hex), set, vary (each key, its spec and values), combine (product or zip),\n"
+    "errors (the error columns measured: [], [\"error\"] or [\"error\",\n"
+    "\"max_error\"]), runs, ok, failed, refused, references (with --error: each\n"
     "distinct problem's t_end, reference, accuracy, rows, and failure when the\n"
-    "reference run failed), rows: [{index, values, status, code, message, error and\n"
-    "reference (with --error), cpu_seconds, run (the object of dvm run --json, or\n"
-    "null for a refused row)}]}.\n"
+    "reference run failed), rows: [{index, values, status, code, message, with\n"
+    "--error: error, max_error (with --max-error), reference, reference_accuracy\n"
+    "(an exact solution's, else null: see references) and final_state ({q, p} as\n"
+    "the error measures them, q in embedding coordinates; null for a run that did\n"
+    "not complete), then cpu_seconds, run (the object of dvm run --json, or null\n"
+    "for a refused row)}]}.\n"
     "\n"
     "Before any run, every row's scene is read and its run built. A value that every\n"
     "run it takes part in refuses (an unknown key, a value of the wrong type, a map\n"
@@ -489,6 +516,17 @@ const char* kSweepHelp =
     "The scene's [output] files are not written; of [output], only monitor_every\n"
     "may be set or varied. With system.compile, every run compiles its derivatives\n"
     "(twice: when checked and when run).\n"
+    "\n"
+    "Under mpirun (OpenMPI), 'mpirun -n R dvm sweep ...' runs the rows on R ranks:\n"
+    "rank 0 checks the rows, hands out one row at a time to whichever rank asks (so\n"
+    "that costly and cheap runs spread evenly), runs rows itself on a second\n"
+    "thread, gathers the rows, computes the references of --error and alone writes\n"
+    "or prints the table: the table of the same sweep on threads. --jobs is refused\n"
+    "there. A process counts as started by mpirun when OpenMPI's variable\n"
+    "OMPI_COMM_WORLD_SIZE is set, and only then is MPI initialised: a sweep started\n"
+    "otherwise does not touch it. MPI is optional when dvm is built (Debian's\n"
+    "libopenmpi-dev); a dvm built without it refuses to run under mpirun (exit 2).\n"
+    "@MPI@\n"
     "\n"
     "Exit status: 0 when every run that was not refused completed; 3 when some run\n"
     "failed numerically or a reference run failed (the table is still complete); 2\n"
@@ -787,97 +825,15 @@ int cmd_converge(const std::vector<std::string>& args) {
   return run_scene(load_scene(scene, sets), o);
 }
 
-int cmd_sweep(const std::vector<std::string>& args) {
-  dvm::SweepOptions o;
-  o.jobs = dvm::default_jobs();
-  std::vector<std::string> varies;
-  std::string scene, out;
-  bool json = false;
-  for (std::size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    auto value = [&](const char* name) -> std::string {
-      if (i + 1 >= args.size()) usage_error(std::string(name) + " needs a value", kSweepHelp);
-      return args[++i];
-    };
-    if (is_help(a)) {
-      std::cout << kSweepHelp;
-      return 0;
-    } else if (a == "--vary") {
-      varies.push_back(value("--vary"));
-    } else if (a.rfind("--vary=", 0) == 0) {
-      varies.push_back(a.substr(7));
-    } else if (a == "--set") {
-      o.sets.push_back(value("--set"));
-    } else if (a.rfind("--set=", 0) == 0) {
-      o.sets.push_back(a.substr(6));
-    } else if (a == "--zip") {
-      o.zip = true;
-    } else if (a == "--error") {
-      o.error = true;
-    } else if (a == "--json") {
-      json = true;
-    } else if (a == "--jobs") {
-      const std::string text = value("--jobs");
-      const double n = parse_number("--jobs", text, kSweepHelp);
-      if (n != std::floor(n) || n < 1 || n > 4096)
-        usage_error("--jobs: got '" + text + "', expected a whole number from 1 to 4096", kSweepHelp);
-      o.jobs = static_cast<int>(n);
-    } else if (a == "--max-runs") {
-      const std::string text = value("--max-runs");
-      o.max_runs = parse_number("--max-runs", text, kSweepHelp);
-      if (o.max_runs != std::floor(o.max_runs) || o.max_runs < 1 || o.max_runs > 1e15)
-        usage_error("--max-runs: got '" + text + "', expected a whole number from 1 to 1e15", kSweepHelp);
-    } else if (a == "--out") {
-      out = value("--out");
-      if (out.empty()) usage_error("--out needs a path (PATH.csv and PATH.json are written)", kSweepHelp);
-    } else if (!a.empty() && a[0] == '-') {
-      usage_error(unknown_option(a, {"--vary", "--zip", "--set", "--error", "--jobs", "--out", "--json",
-                                     "--max-runs", "--help"}),
-                  kSweepHelp);
-    } else if (scene.empty()) {
-      scene = a;
-    } else {
-      usage_error("more than one scene file given ('" + scene + "', '" + a + "')", kSweepHelp);
-    }
-  }
-  if (scene.empty()) usage_error("sweep needs a scene file", kSweepHelp);
-  if (varies.empty()) usage_error("sweep needs at least one --vary KEY=SPEC", kSweepHelp);
-  for (const std::string& v : varies) o.axes.push_back(dvm::parse_vary(v, o.max_runs));
-  dvm::sweep_size(o);
-  // the scene read once (as dvm run reads it: its messages for a missing or huge file)
-  {
-    std::error_code ec;
-    if (std::filesystem::is_directory(scene, ec))
-      throw InputError(scene + ": is a directory; expected a scene file (TOML text)");
-    std::ifstream in(scene, std::ios::binary);
-    if (!in) throw InputError(scene + ": cannot open the scene file");
-    std::ostringstream text;
-    text << in.rdbuf();
-    o.scene_text = text.str();
-    if (o.scene_text.size() > dvm::kMaxSceneBytes)
-      throw InputError(scene + ": the scene is larger than 16 MiB, the most dvm reads; expected a smaller scene");
-    o.scene_path = scene;
-  }
-  // the table's files, checked and opened before any run
-  dvm::OutputFile csv, js;
-  if (!out.empty()) {
-    for (const std::string& f : {out + ".csv", out + ".json"}) {
-      std::error_code ec;
-      if (std::filesystem::equivalent(f, scene, ec))
-        throw InputError("--out " + out + ": '" + f + "' is the scene file; expected another path");
-    }
-    csv.open(out + ".csv", "--out (" + out + ".csv)", 0.0);
-    js.open(out + ".json", "--out (" + out + ".json)", 0.0);
-  }
-  const dvm::SweepReport rep = dvm::run_sweep(o);
+// The end of a sweep on rank 0: the table written (or printed), the counts on
+// stderr; returns the exit status.
+int sweep_summary(const dvm::SweepOptions& o, const dvm::SweepReport& rep, const std::string& out, bool json) {
   const std::string json_text = dvm::sweep_json(o, rep);
   bool write_failed = false;
   if (!out.empty()) {
-    const std::string csv_text = dvm::sweep_csv(o, rep);
-    std::fwrite(csv_text.data(), 1, csv_text.size(), csv.get());
-    std::fwrite(json_text.data(), 1, json_text.size(), js.get());
-    std::string kept;
-    write_failed = !dvm::finish_outputs(true, {&csv, &js}, kept);
+    const std::string why = dvm::write_sweep_table(o, rep, out);
+    if (!why.empty()) std::cerr << "dvm: " << why << "\n";
+    write_failed = !why.empty();
   }
   if (json)
     std::cout << json_text;
@@ -901,6 +857,192 @@ int cmd_sweep(const std::vector<std::string>& args) {
                 << r.failure << "\n";
     }
   return rep.failed > 0 || reference_failed || write_failed ? 3 : 0;
+}
+
+// Under mpirun, the ranks other than 0 say nothing while the sweep is read and set
+// up (rank 0 says it once): their standard error goes to /dev/null until then, and
+// their standard output for good (rank 0 prints the table).
+class QuietRank {
+ public:
+  QuietRank() {
+    const char* rank = std::getenv("OMPI_COMM_WORLD_RANK");
+    if (!dvm::launched_by_mpirun() || !rank || std::string(rank) == "0") return;
+    std::fflush(stdout);
+    std::fflush(stderr);
+    const int null = ::open("/dev/null", O_WRONLY | O_CLOEXEC);
+    if (null < 0) return;
+    saved_ = ::dup(2);
+    ::dup2(null, 1);
+    ::dup2(null, 2);
+    ::close(null);
+  }
+  void speak() {
+    if (saved_ < 0) return;
+    std::fflush(stderr);
+    ::dup2(saved_, 2);
+    ::close(saved_);
+    saved_ = -1;
+  }
+  // (not speak(): a message of bad input, printed by main after this, is rank 0's)
+  ~QuietRank() {
+    if (saved_ >= 0) ::close(saved_);
+  }
+
+ private:
+  int saved_ = -1;
+};
+
+int cmd_sweep(const std::vector<std::string>& args) {
+  QuietRank quiet;
+  const bool mpirun = dvm::launched_by_mpirun();
+  dvm::SweepOptions o;
+  o.jobs = mpirun ? 1 : dvm::default_jobs();
+  std::vector<std::string> varies;
+  std::string scene, out;
+  bool json = false, resume = false;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&](const char* name) -> std::string {
+      if (i + 1 >= args.size()) usage_error(std::string(name) + " needs a value", kSweepHelp);
+      return args[++i];
+    };
+    if (is_help(a)) {
+      std::string help = kSweepHelp;
+      const auto at = help.find("@MPI@");
+      if (at != std::string::npos)
+        help.replace(at, 5, dvm::sweep_mpi_built() ? "This dvm was built with MPI." : "This dvm was built without MPI.");
+      std::cout << help;
+      return 0;
+    } else if (a == "--vary") {
+      varies.push_back(value("--vary"));
+    } else if (a.rfind("--vary=", 0) == 0) {
+      varies.push_back(a.substr(7));
+    } else if (a == "--set") {
+      o.sets.push_back(value("--set"));
+    } else if (a.rfind("--set=", 0) == 0) {
+      o.sets.push_back(a.substr(6));
+    } else if (a == "--zip") {
+      o.zip = true;
+    } else if (a == "--error") {
+      o.error = true;
+    } else if (a == "--max-error") {
+      o.error = o.max_error = true;
+    } else if (a == "--resume") {
+      resume = true;
+    } else if (a == "--json") {
+      json = true;
+    } else if (a == "--jobs") {
+      if (mpirun)
+        usage_error("--jobs: under mpirun each rank runs one run at a time (rank 0 a second thread that hands "
+                    "out the rows); set the number of ranks with mpirun -n",
+                    kSweepHelp);
+      const std::string text = value("--jobs");
+      const double n = parse_number("--jobs", text, kSweepHelp);
+      if (n != std::floor(n) || n < 1 || n > 4096)
+        usage_error("--jobs: got '" + text + "', expected a whole number from 1 to 4096", kSweepHelp);
+      o.jobs = static_cast<int>(n);
+    } else if (a == "--max-runs") {
+      const std::string text = value("--max-runs");
+      o.max_runs = parse_number("--max-runs", text, kSweepHelp);
+      if (o.max_runs != std::floor(o.max_runs) || o.max_runs < 1 || o.max_runs > 1e15)
+        usage_error("--max-runs: got '" + text + "', expected a whole number from 1 to 1e15", kSweepHelp);
+    } else if (a == "--out") {
+      out = value("--out");
+      if (out.empty()) usage_error("--out needs a path (PATH.csv and PATH.json are written)", kSweepHelp);
+    } else if (!a.empty() && a[0] == '-') {
+      usage_error(unknown_option(a, {"--vary", "--zip", "--set", "--error", "--max-error", "--jobs", "--out",
+                                     "--resume", "--json", "--max-runs", "--help"}),
+                  kSweepHelp);
+    } else if (scene.empty()) {
+      scene = a;
+    } else {
+      usage_error("more than one scene file given ('" + scene + "', '" + a + "')", kSweepHelp);
+    }
+  }
+  if (scene.empty()) usage_error("sweep needs a scene file", kSweepHelp);
+  if (varies.empty()) usage_error("sweep needs at least one --vary KEY=SPEC", kSweepHelp);
+  if (resume && out.empty()) usage_error("--resume needs --out PATH: the table PATH.json it resumes", kSweepHelp);
+  for (const std::string& v : varies) o.axes.push_back(dvm::parse_vary(v, o.max_runs));
+  dvm::sweep_size(o);
+  // MPI from here on under mpirun (every rank has read the same arguments)
+  dvm::SweepRanks ranks;
+  const bool root = ranks.rank() == 0;
+  // rank 0 reads the scene (the others get its text), checks the table's files and
+  // reads the table it resumes
+  bool streamed = false;
+  dvm::SweepRows done;
+  std::string setup_error;
+  if (root) try {
+    {  // the scene read once (as dvm run reads it: its messages for a missing or huge file)
+      std::error_code ec;
+      if (std::filesystem::is_directory(scene, ec))
+        throw InputError(scene + ": is a directory; expected a scene file (TOML text)");
+      std::ifstream in(scene, std::ios::binary);
+      if (!in) throw InputError(scene + ": cannot open the scene file");
+      std::ostringstream text;
+      text << in.rdbuf();
+      o.scene_text = text.str();
+      if (o.scene_text.size() > dvm::kMaxSceneBytes)
+        throw InputError(scene + ": the scene is larger than 16 MiB, the most dvm reads; expected a smaller scene");
+    }
+    o.scene_path = scene;
+    // the table's files, checked before any run (temporaries created and removed); a
+    // table in regular files is written as runs finish, one in a stream at the end
+    if (!out.empty()) {
+      for (const std::string& f : {out + ".csv", out + ".json"}) {
+        std::error_code ec;
+        if (std::filesystem::equivalent(f, scene, ec))
+          throw InputError("--out " + out + ": '" + f + "' is the scene file; expected another path");
+      }
+      dvm::OutputFile csv, js;
+      csv.open(out + ".csv", "--out (" + out + ".csv)", 0.0);
+      js.open(out + ".json", "--out (" + out + ".json)", 0.0);
+      streamed = csv.streamed() || js.streamed();
+    }
+    if (resume) {
+      if (streamed)
+        throw InputError("--resume: --out " + out + " is not a regular file; a resumed table is read from PATH.json");
+      std::error_code ec;
+      if (std::filesystem::exists(out + ".json", ec))
+        done = dvm::read_sweep_table(o, out + ".json");
+      else
+        std::cerr << "dvm: sweep: --resume: there is no table " << out << ".json yet; every run runs\n";
+    }
+  } catch (const InputError& e) {
+    setup_error = e.what();
+    if (setup_error.empty()) setup_error = "sweep: bad input";
+  }
+  if (ranks.share(setup_error.empty() ? 1 : 0) == 0) {
+    if (root) std::cerr << "dvm: " << setup_error << "\n";
+    return 2;
+  }
+  o.scene_text = ranks.share(o.scene_text);
+  o.scene_path = scene;
+  quiet.speak();
+
+  int code = 0;
+  try {
+    std::string flush_error;
+    dvm::SweepFlush flush;
+    if (root && !out.empty() && !streamed)
+      flush = [&](const dvm::SweepReport& finished) {
+        const std::string why = dvm::write_sweep_table(o, finished, out);
+        if (!why.empty() && flush_error.empty()) {
+          flush_error = why;
+          std::cerr << "dvm: sweep: " << why << " (tried again at the end)\n";
+        }
+      };
+    const dvm::SweepReport rep = dvm::run_sweep(o, done, flush, ranks);
+    if (root) code = sweep_summary(o, rep, out, json);
+  } catch (const InputError& e) {
+    if (root) std::cerr << "dvm: " << e.what() << "\n";
+    code = 2;
+  } catch (const std::exception& e) {
+    std::cerr << "dvm: internal error: " << e.what() << "\n";
+    if (ranks.size() > 1) ranks.abort(3);
+    code = 3;
+  }
+  return ranks.share(code);
 }
 
 int cmd_version(const std::vector<std::string>& args) {

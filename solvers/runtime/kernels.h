@@ -17,7 +17,7 @@
 //   hamiltonian       HamiltonianStep<LegendreH<S>, Map>  ManifoldHamiltonianStep<H, Map>
 //   sode1 / sode2     SodeStep<S, tangent lift of Map>    (refused)
 //   newmark           NewmarkStep<S>                      (refused)
-//   galerkin          GalerkinStep<S>                     ManifoldGalerkinStep<S, s>
+//   galerkin          GalerkinStep<S>                     ManifoldGalerkinStep<S> (s at run time)
 //     Gauss quadrature on a separable S (Method::use_structure):
 //                     SeparableGaussStep<S> (collocation, fixed point on the stage forces)
 //   composition       ComposedStep<Step> of any of these, adjoint stages from the
@@ -44,8 +44,6 @@
 #include <utility>
 #include <variant>
 #include <vector>
-
-#include <Eigen/SVD>
 
 #include "mechanics/hamiltonian.h"
 #include "mechanics/lagrangian.h"
@@ -505,41 +503,10 @@ std::vector<std::string> velocity_names(const Problem& pr);
 // "the Lagrangian is degenerate at the initial state" when the velocity Hessian is
 // singular there, "not finite at the initial state" when it overflows; `where` names
 // the system's text or the scene. With the velocities' names (one per row of H), the
-// message names those along which d2L/dv2 vanishes (its null direction).
-template <int N>
-void require_regular_hessian(const Mat<double, N, N>& H, const std::string& where,
-                             const std::vector<std::string>& velocities = {}) {
-  if (!H.allFinite())
-    throw InputError(where + ": the velocity Hessian d2L/dv2 is not finite at the initial state (an overflow or a "
-                     "division by zero there); expected a Lagrangian that is finite at initial.q and initial.p/v");
-  const Eigen::MatrixXd Hd = H;  // dynamic size: the fixed 1x1 SVD trips GCC's uninitialised warnings
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Hd, Eigen::ComputeFullV);
-  const auto sv = svd.singularValues();
-  const double smax = sv.maxCoeff(), smin = sv.minCoeff();
-  if (!(smin > 1e-12 * smax) || !std::isfinite(smax)) {
-    std::ostringstream m;
-    m << where << ": the Lagrangian is degenerate at the initial state: the velocity Hessian d2L/dv2 is "
-      << "singular there (singular values from " << smax << " down to " << smin << ")";
-    if (static_cast<Eigen::Index>(velocities.size()) == Hd.rows() && Hd.rows() > 0) {
-      // the null direction: the right singular vector of the smallest singular value
-      Eigen::Index k = 0;
-      sv.minCoeff(&k);
-      const Eigen::VectorXd z = svd.matrixV().col(k);
-      const double top = z.cwiseAbs().maxCoeff();
-      std::vector<std::string> along;
-      for (Eigen::Index i = 0; i < z.size(); ++i)
-        if (std::fabs(z[i]) >= 0.3 * top) along.push_back(velocities[static_cast<std::size_t>(i)]);
-      if (along.size() == 1) {
-        m << ": L has no term of second order in " << along[0] << " there (d2L/dv2 vanishes along it)";
-      } else if (along.size() <= 6) {
-        m << ": d2L/dv2 vanishes along a combination of ";
-        for (std::size_t i = 0; i < along.size(); ++i)
-          m << (i == 0 ? "" : i + 1 == along.size() ? " and " : ", ") << along[i];
-      }
-    }
-    m << "; the Legendre transform cannot be inverted and the discrete equations do not define a step";
-    throw InputError(m.str());
-  }
-}
+// message names those along which d2L/dv2 vanishes (its null direction). Compiled once
+// (run.cc): its SVD is a dynamic-size Eigen instantiation that every kernel file would
+// otherwise compile again.
+void require_regular_hessian(const Eigen::MatrixXd& H, const std::string& where,
+                             const std::vector<std::string>& velocities = {});
 
 }  // namespace dvm::kernels

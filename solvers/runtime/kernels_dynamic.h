@@ -307,7 +307,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     dense_limit("system: a Lagrangian that is not separable (its velocity Hessian, checked at the start)");
   const std::vector<std::string> velocities = velocity_names(pr);
   auto check = [&](const V& v) {
-    if (!constant_hessian) require_regular_hessian<Eigen::Dynamic>(view.velocity_hessian(q, v), where, velocities);
+    if (!constant_hessian) require_regular_hessian(view.velocity_hessian(q, v), where, velocities);
   };
   if (pr.momentum_given) {
     p = Eigen::Map<const V>(pr.p.data(), n);

@@ -57,7 +57,7 @@ SpherePowerMap<K> at_theta(const SpherePowerMap<K>& R, double th) {
 // ---- built-in or written: one set of steps per space ---------------------------------
 // A Lagrangian (or Hamiltonian) on S^2 or SO(3) that is either a built-in B or one
 // written in the scene, W. The kernels are instantiated once for both (the steps,
-// maps, compositions, Galerkin stage counts and Hamiltonian steps of a space are most
+// maps, compositions, Galerkin step and Hamiltonian steps of a space are most
 // of the build); the price is one predictable branch per evaluation of L or H, and GCC
 // inlining the Jet arithmetic differently: per step from 0.83 to 1.16 times the
 // per-system build (solvers/README.md).
@@ -331,7 +331,7 @@ void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifol
   if constexpr (is_written<S>::value) {
     // a Lagrangian written in the scene: its velocity Hessian where the run starts, and
     // the written Hamiltonian against the Legendre transform of L there
-    require_regular_hessian<Mf::dim>(manifold_velocity_hessian(L, q, v0), where);
+    require_regular_hessian(manifold_velocity_hessian(L, q, v0), where);
     if (L.has_hamiltonian()) {
       const double H = hamiltonian_of(L)(q, p), E = manifold_energy(L, q, v0);
       if (!(std::fabs(H - E) <= 1e-9 * std::fmax(1.0, std::fabs(E)))) {
@@ -346,23 +346,6 @@ void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifol
 }
 
 // ---- the factory ---------------------------------------------------------------------
-// Galerkin stage counts are compile-time sizes of ManifoldGalerkinStep: 1..6.
-template <class S, class View, class Point, class Covector>
-std::unique_ptr<Run> manifold_galerkin_run(const View& view, const S& L, const Method& me, double h,
-                                           const StepOptions& opt, const Point& q, const Covector& p,
-                                           const Covector& v0, const RunReport& base, std::int64_t steps) {
-  switch (me.stages) {
-    case 1: return stepper_run(view, ManifoldGalerkinStep<S, 1>(L, me.quadrature, h, opt), q, p, v0, base, steps);
-    case 2: return stepper_run(view, ManifoldGalerkinStep<S, 2>(L, me.quadrature, h, opt), q, p, v0, base, steps);
-    case 3: return stepper_run(view, ManifoldGalerkinStep<S, 3>(L, me.quadrature, h, opt), q, p, v0, base, steps);
-    case 4: return stepper_run(view, ManifoldGalerkinStep<S, 4>(L, me.quadrature, h, opt), q, p, v0, base, steps);
-    case 5: return stepper_run(view, ManifoldGalerkinStep<S, 5>(L, me.quadrature, h, opt), q, p, v0, base, steps);
-    case 6: return stepper_run(view, ManifoldGalerkinStep<S, 6>(L, me.quadrature, h, opt), q, p, v0, base, steps);
-    default: break;
-  }
-  throw InputError("integrator.stages: expected a whole number from 1 to 6");
-}
-
 // Which parts of the method are built for this system (Parts, factories.h: the rest was
 // refused by validate(), which reads the same constant, and is not instantiated): the
 // Hamiltonian form, Galerkin, boundary values.
@@ -400,7 +383,8 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
 
   if (me.galerkin) {
     if constexpr (Galerkin)
-      return manifold_galerkin_run(view, L, me, h, opt, q, p, v0, base, pr.steps);
+      return stepper_run(view, ManifoldGalerkinStep<S>(L, me.quadrature, me.stages, h, opt), q, p, v0, base,
+                         pr.steps);
     else
       throw InputError("integrator.method: unsupported");  // refused by validate()
   }

@@ -195,7 +195,7 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
     // no closed-form inverse Legendre map: the velocity Hessian must be invertible
     const std::vector<std::string> velocities = velocity_names(pr);
     auto check = [&](const Vec<double, N>& v) {
-      require_regular_hessian<N>(velocity_hessian(L, q, v), where, velocities);
+      require_regular_hessian(velocity_hessian(L, q, v), where, velocities);
     };
     if (pr.momentum_given) {
       check(Vec<double, N>::Zero());

@@ -120,6 +120,7 @@ void Recorder::row(const double* x) {
     std::fwrite(x, sizeof(double), static_cast<std::size_t>(columns_), npy_.get());
     ++npy_rows_;
   }
+  if (sink_) sink_(names_, x);
 }
 
 // Magic, version 1.0, header length (little endian), then a Python dict literal padded

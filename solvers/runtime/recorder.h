@@ -66,9 +66,14 @@ class Recorder {
   // file, an output naming one of the inputs, a .npy that cannot be rewound (a pipe).
   void open(const std::vector<std::string>& columns, double rows);
   bool wants(std::int64_t k, std::int64_t last) const { return k % spec_.every == 0 || k == last; }
-  // Whether rows go anywhere (a CSV or a .npy file, or memory).
-  bool writes_rows() const { return !spec_.csv.empty() || !spec_.npy.empty() || spec_.memory; }
+  // Whether rows go anywhere (a CSV or a .npy file, memory, or a sink).
+  bool writes_rows() const { return !spec_.csv.empty() || !spec_.npy.empty() || spec_.memory || sink_; }
   void row(const double* values);
+  // Hands every row to `sink` as well (with or without files): the row's values in
+  // the columns open() was given, which it receives first. A run then evaluates its
+  // energy and invariants at every row, as when rows go to a file.
+  using Sink = std::function<void(const std::vector<std::string>& columns, const double* values)>;
+  void set_sink(Sink sink) { sink_ = std::move(sink); }
   // Renames the files onto their paths (complete) or onto PATH.partial; returns false
   // after printing any write error to stderr. `kept` lists the .partial files.
   bool finish(bool complete, std::string& kept);
@@ -92,9 +97,10 @@ class Recorder {
  private:
   void write_npy_header();
   OutputSpec spec_;
+  Sink sink_;
   OutputFile csv_, npy_, npy_names_;  // npy_names_: the .npy's column names (PATH.json)
   int columns_ = 0;
-  std::vector<std::string> names_;
+  std::vector<std::string> names_;  // the columns open() was given (also for the sink)
   std::vector<double> memory_;  // OutputSpec::memory: the rows written so far
   long long npy_rows_ = 0;
   bool progress_on_ = false, progress_shown_ = false;

@@ -4,6 +4,9 @@
 #include <cstdarg>
 #include <cstdio>
 #include <cstdlib>
+#include <sstream>
+
+#include <Eigen/SVD>
 
 #include "solvers/runtime/json.h"
 #include "mechanics/written_lagrangian.h"
@@ -277,3 +280,41 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
 }
 
 }  // namespace dvm
+
+namespace dvm::kernels {
+
+void require_regular_hessian(const Eigen::MatrixXd& Hd, const std::string& where,
+                             const std::vector<std::string>& velocities) {
+  if (!Hd.allFinite())
+    throw InputError(where + ": the velocity Hessian d2L/dv2 is not finite at the initial state (an overflow or a "
+                     "division by zero there); expected a Lagrangian that is finite at initial.q and initial.p/v");
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Hd, Eigen::ComputeFullV);
+  const auto sv = svd.singularValues();
+  const double smax = sv.maxCoeff(), smin = sv.minCoeff();
+  if (!(smin > 1e-12 * smax) || !std::isfinite(smax)) {
+    std::ostringstream m;
+    m << where << ": the Lagrangian is degenerate at the initial state: the velocity Hessian d2L/dv2 is "
+      << "singular there (singular values from " << smax << " down to " << smin << ")";
+    if (static_cast<Eigen::Index>(velocities.size()) == Hd.rows() && Hd.rows() > 0) {
+      // the null direction: the right singular vector of the smallest singular value
+      Eigen::Index k = 0;
+      sv.minCoeff(&k);
+      const Eigen::VectorXd z = svd.matrixV().col(k);
+      const double top = z.cwiseAbs().maxCoeff();
+      std::vector<std::string> along;
+      for (Eigen::Index i = 0; i < z.size(); ++i)
+        if (std::fabs(z[i]) >= 0.3 * top) along.push_back(velocities[static_cast<std::size_t>(i)]);
+      if (along.size() == 1) {
+        m << ": L has no term of second order in " << along[0] << " there (d2L/dv2 vanishes along it)";
+      } else if (along.size() <= 6) {
+        m << ": d2L/dv2 vanishes along a combination of ";
+        for (std::size_t i = 0; i < along.size(); ++i)
+          m << (i == 0 ? "" : i + 1 == along.size() ? " and " : ", ") << along[i];
+      }
+    }
+    m << "; the Legendre transform cannot be inverted and the discrete equations do not define a step";
+    throw InputError(m.str());
+  }
+}
+
+}  // namespace dvm::kernels

@@ -10,16 +10,23 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstring>
+#include <fstream>
 #include <map>
+#include <mutex>
 #include <random>
 #include <set>
 #include <sstream>
 
 #include <omp.h>
+#ifdef DVM_WITH_MPI
+#include <mpi.h>
+#endif
 #include <toml++/toml.h>
 
 #include "solvers/runtime/errors.h"
 #include "solvers/runtime/json.h"
+#include "solvers/runtime/output.h"
 #include "solvers/runtime/scene.h"
 
 namespace dvm {
@@ -402,12 +409,26 @@ std::string problem_key(const SweepOptions& o, std::size_t i, double t_end) {
   return key + buf;
 }
 
+// --max-error measures along the run against an exact solution: a run without one is
+// refused. Returns the sizes of the exact q and p.
+std::pair<std::size_t, std::size_t> require_exact(const SweepOptions& o, const Scene& s, const Run& run) {
+  std::vector<double> q, p;
+  if (!run.exact(0.0, q, p)) {
+    const std::string name = s.problem.system ? s.problem.system->name : std::string("written");
+    throw InputError("--max-error: the system '" + name + "' of " + o.scene_path +
+                     " has no exact solution here; the largest error along a run is measured against one "
+                     "(--error alone measures the final state against a reference run)");
+  }
+  return {q.size(), p.size()};
+}
+
 }  // namespace
 
 std::string check_row(const SweepOptions& o, std::size_t i) {
   try {
     const Scene s = load_row(o, i);
-    make_run(s.problem, s.method);
+    const auto run = make_run(s.problem, s.method);
+    if (o.error && o.max_error) require_exact(o, s, *run);
     return "";
   } catch (const InputError& e) {
     return e.what();
@@ -428,10 +449,29 @@ SweepRow run_row(const SweepOptions& o, std::size_t i) {
     OutputSpec spec;
     spec.monitor_every = s.monitor_every;
     Recorder recorder(spec);
+    // --max-error: every step's state (t, q, p, ... on R^n, where exact solutions
+    // are) against the exact solution at its time
+    double max_error = 0.0;
+    bool without_exact = false;  // a step where the exact solution could not be evaluated
+    std::vector<double> qe, pe;
+    if (o.error && o.max_error) {
+      const auto [nq, np] = require_exact(o, s, *run);
+      recorder.set_sink([&, nq = nq, np = np](const std::vector<std::string>& columns, const double* x) {
+        if (columns.size() < 1 + nq + np || columns.front() != "t")
+          throw std::logic_error("--max-error: rows without t, q and p");
+        if (!run->exact(x[0], qe, pe)) {
+          without_exact = true;
+          return;
+        }
+        for (std::size_t k = 0; k < nq; ++k) max_error = std::fmax(max_error, std::fabs(x[1 + k] - qe[k]));
+        for (std::size_t k = 0; k < np; ++k) max_error = std::fmax(max_error, std::fabs(x[1 + nq + k] - pe[k]));
+      });
+    }
     const double cpu0 = thread_cpu_seconds();
     row.report = run->execute(&recorder);
     row.cpu_seconds = thread_cpu_seconds() - cpu0;
     row.ran = true;
+    row.run_json = report_json(row.report);
     row.t_end = static_cast<double>(s.problem.steps) * s.problem.step;
     if (row.report.failed) {
       row.status = RowStatus::failed;
@@ -447,6 +487,7 @@ SweepRow run_row(const SweepOptions& o, std::size_t i) {
         row.error = state_distance(row.final_state, exact);
         row.reference_accuracy = exact_accuracy(exact);
       }
+      if (o.max_error) row.max_error = without_exact ? NAN : max_error;
     }
   } catch (const InputError& e) {
     row = SweepRow{};
@@ -514,19 +555,31 @@ void match_thread_stacks() {
 
 }  // namespace
 
-SweepReport run_sweep(const SweepOptions& o) {
-  const std::size_t n = sweep_size(o);
-  match_thread_stacks();
-  const int jobs = std::max(1, o.jobs);
-  const long long count = static_cast<long long>(n);
+namespace {
 
-  // 1. every row read and built, none run
+// The rows a sweep runs (those `done` lacks), in the sweep's order.
+std::vector<long long> rows_to_run(std::size_t n, const SweepRows& done) {
+  std::vector<long long> todo;
+  for (std::size_t i = 0; i < n; ++i)
+    if (!(i < done.have.size() && i < done.rows.size() && done.have[i])) todo.push_back(static_cast<long long>(i));
+  return todo;
+}
+
+// Step 1 of run_sweep: each row's refusal ("" when it runs), the rows of `done`
+// keeping theirs; throws InputError for a value refused by every row it is in.
+std::vector<std::string> check_rows(const SweepOptions& o, const SweepRows& done, const std::vector<long long>& todo,
+                                    int jobs) {
+  const std::size_t n = sweep_size(o);
   std::vector<std::string> refusals(n);
+  for (std::size_t i = 0; i < n && i < done.rows.size() && i < done.have.size(); ++i)
+    if (done.have[i] && done.rows[i].status == RowStatus::refused) refusals[i] = done.rows[i].message;
+  const long long count = static_cast<long long>(todo.size());
   {
-    Progress progress("checked", n);
+    Progress progress("checked", todo.size());
 #pragma omp parallel for schedule(dynamic, 1) num_threads(jobs)
-    for (long long i = 0; i < count; ++i) {
-      refusals[static_cast<std::size_t>(i)] = check_row(o, static_cast<std::size_t>(i));
+    for (long long t = 0; t < count; ++t) {
+      const std::size_t i = static_cast<std::size_t>(todo[static_cast<std::size_t>(t)]);
+      refusals[i] = check_row(o, i);
       progress.done_one();
     }
   }
@@ -570,33 +623,101 @@ SweepReport run_sweep(const SweepOptions& o) {
     }
   }
 
-  // 2. the runs
-  SweepReport rep;
-  rep.runs = n;
-  rep.rows.resize(n);
+  return refusals;
+}
+
+SweepRow refused_row(std::size_t k, const std::string& why) {
+  SweepRow row;
+  row.index = k;
+  row.status = RowStatus::refused;
+  row.code = 2;
+  row.message = why;
+  return row;
+}
+
+// The rows as they finish, from any thread, and the calls of `flush` (see SweepFlush).
+class Gather {
+ public:
+  Gather(std::size_t n, const SweepRows& done, const SweepFlush& flush) : flush_(flush), have_(n, 0) {
+    rep_.runs = n;
+    rep_.rows.resize(n);
+    for (std::size_t i = 0; i < n && i < done.rows.size() && i < done.have.size(); ++i)
+      if (done.have[i]) rep_.rows[i] = done.rows[i], have_[i] = 1;
+  }
+  void add(SweepRow row) {
+    {
+      std::lock_guard<std::mutex> lock(rows_lock_);
+      const std::size_t k = row.index;
+      rep_.rows[k] = std::move(row);
+      have_[k] = 1;
+    }
+    maybe_flush();
+  }
+  // The report of every row (all added), without errors.
+  SweepReport finish() {
+    for (const SweepRow& row : rep_.rows) {
+      rep_.ok += row.status == RowStatus::ok;
+      rep_.failed += row.status == RowStatus::failed;
+      rep_.refused += row.status == RowStatus::refused;
+    }
+    return std::move(rep_);
+  }
+
+ private:
+  void maybe_flush() {
+    if (!flush_) return;
+    std::unique_lock<std::mutex> one(flush_lock_, std::try_to_lock);
+    if (!one.owns_lock()) return;
+    const auto start = std::chrono::steady_clock::now();
+    if (start - last_end_ < 10 * last_took_) return;
+    SweepReport finished;
+    finished.runs = rep_.runs;
+    {
+      std::lock_guard<std::mutex> lock(rows_lock_);
+      for (std::size_t i = 0; i < have_.size(); ++i)
+        if (have_[i]) finished.rows.push_back(rep_.rows[i]);
+    }
+    for (const SweepRow& row : finished.rows) {
+      finished.ok += row.status == RowStatus::ok;
+      finished.failed += row.status == RowStatus::failed;
+      finished.refused += row.status == RowStatus::refused;
+    }
+    flush_(finished);
+    last_end_ = std::chrono::steady_clock::now();
+    last_took_ = last_end_ - start;
+  }
+  const SweepFlush& flush_;
+  SweepReport rep_;
+  std::vector<char> have_;
+  std::mutex rows_lock_, flush_lock_;
+  std::chrono::steady_clock::time_point last_end_ = std::chrono::steady_clock::now();
+  std::chrono::steady_clock::duration last_took_{0};
+};
+
+}  // namespace
+
+SweepReport run_sweep(const SweepOptions& o) { return run_sweep(o, SweepRows{}, SweepFlush{}); }
+
+SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepFlush& flush) {
+  const std::size_t n = sweep_size(o);
+  match_thread_stacks();
+  const int jobs = std::max(1, o.jobs);
+  const std::vector<long long> todo = rows_to_run(n, done);
+  // 1. every row read and built, none run (a row given keeps its refusal)
+  const std::vector<std::string> refusals = check_rows(o, done, todo, jobs);
+  // 2. the runs, handed to `flush` as they finish
+  Gather gather(n, done, flush);
   {
-    Progress progress("ran", n);
+    const long long count = static_cast<long long>(todo.size());
+    Progress progress("ran", todo.size());
 #pragma omp parallel for schedule(dynamic, 1) num_threads(jobs)
-    for (long long i = 0; i < count; ++i) {
-      const std::size_t k = static_cast<std::size_t>(i);
-      if (refusals[k].empty()) {
-        rep.rows[k] = run_row(o, k);
-      } else {
-        SweepRow& row = rep.rows[k];
-        row.index = k;
-        row.status = RowStatus::refused;
-        row.code = 2;
-        row.message = refusals[k];
-      }
+    for (long long t = 0; t < count; ++t) {
+      const std::size_t k = static_cast<std::size_t>(todo[static_cast<std::size_t>(t)]);
+      gather.add(refusals[k].empty() ? run_row(o, k) : refused_row(k, refusals[k]));
       progress.done_one();
     }
   }
-  for (const SweepRow& row : rep.rows) {
-    rep.ok += row.status == RowStatus::ok;
-    rep.failed += row.status == RowStatus::failed;
-    rep.refused += row.status == RowStatus::refused;
-  }
-
+  SweepReport rep = gather.finish();
   // 3. errors against references
   if (o.error) attach_errors(o, rep.rows, rep.references);
   return rep;
@@ -613,7 +734,7 @@ void attach_errors(const SweepOptions& o, std::vector<SweepRow>& rows, std::vect
       SweepReference r;
       r.t_end = row.t_end;
       refs.push_back(r);
-      exact.push_back(!std::isnan(row.error));
+      exact.push_back(!std::isnan(row.reference_accuracy));
     }
     row.reference = static_cast<int>(it->second);
     refs[it->second].rows.push_back(row.index);
@@ -683,6 +804,7 @@ std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
   for (const SweepAxis& a : o.axes) head.push_back(a.key);
   for (const char* c : {"status", "code", "message"}) head.push_back(c);
   if (o.error) head.push_back("error");
+  if (o.error && o.max_error) head.push_back("max_error");
   for (const char* c : {"system", "map", "form", "composition", "method", "step", "steps", "t_final", "wall_seconds",
                         "cpu_seconds", "energy_initial", "energy_final", "max_abs_energy_error", "solver_iterations",
                         "jacobians", "max_step_iterations", "order", "failed_step", "failed_time"})
@@ -700,6 +822,7 @@ std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
     c.push_back(std::to_string(row.code));
     c.push_back(row.message);
     if (o.error) c.push_back(num17(row.error));
+    if (o.error && o.max_error) c.push_back(num17(row.max_error));
     const RunReport& r = row.report;
     if (row.ran) {
       const bool failed = r.failed && !r.boundary_value;
@@ -721,21 +844,77 @@ std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
   return out;
 }
 
-std::string sweep_json(const SweepOptions& o, const SweepReport& rep) {
-  Json::Object j;
-  j.num("json_version", 1).str("scene", o.scene_path);
+std::string scene_digest(const std::string& text) {
+  std::uint64_t h = 14695981039346656037ull;
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  char buf[24];
+  std::snprintf(buf, sizeof buf, "%016llx", static_cast<unsigned long long>(h));
+  return buf;
+}
+
+namespace {
+
+// The header's fields that say which sweep made a table (a resumed table must be of
+// the same sweep): the JSON text of each.
+std::string set_json(const SweepOptions& o) {
   std::string sets = "[";
   for (std::size_t k = 0; k < o.sets.size(); ++k) sets += (k ? ", " : "") + Json::string(o.sets[k]);
-  j.raw("set", sets + "]");
+  return sets + "]";
+}
+std::string values_json(const SweepAxis& a) {
+  std::string values = "[";
+  for (std::size_t v = 0; v < a.values.size(); ++v) values += (v ? ", " : "") + a.values[v].json;
+  return values + "]";
+}
+std::string errors_json(const SweepOptions& o) {
+  return !o.error ? "[]" : o.max_error ? "[\"error\", \"max_error\"]" : "[\"error\"]";
+}
+std::string row_values_json(const SweepOptions& o, std::size_t i, int indent) {
+  Json::Object values;
+  const std::vector<std::size_t> at = sweep_values(o, i);
+  for (std::size_t a = 0; a < o.axes.size(); ++a) values.raw(o.axes[a].key, o.axes[a].values[at[a]].json);
+  return values.dump(indent);
+}
+
+}  // namespace
+
+std::string sweep_row_json(const SweepOptions& o, const SweepRow& row) {
+  Json::Object x;
+  x.num("index", static_cast<double>(row.index));
+  x.raw("values", row_values_json(o, row.index, 8)).str("status", to_string(row.status)).num("code", row.code);
+  x.str("message", row.message);
+  if (o.error) {
+    x.num("error", row.error);
+    if (o.max_error) x.num("max_error", row.max_error);
+    x.raw("reference", row.reference < 0 ? "null" : std::to_string(row.reference));
+    x.num("reference_accuracy", row.reference_accuracy);
+    if (row.problem.empty() && row.final_state.q.empty() && row.final_state.p.empty()) {
+      x.raw("final_state", "null");
+    } else {
+      Json::Object f;
+      f.arr("q", row.final_state.q).arr("p", row.final_state.p);
+      x.raw("final_state", f.dump(8));
+    }
+  }
+  x.raw("cpu_seconds", row.ran ? Json::number(row.cpu_seconds) : "null");
+  x.raw("run", row.ran ? (row.run_json.empty() ? report_json(row.report) : row.run_json) : "null");
+  return x.dump(6);
+}
+
+std::string sweep_json(const SweepOptions& o, const SweepReport& rep) {
+  Json::Object j;
+  j.num("json_version", 1).str("scene", o.scene_path).str("scene_digest", scene_digest(o.scene_text));
+  j.raw("set", set_json(o));
   std::string vary = "[";
   for (std::size_t a = 0; a < o.axes.size(); ++a) {
-    std::string values = "[";
-    for (std::size_t v = 0; v < o.axes[a].values.size(); ++v) values += (v ? ", " : "") + o.axes[a].values[v].json;
     Json::Object x;
-    x.str("key", o.axes[a].key).str("spec", o.axes[a].spec).raw("values", values + "]");
+    x.str("key", o.axes[a].key).str("spec", o.axes[a].spec).raw("values", values_json(o.axes[a]));
     vary += std::string(a ? ", " : "") + x.dump(6);
   }
-  j.raw("vary", vary + "]").str("combine", o.zip ? "zip" : "product");
+  j.raw("vary", vary + "]").str("combine", o.zip ? "zip" : "product").raw("errors", errors_json(o));
   j.num("runs", static_cast<double>(rep.runs)).num("ok", static_cast<double>(rep.ok));
   j.num("failed", static_cast<double>(rep.failed)).num("refused", static_cast<double>(rep.refused));
   if (o.error) {
@@ -753,22 +932,557 @@ std::string sweep_json(const SweepOptions& o, const SweepReport& rep) {
     j.raw("references", refs + (rep.references.empty() ? "]" : "\n  ]"));
   }
   std::string rows = "[";
-  for (std::size_t k = 0; k < rep.rows.size(); ++k) {
-    const SweepRow& row = rep.rows[k];
-    Json::Object x;
-    x.num("index", static_cast<double>(row.index));
-    Json::Object values;
-    const std::vector<std::size_t> at = sweep_values(o, row.index);
-    for (std::size_t a = 0; a < o.axes.size(); ++a) values.raw(o.axes[a].key, o.axes[a].values[at[a]].json);
-    x.raw("values", values.dump(8)).str("status", to_string(row.status)).num("code", row.code);
-    x.str("message", row.message);
-    if (o.error) x.num("error", row.error).raw("reference", row.reference < 0 ? "null" : std::to_string(row.reference));
-    x.raw("cpu_seconds", row.ran ? Json::number(row.cpu_seconds) : "null");
-    x.raw("run", row.ran ? report_json(row.report) : "null");
-    rows += std::string(k ? ",\n    " : "\n    ") + x.dump(6);
-  }
+  for (std::size_t k = 0; k < rep.rows.size(); ++k)
+    rows += std::string(k ? ",\n    " : "\n    ") + sweep_row_json(o, rep.rows[k]);
   j.raw("rows", rows + (rep.rows.empty() ? "]" : "\n  ]"));
   return j.dump() + "\n";
 }
+
+std::string write_sweep_table(const SweepOptions& o, const SweepReport& rep, const std::string& path) {
+  try {
+    // the JSON (what a resumed sweep reads) first
+    for (const bool json : {true, false}) {
+      const std::string file = path + (json ? ".json" : ".csv");
+      const std::string text = json ? sweep_json(o, rep) : sweep_csv(o, rep);
+      OutputFile f;
+      f.open(file, "--out (" + file + ")", static_cast<double>(text.size()));
+      if (std::fwrite(text.data(), 1, text.size(), f.get()) != text.size()) {
+        const std::string why = f.finish(false);
+        return file + ": the table could not be written" + (why.empty() ? std::string() : ": " + why);
+      }
+      const std::string why = f.finish(true);
+      if (!why.empty()) return why;
+    }
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+// ---- reading a table back --------------------------------------------------------------
+
+namespace {
+
+// A JSON value as the table's reader needs it: its kind, its contents, and where its
+// text is (the run's object is kept as the text it was written as).
+struct JValue {
+  enum Kind { null, boolean, number, string, array, object } kind = null;
+  bool b = false;
+  double x = NAN;
+  std::string s;
+  std::vector<JValue> items;
+  std::vector<std::pair<std::string, JValue>> members;
+  std::size_t begin = 0, end = 0;
+
+  const JValue* find(const std::string& key) const {
+    for (const auto& [k, v] : members)
+      if (k == key) return &v;
+    return nullptr;
+  }
+};
+
+class JReader {
+ public:
+  JReader(const std::string& text, std::string where) : t_(text), where_(std::move(where)) {}
+  JValue document() {
+    JValue v = value(0);
+    space();
+    if (at_ < t_.size()) fail("text after the end of the JSON value");
+    return v;
+  }
+
+ private:
+  [[noreturn]] void fail(const std::string& why) const {
+    throw InputError(where_ + ": not a JSON table of dvm sweep (at byte " + std::to_string(at_) + ": " + why + ")");
+  }
+  void space() {
+    while (at_ < t_.size() && (t_[at_] == ' ' || t_[at_] == '\n' || t_[at_] == '\r' || t_[at_] == '\t')) ++at_;
+  }
+  bool word(const char* w) {
+    const std::size_t n = std::strlen(w);
+    if (t_.compare(at_, n, w) != 0) return false;
+    at_ += n;
+    return true;
+  }
+  JValue value(int depth) {
+    if (depth > 64) fail("nested too deeply");
+    space();
+    if (at_ >= t_.size()) fail("unexpected end");
+    JValue v;
+    v.begin = at_;
+    const char c = t_[at_];
+    if (c == '{') {
+      v.kind = JValue::object;
+      ++at_;
+      space();
+      if (at_ < t_.size() && t_[at_] == '}') {
+        ++at_;
+      } else {
+        while (true) {
+          space();
+          if (at_ >= t_.size() || t_[at_] != '"') fail("expected a member name");
+          std::string key = string_text();
+          space();
+          if (at_ >= t_.size() || t_[at_] != ':') fail("expected ':'");
+          ++at_;
+          v.members.emplace_back(std::move(key), value(depth + 1));
+          space();
+          if (at_ < t_.size() && t_[at_] == ',') {
+            ++at_;
+            continue;
+          }
+          if (at_ < t_.size() && t_[at_] == '}') {
+            ++at_;
+            break;
+          }
+          fail("expected ',' or '}'");
+        }
+      }
+    } else if (c == '[') {
+      v.kind = JValue::array;
+      ++at_;
+      space();
+      if (at_ < t_.size() && t_[at_] == ']') {
+        ++at_;
+      } else {
+        while (true) {
+          v.items.push_back(value(depth + 1));
+          space();
+          if (at_ < t_.size() && t_[at_] == ',') {
+            ++at_;
+            continue;
+          }
+          if (at_ < t_.size() && t_[at_] == ']') {
+            ++at_;
+            break;
+          }
+          fail("expected ',' or ']'");
+        }
+      }
+    } else if (c == '"') {
+      v.kind = JValue::string;
+      v.s = string_text();
+    } else if (word("null")) {
+      v.kind = JValue::null;
+    } else if (word("true")) {
+      v.kind = JValue::boolean;
+      v.b = true;
+    } else if (word("false")) {
+      v.kind = JValue::boolean;
+    } else {
+      const std::size_t start = at_;
+      while (at_ < t_.size() && std::strchr("+-0123456789.eE", t_[at_])) ++at_;
+      const std::string num = t_.substr(start, at_ - start);
+      char* end = nullptr;
+      v.kind = JValue::number;
+      v.x = std::strtod(num.c_str(), &end);
+      if (num.empty() || *end != '\0') fail("expected a value");
+    }
+    v.end = at_;
+    return v;
+  }
+  static void utf8(std::string& out, unsigned cp) {
+    if (cp < 0x80) {
+      out += static_cast<char>(cp);
+    } else if (cp < 0x800) {
+      out += static_cast<char>(0xc0 | (cp >> 6));
+      out += static_cast<char>(0x80 | (cp & 0x3f));
+    } else {
+      out += static_cast<char>(0xe0 | (cp >> 12));
+      out += static_cast<char>(0x80 | ((cp >> 6) & 0x3f));
+      out += static_cast<char>(0x80 | (cp & 0x3f));
+    }
+  }
+  std::string string_text() {
+    ++at_;  // the opening quote
+    std::string out;
+    while (true) {
+      if (at_ >= t_.size()) fail("a string without its closing quote");
+      const char c = t_[at_++];
+      if (c == '"') return out;
+      if (c != '\\') {
+        out += c;
+        continue;
+      }
+      if (at_ >= t_.size()) fail("a string without its closing quote");
+      const char e = t_[at_++];
+      switch (e) {
+        case '"': out += '"'; break;
+        case '\\': out += '\\'; break;
+        case '/': out += '/'; break;
+        case 'b': out += '\b'; break;
+        case 'f': out += '\f'; break;
+        case 'n': out += '\n'; break;
+        case 'r': out += '\r'; break;
+        case 't': out += '\t'; break;
+        case 'u': {
+          if (at_ + 4 > t_.size()) fail("a short \\u escape");
+          const std::string hex = t_.substr(at_, 4);
+          char* end = nullptr;
+          const unsigned long cp = std::strtoul(hex.c_str(), &end, 16);
+          if (*end != '\0') fail("a bad \\u escape");
+          at_ += 4;
+          utf8(out, static_cast<unsigned>(cp));
+          break;
+        }
+        default: fail("an unknown escape");
+      }
+    }
+  }
+  const std::string& t_;
+  std::string where_;
+  std::size_t at_ = 0;
+};
+
+[[noreturn]] void bad_table(const std::string& where, const std::string& why) {
+  throw InputError(where + ": not a JSON table of dvm sweep (" + why + ")");
+}
+
+const JValue& member(const JValue& v, const std::string& key, JValue::Kind kind, const std::string& where) {
+  const JValue* m = v.kind == JValue::object ? v.find(key) : nullptr;
+  if (!m) bad_table(where, "no member '" + key + "'");
+  if (m->kind != kind && !(kind == JValue::number && m->kind == JValue::null))
+    bad_table(where, "'" + key + "' is not of the expected type");
+  return *m;
+}
+double number_or_nan(const JValue& v, const std::string& key, const std::string& where) {
+  const JValue* m = v.find(key);
+  if (!m || m->kind == JValue::null) return NAN;
+  if (m->kind != JValue::number) bad_table(where, "'" + key + "' is not a number");
+  return m->x;
+}
+std::string text_of(const JValue& v, const std::string& key, const std::string& where) {
+  const JValue* m = v.find(key);
+  if (!m) return "";
+  if (m->kind != JValue::string) bad_table(where, "'" + key + "' is not a string");
+  return m->s;
+}
+std::vector<double> numbers(const JValue* v, const std::string& where) {
+  std::vector<double> out;
+  if (!v) return out;
+  if (v->kind != JValue::array) bad_table(where, "expected an array of numbers");
+  for (const JValue& x : v->items) {
+    if (x.kind != JValue::number && x.kind != JValue::null) bad_table(where, "expected an array of numbers");
+    out.push_back(x.x);
+  }
+  return out;
+}
+
+// A row of the table, as sweep_row_json wrote it.
+SweepRow row_from(const SweepOptions& o, const JValue& v, const std::string& text, const std::string& where) {
+  if (v.kind != JValue::object) bad_table(where, "a row is not an object");
+  const double index = member(v, "index", JValue::number, where).x;
+  const std::size_t n = sweep_size(o);
+  if (!(index >= 0 && index < static_cast<double>(n) && index == std::floor(index)))
+    bad_table(where, "a row index outside the sweep's " + std::to_string(n) + " runs");
+  SweepRow row;
+  row.index = static_cast<std::size_t>(index);
+  const std::string at = where + ", row " + std::to_string(row.index);
+  // the row's values are those of its index in this sweep
+  const JValue& values = member(v, "values", JValue::object, at);
+  if (text.compare(values.begin, values.end - values.begin, row_values_json(o, row.index, 8)) != 0)
+    throw InputError(at + ": its values " + text.substr(values.begin, values.end - values.begin) +
+                     " are not those of row " + std::to_string(row.index) + " of this sweep " +
+                     row_values_json(o, row.index, 8) + "; the table was made by another sweep");
+  const std::string status = member(v, "status", JValue::string, at).s;
+  if (status == "ok") row.status = RowStatus::ok;
+  else if (status == "failed") row.status = RowStatus::failed;
+  else if (status == "refused") row.status = RowStatus::refused;
+  else bad_table(at, "status '" + status + "'");
+  row.code = static_cast<int>(member(v, "code", JValue::number, at).x);
+  row.message = member(v, "message", JValue::string, at).s;
+  if (o.error) {
+    row.error = number_or_nan(v, "error", at);
+    if (o.max_error) row.max_error = number_or_nan(v, "max_error", at);
+    row.reference_accuracy = number_or_nan(v, "reference_accuracy", at);
+    const double reference = number_or_nan(v, "reference", at);
+    row.reference = std::isnan(reference) ? -1 : static_cast<int>(reference);
+    const JValue* f = v.find("final_state");
+    if (f && f->kind == JValue::object) {
+      row.final_state.q = numbers(f->find("q"), at);
+      row.final_state.p = numbers(f->find("p"), at);
+    }
+  }
+  const JValue* run = v.find("run");
+  if (!run) bad_table(at, "no member 'run'");
+  if (run->kind == JValue::object) {
+    row.ran = true;
+    row.cpu_seconds = number_or_nan(v, "cpu_seconds", at);
+    row.run_json = text.substr(run->begin, run->end - run->begin);
+    RunReport& r = row.report;
+    r.failed = text_of(*run, "status", at) == "failed";
+    r.boundary_value = text_of(*run, "problem", at) == "boundary-value";
+    r.system = text_of(*run, "system", at);
+    r.map = text_of(*run, "map", at);
+    r.method = text_of(*run, "method", at);
+    r.composition = text_of(*run, "composition", at);
+    r.form = text_of(*run, "form", at);
+    r.step = number_or_nan(*run, "step", at);
+    r.steps = static_cast<std::int64_t>(number_or_nan(*run, "steps", at));
+    const double requested = number_or_nan(*run, "steps_requested", at);
+    r.steps_requested = std::isnan(requested) ? 0 : static_cast<std::int64_t>(requested);
+    r.t_final = number_or_nan(*run, "t_final", at);
+    r.wall_seconds = number_or_nan(*run, "wall_seconds", at);
+    r.energy_initial = number_or_nan(*run, "energy_initial", at);
+    r.energy_final = number_or_nan(*run, "energy_final", at);
+    r.max_abs_energy_error = number_or_nan(*run, "max_abs_energy_error", at);
+    r.solver_iterations = static_cast<std::int64_t>(number_or_nan(*run, "solver_iterations", at));
+    r.jacobians = static_cast<std::int64_t>(number_or_nan(*run, "jacobians", at));
+    const double most = number_or_nan(*run, "max_step_iterations", at);
+    r.max_step_iterations = std::isnan(most) ? 0 : static_cast<int>(most);
+    const double order = number_or_nan(*run, "order", at);
+    r.order = std::isnan(order) ? 0 : static_cast<int>(order);
+    r.q_final = numbers(run->find("q_final"), at);
+    r.p_final = numbers(run->find("p_final"), at);
+    if (const JValue* f = run->find("failure"); f && f->kind == JValue::object) {
+      r.loop.failed_step = static_cast<std::int64_t>(number_or_nan(*f, "step", at));
+      r.loop.failed_time = number_or_nan(*f, "time", at);
+    }
+  } else if (run->kind != JValue::null) {
+    bad_table(at, "'run' is neither an object nor null");
+  }
+  // the key of its problem (errors against a reference run)
+  if (o.error && row.status == RowStatus::ok) {
+    const Scene s = load_row(o, row.index);
+    row.t_end = static_cast<double>(s.problem.steps) * s.problem.step;
+    row.problem = problem_key(o, row.index, row.t_end);
+  }
+  // the row must render as it was read
+  if (sweep_row_json(o, row) != text.substr(v.begin, v.end - v.begin))
+    throw InputError(at + ": the row does not read back as it was written (a table written by another version of "
+                     "dvm, or edited)");
+  // the references are found again (attach_errors), and the errors against reference
+  // runs measured again
+  row.reference = -1;
+  if (std::isnan(row.reference_accuracy)) row.error = NAN;
+  return row;
+}
+
+}  // namespace
+
+SweepRow sweep_row_from_json(const SweepOptions& o, const std::string& text) {
+  JReader reader(text, "a row of the sweep");
+  return row_from(o, reader.document(), text, "a row of the sweep");
+}
+
+SweepRows read_sweep_table(const SweepOptions& o, const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError("--resume: cannot read the table " + path);
+  std::ostringstream buf;
+  buf << in.rdbuf();
+  const std::string text = buf.str();
+  const std::string where = "--resume: " + path;
+  JReader reader(text, where);
+  const JValue doc = reader.document();
+  if (doc.kind != JValue::object) bad_table(where, "not an object");
+  auto raw = [&](const JValue& v) { return text.substr(v.begin, v.end - v.begin); };
+  auto differs = [&](const std::string& what, const std::string& table, const std::string& ours) {
+    throw InputError(where + " was made by another sweep: " + what + " " + table + " in the table, " + ours +
+                     " in this sweep; run it without --resume (or with another --out) to start again");
+  };
+  if (member(doc, "json_version", JValue::number, where).x != 1) bad_table(where, "json_version is not 1");
+  const std::string scene = member(doc, "scene", JValue::string, where).s;
+  if (scene != o.scene_path) differs("the scene file is", Json::string(scene), Json::string(o.scene_path));
+  const std::string digest = text_of(doc, "scene_digest", where);
+  if (digest != scene_digest(o.scene_text))
+    differs("the scene's text (its digest) is", Json::string(digest),
+            Json::string(scene_digest(o.scene_text)) + " (the file changed since)");
+  if (raw(member(doc, "set", JValue::array, where)) != set_json(o))
+    differs("--set is", raw(*doc.find("set")), set_json(o));
+  const JValue& vary = member(doc, "vary", JValue::array, where);
+  std::string keys = "[", our_keys = "[";
+  for (std::size_t a = 0; a < vary.items.size(); ++a)
+    keys += (a ? ", " : "") + Json::string(member(vary.items[a], "key", JValue::string, where).s);
+  for (std::size_t a = 0; a < o.axes.size(); ++a) our_keys += (a ? ", " : "") + Json::string(o.axes[a].key);
+  if (keys + "]" != our_keys + "]") differs("the varied keys are", keys + "]", our_keys + "]");
+  for (std::size_t a = 0; a < o.axes.size(); ++a) {
+    const std::string values = raw(member(vary.items[a], "values", JValue::array, where));
+    if (values != values_json(o.axes[a]))
+      differs("the values of --vary " + o.axes[a].key + " are", values, values_json(o.axes[a]));
+  }
+  const std::string combine = member(doc, "combine", JValue::string, where).s;
+  if (combine != (o.zip ? "zip" : "product"))
+    differs("the combination (--zip or not) is", combine, o.zip ? "zip" : "product");
+  if (raw(member(doc, "errors", JValue::array, where)) != errors_json(o))
+    differs("the errors measured (--error, --max-error) are", raw(*doc.find("errors")), errors_json(o));
+  const std::size_t n = sweep_size(o);
+  if (member(doc, "runs", JValue::number, where).x != static_cast<double>(n))
+    bad_table(where, "'runs' is not the sweep's number of runs");
+  SweepRows out;
+  out.rows.resize(n);
+  out.have.assign(n, 0);
+  for (const JValue& r : member(doc, "rows", JValue::array, where).items) {
+    SweepRow row = row_from(o, r, text, where);
+    if (out.have[row.index]) bad_table(where, "row " + std::to_string(row.index) + " twice");
+    out.have[row.index] = 1;
+    out.rows[row.index] = std::move(row);
+  }
+  return out;
+}
+
+// ---- ranks (MPI) ---------------------------------------------------------------------
+
+bool launched_by_mpirun() { return std::getenv("OMPI_COMM_WORLD_SIZE") != nullptr; }
+
+#ifdef DVM_WITH_MPI
+
+bool sweep_mpi_built() { return true; }
+
+SweepRanks::SweepRanks() {
+  if (!launched_by_mpirun()) return;
+  // only the main thread calls MPI (rank 0's second thread runs rows)
+  int provided = 0;
+  MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
+  mpi_ = true;
+  MPI_Comm_rank(MPI_COMM_WORLD, &rank_);
+  MPI_Comm_size(MPI_COMM_WORLD, &size_);
+}
+
+SweepRanks::~SweepRanks() {
+  if (mpi_) MPI_Finalize();
+}
+
+std::string SweepRanks::share(const std::string& on_rank0) const {
+  if (!mpi_) return on_rank0;
+  unsigned long long n = on_rank0.size();
+  MPI_Bcast(&n, 1, MPI_UNSIGNED_LONG_LONG, 0, MPI_COMM_WORLD);
+  std::string text = rank_ == 0 ? on_rank0 : std::string(n, '\0');
+  // in pieces that an int counts
+  for (unsigned long long at = 0; at < n; at += 1ull << 30) {
+    const int piece = static_cast<int>(std::min<unsigned long long>(n - at, 1ull << 30));
+    MPI_Bcast(text.data() + at, piece, MPI_CHAR, 0, MPI_COMM_WORLD);
+  }
+  return text;
+}
+
+int SweepRanks::share(int on_rank0) const {
+  int v = on_rank0;
+  if (mpi_) MPI_Bcast(&v, 1, MPI_INT, 0, MPI_COMM_WORLD);
+  return v;
+}
+
+void SweepRanks::abort(int code) const {
+  if (mpi_) MPI_Abort(MPI_COMM_WORLD, code);
+  std::exit(code);
+}
+
+namespace {
+
+constexpr int kTagAsk = 1;    // worker -> 0: the text of the row it ran ("" at first)
+constexpr int kTagIndex = 2;  // 0 -> worker: the next row to run, or -1: none left
+
+// Rank 0's side: answers the other ranks until each has been told that no row is
+// left, taking rows from `next` as its own thread does.
+void serve(const SweepOptions& o, const std::vector<long long>& runs, std::atomic<std::size_t>& next,
+           Gather& gather, int ranks) {
+  int working = ranks - 1;
+  std::string text;
+  while (working > 0) {
+    int waiting = 0;
+    MPI_Status st;
+    MPI_Iprobe(MPI_ANY_SOURCE, kTagAsk, MPI_COMM_WORLD, &waiting, &st);
+    if (!waiting) {
+      // (OpenMPI's blocking receive would spin on a core that rank 0's rows need)
+      const timespec pause{0, 200000};
+      nanosleep(&pause, nullptr);
+      continue;
+    }
+    int length = 0;
+    MPI_Get_count(&st, MPI_CHAR, &length);
+    text.assign(static_cast<std::size_t>(length), '\0');
+    MPI_Recv(text.data(), length, MPI_CHAR, st.MPI_SOURCE, kTagAsk, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    if (!text.empty()) gather.add(sweep_row_from_json(o, text));
+    const std::size_t t = next++;
+    const long long index = t < runs.size() ? runs[t] : -1;
+    MPI_Send(&index, 1, MPI_LONG_LONG, st.MPI_SOURCE, kTagIndex, MPI_COMM_WORLD);
+    if (index < 0) --working;
+  }
+}
+
+// The other ranks' side: ask, run, send the row back with the next question.
+void work(const SweepOptions& o) {
+  std::string text;
+  while (true) {
+    MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, 0, kTagAsk, MPI_COMM_WORLD);
+    long long index = -1;
+    MPI_Recv(&index, 1, MPI_LONG_LONG, 0, kTagIndex, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+    if (index < 0) return;
+    text = sweep_row_json(o, run_row(o, static_cast<std::size_t>(index)));
+  }
+}
+
+}  // namespace
+
+SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepFlush& flush, const SweepRanks& ranks) {
+  if (ranks.size() == 1) return run_sweep(o, done, flush);
+  if (ranks.rank() != 0) {
+    if (ranks.share(0) == 1) work(o);  // rank 0 found no bad input
+    return SweepReport{};
+  }
+  const std::size_t n = sweep_size(o);
+  match_thread_stacks();
+  const std::vector<long long> todo = rows_to_run(n, done);
+  // 1. checked on rank 0 alone; the other ranks wait for the outcome
+  std::vector<std::string> refusals;
+  try {
+    refusals = check_rows(o, done, todo, 1);
+  } catch (...) {
+    ranks.share(0);
+    throw;
+  }
+  ranks.share(1);
+  // 2. refused rows at once; the others handed out one at a time
+  Gather gather(n, done, flush);
+  std::vector<long long> runs;
+  for (long long k : todo) {
+    if (refusals[static_cast<std::size_t>(k)].empty())
+      runs.push_back(k);
+    else
+      gather.add(refused_row(static_cast<std::size_t>(k), refusals[static_cast<std::size_t>(k)]));
+  }
+  std::atomic<std::size_t> next{0};
+  std::string failure;
+#pragma omp parallel num_threads(2)
+  {
+    if (omp_get_thread_num() == 0) {
+      try {
+        serve(o, runs, next, gather, ranks.size());
+      } catch (const std::exception& e) {
+        failure = e.what();
+      }
+    } else {
+      for (std::size_t t = next++; t < runs.size(); t = next++)
+        gather.add(run_row(o, static_cast<std::size_t>(runs[t])));
+    }
+  }
+  if (!failure.empty()) {
+    std::fprintf(stderr, "dvm: internal error: sweep: a row from another rank: %s\n", failure.c_str());
+    ranks.abort(3);
+  }
+  SweepReport rep = gather.finish();
+  // 3. errors against references, on rank 0
+  if (o.error) attach_errors(o, rep.rows, rep.references);
+  return rep;
+}
+
+#else
+
+bool sweep_mpi_built() { return false; }
+
+SweepRanks::SweepRanks() {
+  if (launched_by_mpirun())
+    throw InputError("sweep: started by mpirun (OMPI_COMM_WORLD_SIZE is set), but this dvm was built without MPI; "
+                     "rebuild with Debian's libopenmpi-dev installed, or run without mpirun (--jobs N threads)");
+}
+SweepRanks::~SweepRanks() = default;
+std::string SweepRanks::share(const std::string& on_rank0) const { return on_rank0; }
+int SweepRanks::share(int on_rank0) const { return on_rank0; }
+void SweepRanks::abort(int code) const { std::exit(code); }
+
+SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepFlush& flush, const SweepRanks&) {
+  return run_sweep(o, done, flush);
+}
+
+#endif
 
 }  // namespace dvm

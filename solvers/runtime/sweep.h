@@ -23,12 +23,22 @@
 // dvm converge, solvers/runtime/converge.h) computed once per distinct problem: the
 // rows that share their values outside [integrator] and [output] and their time span
 // T = steps x step. Where the system has an exact solution, each run is measured
-// against it at its own final time.
+// against it at its own final time. SweepOptions::max_error adds the largest error
+// along the run, over every step: measured against the exact solution, so a row
+// whose system has none is refused.
+//
+// Tables written as rows finish, and resumed: run_sweep hands the rows finished so far
+// to a callback (write_sweep_table writes them, each file by a temporary renamed onto
+// its path), and read_sweep_table reads such a table back, so that a sweep stopped
+// midway runs only the rows the table lacks. A row read back renders to the same
+// text as when it was run (its numbers have 17 digits), so the resumed table is the
+// uninterrupted one.
 #pragma once
 
 #include <cstddef>
 #include <cmath>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -61,6 +71,7 @@ struct SweepOptions {
   std::vector<SweepAxis> axes;
   bool zip = false;
   bool error = false;  // measure each run's error against a reference
+  bool max_error = false;  // and the largest along the run (with error; needs an exact solution)
   int jobs = 1;        // threads
   double max_runs = kDefaultMaxRuns;
   static constexpr double kDefaultMaxRuns = 1e6;
@@ -95,8 +106,10 @@ struct SweepRow {
   double t_end = 0.0;       // steps x step of the problem
   FinalState final_state;   // as the error measures it
   double error = NAN;       // NaN: none (a failed or refused run, or a failed reference)
+  double max_error = NAN;   // SweepOptions::max_error: the largest error over the steps
   double reference_accuracy = NAN;  // an exact solution's (the others are the reference's)
   int reference = -1;       // index into SweepReport::references
+  std::string run_json;     // the report as JSON (report_json, or the text read back)
 };
 
 // Reads row i's scene and builds its run without running it; "" when it can run,
@@ -121,6 +134,19 @@ struct SweepReport {
   std::vector<SweepReference> references;
 };
 
+// The rows of a sweep as they stand: row i is there when have[i] (size: the sweep's).
+struct SweepRows {
+  std::vector<SweepRow> rows;
+  std::vector<char> have;
+};
+
+// What run_sweep calls with the rows finished so far (with those given to it), in
+// the sweep's order, without errors against reference runs (their rows need the
+// others): after a row finishes, unless the last call took more than a tenth of the
+// time since it ended (so at most a tenth of a sweep's time goes to it). One call at
+// a time; the runs go on meanwhile.
+using SweepFlush = std::function<void(const SweepReport& finished)>;
+
 // The sweep on options.jobs threads:
 //   1. every row is checked (check_row); a value of a varied key that every row it
 //      takes part in refuses is bad input: InputError naming the key and the value,
@@ -130,13 +156,82 @@ struct SweepReport {
 //      exact solution (attach_errors).
 // The report is the same for any number of threads.
 SweepReport run_sweep(const SweepOptions& options);
+// The same, with the rows of `done` taken as they are (neither checked nor run again;
+// a refused one counts as refused in step 1), and `flush` called as rows finish.
+SweepReport run_sweep(const SweepOptions& options, const SweepRows& done, const SweepFlush& flush);
 
 // The references of the rows not yet measured, one per distinct problem (on
 // options.jobs threads), and their rows' errors.
 void attach_errors(const SweepOptions& options, std::vector<SweepRow>& rows, std::vector<SweepReference>& references);
 
-// The table as CSV (a header row, then one row per run) and as JSON.
+// The table as CSV (a header row, then one row per run) and as JSON. A report with
+// fewer rows than the sweep has runs is a table of the rows finished so far.
 std::string sweep_csv(const SweepOptions& options, const SweepReport& report);
 std::string sweep_json(const SweepOptions& options, const SweepReport& report);
+
+// Writes PATH.csv and PATH.json, each to a temporary beside it renamed onto it (the
+// JSON first). Returns "" or what went wrong.
+std::string write_sweep_table(const SweepOptions& options, const SweepReport& report, const std::string& path);
+
+// Reads back the rows of a table PATH.json written by a sweep with the same options
+// (scene file and its text, --set, varied keys and values, zip, errors measured).
+// Throws InputError naming what differs, or where the text is not such a table.
+SweepRows read_sweep_table(const SweepOptions& options, const std::string& json_path);
+
+// One row as the table's JSON writes it, and back (the row's rendering, and its
+// values, checked against the options; InputError otherwise).
+std::string sweep_row_json(const SweepOptions& options, const SweepRow& row);
+SweepRow sweep_row_from_json(const SweepOptions& options, const std::string& text);
+
+// The hash of the scene's text a table carries (FNV-1a, 64 bits, in hex).
+std::string scene_digest(const std::string& text);
+
+// ---- ranks (MPI) -------------------------------------------------------------------
+// A sweep started by OpenMPI's mpirun runs its rows on every rank: rank 0 checks the
+// rows, hands out the index of the next row to run to whichever rank asks (ranks
+// ask when they start and when they finish a row, so that cheap and costly rows
+// spread evenly), runs rows itself on a second thread meanwhile, gathers the rows
+// (each sent as the text of its row in the JSON table) and alone writes the table.
+// The rows are those of the same sweep on threads, so the table is the same.
+//
+// MPI is an optional part of the build (DVM_WITH_MPI, only this library's sweep.cc
+// is compiled against it). A process is taken as started by mpirun when OpenMPI's
+// environment variable OMPI_COMM_WORLD_SIZE is set: only then is MPI initialised, so
+// a process started otherwise never touches MPI.
+
+// Whether this library was built with MPI.
+bool sweep_mpi_built();
+// Whether OMPI_COMM_WORLD_SIZE is set.
+bool launched_by_mpirun();
+
+// The ranks of this process's launch: MPI initialised for the lifetime of the object
+// when launched by mpirun (InputError when this library was built without MPI), a
+// single rank 0 otherwise.
+class SweepRanks {
+ public:
+  SweepRanks();
+  ~SweepRanks();
+  SweepRanks(const SweepRanks&) = delete;
+  SweepRanks& operator=(const SweepRanks&) = delete;
+  bool mpi() const { return mpi_; }  // whether MPI was initialised
+  int rank() const { return rank_; }
+  int size() const { return size_; }
+  // Rank 0's value on every rank (every rank calls it, in the same order).
+  std::string share(const std::string& on_rank0) const;
+  int share(int on_rank0) const;
+  // Ends every rank's process with the code (after a failure that leaves some rank
+  // waiting for the others).
+  [[noreturn]] void abort(int code) const;
+
+ private:
+  bool mpi_ = false;
+  int rank_ = 0, size_ = 1;
+};
+
+// run_sweep over the ranks (one of them, ranks.size() 1: run_sweep above). Every rank
+// calls it; rank 0 returns the report (it throws the InputError of step 1, after
+// telling the others), the other ranks an empty report (runs 0).
+SweepReport run_sweep(const SweepOptions& options, const SweepRows& done, const SweepFlush& flush,
+                      const SweepRanks& ranks);
 
 }  // namespace dvm

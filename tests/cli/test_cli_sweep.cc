@@ -10,6 +10,12 @@
 
 #include "tests/cli/cli_harness.h"
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <time.h>
+#include <unistd.h>
+
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -98,6 +104,58 @@ Json sweep_json(std::vector<std::string> args, const std::string& out, int statu
   BOOST_TEST_REQUIRE(o.status == status, o.err);
   BOOST_TEST(slurp(out + ".json") == o.out);
   return parse_json(o.out);
+}
+
+// A table without the fields that measure time: the JSON's rows' cpu_seconds and their
+// runs' wall_seconds and compile_seconds.
+Json untimed_table(Json j) {
+  for (Json& row : j.at("rows")) {
+    row.erase("cpu_seconds");
+    if (row.at("run").is_object()) row["run"] = untimed(row.at("run"));
+  }
+  return j;
+}
+
+// The CSV's rows with the cells of the columns that measure time emptied.
+std::vector<std::vector<std::string>> untimed_csv(const std::string& text) {
+  auto rows = csv_rows(text);
+  BOOST_TEST_REQUIRE(!rows.empty());
+  const std::size_t wall = column(rows[0], "wall_seconds"), cpu = column(rows[0], "cpu_seconds");
+  for (std::size_t i = 1; i < rows.size(); ++i)
+    for (std::size_t k : {wall, cpu})
+      if (k < rows[i].size()) rows[i][k].clear();
+  return rows;
+}
+
+// Starts dvm with the arguments (stdout and stderr to files in the temporary folder);
+// returns its process id.
+pid_t start_dvm(const std::vector<std::string>& args) {
+  std::vector<std::string> all = {dvm_binary()};
+  all.insert(all.end(), args.begin(), args.end());
+  const std::string out = temp_dir() + "/started.out", err = temp_dir() + "/started.err";
+  const pid_t pid = fork();
+  BOOST_REQUIRE(pid >= 0);
+  if (pid == 0) {
+    const int o = ::open(out.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    const int e = ::open(err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    if (o < 0 || e < 0) _exit(127);
+    dup2(o, 1);
+    dup2(e, 2);
+    std::vector<char*> argv;
+    for (std::string& a : all) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execv(argv[0], argv.data());
+    _exit(127);
+  }
+  return pid;
+}
+
+// The number of rows of the JSON table at `path` (-1 while there is none).
+int table_rows(const std::string& path) {
+  if (!file_exists(path)) return -1;
+  const Json j = Json::parse(slurp(path), nullptr, false);
+  BOOST_REQUIRE_MESSAGE(!j.is_discarded(), path << " is not JSON while the sweep runs: it must be replaced whole");
+  return static_cast<int>(j.at("rows").size());
 }
 
 }  // namespace
@@ -382,4 +440,197 @@ BOOST_AUTO_TEST_CASE(the_stability_thresholds_of_dvm_methods_are_those_of_the_st
     }
   }
   BOOST_TEST(at_threshold >= 22);
+}
+
+// A sweep killed (SIGKILL) once its table holds some rows, then resumed: the rows the
+// killed sweep wrote are kept as they are (a failed row too: it is not run again, so
+// its timings are those of the killed sweep), the others run, and the table equals
+// the one of the same sweep never stopped, row for row, but for the timings.
+BOOST_AUTO_TEST_CASE(a_sweep_killed_midway_and_resumed_equals_the_uninterrupted_one) {
+  // 16 runs of 10^6 midpoint steps; those with one Newton iteration fail at step 0
+  const std::string s = write_scene("long.toml",
+                                    "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
+                                    "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = 1000000\n");
+  const std::vector<std::string> args = {"sweep", s, "--jobs", "1", "--vary", "integrator.step=log:0.0005:0.002:8",
+                                         "--vary", "integrator.max_iterations=[25, 1]"};
+  auto with = [&](std::vector<std::string> extra) {
+    std::vector<std::string> a = args;
+    a.insert(a.end(), extra.begin(), extra.end());
+    return a;
+  };
+  const std::string whole = temp_dir() + "/whole", cut = temp_dir() + "/cut";
+  const Output w = dvm(with({"--out", whole}));
+  BOOST_TEST_REQUIRE(w.status == 3, w.err);  // the failed runs
+  const Json expected = parse_json(slurp(whole + ".json"));
+  BOOST_TEST_REQUIRE(expected.at("rows").size() == 16u);
+  BOOST_TEST(expected.at("failed").get<int>() == 8);
+
+  // killed once the table has at least one row and not all
+  const pid_t pid = start_dvm(with({"--out", cut}));
+  int rows = -1;
+  for (int tries = 0; tries < 200000; ++tries) {
+    rows = table_rows(cut + ".json");
+    if (rows >= 2 && rows < 16) break;
+    int status = 0;
+    if (waitpid(pid, &status, WNOHANG) == pid) BOOST_FAIL("the sweep ended before it could be killed: " << rows);
+    const timespec pause{0, 1000000};
+    nanosleep(&pause, nullptr);
+  }
+  BOOST_TEST_REQUIRE(kill(pid, SIGKILL) == 0);
+  int status = 0;
+  BOOST_TEST_REQUIRE(waitpid(pid, &status, 0) == pid);
+  BOOST_TEST_REQUIRE(WIFSIGNALED(status));
+  const Json killed = parse_json(slurp(cut + ".json"));
+  const std::size_t kept = killed.at("rows").size();
+  BOOST_TEST_MESSAGE("killed with " << kept << " of 16 rows in the table");
+  BOOST_TEST_REQUIRE(kept >= 2u);
+  BOOST_TEST_REQUIRE(kept < 16u);
+  // a table of the rows finished so far, each the uninterrupted sweep's row
+  BOOST_TEST(killed.at("runs").get<int>() == 16);
+  bool failed_kept = false;
+  for (const Json& row : killed.at("rows")) {
+    const std::size_t i = row.at("index").get<std::size_t>();
+    Json a = row, b = expected.at("rows").at(i);
+    a.erase("cpu_seconds"), b.erase("cpu_seconds");
+    if (a.at("run").is_object()) a["run"] = untimed(a.at("run")), b["run"] = untimed(b.at("run"));
+    BOOST_TEST(a == b, "row " << i);
+    failed_kept = failed_kept || row.at("status") == "failed";
+  }
+  BOOST_TEST_REQUIRE(failed_kept);  // rows run in order: the failed row 1 is among them
+
+  const Output r = dvm(with({"--out", cut, "--resume"}));
+  BOOST_TEST(r.status == 3, r.err);
+  const Json resumed = parse_json(slurp(cut + ".json"));
+  BOOST_TEST(untimed_table(resumed) == untimed_table(expected));
+  BOOST_TEST(untimed_csv(slurp(cut + ".csv")) == untimed_csv(slurp(whole + ".csv")));
+  // the kept rows, failed ones included, were not run again: the same timings
+  for (const Json& row : killed.at("rows")) {
+    const Json& again = resumed.at("rows").at(row.at("index").get<std::size_t>());
+    BOOST_TEST(again.at("cpu_seconds") == row.at("cpu_seconds"));
+    BOOST_TEST(again.at("run").at("wall_seconds") == row.at("run").at("wall_seconds"));
+  }
+  // a complete table resumed runs nothing and is written again as it was
+  const std::string before = slurp(cut + ".json");
+  const Output again = dvm(with({"--out", cut, "--resume"}));
+  BOOST_TEST(again.status == 3, again.err);
+  BOOST_TEST(slurp(cut + ".json") == before);
+}
+
+BOOST_AUTO_TEST_CASE(resume_refuses_the_table_of_another_sweep_and_needs_out) {
+  const std::string s = write_scene("harmonic.toml", kHarmonic);
+  const std::string other = write_scene("other.toml", std::string(kHarmonic) + "# another text\n");
+  const std::string out = temp_dir() + "/resumed";
+  const std::vector<std::string> vary = {"--vary", "integrator.step=[0.1, 0.05]", "--vary",
+                                         "integrator.composition=[none, suzuki5]"};
+  std::vector<std::string> args = {"sweep", s, "--out", out};
+  args.insert(args.end(), vary.begin(), vary.end());
+  BOOST_TEST_REQUIRE(dvm(args).status == 0);
+  const std::string json = slurp(out + ".json"), csv = slurp(out + ".csv");
+  struct Case {
+    std::vector<std::string> args;
+    std::vector<std::string> expect;
+  };
+  const std::vector<Case> cases = {
+      {{"sweep", other, "--out", out, "--resume", "--vary", "integrator.step=[0.1, 0.05]", "--vary",
+        "integrator.composition=[none, suzuki5]"},
+       {"another sweep", "the scene file is", other}},
+      {{"sweep", s, "--out", out, "--resume", "--vary", "integrator.step=[0.1, 0.05]", "--vary",
+        "integrator.map=[midpoint, theta]"},
+       {"another sweep", "varied keys", "integrator.composition", "integrator.map"}},
+      {{"sweep", s, "--out", out, "--resume", "--vary", "integrator.step=[0.1, 0.025]", "--vary",
+        "integrator.composition=[none, suzuki5]"},
+       {"another sweep", "--vary integrator.step", "0.025"}},
+      {{"sweep", s, "--out", out, "--resume", "--zip", "--vary", "integrator.step=[0.1, 0.05]", "--vary",
+        "integrator.composition=[none, suzuki5]"},
+       {"another sweep", "--zip", "product"}},
+      {{"sweep", s, "--out", out, "--resume", "--error", "--vary", "integrator.step=[0.1, 0.05]", "--vary",
+        "integrator.composition=[none, suzuki5]"},
+       {"another sweep", "--error"}},
+      {{"sweep", s, "--out", out, "--resume", "--set", "initial.q=[2.0]", "--vary", "integrator.step=[0.1, 0.05]",
+        "--vary", "integrator.composition=[none, suzuki5]"},
+       {"another sweep", "--set", "initial.q"}},
+      {{"sweep", s, "--resume", "--vary", "integrator.step=[0.1, 0.05]"}, {"--resume needs --out"}},
+  };
+  for (const Case& c : cases) {
+    const Output o = dvm(c.args);
+    BOOST_TEST(o.status == 2, o.err);
+    for (const std::string& e : c.expect) BOOST_TEST(o.err.find(e) != std::string::npos, e << " in: " << o.err);
+    // the table is left as it was
+    BOOST_TEST(slurp(out + ".json") == json);
+    BOOST_TEST(slurp(out + ".csv") == csv);
+  }
+  // the scene's text changed under the same path
+  write_scene("harmonic.toml", std::string(kHarmonic) + "# edited\n");
+  args.push_back("--resume");
+  const Output edited = dvm(args);
+  BOOST_TEST(edited.status == 2, edited.err);
+  BOOST_TEST(edited.err.find("the scene's text") != std::string::npos, edited.err);
+  BOOST_TEST(slurp(out + ".json") == json);
+  // a table that is not one
+  std::ofstream(out + ".json") << "{\"json_version\": 1, \"rows\": [";
+  const Output broken = dvm(args);
+  BOOST_TEST(broken.status == 2, broken.err);
+  BOOST_TEST(broken.err.find("not a JSON table of dvm sweep") != std::string::npos, broken.err);
+  // with no table yet, every run runs (and stderr says so)
+  std::vector<std::string> fresh = {"sweep", s, "--out", temp_dir() + "/fresh", "--resume"};
+  fresh.insert(fresh.end(), vary.begin(), vary.end());
+  const Output f = dvm(fresh);
+  BOOST_TEST(f.status == 0, f.err);
+  BOOST_TEST(f.err.find("no table") != std::string::npos, f.err);
+  BOOST_TEST(parse_json(slurp(temp_dir() + "/fresh.json")).at("ok").get<int>() == 4);
+}
+
+// --max-error: the largest distance from the exact solution over the steps, which is
+// what the trajectory `dvm run` writes gives, row by row, against the closed form.
+BOOST_AUTO_TEST_CASE(max_error_along_the_run_is_that_of_the_written_trajectory) {
+  // harmonic, omega = 2: q(t) = q0 cos(2t) + p0/2 sin(2t), p(t) = -2 q0 sin(2t) + p0 cos(2t);
+  // 100 steps, over which the largest error is not the last
+  std::string text = kHarmonic;
+  text.replace(text.find("steps = 30"), 10, "steps = 100");
+  const std::string s = write_scene("harmonic100.toml", text);
+  const Json j = sweep_json({"sweep", s, "--max-error", "--set", "system.params.omega=2.0", "--vary",
+                             "integrator.composition=[none, suzuki5]", "--vary", "integrator.step=[0.1, 0.05]"},
+                            temp_dir() + "/max", 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 4u);
+  BOOST_TEST(j.at("errors") == Json::parse(R"(["error", "max_error"])"));
+  int larger = 0;
+  for (std::size_t i = 0; i < 4; ++i) {
+    const Json& row = j.at("rows").at(i);
+    const std::string csv = temp_dir() + "/trajectory.csv";
+    const Output r = run_alone(s, row, {"--set", "system.params.omega=2.0"});
+    BOOST_TEST_REQUIRE(r.status == 0, r.err);
+    std::vector<std::string> args = {"run", s, "--csv", csv, "--set", "system.params.omega=2.0"};
+    for (const auto& [key, value] : row.at("values").items()) args.insert(args.end(), {"--set", key + "=" + set_value(value)});
+    const Output written = dvm(args);
+    BOOST_TEST_REQUIRE(written.status == 0, written.err);
+    const auto rows = csv_rows(slurp(csv));
+    BOOST_TEST_REQUIRE(rows.size() == 102u);  // the header, t = 0 and 100 steps
+    const std::size_t tc = column(rows[0], "t"), qc = column(rows[0], "q0"), pc = column(rows[0], "p0");
+    double most = 0.0;
+    for (std::size_t k = 1; k < rows.size(); ++k) {
+      const double t = std::stod(rows[k][tc]), q = std::stod(rows[k][qc]), p = std::stod(rows[k][pc]);
+      const double qe = std::cos(2 * t) + 0.25 * std::sin(2 * t), pe = -2 * std::sin(2 * t) + 0.5 * std::cos(2 * t);
+      most = std::fmax(most, std::fmax(std::fabs(q - qe), std::fabs(p - pe)));
+    }
+    const double max_error = row.at("max_error").get<double>(), error = row.at("error").get<double>();
+    // the closed form evaluated two ways differs by round-off only
+    BOOST_TEST(std::fabs(max_error - most) <= 1e-14, max_error << " vs " << most);
+    BOOST_TEST(max_error >= error);
+    larger += max_error > error * (1 + 1e-9);
+    // the run itself is the one without --max-error (monitor_every is 1)
+    BOOST_TEST(untimed(parse_json(r.out)) == untimed(row.at("run")));
+  }
+  BOOST_TEST(larger >= 2);  // the largest error is not always the final one
+  // the CSV's max_error column, after error
+  const auto csv = csv_rows(slurp(temp_dir() + "/max.csv"));
+  BOOST_TEST(column(csv[0], "max_error") == column(csv[0], "error") + 1);
+  for (std::size_t i = 0; i < 4; ++i)
+    BOOST_TEST(std::strtod(csv[i + 1][column(csv[0], "max_error")].c_str(), nullptr) ==
+               j.at("rows").at(i).at("max_error").get<double>());
+  // a system without an exact solution: refused, naming the flag
+  const std::string pendulum = write_scene("pendulum.toml", kPendulum);
+  const Output o = dvm({"sweep", pendulum, "--max-error", "--vary", "integrator.step=[0.05, 0.025]"});
+  BOOST_TEST(o.status == 2, o.err);
+  BOOST_TEST(o.err.find("--max-error") != std::string::npos, o.err);
+  BOOST_TEST(o.err.find("no exact solution") != std::string::npos, o.err);
 }

@@ -72,7 +72,7 @@ double fitted_order(const System& L, double T, const std::vector<int>& ns,
   using M = typename System::Manifold;
   std::vector<double> hs, errs;
   for (int n : ns) {
-    const ManifoldGalerkinStep<System, S> G(L, QuadratureKind::gauss, T / n);
+    const ManifoldGalerkinStep<System> G(L, QuadratureKind::gauss, S, T / n);
     auto q = q0;
     auto p = p0;
     BOOST_REQUIRE(run(G, L, q, p, n));
@@ -146,9 +146,10 @@ double defect_in_chart(const Step& G, const typename Step::Point& c, const Vec<d
 // gradient of action() in one Jet of all its arguments, at control points X spread
 // about a step of chart length ~0.1 from q0 (each component perturbed by a fixed
 // pattern so that the curve is not a straight line).
-template <class Step>
+template <int S, class Step>
 double gradient_against_jets(const Step& G, const typename Step::Point& q0) {
-  constexpr int n = Step::n, SN = Step::SN, K = Step::K;
+  constexpr int n = Step::n, SN = S * n, K = n + SN;
+  BOOST_REQUIRE_EQUAL(G.stages(), S);
   using J = ceres::Jet<double, K>;
   Vec<double, SN> X;
   for (int k = 0; k < SN; ++k) X[k] = 0.1 * (k / n + 1) / (SN / n) + 0.013 * std::sin(1.7 * k + 0.4);
