@@ -9,6 +9,7 @@
 #include <boost/test/unit_test.hpp>
 
 #include "tests/cli/cli_harness.h"
+#include "tests/cli/sweep_tables.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -59,41 +60,6 @@ Output run_alone(const std::string& scene, const Json& row, std::vector<std::str
   return dvm(args);
 }
 
-// A run's JSON without the fields that measure time.
-Json untimed(Json j) {
-  j.erase("wall_seconds");
-  j.erase("compile_seconds");
-  return j;
-}
-
-// The CSV as rows of cells (no cell in these tests holds a comma or a quote, except
-// messages, which are compared through the JSON).
-std::vector<std::vector<std::string>> csv_rows(const std::string& text) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::string cell;
-    bool quoted = false;
-    for (char c : line) {
-      if (c == '"') quoted = !quoted;
-      else if (c == ',' && !quoted) cells.push_back(cell), cell.clear();
-      else cell += c;
-    }
-    cells.push_back(cell);
-    rows.push_back(cells);
-  }
-  return rows;
-}
-
-std::size_t column(const std::vector<std::string>& head, const std::string& name) {
-  for (std::size_t k = 0; k < head.size(); ++k)
-    if (head[k] == name) return k;
-  BOOST_FAIL("no column " << name);
-  return 0;
-}
-
 // Runs the sweep with --out and --json; returns the parsed JSON (stdout) and checks
 // that PATH.json holds the same text.
 Json sweep_json(std::vector<std::string> args, const std::string& out, int status) {
@@ -104,27 +70,6 @@ Json sweep_json(std::vector<std::string> args, const std::string& out, int statu
   BOOST_TEST_REQUIRE(o.status == status, o.err);
   BOOST_TEST(slurp(out + ".json") == o.out);
   return parse_json(o.out);
-}
-
-// A table without the fields that measure time: the JSON's rows' cpu_seconds and their
-// runs' wall_seconds and compile_seconds.
-Json untimed_table(Json j) {
-  for (Json& row : j.at("rows")) {
-    row.erase("cpu_seconds");
-    if (row.at("run").is_object()) row["run"] = untimed(row.at("run"));
-  }
-  return j;
-}
-
-// The CSV's rows with the cells of the columns that measure time emptied.
-std::vector<std::vector<std::string>> untimed_csv(const std::string& text) {
-  auto rows = csv_rows(text);
-  BOOST_TEST_REQUIRE(!rows.empty());
-  const std::size_t wall = column(rows[0], "wall_seconds"), cpu = column(rows[0], "cpu_seconds");
-  for (std::size_t i = 1; i < rows.size(); ++i)
-    for (std::size_t k : {wall, cpu})
-      if (k < rows[i].size()) rows[i][k].clear();
-  return rows;
 }
 
 // Starts dvm with the arguments (stdout and stderr to files in the temporary folder);

@@ -10,6 +10,7 @@
 #include <boost/test/unit_test.hpp>
 
 #include "tests/cli/cli_harness.h"
+#include "tests/cli/sweep_tables.h"
 
 #include <fcntl.h>
 #include <signal.h>
@@ -63,44 +64,6 @@ Output mpirun(int ranks, const std::vector<std::string>& args) {
   return run_program(find_mpirun(), mpirun_args(ranks, args));
 }
 
-Json untimed_run(Json j) {
-  j.erase("wall_seconds");
-  j.erase("compile_seconds");
-  return j;
-}
-Json untimed_table(Json j) {
-  for (Json& row : j.at("rows")) {
-    row.erase("cpu_seconds");
-    if (row.at("run").is_object()) row["run"] = untimed_run(row.at("run"));
-  }
-  return j;
-}
-// The CSV's lines with the timing columns (wall_seconds, cpu_seconds) emptied; no
-// cell of these tables holds a comma but the messages, which come after no timing.
-std::vector<std::vector<std::string>> untimed_csv(const std::string& text) {
-  std::vector<std::vector<std::string>> rows;
-  std::istringstream in(text);
-  std::string line;
-  while (std::getline(in, line)) {
-    std::vector<std::string> cells;
-    std::string cell;
-    bool quoted = false;
-    for (char c : line) {
-      if (c == '"') quoted = !quoted;
-      if (c == ',' && !quoted) cells.push_back(cell), cell.clear();
-      else cell += c;
-    }
-    cells.push_back(cell);
-    rows.push_back(cells);
-  }
-  BOOST_REQUIRE(!rows.empty());
-  for (std::size_t k = 0; k < rows[0].size(); ++k)
-    if (rows[0][k] == "wall_seconds" || rows[0][k] == "cpu_seconds")
-      for (std::size_t i = 1; i < rows.size(); ++i)
-        if (k < rows[i].size()) rows[i][k].clear();
-  return rows;
-}
-
 // A harmonic oscillator whose runs differ in cost by a factor of 128 (100 to 12800
 // steps); a run with one Newton iteration fails at its first step.
 const char* kHarmonic =
@@ -142,7 +105,7 @@ BOOST_AUTO_TEST_CASE(a_sweep_with_failed_runs_is_the_same_on_2_and_3_ranks) {
                             "integrator.max_iterations=25", "--set", "integrator.composition=\"none\""});
   BOOST_TEST_REQUIRE(alone.status == 0, alone.err);
   BOOST_TEST(row.at("values").at("integrator.steps").get<int>() == 12800);
-  BOOST_TEST(untimed_run(parse_json(alone.out)) == untimed_run(row.at("run")));
+  BOOST_TEST(untimed(parse_json(alone.out)) == untimed(row.at("run")));
 }
 
 BOOST_AUTO_TEST_CASE(errors_against_a_reference_run_are_the_same_on_ranks) {
