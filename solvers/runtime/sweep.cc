@@ -7,10 +7,13 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <condition_variable>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <mutex>
@@ -1318,6 +1321,146 @@ SweepRows read_sweep_table(const SweepOptions& o, const std::string& path) {
     out.rows[row.index] = std::move(row);
   }
   return out;
+}
+
+// ---- a table as cells (dvm chart) ------------------------------------------------------
+
+int SweepCells::column(const std::string& name) const {
+  for (std::size_t k = 0; k < head.size(); ++k)
+    if (head[k] == name) return static_cast<int>(k);
+  return -1;
+}
+
+namespace {
+
+// RFC 4180 CSV: cells in double quotes may hold commas, quotes (doubled) and newlines.
+std::vector<std::vector<std::string>> csv_records(const std::string& text, const std::string& where) {
+  std::vector<std::vector<std::string>> records;
+  std::vector<std::string> cells;
+  std::string cell;
+  bool quoted = false, any = false;
+  for (std::size_t k = 0; k < text.size(); ++k) {
+    const char c = text[k];
+    if (quoted) {
+      if (c == '"' && k + 1 < text.size() && text[k + 1] == '"') cell += '"', ++k;
+      else if (c == '"') quoted = false;
+      else cell += c;
+    } else if (c == '"') {
+      quoted = true;
+      any = true;
+    } else if (c == ',') {
+      cells.push_back(cell), cell.clear();
+      any = true;
+    } else if (c == '\n' || c == '\r') {
+      if (c == '\r' && k + 1 < text.size() && text[k + 1] == '\n') ++k;
+      if (any || !cell.empty()) cells.push_back(cell), records.push_back(cells);
+      cells.clear(), cell.clear(), any = false;
+    } else {
+      cell += c;
+      any = true;
+    }
+  }
+  if (quoted) throw InputError(where + ": not a CSV table of dvm sweep (a quoted cell without its closing quote)");
+  if (any || !cell.empty()) cells.push_back(cell), records.push_back(cells);
+  return records;
+}
+
+}  // namespace
+
+SweepCells read_sweep_cells(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) throw InputError(path + ": is a directory; expected a table of dvm sweep");
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(path + ": cannot read the table");
+  std::ostringstream buf;
+  buf << in.rdbuf();
+  const std::string text = buf.str();
+  SweepCells t;
+  const std::size_t first = text.find_first_not_of(" \t\r\n");
+  if (first == std::string::npos) throw InputError(path + ": empty; expected a table of dvm sweep (CSV or JSON)");
+  if (text[first] != '{') {
+    auto records = csv_records(text, path);
+    t.head = records.front();
+    if (t.head.empty() || t.head.front() != "index" || t.column("status") < 0)
+      throw InputError(path + ": not a CSV table of dvm sweep (its header does not start with index and has no "
+                       "status column)");
+    for (int k = 1; k < t.column("status"); ++k) t.varied.push_back(t.head[static_cast<std::size_t>(k)]);
+    for (std::size_t r = 1; r < records.size(); ++r) {
+      if (records[r].size() != t.head.size())
+        throw InputError(path + ": not a CSV table of dvm sweep (record " + std::to_string(r + 1) + " has " +
+                         std::to_string(records[r].size()) + " cells, the header " + std::to_string(t.head.size()) +
+                         ")");
+      t.rows.push_back(std::move(records[r]));
+    }
+    return t;
+  }
+  const std::string& where = path;
+  JReader reader(text, where);
+  const JValue doc = reader.document();
+  if (doc.kind != JValue::object) bad_table(where, "not an object");
+  auto cell = [&](const JValue* v) -> std::string {
+    if (!v || v->kind == JValue::null) return "";
+    if (v->kind == JValue::string) return v->s;
+    if (v->kind == JValue::boolean) return v->b ? "true" : "false";
+    return text.substr(v->begin, v->end - v->begin);
+  };
+  for (const JValue& a : member(doc, "vary", JValue::array, where).items)
+    t.varied.push_back(member(a, "key", JValue::string, where).s);
+  std::vector<std::string> errors;
+  if (const JValue* e = doc.find("errors"); e && e->kind == JValue::array)
+    for (const JValue& x : e->items) errors.push_back(cell(&x));
+  const auto& rows = member(doc, "rows", JValue::array, where).items;
+  std::size_t nq = 0, np = 0;
+  for (const JValue& r : rows)
+    if (const JValue* run = r.find("run"); run && run->kind == JValue::object) {
+      if (const JValue* q = run->find("q_final"); q && q->kind == JValue::array) nq = std::max(nq, q->items.size());
+      if (const JValue* p = run->find("p_final"); p && p->kind == JValue::array) np = std::max(np, p->items.size());
+    }
+  t.head = {"index"};
+  for (const std::string& k : t.varied) t.head.push_back(k);
+  for (const char* c : {"status", "code", "message"}) t.head.push_back(c);
+  for (const std::string& e : errors) t.head.push_back(e);
+  const std::vector<std::string> run_fields = {"system", "map", "form", "composition", "method", "step", "steps",
+                                               "t_final", "wall_seconds"};
+  const std::vector<std::string> run_after = {"energy_initial", "energy_final", "max_abs_energy_error",
+                                              "solver_iterations", "jacobians", "max_step_iterations", "order"};
+  for (const std::string& c : run_fields) t.head.push_back(c);
+  t.head.push_back("cpu_seconds");
+  for (const std::string& c : run_after) t.head.push_back(c);
+  t.head.push_back("failed_step");
+  t.head.push_back("failed_time");
+  for (std::size_t k = 0; k < nq; ++k) t.head.push_back("q_final[" + std::to_string(k) + "]");
+  for (std::size_t k = 0; k < np; ++k) t.head.push_back("p_final[" + std::to_string(k) + "]");
+  for (const JValue& r : rows) {
+    if (r.kind != JValue::object) bad_table(where, "a row is not an object");
+    std::vector<std::string> c = {cell(&member(r, "index", JValue::number, where))};
+    const JValue& values = member(r, "values", JValue::object, where);
+    for (const std::string& k : t.varied) c.push_back(cell(values.find(k)));
+    c.push_back(member(r, "status", JValue::string, where).s);
+    c.push_back(cell(r.find("code")));
+    c.push_back(cell(r.find("message")));
+    for (const std::string& e : errors) c.push_back(cell(r.find(e)));
+    const JValue* run = r.find("run");
+    if (run && run->kind == JValue::object) {
+      for (const std::string& f : run_fields) c.push_back(cell(run->find(f)));
+      c.push_back(cell(r.find("cpu_seconds")));
+      for (const std::string& f : run_after) c.push_back(cell(run->find(f)));
+      const JValue* failure = run->find("failure");
+      const bool failed = failure && failure->kind == JValue::object;
+      c.push_back(failed ? cell(failure->find("step")) : "");
+      c.push_back(failed ? cell(failure->find("time")) : "");
+      auto components = [&](const char* name, std::size_t n) {
+        const JValue* v = run->find(name);
+        for (std::size_t k = 0; k < n; ++k)
+          c.push_back(v && v->kind == JValue::array && k < v->items.size() ? cell(&v->items[k]) : "");
+      };
+      components("q_final", nq);
+      components("p_final", np);
+    }
+    c.resize(t.head.size());
+    t.rows.push_back(std::move(c));
+  }
+  return t;
 }
 
 // ---- ranks (MPI) ---------------------------------------------------------------------

@@ -178,6 +178,22 @@ std::string write_sweep_table(const SweepOptions& options, const SweepReport& re
 // Throws InputError naming what differs, or where the text is not such a table.
 SweepRows read_sweep_table(const SweepOptions& options, const std::string& json_path);
 
+// A table of a sweep as cells, read from its CSV or its JSON (by the text: a JSON
+// table starts with '{'), without the options that made it: the columns of the CSV
+// (head; `varied` the varied keys among them, in order) and one row of cells per row.
+// From the JSON the cells are those of the CSV but for the spelling of numbers: the
+// JSON's text of each (the same double), and the varied values as JSON (strings
+// without their quotes). What `dvm chart` reads. Throws InputError naming the file
+// when the text is neither such a CSV nor such a JSON table.
+struct SweepCells {
+  std::vector<std::string> head;
+  std::vector<std::string> varied;
+  std::vector<std::vector<std::string>> rows;
+  // the column's index, or -1
+  int column(const std::string& name) const;
+};
+SweepCells read_sweep_cells(const std::string& path);
+
 // One row as the table's JSON writes it, and back (the row's rendering, and its
 // values, checked against the options; InputError otherwise).
 std::string sweep_row_json(const SweepOptions& options, const SweepRow& row);
