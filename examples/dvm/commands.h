@@ -2,7 +2,9 @@
 // pass (check-map), 2 bad input or usage, 3 a numerical failure during a run.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -38,5 +40,25 @@ int check_scene_map_command(const std::string& path, const std::vector<std::stri
 // Lists the composition methods (order, stages, symmetry, stability threshold) and the
 // Galerkin methods as a table or JSON; returns 0.
 int methods_command(bool json);
+
+// `dvm chart` (chart.cc): a chart of a table of dvm sweep, drawn by gnuplot.
+struct ChartOptions {
+  std::string table;                     // PATH.csv or PATH.json of dvm sweep --out
+  std::string kind = "work-precision";   // one of chart_kinds()
+  std::string x, y, z;                   // columns ("": the kind's defaults)
+  std::vector<std::string> by;           // the columns whose values make the lines
+  bool by_given = false;                 // --by given (else: the varied keys not on an axis)
+  std::vector<std::pair<std::string, std::string>> where;  // rows kept: column = value
+  double max_energy_error = NAN;         // stability: unstable above it (NaN: status only)
+  std::string log;                       // the logarithmic axes: "x", "y", "xy", "none" ("": the kind's)
+  std::string out;                       // the chart, .png or .svg; .dat and .gp beside it
+  std::string title;                     // "": one made from the kind and the columns
+  bool data_only = false;                // write the data and the script, do not run gnuplot
+};
+const std::vector<std::string>& chart_kinds();
+// Writes the data and the script, runs gnuplot (unless data_only); returns 0, or 3
+// when gnuplot fails. Throws InputError for bad input (an unknown kind, a column the
+// table lacks, nothing to draw, no gnuplot).
+int chart_command(const ChartOptions& options);
 
 }  // namespace dvm::cli

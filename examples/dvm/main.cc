@@ -47,6 +47,8 @@ const char* kUsage =
     "  check-map NAME     check the identities of a discretization map, as JSON\n"
     "  converge SCENE     run a scene at several step sizes: errors and observed order\n"
     "  sweep SCENE        run a scene over lists or ranges of values of its keys: a table\n"
+    "  chart TABLE        draw a sweep's table with gnuplot: work precision, error against\n"
+    "                     h, stability map, error heat map (PNG or SVG)\n"
     "  version            print the version and the git revision it was built from\n"
     "  help [COMMAND]     print this list, or the help of COMMAND\n"
     "\n"
@@ -542,6 +544,76 @@ const char* kSweepHelp =
     "      --vary system.params.omega=1:4:4 \\\n"
     "      --vary 'initial.q=[[1.0], [0.5], [0.25], [0.125]]'\n";
 
+const char* kChartHelp =
+    "usage: dvm chart TABLE [--kind KIND] [--x COLUMN] [--y COLUMN] [--z COLUMN]\n"
+    "                 [--by COLUMN[,COLUMN...]] [--where COLUMN=VALUE]...\n"
+    "                 [--max-energy-error E] [--log AXES] [--title TEXT]\n"
+    "                 [--out PATH.png|PATH.svg] [--data-only]\n"
+    "\n"
+    "Draws a table of dvm sweep (TABLE: the PATH.csv or PATH.json that 'dvm sweep\n"
+    "--out PATH' writes; the two give the same chart) with gnuplot. Columns are named\n"
+    "as in the CSV table ('dvm sweep --help'): a varied key (integrator.composition,\n"
+    "system.params.g, ...), error, cpu_seconds, step, max_abs_energy_error, ...\n"
+    "Lines: one per value of the --by columns (several: each combination); by default\n"
+    "the varied keys that are neither an axis nor a step key (integrator.step,\n"
+    "integrator.steps, integrator.t_end), so that the step varies along each line.\n"
+    "\n"
+    "  --kind work-precision  (default) y = error against x = cpu_seconds (the CPU time\n"
+    "              of the run's thread), logarithmic both: a line per method, a point\n"
+    "              per step size (joined in the order of the column step); lower left\n"
+    "              is better. Needs the table of a sweep with --error\n"
+    "  --kind error-h  y = error against x = step, logarithmic both: the slope of a\n"
+    "              line is the method's order. Needs --error\n"
+    "  --kind stability  over the parameter x (--x; by default the one varied key that\n"
+    "              is neither a step key nor a --by column), the largest stable step\n"
+    "              (y, default step): among the rows of one x value and one line,\n"
+    "              sorted by step, the largest step whose run and the runs of every\n"
+    "              smaller step are stable (filled points), and the smallest unstable\n"
+    "              step (open points): the boundary lies between. A run is unstable\n"
+    "              when it failed (status failed: the step's solver gave up) or, with\n"
+    "              --max-energy-error E, when its max_abs_energy_error is above E or\n"
+    "              not finite (a run that blew up: explicit methods do not fail, they\n"
+    "              diverge). Refused rows are left out. An x whose values are not\n"
+    "              numbers (compositions, maps) is drawn as categories; a list of one\n"
+    "              number (initial.q = [0.5]) is that number. y logarithmic\n"
+    "  --kind heat  z (default error) over the grid of x (default step, logarithmic)\n"
+    "              and y (by default the one varied key besides the step): a cell per\n"
+    "              run, coloured on a logarithmic scale; failed runs marked x. Every\n"
+    "              other varied key must be fixed with --where; two rows in one cell\n"
+    "              are refused\n"
+    "  --x, --y, --z COLUMN  the columns of the axes (defaults above)\n"
+    "  --by COLUMNS  the columns whose values make the lines, comma-separated; '' for\n"
+    "              one line of every row\n"
+    "  --where COLUMN=VALUE  keep only the rows whose cell is VALUE (numbers compare as\n"
+    "              numbers); repeatable\n"
+    "  --max-energy-error E  stability: a run whose max_abs_energy_error is above E\n"
+    "              (or not finite) is unstable\n"
+    "  --log AXES  the logarithmic axes: x, y, xy or none (defaults above)\n"
+    "  --title TEXT  the chart's title (default: what it draws and the table's name)\n"
+    "  --out PATH  the chart, PATH.png or PATH.svg (the format by the extension;\n"
+    "              default: TABLE without its extension, then _KIND.png). Beside it\n"
+    "              the data PATH.dat (gnuplot's blocks, one per line, numbers with 17\n"
+    "              digits; its comment lines say the columns) and the script PATH.gp,\n"
+    "              which gnuplot runs in that folder ('gnuplot NAME.gp' there draws\n"
+    "              the chart again); each file replaced whole\n"
+    "  --data-only  write the data and the script only, without running gnuplot\n"
+    "\n"
+    "gnuplot is $DVM_GNUPLOT, else gnuplot on PATH (Debian: gnuplot-nox; 'make\n"
+    "charts' installs it). Exit status: 0 when the chart is drawn; 2 for bad input,\n"
+    "naming the option or the column: an unknown kind, a column the table lacks\n"
+    "(error without dvm sweep --error), a table that is not one of dvm sweep, no row\n"
+    "to draw, an --out without .png or .svg, no gnuplot (without --data-only); 3 when\n"
+    "gnuplot fails (the data and the script are written).\n"
+    "\n"
+    "examples:\n"
+    "  dvm sweep examples/scenes/pendulum.toml --error --out study \\\n"
+    "      --vary integrator.steps=log:100:3200:6 \\\n"
+    "      --vary 'integrator.composition=[none, suzuki5, kahan-li8]'\n"
+    "  dvm chart study.json --out work_precision.svg\n"
+    "  dvm chart study.csv --kind error-h --out error_h.png\n"
+    "  dvm chart map.json --kind stability --x initial.q --by integrator.composition \\\n"
+    "      --max-energy-error 0.1 --out stability.png\n";
+
 // The run help with the registries' names filled in, and what each system runs.
 std::string run_help() {
   std::string h = kRunHelp;
@@ -620,6 +692,7 @@ std::string run_help() {
                         : help == kCheckHelp    ? "check-map"
                         : help == kConvergeHelp ? "converge"
                         : help == kSweepHelp    ? "sweep"
+                        : help == kChartHelp    ? "chart"
                                                 : "version";
   std::cerr << "dvm: " << msg << "\nsee 'dvm " << command << " --help'\n";
   std::exit(2);
@@ -1045,6 +1118,77 @@ int cmd_sweep(const std::vector<std::string>& args) {
   return ranks.share(code);
 }
 
+int cmd_chart(const std::vector<std::string>& args) {
+  ChartOptions o;
+  for (std::size_t i = 0; i < args.size(); ++i) {
+    const std::string& a = args[i];
+    auto value = [&](const char* name) -> std::string {
+      if (i + 1 >= args.size()) usage_error(std::string(name) + " needs a value", kChartHelp);
+      return args[++i];
+    };
+    if (is_help(a)) {
+      std::cout << kChartHelp;
+      return 0;
+    } else if (a == "--kind") {
+      o.kind = value("--kind");
+    } else if (a == "--x") {
+      o.x = value("--x");
+    } else if (a == "--y") {
+      o.y = value("--y");
+    } else if (a == "--z") {
+      o.z = value("--z");
+    } else if (a == "--by") {
+      const std::string text = value("--by");
+      o.by.clear();
+      o.by_given = true;
+      std::size_t start = 0;
+      while (!text.empty() && start <= text.size()) {
+        const std::size_t end = std::min(text.find(',', start), text.size());
+        const std::string k = text.substr(start, end - start);
+        if (k.empty()) usage_error("--by: an empty column name in '" + text + "'", kChartHelp);
+        o.by.push_back(k);
+        start = end + 1;
+      }
+    } else if (a == "--where") {
+      const std::string text = value("--where");
+      const auto eq = text.find('=');
+      if (eq == std::string::npos || eq == 0)
+        usage_error("--where: expected COLUMN=VALUE, got '" + text + "'", kChartHelp);
+      o.where.emplace_back(text.substr(0, eq), text.substr(eq + 1));
+    } else if (a == "--max-energy-error") {
+      const std::string text = value("--max-energy-error");
+      o.max_energy_error = parse_number("--max-energy-error", text, kChartHelp);
+      if (!(o.max_energy_error >= 0))
+        usage_error("--max-energy-error: got '" + text + "', expected a number >= 0", kChartHelp);
+    } else if (a == "--log") {
+      o.log = value("--log");
+      if (o.log != "x" && o.log != "y" && o.log != "xy" && o.log != "none")
+        usage_error("--log: got '" + o.log + "', expected x, y, xy or none", kChartHelp);
+    } else if (a == "--title") {
+      o.title = value("--title");
+    } else if (a == "--out") {
+      o.out = value("--out");
+      if (o.out.empty()) usage_error("--out needs a path ending in .png or .svg", kChartHelp);
+    } else if (a == "--data-only") {
+      o.data_only = true;
+    } else if (!a.empty() && a[0] == '-') {
+      usage_error(unknown_option(a, {"--kind", "--x", "--y", "--z", "--by", "--where", "--max-energy-error", "--log",
+                                     "--title", "--out", "--data-only", "--help"}),
+                  kChartHelp);
+    } else if (o.table.empty()) {
+      o.table = a;
+    } else {
+      usage_error("more than one table given ('" + o.table + "', '" + a + "')", kChartHelp);
+    }
+  }
+  if (o.table.empty()) usage_error("chart needs a table (PATH.csv or PATH.json of dvm sweep --out)", kChartHelp);
+  if (o.out.empty()) {
+    const std::filesystem::path t(o.table);
+    o.out = (t.parent_path() / t.stem()).string() + "_" + o.kind + ".png";
+  }
+  return chart_command(o);
+}
+
 int cmd_version(const std::vector<std::string>& args) {
   for (const auto& a : args) {
     if (is_help(a)) {
@@ -1139,9 +1283,10 @@ int main(int argc, char** argv) {
     if (command == "methods") return cmd_methods(args);
     if (command == "converge") return cmd_converge(args);
     if (command == "sweep") return cmd_sweep(args);
+    if (command == "chart") return cmd_chart(args);
     usage_error("unknown command '" + command + "'" +
                     dvm::did_you_mean(command, {"run", "maps", "methods", "systems", "check-map", "converge",
-                                                "sweep", "version", "help"}),
+                                                "sweep", "chart", "version", "help"}),
                 kUsage);
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";
