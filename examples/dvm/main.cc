@@ -464,7 +464,9 @@ const char* kSweepHelp =
     "              a run whose system has none is refused. The run's energy is then\n"
     "              monitored at every step (as when dvm run writes every row)\n"
     "  --jobs N    run on N threads (default: the processors available); the table\n"
-    "              does not depend on N\n"
+    "              does not depend on N. Under mpirun: N rows at a time on each rank\n"
+    "              (default 1: start one rank per core, or one rank per machine with\n"
+    "              --jobs its cores)\n"
     "  --out PATH  write the table to PATH.csv and PATH.json as runs finish and at\n"
     "              the end, and print one line saying so; without it the CSV table\n"
     "              goes to stdout. Each write replaces a file whole (a temporary\n"
@@ -520,14 +522,16 @@ const char* kSweepHelp =
     "(twice: when checked and when run).\n"
     "\n"
     "Under mpirun (OpenMPI), 'mpirun -n R dvm sweep ...' runs the rows on R ranks:\n"
-    "rank 0 checks the rows, hands out one row at a time to whichever rank asks (so\n"
-    "that costly and cheap runs spread evenly), runs rows itself on a second\n"
-    "thread, gathers the rows, computes the references of --error and alone writes\n"
-    "or prints the table: the table of the same sweep on threads. --jobs is refused\n"
-    "there. A process counts as started by mpirun when OpenMPI's variable\n"
-    "OMPI_COMM_WORLD_SIZE is set, and only then is MPI initialised: a sweep started\n"
-    "otherwise does not touch it. MPI is optional when dvm is built (Debian's\n"
-    "libopenmpi-dev); a dvm built without it refuses to run under mpirun (exit 2).\n"
+    "rank 0 checks the rows, hands out one row at a time to whichever rank's thread\n"
+    "asks (so that costly and cheap runs spread evenly), runs rows itself on --jobs\n"
+    "threads beside the one that hands them out, gathers the rows, computes the\n"
+    "references of --error and alone writes or prints the table: the table of the\n"
+    "same sweep on threads. Every rank runs --jobs rows at a time (default 1), its\n"
+    "main thread alone talking to rank 0. A process counts as started by mpirun when\n"
+    "OpenMPI's variable OMPI_COMM_WORLD_SIZE is set, and only then is MPI\n"
+    "initialised: a sweep started otherwise does not touch it. MPI is optional when\n"
+    "dvm is built (Debian's libopenmpi-dev); a dvm built without it refuses to run\n"
+    "under mpirun (exit 2).\n"
     "@MPI@\n"
     "\n"
     "Exit status: 0 when every run that was not refused completed; 3 when some run\n"
@@ -1005,10 +1009,6 @@ int cmd_sweep(const std::vector<std::string>& args) {
     } else if (a == "--json") {
       json = true;
     } else if (a == "--jobs") {
-      if (mpirun)
-        usage_error("--jobs: under mpirun each rank runs one run at a time (rank 0 a second thread that hands "
-                    "out the rows); set the number of ranks with mpirun -n",
-                    kSweepHelp);
       const std::string text = value("--jobs");
       const double n = parse_number("--jobs", text, kSweepHelp);
       if (n != std::floor(n) || n < 1 || n > 4096)

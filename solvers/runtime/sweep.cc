@@ -1473,7 +1473,7 @@ bool sweep_mpi_built() { return true; }
 
 SweepRanks::SweepRanks() {
   if (!launched_by_mpirun()) return;
-  // only the main thread calls MPI (rank 0's second thread runs rows)
+  // only the main thread calls MPI (the other threads run rows)
   int provided = 0;
   MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
   mpi_ = true;
@@ -1514,11 +1514,11 @@ namespace {
 constexpr int kTagAsk = 1;    // worker -> 0: the text of the row it ran ("" at first)
 constexpr int kTagIndex = 2;  // 0 -> worker: the next row to run, or -1: none left
 
-// Rank 0's side: answers the other ranks until each has been told that no row is
-// left, taking rows from `next` as its own thread does.
+// Rank 0's side: answers the other ranks' threads (`jobs` on each) until each has
+// been told that no row is left, taking rows from `next` as its own threads do.
 void serve(const SweepOptions& o, const std::vector<long long>& runs, std::atomic<std::size_t>& next,
-           Gather& gather, int ranks) {
-  int working = ranks - 1;
+           Gather& gather, int ranks, int jobs) {
+  int working = (ranks - 1) * jobs;
   std::string text;
   while (working > 0) {
     int waiting = 0;
@@ -1542,15 +1542,71 @@ void serve(const SweepOptions& o, const std::vector<long long>& runs, std::atomi
   }
 }
 
-// The other ranks' side: ask, run, send the row back with the next question.
-void work(const SweepOptions& o) {
-  std::string text;
-  while (true) {
-    MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, 0, kTagAsk, MPI_COMM_WORLD);
-    long long index = -1;
-    MPI_Recv(&index, 1, MPI_LONG_LONG, 0, kTagIndex, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-    if (index < 0) return;
-    text = sweep_row_json(o, run_row(o, static_cast<std::size_t>(index)));
+// One question to rank 0: the text of the row run ("" at first); the answer is the
+// next row to run, or -1.
+long long ask(const std::string& text) {
+  MPI_Send(text.data(), static_cast<int>(text.size()), MPI_CHAR, 0, kTagAsk, MPI_COMM_WORLD);
+  long long index = -1;
+  MPI_Recv(&index, 1, MPI_LONG_LONG, 0, kTagIndex, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+  return index;
+}
+
+// The other ranks' side: ask, run, send the row back with the next question. With
+// `jobs` threads, the main thread (the only one that calls MPI) asks once for each
+// thread, then once for each row a thread finishes, and hands the answers to the
+// threads; a thread told -1 ends.
+void work(const SweepOptions& o, int jobs) {
+  if (jobs <= 1) {
+    std::string text;
+    for (long long index = ask(text); index >= 0; index = ask(text))
+      text = sweep_row_json(o, run_row(o, static_cast<std::size_t>(index)));
+    return;
+  }
+  std::mutex lock;
+  std::condition_variable changed;
+  std::deque<long long> todo;      // answers, for the threads
+  std::deque<std::string> done;    // rows run, for the main thread to send
+#pragma omp parallel num_threads(jobs + 1)
+  {
+    if (omp_get_thread_num() == 0) {
+      int ended = 0;  // threads told -1
+      for (int k = 0; k < jobs; ++k) {
+        const long long index = ask("");
+        ended += index < 0;
+        std::lock_guard<std::mutex> g(lock);
+        todo.push_back(index);
+        changed.notify_all();
+      }
+      while (ended < jobs) {
+        std::string text;
+        {
+          std::unique_lock<std::mutex> g(lock);
+          changed.wait(g, [&] { return !done.empty(); });
+          text = std::move(done.front());
+          done.pop_front();
+        }
+        const long long index = ask(text);
+        ended += index < 0;
+        std::lock_guard<std::mutex> g(lock);
+        todo.push_back(index);
+        changed.notify_all();
+      }
+    } else {
+      while (true) {
+        long long index = -1;
+        {
+          std::unique_lock<std::mutex> g(lock);
+          changed.wait(g, [&] { return !todo.empty(); });
+          index = todo.front();
+          todo.pop_front();
+        }
+        if (index < 0) break;
+        std::string text = sweep_row_json(o, run_row(o, static_cast<std::size_t>(index)));
+        std::lock_guard<std::mutex> g(lock);
+        done.push_back(std::move(text));
+        changed.notify_all();
+      }
+    }
   }
 }
 
@@ -1558,8 +1614,12 @@ void work(const SweepOptions& o) {
 
 SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepFlush& flush, const SweepRanks& ranks) {
   if (ranks.size() == 1) return run_sweep(o, done, flush);
+  const int jobs = std::max(1, o.jobs);
   if (ranks.rank() != 0) {
-    if (ranks.share(0) == 1) work(o);  // rank 0 found no bad input
+    if (ranks.share(0) == 1) {  // rank 0 found no bad input
+      match_thread_stacks();
+      work(o, jobs);
+    }
     return SweepReport{};
   }
   const std::size_t n = sweep_size(o);
@@ -1585,11 +1645,11 @@ SweepReport run_sweep(const SweepOptions& o, const SweepRows& done, const SweepF
   }
   std::atomic<std::size_t> next{0};
   std::string failure;
-#pragma omp parallel num_threads(2)
+#pragma omp parallel num_threads(jobs + 1)
   {
     if (omp_get_thread_num() == 0) {
       try {
-        serve(o, runs, next, gather, ranks.size());
+        serve(o, runs, next, gather, ranks.size(), jobs);
       } catch (const std::exception& e) {
         failure = e.what();
       }

@@ -72,7 +72,7 @@ struct SweepOptions {
   bool zip = false;
   bool error = false;  // measure each run's error against a reference
   bool max_error = false;  // and the largest along the run (with error; needs an exact solution)
-  int jobs = 1;        // threads
+  int jobs = 1;        // threads (under mpirun: on each rank)
   double max_runs = kDefaultMaxRuns;
   static constexpr double kDefaultMaxRuns = 1e6;
 };
@@ -206,9 +206,12 @@ std::string scene_digest(const std::string& text);
 // A sweep started by OpenMPI's mpirun runs its rows on every rank: rank 0 checks the
 // rows, hands out the index of the next row to run to whichever rank asks (ranks
 // ask when they start and when they finish a row, so that cheap and costly rows
-// spread evenly), runs rows itself on a second thread meanwhile, gathers the rows
+// spread evenly), runs rows itself on other threads meanwhile, gathers the rows
 // (each sent as the text of its row in the JSON table) and alone writes the table.
-// The rows are those of the same sweep on threads, so the table is the same.
+// Each rank runs options.jobs rows at a time, on as many threads: its main thread
+// alone calls MPI (it asks once for each thread, and once for each row a thread
+// finishes), so MPI_THREAD_FUNNELED is all it needs. The rows are those of the same
+// sweep on threads, so the table is the same.
 //
 // MPI is an optional part of the build (DVM_WITH_MPI, only this library's sweep.cc
 // is compiled against it). A process is taken as started by mpirun when OpenMPI's

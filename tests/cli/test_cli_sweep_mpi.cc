@@ -1,5 +1,6 @@
-// dvm sweep under mpirun: the rows spread over the ranks make the table the same sweep
-// makes on one thread, bit for bit but for the timings, with failed rows, with errors
+// dvm sweep under mpirun: the rows spread over the ranks (and over threads within
+// them) make the table the same sweep makes on one thread, bit for bit but for the
+// timings, with failed rows, with errors
 // against a reference run (computed on rank 0), and resumed after the ranks were
 // stopped midway; bad input is said once, with exit 2.
 //
@@ -70,22 +71,26 @@ const char* kHarmonic =
     "[system]\nbuiltin = \"harmonic\"\n[initial]\nq = [1.0]\np = [0.5]\n"
     "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = 100\n";
 
-// The sweep on one thread and under mpirun -n 2 and -n 3: the same tables.
+// The sweep on one thread and under mpirun -n 2 and -n 3 (one row at a time on each
+// rank), and -n 2 with --jobs 2 (two rows at a time on each rank): the same tables.
 void same_on_ranks(const std::vector<std::string>& args, int status) {
   std::vector<std::string> one = args;
   one.insert(one.end(), {"--jobs", "1", "--out", temp_dir() + "/one"});
   const Output a = dvm(one);
   BOOST_TEST_REQUIRE(a.status == status, a.err);
   const Json expected = parse_json(slurp(temp_dir() + "/one.json"));
-  for (int ranks : {2, 3}) {
-    const std::string out = temp_dir() + "/ranks" + std::to_string(ranks);
+  for (const auto& [ranks, jobs] : std::vector<std::pair<int, int>>{{2, 1}, {3, 1}, {2, 2}}) {
+    const std::string out = temp_dir() + "/ranks" + std::to_string(ranks) + (jobs > 1 ? "_jobs" + std::to_string(jobs) : "");
     std::vector<std::string> many = args;
     many.insert(many.end(), {"--out", out});
+    if (jobs > 1) many.insert(many.end(), {"--jobs", std::to_string(jobs)});
     const Output b = mpirun(ranks, many);
-    BOOST_TEST(b.status == status, ranks << " ranks: " << b.err);
-    BOOST_TEST(b.out.find("wrote " + out + ".csv") != std::string::npos, b.out);
-    BOOST_TEST(untimed_table(parse_json(slurp(out + ".json"))) == untimed_table(expected), ranks << " ranks");
-    BOOST_TEST(untimed_csv(slurp(out + ".csv")) == untimed_csv(slurp(temp_dir() + "/one.csv")), ranks << " ranks");
+    BOOST_TEST_CONTEXT(ranks << " ranks, --jobs " << jobs) {
+      BOOST_TEST(b.status == status, b.err);
+      BOOST_TEST(b.out.find("wrote " + out + ".csv") != std::string::npos, b.out);
+      BOOST_TEST(untimed_table(parse_json(slurp(out + ".json"))) == untimed_table(expected));
+      BOOST_TEST(untimed_csv(slurp(out + ".csv")) == untimed_csv(slurp(temp_dir() + "/one.csv")));
+    }
   }
 }
 
@@ -189,10 +194,11 @@ BOOST_AUTO_TEST_CASE(bad_input_under_mpirun_is_said_once_with_exit_2) {
   BOOST_TEST(b.status == 2, b.err);
   BOOST_TEST(b.err.find("empty range") == b.err.rfind("empty range"), b.err);
   BOOST_TEST(b.err.find("empty range") != std::string::npos, b.err);
-  // threads under mpirun
-  const Output c = mpirun(2, {"sweep", s, "--jobs", "2", "--vary", "integrator.step=[0.1]"});
+  // a bad --jobs, said once
+  const Output c = mpirun(2, {"sweep", s, "--jobs", "0", "--vary", "integrator.step=[0.1]"});
   BOOST_TEST(c.status == 2, c.err);
-  BOOST_TEST(c.err.find("--jobs: under mpirun") != std::string::npos, c.err);
+  BOOST_TEST(c.err.find("--jobs: got '0'") != std::string::npos, c.err);
+  BOOST_TEST(c.err.find("--jobs") == c.err.rfind("--jobs: got"), c.err);
   // the help says whether this dvm has MPI
   BOOST_TEST(dvm({"sweep", "--help"}).out.find("This dvm was built with MPI.") != std::string::npos);
 }
