@@ -363,11 +363,20 @@ int Chart::stability() {
   s += "set xlabel " + gp_string(x) + " noenhanced\nset ylabel " + gp_string(h) + " noenhanced\n";
   s += by.empty() ? "unset key\n" : "set key outside right top noenhanced font \",9\"\n";
   // a margin around the steps drawn (a range of its own where they are all one step)
-  if (logged('y', "y"))
+  if (logged('y', "y")) {
     s += "set yrange [" + num17(low / 1.25) + ":" + num17(high * 1.25) + "]\n";
-  else
+    // within a decade or two gnuplot would label the powers of ten alone: 1, 1.5, 2, 3, 5, 7 of each
+    std::vector<std::string> tics;
+    for (int e = static_cast<int>(std::floor(std::log10(low / 1.25))); e <= std::ceil(std::log10(high * 1.25)); ++e)
+      for (double m : {1.0, 1.5, 2.0, 3.0, 5.0, 7.0}) {
+        const double v = m * std::pow(10.0, e);
+        if (v >= low / 1.25 && v <= high * 1.25) tics.push_back(num17(v));
+      }
+    if (tics.size() >= 2) s += "set ytics (" + join(tics, ", ") + ")\nset format y \"%g\"\n";
+  } else {
     s += "set yrange [" + num17(low - 0.1 * std::fmax(high - low, std::fabs(low))) + ":" +
          num17(high + 0.1 * std::fmax(high - low, std::fabs(high))) + "]\n";
+  }
   const std::string file = gp_string(name_ + ".dat"), last = std::to_string(blocks - 1);
   if (categorical) {
     s += "set xrange [-0.5:" + std::to_string(categories.size()) + " - 0.5]\n";
