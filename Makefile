@@ -4,7 +4,8 @@
 #   make test   build the test tree (build-test/, clang++-14) and run the whole test suite
 #   make bench  build and run the benchmark programs
 #   make charts build the benchmark suite, regenerate examples/charts (CSV, PNG, SVG)
-#               and the numbers at the end of examples/charts/README.md
+#               and the numbers at the end of examples/charts/README.md, and the
+#               charts of the studies in examples/studies (dvm sweep, dvm chart)
 #   make sanitize  build the suites labelled "sanitize" (tests/CMakeLists.txt: input,
 #               files, run-time memory, the runtime layer and the CLI, which drives
 #               every kernel) with AddressSanitizer and UndefinedBehaviorSanitizer (in
@@ -119,23 +120,25 @@ BENCH_PROGRAMS := bench_midpoint_step bench_written_lagrangian bench_ratios benc
   bench_sphere_chain bench_sweep
 bench: deps
 	$(call configure,ON)
-	cmake --build $(BUILD) -j $(JOBS) --target $(BENCH_PROGRAMS)
+	cmake --build $(BUILD) -j $(JOBS) --target $(BENCH_PROGRAMS) dvm
 	./$(BUILD)/examples/bench_midpoint_step
 	./$(BUILD)/examples/bench_written_lagrangian
 	./$(BUILD)/examples/bench_ratios
 	./$(BUILD)/examples/bench_galerkin_kepler
 	./$(BUILD)/examples/bench_sweep
+	sh examples/bench/bench_sweep_mpi.sh ./$(BUILD)/examples/dvm || [ $$? -eq 77 ]
 
 CHARTS := examples/charts
 charts: deps
 	$(call install_missing,gnuplot-nox)
 	$(call configure,OFF)
-	cmake --build $(BUILD) -j $(JOBS) --target dvm_charts bench_ratios
+	cmake --build $(BUILD) -j $(JOBS) --target dvm_charts bench_ratios dvm
 	./$(BUILD)/examples/dvm_charts --out $(CHARTS)
 	./$(BUILD)/examples/bench_ratios --out $(CHARTS)
 	/usr/bin/gnuplot -e "dir='$(CHARTS)'" $(CHARTS)/plot.gp
 	sh $(CHARTS)/update_readme.sh $(CHARTS)/README.md $(CHARTS)/ratios.md $(CHARTS)/table_sweeps.md \
 	  $(CHARTS)/table_long.md $(CHARTS)/table_stability.md
+	JOBS=$(JOBS) sh examples/studies/run.sh ./$(BUILD)/examples/dvm examples/studies $(BUILD)/studies
 
 # The benchmark programs no test runs are left out (DVM_BUILD_BENCH=OFF). The fuzz
 # targets are built in the same tree (DVM_FUZZ=ON), so that `make fuzz` after
