@@ -509,7 +509,7 @@ int Chart::heat() {
   s += "set xlabel " + gp_string(x) + " noenhanced\nset ylabel " + gp_string(y) + " noenhanced\n";
   s += "set xrange [" + num17(xe.begin()->second.first) + ":" + num17(xe.rbegin()->second.second) + "]\n";
   s += "set yrange [" + num17(ye.begin()->second.first) + ":" + num17(ye.rbegin()->second.second) + "]\n";
-  s += "set key outside bottom center horizontal\n";
+  s += "set key outside top center horizontal\n";
   const std::string file = gp_string(name_ + ".dat");
   std::vector<std::string> parts;
   if (drawn) parts.push_back(file + " index 0 using 1:2:3:4:5:6:7 with boxxyerror fs solid 1.0 noborder lc palette notitle");
