@@ -1,5 +1,5 @@
 #!/bin/sh
-# The shipped studies (README.md here): three sweeps of dvm sweep and their charts by
+# The shipped studies (README.md here): four sweeps of dvm sweep and their charts by
 # dvm chart, PNG and SVG, with the data and gnuplot script of each beside it.
 #
 #   sh examples/studies/run.sh [DVM [CHARTS [TABLES]]]
@@ -63,3 +63,11 @@ chart "$tables/double_pendulum.json" double_pendulum_work_precision --kind work-
   --title "double pendulum (written), t = 4: error against CPU time, midpoint map composed"
 chart "$tables/double_pendulum.json" double_pendulum_error_h --kind error-h \
   --title "double pendulum (written), t = 4: error against the step, midpoint map composed"
+
+# (c) The error of the midpoint map on the pendulum over the step and the amplitude,
+# failed runs marked.
+sweep "$here/pendulum_error.toml" --out "$tables/pendulum_error" --error \
+  --vary 'initial.q=[[0.25], [0.5], [0.75], [1.0], [1.25], [1.5], [1.75], [2.0], [2.25], [2.5], [2.75], [3.0]]' \
+  --vary integrator.step=log:0.025:3.2:8
+chart "$tables/pendulum_error.json" pendulum_error_heat --kind heat --y initial.q \
+  --title "pendulum, midpoint map, t = 12.8: error of the final state over h and q0 (x: the solver failed)"
