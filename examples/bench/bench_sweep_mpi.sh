@@ -7,7 +7,8 @@
 #   T_1  dvm sweep --jobs 1 (the baseline)
 #   M_1  mpirun -n 1 dvm sweep (the baseline with MPI's start and the ranks' protocol)
 #   M_R  mpirun -n R dvm sweep (rank 0 hands out rows and runs rows on a second thread)
-#   W_R  mpirun -n 1 dvm sweep --jobs R (one rank, R threads asking rank 0's server)
+#   W_R  mpirun --bind-to none -n 1 dvm sweep --jobs R (one rank running R rows at a
+#        time on threads; mpirun would bind the rank, and so its threads, to one core)
 #   T_R  dvm sweep --jobs R
 # each the best of REPEATS (default 3), and prints the efficiencies T_1 / (R M_R),
 # M_1 / (R M_R), M_1 / (R W_R) and T_1 / (R T_R) (1: perfect). Every table must equal the baseline's
@@ -68,7 +69,7 @@ untimed() {
 t1=$(best threads1 "$dvm" "$@" --jobs 1)
 m1=$(best ranks1 $mpi -n 1 "$dvm" "$@")
 mr=$(best ranks $mpi -n "$ranks" "$dvm" "$@")
-wr=$(best ranks1jobs $mpi -n 1 "$dvm" "$@" --jobs "$ranks")
+wr=$(best ranks1jobs $mpi --bind-to none -n 1 "$dvm" "$@" --jobs "$ranks")
 tr=$(best threads "$dvm" "$@" --jobs "$ranks")
 untimed "$tmp/threads1.csv" > "$tmp/base"
 same=identical
@@ -80,7 +81,7 @@ echo "sweep of $rows runs, best of $repeats (wall seconds)"
 echo "  dvm sweep --jobs 1        $t1"
 echo "  mpirun -n 1 dvm sweep     $m1"
 echo "  mpirun -n $ranks dvm sweep     $mr"
-echo "  mpirun -n 1 dvm sweep --jobs $ranks  $wr"
+echo "  mpirun --bind-to none -n 1 dvm sweep --jobs $ranks  $wr"
 echo "  dvm sweep --jobs $ranks        $tr"
 echo "$t1 $m1 $mr $tr $ranks $wr" | awk '{ printf "  parallel efficiency of %d ranks against --jobs 1: %.2f, against mpirun -n 1: %.2f\n", $5, $1 / ($5 * $3), $2 / ($5 * $3);
   printf "  parallel efficiency of %d threads in one rank against mpirun -n 1: %.2f\n", $5, $2 / ($5 * $6);

@@ -465,7 +465,9 @@ const char* kSweepHelp =
     "  --jobs N    run on N threads (default: the processors available); the table\n"
     "              does not depend on N. Under mpirun: N rows at a time on each rank\n"
     "              (default 1: start one rank per core, or one rank per machine with\n"
-    "              --jobs its cores)\n"
+    "              --jobs its cores and mpirun --bind-to none, since mpirun binds\n"
+    "              each rank to one core by default; rank 0 warns when --jobs\n"
+    "              exceeds the processors it may use)\n"
     "  --out PATH  write the table to PATH.csv and PATH.json as runs finish and at\n"
     "              the end, and print one line saying so; without it the CSV table\n"
     "              goes to stdout. Each write replaces a file whole (a temporary\n"
@@ -1091,6 +1093,11 @@ int cmd_sweep(const std::vector<std::string>& args) {
   o.scene_text = ranks.share(o.scene_text);
   o.scene_path = scene;
   quiet.speak();
+  // mpirun binds each rank to one core unless told otherwise: its threads would share it
+  if (root && mpirun && o.jobs > dvm::default_jobs())
+    std::cerr << "dvm: sweep: --jobs " << o.jobs << " on rank 0, which may use " << dvm::default_jobs()
+              << " processor(s): its threads share them (mpirun binds each rank to a core by default; give "
+                 "mpirun --bind-to none, or --map-by slot:PE=" << o.jobs << ")\n";
 
   int code = 0;
   try {
