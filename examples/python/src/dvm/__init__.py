@@ -32,7 +32,8 @@ from . import _dvm
 
 __all__ = [
     "InputError", "StepFailure", "Scene", "Result", "System", "Method",
-    "load_scene", "run", "integrate", "converge", "Convergence", "systems", "maps", "methods",
+    "load_scene", "run", "integrate", "converge", "Convergence", "check_map", "MapCheck", "systems", "maps",
+    "methods",
 ]
 
 
@@ -461,6 +462,85 @@ def converge(scene, steps=None, t_end=None, max_steps=None):
     if report.get("failure"):
         raise StepFailure("a run of the convergence study did not converge: " + report["failure"], study)
     return study
+
+
+# ---- map checks ----------------------------------------------------------------------
+
+class MapCheck:
+    """The identity checks of a discretization map (:func:`check_map`): every field of
+    ``dvm check-map``'s JSON as an attribute: ``map``, ``space`` ("R^n", "S^2",
+    "SO(3)"), ``theta``, ``dim`` (the dimension the identities were checked in; on a
+    manifold its chart's), ``claims_symmetric``, ``residuals`` (a dict: each identity's
+    largest residual over the sample points), ``tolerance`` and ``passed`` (every
+    identity holds to the tolerance and adjoint_difference matches the symmetry claim;
+    ``dvm check-map`` exits with status 1 when not). ``report`` is the whole dict."""
+
+    def __init__(self, report):
+        self.report = report
+
+    def __getattr__(self, name):
+        report = self.__dict__.get("report", {})
+        if name in report:
+            return report[name]
+        raise AttributeError(f"'MapCheck' has no attribute '{name}' (its fields: {', '.join(report)})")
+
+    def __bool__(self):
+        return bool(self.report.get("passed"))
+
+    def __repr__(self):
+        worst = max(self.report.get("residuals", {}).items(), key=lambda kv: -1.0 if kv[1] is None else kv[1],
+                    default=(None, None))
+        return (f"<dvm.MapCheck {self.report.get('map')} on {self.report.get('space')}: "
+                f"{'passed' if self.report.get('passed') else 'failed'} (largest residual {worst[1]!r}, "
+                f"{worst[0]})>")
+
+
+def _finite_option(option, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not _math.isfinite(value):
+        raise InputError(f"{option}: got '{value}', expected a finite number")
+    return float(value)
+
+
+def check_map(map, theta=None, dim=None, tolerance=1e-12):
+    """Checks the identities of a discretization map, as ``dvm check-map`` does:
+    R_d(x, 0) = (x, x), T R^2 - T R^1 = Id, the inverse's round trip, the adjoint's
+    involution and the symmetry claim, the same axioms for the tangent lift, the
+    symplecticity and round trip of the cotangent lift; on S^2 and SO(3) in a chart,
+    and the closed-form inverse on the manifold. Each residual is the largest over
+    random sample points (the same points every call).
+
+    map: a map's name (:func:`maps` lists them; ``dvm check-map NAME``), or a
+    :class:`Scene`: the map it runs, a written one from its [map] section
+    (``dvm check-map --scene FILE``). theta: the theta of a theta map (``--theta``,
+    default the map's own; a scene's is its integrator.theta); dim: 1 to 4, the
+    dimension of R^n the identities are checked in (``--dim``, default 2; maps on a
+    manifold take none); tolerance: ``--tolerance`` (default 1e-12).
+
+    Returns a :class:`MapCheck` (true when the check passed). Raises
+    :class:`InputError` with the program's message (naming its options) for an unknown
+    map, a theta, dim or tolerance it refuses.
+    """
+    if theta is not None:
+        given, theta = theta, _finite_option("--theta", theta)
+        if not (0.0 <= theta <= 1.0):
+            raise InputError(f"--theta: got {given}, expected a number in [0, 1]")
+    if dim is not None:
+        d = _finite_option("--dim", dim)
+        if d != int(d) or d < 1 or d > 4:
+            raise InputError("--dim: expected 1, 2, 3 or 4")
+        dim = int(d)
+    tolerance = _finite_option("--tolerance", tolerance)
+    if not (tolerance > 0):
+        raise InputError("--tolerance: expected a positive number")
+    if isinstance(map, Scene):
+        if theta is not None:
+            raise InputError("--theta: with --scene, the scene's integrator.theta is the map's (use --set)")
+        text = _call(_dvm._check_scene_map, map._handle, dim or 0, tolerance)
+    elif isinstance(map, str):
+        text = _call(_dvm._check_map, map, -1.0 if theta is None else theta, dim or 0, tolerance)
+    else:
+        raise TypeError("check_map: expected a map's name or a dvm.Scene, got " + type(map).__name__)
+    return MapCheck(_json.loads(text))
 
 
 # ---- listings -----------------------------------------------------------------------
