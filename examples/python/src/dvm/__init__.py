@@ -51,8 +51,9 @@ class InputError(ValueError):
     """
 
     # "SOURCE:LINE:COLUMN: ..." or "SOURCE (from --set): ..." (a position, or none for an
-    # override), "SOURCE: key '...'", "SOURCE: missing key '...'"
-    _SOURCE = _re.compile(r"^(?P<source>.+?)(?::(?P<line>\d+):(?P<column>\d+)| \(from --set\))?: "
+    # override; integrate names the argument: "dvm.integrate (from argument h): ..."),
+    # "SOURCE: key '...'", "SOURCE: missing key '...'"
+    _SOURCE = _re.compile(r"^(?P<source>.+?)(?::(?P<line>\d+):(?P<column>\d+)| \(from [^)]+\))?: "
                           r"(?=key '|missing key '|character \d+ of the value|in [a-z_]+\.)")
     _KEY = _re.compile(r"(?:^|: )(?:key '|missing key '|in )(?P<key>[A-Za-z_]\w*(?:\.[\w\[\]]+)+)")
     _LEADING = _re.compile(r"^(?:--set )?(?P<key>[A-Za-z_]\w*(?:\.\w+)+):")
@@ -351,9 +352,11 @@ def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=N
     "steps": K} for a boundary-value problem); progress: as in :func:`run`.
 
     The arguments become the keys of a scene read by the program's scene reader, so a
-    refused value raises :class:`InputError` with the program's message (naming the
-    scene key: 'initial.q', 'integrator.step', ...; "(from --set)" stands for the
-    arguments). Raises :class:`StepFailure` when a step fails.
+    refused value raises :class:`InputError` with the program's message, which names the
+    scene key ('initial.q', 'integrator.step', ...) and where "(from --set)" would stand
+    in the program's, the argument that gave it: "dvm.integrate (from argument h): key
+    'integrator.step': ...", "(from the System)", "(from the Method)". Raises
+    :class:`StepFailure` when a step fails.
     """
     if not isinstance(system, System):
         raise TypeError("integrate: expected a dvm.System, got " + type(system).__name__)
@@ -385,8 +388,40 @@ def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=N
     # the sections present (even empty), so that a message names a missing key, not a
     # missing section
     text = "[system]\n[initial]\n[integrator]\n"
-    handle = _call(_dvm._load_scene, text, True, "dvm.integrate", _overrides(keys))
-    return run(Scene(handle, []), progress=progress)
+    try:
+        handle = _call(_dvm._load_scene, text, True, "dvm.integrate", _overrides(keys))
+        return run(Scene(handle, []), progress=progress)
+    except InputError as e:
+        raise InputError(_integrate_message(str(e))) from None
+
+
+# the arguments of integrate that give one scene key each
+_INTEGRATE_ARGUMENTS = {"initial.q": "argument q0", "initial.p": "argument p0", "initial.v": "argument v0",
+                        "integrator.step": "argument h", "integrator.steps": "argument steps",
+                        "integrator.t_end": "argument t_end", "output.every": "argument every",
+                        "output.monitor_every": "argument monitor_every"}
+_INTEGRATE_SECTIONS = {"system": "the System", "integrator": "the Method", "map": "the Method's written_map",
+                       "initial": "argument initial", "problem": "argument problem", "output": "the arguments"}
+_FROM_SET = _re.compile(r"dvm\.integrate \(from --set\)(?=: (?:key '(?P<key>[^']+)'|character \d+ of the value: "
+                        r"in (?P<within>[A-Za-z_][\w.\[\]]*))|)")
+
+
+def _integrate_origin(key):
+    """What gave a scene key integrate wrote: "argument h", "the System", ..."""
+    if not key:
+        return "the arguments"
+    key = key.split("[")[0]
+    if key in _INTEGRATE_ARGUMENTS:
+        return _INTEGRATE_ARGUMENTS[key]
+    return _INTEGRATE_SECTIONS.get(key.split(".")[0], "the arguments")
+
+
+def _integrate_message(message):
+    """The scene reader's message for integrate's scene, where "(from --set)" (a key
+    without a position in a file) becomes the argument that gave the key:
+    "dvm.integrate (from argument h): key 'integrator.step': ..."."""
+    return _FROM_SET.sub(lambda m: f"dvm.integrate (from {_integrate_origin(m.group('key') or m.group('within'))})",
+                         message)
 
 
 # ---- convergence studies ----------------------------------------------------------------
