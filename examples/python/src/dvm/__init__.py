@@ -17,7 +17,10 @@ Errors: bad input raises :class:`InputError` (a ValueError) with the program's
 message, which names the scene key and, for a file, its line and column; a run that
 fails numerically raises :class:`StepFailure`, carrying the step, the time, the
 residual and the trajectory up to the failure. A run releases the GIL (threads run in
-parallel) and stops with KeyboardInterrupt on Ctrl-C.
+parallel) and stops with KeyboardInterrupt on Ctrl-C; ``progress=True`` draws a
+progress bar on stderr.
+
+:func:`check_map` checks a map's identities as ``dvm check-map`` does.
 
 The listings :func:`systems`, :func:`maps` and :func:`methods` are those of
 ``dvm systems --json``, ``dvm maps --json`` and ``dvm methods --json``.
@@ -27,6 +30,8 @@ import json as _json
 import math as _math
 import os as _os
 import re as _re
+import sys as _sys
+import time as _time
 
 from . import _dvm
 
@@ -268,22 +273,94 @@ class Result:
                 f"steps to t = {self.report.get('t_final')}, {self.data.shape[0]} rows x {self.data.shape[1]} columns>")
 
 
+class _ProgressBar:
+    """progress=True: a text bar on a stream (sys.stderr), redrawn in place ("\\r") at
+    each visit of the run's poll hook, and completed with a newline when the run ends.
+
+        [##########..........]  50.0%  step 500000/1000000  1.2 s, 1 s left
+
+    A boundary-value problem counts the iterations of its solve against their most
+    (integrator.max_iterations)."""
+
+    WIDTH = 30
+
+    def __init__(self, stream, unit, total):
+        self.stream, self.unit, self.total = stream, unit, total
+        self.start = _time.monotonic()
+        self.shown = False
+        if total:
+            self.draw(0, total)
+
+    def __call__(self, k, total):
+        self.total = total
+        self.draw(k, total)
+
+    def draw(self, k, total, fraction=None, note=None):
+        if fraction is None:
+            fraction = min(max(k / total, 0.0), 1.0) if total > 0 else 1.0
+        filled = int(fraction * self.WIDTH + 0.5)
+        elapsed = _time.monotonic() - self.start
+        if note is None:
+            note = f"{elapsed:.1f} s"
+            if 0.0 < fraction < 1.0 and self.unit == "step":
+                note += f", {elapsed * (1.0 - fraction) / fraction:.0f} s left"
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.WIDTH - filled)}] {100.0 * fraction:5.1f}%  "
+                          f"{self.unit} {k}/{total}  {note}   ")
+        self.stream.flush()
+        self.shown = True
+
+    def finish(self, result):
+        """The last frame: the whole bar for a completed run, then a newline."""
+        elapsed = _time.monotonic() - self.start
+        if result is not None and self.unit == "step":
+            self.draw(result.report.get("steps"), self.total, 1.0, f"{elapsed:.1f} s")
+        elif result is not None:
+            self.draw(result.report.get("solver_iterations"), self.total or "?", 1.0, f"{elapsed:.1f} s, solved")
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _progress_of(progress, scene):
+    """The poll hook's function for run's ``progress``: None, a function, or True (a bar)."""
+    if progress is None or progress is False:
+        return None, None
+    if progress is True:
+        bar = (_ProgressBar(_sys.stderr, "iteration", None) if scene.boundary_value
+               else _ProgressBar(_sys.stderr, "step", scene.steps))
+        return bar, bar
+    if not callable(progress):
+        raise TypeError("progress: expected None, True (a bar on stderr) or a function progress(step, steps), got "
+                        + type(progress).__name__)
+    return progress, None
+
+
 def run(scene, progress=None):
     """Runs a scene (from :func:`load_scene`) as ``dvm run`` does and returns its
     :class:`Result`: the rows its CSV would hold (``[output] every`` applies; no file is
     written) and its report.
 
-    progress: None, or a function called as progress(step, steps) from the run's
-    thread about every 0.05 s while it runs (an exception it raises stops the run).
+    progress: None; True, for a text bar on stderr (the steps done, the time taken and
+    left), redrawn while the run goes and completed when it ends; or a function called
+    as progress(step, steps) from the run's thread about every 0.05 s while it runs (an
+    exception it raises stops the run). For a boundary-value problem the bar and the
+    function count the iterations of its solve: progress(iteration, max_iterations).
 
     The GIL is released while the run integrates. Raises :class:`StepFailure` when a
-    step fails (its ``result`` holds the rows up to it), KeyboardInterrupt on Ctrl-C,
-    :class:`InputError` for a run the runtime refuses.
+    step fails (its ``result`` holds the rows up to it), KeyboardInterrupt on Ctrl-C
+    (also during the solve of a boundary-value problem), :class:`InputError` for a run
+    the runtime refuses.
     """
     if not isinstance(scene, Scene):
         raise TypeError("run: expected a dvm.Scene (from dvm.load_scene), got " + type(scene).__name__)
-    report_text, failure, columns, data = _call(_dvm._run, scene._handle, scene.every, scene.monitor_every, progress)
-    result = Result(_json.loads(report_text), columns, data)
+    hook, bar = _progress_of(progress, scene)
+    result = None
+    try:
+        report_text, failure, columns, data = _call(_dvm._run, scene._handle, scene.every, scene.monitor_every, hook)
+        result = Result(_json.loads(report_text), columns, data)
+    finally:
+        if bar is not None:
+            bar.finish(result if result is not None and not failure else None)
     if failure:
         raise StepFailure(failure, result)
     return result
@@ -349,7 +426,8 @@ def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=N
     and the last are always kept); monitor_every: the steps between evaluations of the
     energy and invariants (default 1); initial, problem: further keys of the scene's
     [initial] and [problem] sections (problem={"kind": "boundary-value", "q_final": ...,
-    "steps": K} for a boundary-value problem); progress: as in :func:`run`.
+    "steps": K} for a boundary-value problem); progress: as in :func:`run` (True: a
+    bar on stderr; a function: progress(step, steps)).
 
     The arguments become the keys of a scene read by the program's scene reader, so a
     refused value raises :class:`InputError` with the program's message, which names the

@@ -7,7 +7,8 @@ import numpy as np
 import numpy.typing as npt
 
 _Value = Union[bool, int, float, str, Sequence[Any], Mapping[str, Any], np.ndarray]
-_Progress = Optional[Callable[[int, int], Any]]
+# None, True (a bar on stderr) or a function progress(step, steps)
+_Progress = Union[None, bool, Callable[[int, int], Any]]
 
 class InputError(ValueError):
     message: str
