@@ -4,7 +4,6 @@
 import re
 import time
 
-import numpy as np
 import pytest
 
 import dvm
