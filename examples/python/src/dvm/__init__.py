@@ -354,13 +354,13 @@ def run(scene, progress=None):
     if not isinstance(scene, Scene):
         raise TypeError("run: expected a dvm.Scene (from dvm.load_scene), got " + type(scene).__name__)
     hook, bar = _progress_of(progress, scene)
-    result = None
+    result, failure = None, ""
     try:
         report_text, failure, columns, data = _call(_dvm._run, scene._handle, scene.every, scene.monitor_every, hook)
         result = Result(_json.loads(report_text), columns, data)
     finally:
         if bar is not None:
-            bar.finish(result if result is not None and not failure else None)
+            bar.finish(None if result is None or failure else result)
     if failure:
         raise StepFailure(failure, result)
     return result
