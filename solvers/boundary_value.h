@@ -24,6 +24,8 @@
 
 #include <ceres/ceres.h>
 
+#include <exception>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -35,6 +37,38 @@ struct BoundaryValueOptions {
   int max_iterations = 100;
   double residual_tolerance = 1e-14;  // on max |DEL_k| relative to the scale above
   bool verbose = false;
+  // Called with the iteration's number after every iteration of Ceres (0: the starting
+  // point), the hook of a caller that must act during a long solve (an interrupt, a
+  // progress display). An exception it throws stops the solve: Ceres is told to abort
+  // (nothing may be thrown through its minimizer), and solve() rethrows it once
+  // ceres::Solve has returned.
+  std::function<void(int iteration)> poll;
+};
+
+// BoundaryValueOptions::poll as a Ceres iteration callback; rethrow() after the solve.
+class BoundaryValuePoll final : public ceres::IterationCallback {
+ public:
+  explicit BoundaryValuePoll(const std::function<void(int)>& poll) : poll_(poll) {}
+  ceres::CallbackReturnType operator()(const ceres::IterationSummary& summary) override {
+    try {
+      poll_(summary.iteration);
+    } catch (...) {
+      error_ = std::current_exception();
+      return ceres::SOLVER_ABORT;
+    }
+    return ceres::SOLVER_CONTINUE;
+  }
+  // Adds itself to a solve's options when there is a hook to call.
+  void attach(ceres::Solver::Options& so) {
+    if (poll_) so.callbacks.push_back(this);
+  }
+  void rethrow() const {
+    if (error_) std::rethrow_exception(error_);
+  }
+
+ private:
+  const std::function<void(int)>& poll_;
+  std::exception_ptr error_;
 };
 
 template <int N>
@@ -109,8 +143,11 @@ class BoundaryValueProblem {
     so.initial_trust_region_radius = 1e12;
     so.minimizer_progress_to_stdout = opt.verbose;
     so.logging_type = opt.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+    BoundaryValuePoll poll(opt.poll);
+    poll.attach(so);
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
+    poll.rethrow();
 
     BoundaryValueResult<N> res;
     res.iterations = static_cast<int>(summary.iterations.size());

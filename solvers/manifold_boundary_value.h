@@ -116,8 +116,11 @@ class SphereBoundaryValueProblem {
     so.initial_trust_region_radius = 1e12;
     so.minimizer_progress_to_stdout = opt.verbose;
     so.logging_type = opt.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+    BoundaryValuePoll poll(opt.poll);
+    poll.attach(so);
     ceres::Solver::Summary summary;
     ceres::Solve(so, &problem, &summary);
+    poll.rethrow();
 
     BoundaryValueResult<S> res;
     res.iterations = static_cast<int>(summary.iterations.size());

@@ -3,8 +3,9 @@
 // It binds the runtime layer as the dvm program uses it: load_scene (the one scene
 // reader, with its messages), make_run and Run::execute with a Recorder that keeps the
 // rows in memory, report_json and run_failure_message (what `dvm run --json` prints and
-// what a failed run says on stderr), and the listings of the registries. The Python
-// side (src/dvm/__init__.py) turns these into the documented API.
+// what a failed run says on stderr), the listings of the registries, the convergence
+// study and the map checks (the JSON of `dvm converge --json` and `dvm check-map`). The
+// Python side (src/dvm/__init__.py) turns these into the documented API.
 //
 // A run releases the GIL: make_run (which may compile a written Lagrangian) and the
 // whole integrate loop run without it. The recorder's poll hook (solvers/runtime/
@@ -25,6 +26,7 @@
 #include <string>
 #include <vector>
 
+#include "solvers/runtime/check_map.h"
 #include "solvers/runtime/converge.h"
 #include "solvers/runtime/errors.h"
 #include "solvers/runtime/listings.h"
@@ -98,6 +100,18 @@ std::string converge(const dvm::Scene& scene, const std::vector<std::int64_t>& s
   return dvm::converge_json(dvm::converge(scene.problem, scene.method, o));
 }
 
+// The identity checks of a map of the registry (theta < 0: the map's own; dim 0: the
+// default) or of a scene's map: the JSON `dvm check-map` prints.
+std::string check_map(const std::string& name, double theta, int dim, double tolerance) {
+  py::gil_scoped_release release;
+  return dvm::map_check_json(dvm::check_map(name, theta, dim, tolerance));
+}
+
+std::string check_scene_map(const dvm::Scene& scene, int dim, double tolerance) {
+  py::gil_scoped_release release;
+  return dvm::map_check_json(dvm::check_scene_map(scene, dim, tolerance));
+}
+
 }  // namespace
 
 PYBIND11_MODULE(_dvm, m) {
@@ -124,6 +138,10 @@ PYBIND11_MODULE(_dvm, m) {
   m.def("_converge", &converge, py::arg("scene"), py::arg("steps_list"), py::arg("t_end"), py::arg("max_total_steps"),
         "A convergence study: the JSON of `dvm converge --json`.");
   m.attr("_converge_max_total_steps") = dvm::ConvergeOptions::kDefaultMaxTotalSteps;
+  m.def("_check_map", &check_map, py::arg("name"), py::arg("theta"), py::arg("dim"), py::arg("tolerance"),
+        "A map's identity checks: the JSON of `dvm check-map NAME`.");
+  m.def("_check_scene_map", &check_scene_map, py::arg("scene"), py::arg("dim"), py::arg("tolerance"),
+        "The identity checks of a scene's map: the JSON of `dvm check-map --scene`.");
   m.def("_systems_json", &dvm::systems_json, "`dvm systems --json`");
   m.def("_maps_json", &dvm::maps_json, "`dvm maps --json`");
   m.def("_methods_json", &dvm::methods_json, "`dvm methods --json`");

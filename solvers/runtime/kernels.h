@@ -392,7 +392,9 @@ std::unique_ptr<Run> collocation_run(const View& view, Step step, const typename
 // recorder as a run's rows (its room checked before the solve); the report gives the
 // ends, the energy's spread, and on a manifold the distance from it and (spread = true)
 // the spread of the vertical angular momentum J3 (the view's last invariant) along the
-// solution.
+// solution. The recorder's poll hook is called as poll(iteration, max_iterations) after
+// every iteration of the solve; an exception it throws stops the solve and leaves
+// execute (the recorder's temporaries are removed, as an initial-value run's are).
 template <class View, class Solver>
 class BoundaryValueRun final : public Run {
  public:
@@ -417,6 +419,8 @@ class BoundaryValueRun final : public Run {
     if (rec) rec->open(view_.columns(), output_rows(steps_, rec->every()));
     BoundaryValueOptions bo;
     bo.max_iterations = max_iterations_;
+    if (rec && rec->spec().poll)  // the recorder's hook, after every iteration of the solve
+      bo.poll = [&](int iteration) { rec->spec().poll(iteration, max_iterations_); };
     const auto start = std::chrono::steady_clock::now();
     const auto res = solver_.solve(qa_, qb_, static_cast<int>(steps_), bo);
     r.wall_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -14,11 +14,12 @@
 // handed over whole by take_rows() (a binding wraps it as an array without copying).
 //
 // A run calls progress(k, ...) after every step; OutputSpec::poll, when set, is called
-// from there every kPollSteps steps. It is the hook of a caller that must act while a
-// run is in progress (check for an interrupt, show progress): an exception it throws
-// stops the run and leaves Run::execute (the temporaries of the files are removed, no
-// rows are lost from memory). It must not throw std::domain_error, which the
-// integrate loop takes for a failed step.
+// from there every kPollSteps steps (and as poll(i, max_iterations) after every
+// iteration i of the single solve of a boundary-value problem). It is the hook of a
+// caller that must act while a run is in progress (check for an interrupt, show
+// progress): an exception it throws stops the run and leaves Run::execute (the
+// temporaries of the files are removed, no rows are lost from memory). It must not
+// throw std::domain_error, which the integrate loop takes for a failed step.
 #pragma once
 
 #include <chrono>
@@ -43,8 +44,9 @@ struct OutputSpec {
   std::int64_t monitor_every = 1;
   bool progress = false;                // progress on stderr when it is a terminal
   bool memory = false;                  // rows kept in memory (Recorder::take_rows)
-  // Called as poll(k, steps) at every kPollSteps-th step k of an initial-value run (not
-  // during the single solve of a boundary-value problem); see above.
+  // Called as poll(k, steps) at every kPollSteps-th step k of an initial-value run, and
+  // as poll(i, max_iterations) after every iteration i of the solve of a boundary-value
+  // problem; see above.
   std::function<void(std::int64_t, std::int64_t)> poll;
 };
 

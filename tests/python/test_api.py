@@ -138,7 +138,7 @@ def test_progress_is_called_and_can_stop_a_run():
 
 def test_docstrings():
     for f in (dvm, dvm.load_scene, dvm.run, dvm.integrate, dvm.System, dvm.Method, dvm.Result, dvm.InputError,
-              dvm.StepFailure, dvm.systems, dvm.maps, dvm.methods):
+              dvm.StepFailure, dvm.systems, dvm.maps, dvm.methods, dvm.check_map, dvm.MapCheck):
         assert f.__doc__ and len(f.__doc__) > 80, f
 
 

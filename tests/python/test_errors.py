@@ -25,7 +25,7 @@ steps = 10
 
 # what dvm.integrate gives the scene reader: a scene named dvm.integrate with its three
 # sections, the arguments as --set overrides (the program reads the same from a file of
-# that name)
+# that name); its messages name the argument where the program's say "(from --set)"
 INTEGRATE_BASE = "[system]\n[initial]\n[integrator]\n"
 
 
@@ -108,17 +108,39 @@ def test_a_rule_between_keys(tmp_path):
      {"q0": [1.0], "v0": [0.0], "h": 0.01, "steps": 10},
      ['system.coordinates=["x"]', 'system.lagrangian="x_dot^2/2 - x^^2"', 'integrator.map="midpoint"',
       "initial.q=[1.0]", "initial.v=[0.0]", "integrator.step=0.01", "integrator.steps=10"]),
+    ({"builtin": "kepler"}, {"map": "midpoint"}, {"q0": [0.4, 0.0], "p0": [0.0, 2.0], "h": 0.01, "t_end": -1.0},
+     ['system.builtin="kepler"', 'integrator.map="midpoint"', "initial.q=[0.4, 0.0]", "initial.p=[0.0, 2.0]",
+      "integrator.step=0.01", "integrator.t_end=-1.0"]),
+    ({"builtin": "kepler"}, {"map": "midpoint"},
+     {"q0": [0.4, 0.0], "p0": [0.0, 2.0], "h": 0.01, "steps": 10, "initial": {"w": 1.0}},
+     ['system.builtin="kepler"', 'integrator.map="midpoint"', "initial.w=1.0", "initial.q=[0.4, 0.0]",
+      "initial.p=[0.0, 2.0]", "integrator.step=0.01", "integrator.steps=10"]),
 ], ids=["unknown system", "size of q", "step", "unknown key", "unknown parameter", "no momentum",
-        "written text"])
+        "written text", "t_end", "initial"])
 def test_integrate_refuses_as_the_program(case, tmp_path):
     system, method, args, overrides = case
     expected = integrate_message(overrides, str(tmp_path))
     with pytest.raises(dvm.InputError) as e:
         dvm.integrate(dvm.System(**system), dvm.Method(**method), **args)
-    assert str(e.value) == expected
+    # the program's message, with the argument that gave the key for "--set"
+    origin = {"system": "the System", "integrator": "the Method", "initial": "argument initial"}
+    key = e.value.key
+    origin.update({"initial.q": "argument q0", "integrator.step": "argument h", "integrator.t_end": "argument t_end"})
+    given = origin.get(key, origin.get(key.split(".")[0]))
+    assert "(from --set)" not in str(e.value)
+    assert str(e.value) == expected.replace("dvm.integrate (from --set)", f"dvm.integrate (from {given})")
+    if "(from --set)" in expected:
+        assert f"(from {given})" in str(e.value)
     assert e.value.source == "dvm.integrate"
     assert e.value.key and e.value.key.split(".")[0] in ("system", "initial", "integrator"), e.value.key
     assert e.value.line is None
+
+
+def test_the_program_keeps_from_set(tmp_path):
+    # the program's own messages for --set stay as they were
+    message = integrate_message(['system.builtin="kepler"', 'integrator.map="midpoint"', "initial.q=[0.4, 0.0]",
+                                 "initial.p=[0.0, 2.0]", "integrator.step=0.0", "integrator.steps=10"], str(tmp_path))
+    assert message.startswith("dvm.integrate (from --set): key 'integrator.step'"), message
 
 
 def test_values_that_are_not_scene_values():

@@ -144,3 +144,46 @@ def test_sigint_stops_a_run():
             child.kill()
     assert child.returncode == 0, err
     assert out.split("\n")[:2] == ["interrupted", "again 100 ok"], (out, err)
+
+
+# A boundary-value problem that no number of iterations solves in the time of the test:
+# the pendulum from 0 to 3 rad in 10 s on 2 x 10^5 nodes, 1000 iterations allowed (each
+# a sparse solve of tenths of a second). SIGINT reaches it between two iterations.
+CHILD_BVP = r"""
+import sys, time
+import dvm
+scene = dvm.load_scene(sys.argv[1], problem={"q_final": [3.0], "steps": 200000},
+                       integrator={"step": 5e-5, "max_iterations": 1000})
+print("start", flush=True)
+start = time.perf_counter()
+try:
+    dvm.run(scene)
+    print("completed", flush=True)
+except KeyboardInterrupt:
+    print("interrupted", flush=True)
+except dvm.StepFailure as e:
+    print("failed", e, flush=True)
+print("took", time.perf_counter() - start, flush=True)
+r = dvm.run(dvm.load_scene(sys.argv[1]))
+print("again", r.steps, r.status, flush=True)
+"""
+
+
+def test_sigint_stops_a_boundary_value_solve():
+    child = subprocess.Popen([sys.executable, "-c", CHILD_BVP, os.path.join(os.environ["DVM_SCENES"],
+                                                                            "pendulum_bvp.toml")],
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ))
+    try:
+        assert child.stdout.readline().strip() == "start"
+        time.sleep(1.0)  # inside the solve
+        child.send_signal(signal.SIGINT)
+        out, err = child.communicate(timeout=120)
+    finally:
+        if child.poll() is None:
+            child.kill()
+    assert child.returncode == 0, err
+    lines = out.split("\n")
+    assert lines[0] == "interrupted", (out, err)
+    # stopped within an iteration or two of the signal, not at the end of the solve
+    assert lines[1].startswith("took ") and float(lines[1].split()[1]) < 15.0, out
+    assert lines[2] == "again 10000 ok", (out, err)

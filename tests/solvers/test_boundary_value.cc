@@ -1,5 +1,6 @@
 // Whole-trajectory (boundary-value) problems: one sparse Ceres problem for all interior
-// nodes reproduces the one-step integrator, and a pendulum with 10^4 nodes solves.
+// nodes reproduces the one-step integrator, and a pendulum with 10^4 nodes solves; the
+// poll hook is called after every iteration and stops the solve by throwing.
 #define BOOST_TEST_MODULE boundary_value
 #include <boost/test/unit_test.hpp>
 
@@ -79,4 +80,41 @@ BOOST_AUTO_TEST_CASE(pendulum_with_ten_thousand_nodes_solves) {
   for (int k = 0; k <= K; ++k) dev = std::fmax(dev, std::fabs(res.q[k][0] - traj[k][0]));
   BOOST_TEST_MESSAGE("pendulum: max |q_bvp - q_shot| = " << dev);
   BOOST_TEST(dev <= 1e-8);
+}
+
+BOOST_AUTO_TEST_CASE(the_poll_hook_sees_every_iteration_and_can_stop_the_solve) {
+  // BoundaryValueOptions::poll is called after each Ceres iteration, 0 (the start)
+  // first; an exception it throws stops the solve and comes out of solve().
+  const Pendulum P(1.0, 1.0, 1.0);
+  const double h = 2e-3;
+  const int K = 1000;
+  const BoundaryValueProblem<Pendulum, ThetaMap> B(P, ThetaMap::midpoint(), h);
+  std::vector<int> seen;
+  BoundaryValueOptions opt;
+  opt.poll = [&](int iteration) { seen.push_back(iteration); };
+  const auto res = B.solve(V1(0.0), V1(1.5), K, opt);
+  BOOST_TEST(res.converged, res.message);
+  BOOST_REQUIRE(!seen.empty());
+  // (the iteration that meets a stopping rule is counted, and may not be called back)
+  BOOST_TEST(static_cast<int>(seen.size()) <= res.iterations);
+  BOOST_TEST(static_cast<int>(seen.size()) >= res.iterations - 1);
+  for (std::size_t i = 0; i < seen.size(); ++i) BOOST_TEST(seen[i] == static_cast<int>(i));
+  // the same problem, stopped at iteration 1 of the several it takes
+  BOOST_REQUIRE(res.iterations > 2);
+  struct Stop {
+    int iteration;
+  };
+  seen.clear();
+  opt.poll = [&](int iteration) {
+    seen.push_back(iteration);
+    if (iteration == 1) throw Stop{iteration};
+  };
+  bool stopped = false;
+  try {
+    B.solve(V1(0.0), V1(1.5), K, opt);
+  } catch (const Stop& s) {
+    stopped = s.iteration == 1;
+  }
+  BOOST_TEST(stopped);
+  BOOST_TEST((seen == std::vector<int>{0, 1}));
 }

@@ -17,7 +17,10 @@ Errors: bad input raises :class:`InputError` (a ValueError) with the program's
 message, which names the scene key and, for a file, its line and column; a run that
 fails numerically raises :class:`StepFailure`, carrying the step, the time, the
 residual and the trajectory up to the failure. A run releases the GIL (threads run in
-parallel) and stops with KeyboardInterrupt on Ctrl-C.
+parallel) and stops with KeyboardInterrupt on Ctrl-C; ``progress=True`` draws a
+progress bar on stderr.
+
+:func:`check_map` checks a map's identities as ``dvm check-map`` does.
 
 The listings :func:`systems`, :func:`maps` and :func:`methods` are those of
 ``dvm systems --json``, ``dvm maps --json`` and ``dvm methods --json``.
@@ -27,12 +30,15 @@ import json as _json
 import math as _math
 import os as _os
 import re as _re
+import sys as _sys
+import time as _time
 
 from . import _dvm
 
 __all__ = [
     "InputError", "StepFailure", "Scene", "Result", "System", "Method",
-    "load_scene", "run", "integrate", "converge", "Convergence", "systems", "maps", "methods",
+    "load_scene", "run", "integrate", "converge", "Convergence", "check_map", "MapCheck", "systems", "maps",
+    "methods",
 ]
 
 
@@ -50,8 +56,9 @@ class InputError(ValueError):
     """
 
     # "SOURCE:LINE:COLUMN: ..." or "SOURCE (from --set): ..." (a position, or none for an
-    # override), "SOURCE: key '...'", "SOURCE: missing key '...'"
-    _SOURCE = _re.compile(r"^(?P<source>.+?)(?::(?P<line>\d+):(?P<column>\d+)| \(from --set\))?: "
+    # override; integrate names the argument: "dvm.integrate (from argument h): ..."),
+    # "SOURCE: key '...'", "SOURCE: missing key '...'"
+    _SOURCE = _re.compile(r"^(?P<source>.+?)(?::(?P<line>\d+):(?P<column>\d+)| \(from [^)]+\))?: "
                           r"(?=key '|missing key '|character \d+ of the value|in [a-z_]+\.)")
     _KEY = _re.compile(r"(?:^|: )(?:key '|missing key '|in )(?P<key>[A-Za-z_]\w*(?:\.[\w\[\]]+)+)")
     _LEADING = _re.compile(r"^(?:--set )?(?P<key>[A-Za-z_]\w*(?:\.\w+)+):")
@@ -266,22 +273,94 @@ class Result:
                 f"steps to t = {self.report.get('t_final')}, {self.data.shape[0]} rows x {self.data.shape[1]} columns>")
 
 
+class _ProgressBar:
+    """progress=True: a text bar on a stream (sys.stderr), redrawn in place ("\\r") at
+    each visit of the run's poll hook, and completed with a newline when the run ends.
+
+        [##########..........]  50.0%  step 500000/1000000  1.2 s, 1 s left
+
+    A boundary-value problem counts the iterations of its solve against their most
+    (integrator.max_iterations)."""
+
+    WIDTH = 30
+
+    def __init__(self, stream, unit, total):
+        self.stream, self.unit, self.total = stream, unit, total
+        self.start = _time.monotonic()
+        self.shown = False
+        if total:
+            self.draw(0, total)
+
+    def __call__(self, k, total):
+        self.total = total
+        self.draw(k, total)
+
+    def draw(self, k, total, fraction=None, note=None):
+        if fraction is None:
+            fraction = min(max(k / total, 0.0), 1.0) if total > 0 else 1.0
+        filled = int(fraction * self.WIDTH + 0.5)
+        elapsed = _time.monotonic() - self.start
+        if note is None:
+            note = f"{elapsed:.1f} s"
+            if 0.0 < fraction < 1.0 and self.unit == "step":
+                note += f", {elapsed * (1.0 - fraction) / fraction:.0f} s left"
+        self.stream.write(f"\r[{'#' * filled}{'.' * (self.WIDTH - filled)}] {100.0 * fraction:5.1f}%  "
+                          f"{self.unit} {k}/{total}  {note}   ")
+        self.stream.flush()
+        self.shown = True
+
+    def finish(self, result):
+        """The last frame: the whole bar for a completed run, then a newline."""
+        elapsed = _time.monotonic() - self.start
+        if result is not None and self.unit == "step":
+            self.draw(result.report.get("steps"), self.total, 1.0, f"{elapsed:.1f} s")
+        elif result is not None:
+            self.draw(result.report.get("solver_iterations"), self.total or "?", 1.0, f"{elapsed:.1f} s, solved")
+        if self.shown:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _progress_of(progress, scene):
+    """The poll hook's function for run's ``progress``: None, a function, or True (a bar)."""
+    if progress is None or progress is False:
+        return None, None
+    if progress is True:
+        bar = (_ProgressBar(_sys.stderr, "iteration", None) if scene.boundary_value
+               else _ProgressBar(_sys.stderr, "step", scene.steps))
+        return bar, bar
+    if not callable(progress):
+        raise TypeError("progress: expected None, True (a bar on stderr) or a function progress(step, steps), got "
+                        + type(progress).__name__)
+    return progress, None
+
+
 def run(scene, progress=None):
     """Runs a scene (from :func:`load_scene`) as ``dvm run`` does and returns its
     :class:`Result`: the rows its CSV would hold (``[output] every`` applies; no file is
     written) and its report.
 
-    progress: None, or a function called as progress(step, steps) from the run's
-    thread about every 0.05 s while it runs (an exception it raises stops the run).
+    progress: None; True, for a text bar on stderr (the steps done, the time taken and
+    left), redrawn while the run goes and completed when it ends; or a function called
+    as progress(step, steps) from the run's thread about every 0.05 s while it runs (an
+    exception it raises stops the run). For a boundary-value problem the bar and the
+    function count the iterations of its solve: progress(iteration, max_iterations).
 
     The GIL is released while the run integrates. Raises :class:`StepFailure` when a
-    step fails (its ``result`` holds the rows up to it), KeyboardInterrupt on Ctrl-C,
-    :class:`InputError` for a run the runtime refuses.
+    step fails (its ``result`` holds the rows up to it), KeyboardInterrupt on Ctrl-C
+    (also during the solve of a boundary-value problem), :class:`InputError` for a run
+    the runtime refuses.
     """
     if not isinstance(scene, Scene):
         raise TypeError("run: expected a dvm.Scene (from dvm.load_scene), got " + type(scene).__name__)
-    report_text, failure, columns, data = _call(_dvm._run, scene._handle, scene.every, scene.monitor_every, progress)
-    result = Result(_json.loads(report_text), columns, data)
+    hook, bar = _progress_of(progress, scene)
+    result, failure = None, ""
+    try:
+        report_text, failure, columns, data = _call(_dvm._run, scene._handle, scene.every, scene.monitor_every, hook)
+        result = Result(_json.loads(report_text), columns, data)
+    finally:
+        if bar is not None:
+            bar.finish(None if result is None or failure else result)
     if failure:
         raise StepFailure(failure, result)
     return result
@@ -347,12 +426,15 @@ def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=N
     and the last are always kept); monitor_every: the steps between evaluations of the
     energy and invariants (default 1); initial, problem: further keys of the scene's
     [initial] and [problem] sections (problem={"kind": "boundary-value", "q_final": ...,
-    "steps": K} for a boundary-value problem); progress: as in :func:`run`.
+    "steps": K} for a boundary-value problem); progress: as in :func:`run` (True: a
+    bar on stderr; a function: progress(step, steps)).
 
     The arguments become the keys of a scene read by the program's scene reader, so a
-    refused value raises :class:`InputError` with the program's message (naming the
-    scene key: 'initial.q', 'integrator.step', ...; "(from --set)" stands for the
-    arguments). Raises :class:`StepFailure` when a step fails.
+    refused value raises :class:`InputError` with the program's message, which names the
+    scene key ('initial.q', 'integrator.step', ...) and where "(from --set)" would stand
+    in the program's, the argument that gave it: "dvm.integrate (from argument h): key
+    'integrator.step': ...", "(from the System)", "(from the Method)". Raises
+    :class:`StepFailure` when a step fails.
     """
     if not isinstance(system, System):
         raise TypeError("integrate: expected a dvm.System, got " + type(system).__name__)
@@ -384,8 +466,40 @@ def integrate(system, method=None, *, q0=None, p0=None, v0=None, h=None, steps=N
     # the sections present (even empty), so that a message names a missing key, not a
     # missing section
     text = "[system]\n[initial]\n[integrator]\n"
-    handle = _call(_dvm._load_scene, text, True, "dvm.integrate", _overrides(keys))
-    return run(Scene(handle, []), progress=progress)
+    try:
+        handle = _call(_dvm._load_scene, text, True, "dvm.integrate", _overrides(keys))
+        return run(Scene(handle, []), progress=progress)
+    except InputError as e:
+        raise InputError(_integrate_message(str(e))) from None
+
+
+# the arguments of integrate that give one scene key each
+_INTEGRATE_ARGUMENTS = {"initial.q": "argument q0", "initial.p": "argument p0", "initial.v": "argument v0",
+                        "integrator.step": "argument h", "integrator.steps": "argument steps",
+                        "integrator.t_end": "argument t_end", "output.every": "argument every",
+                        "output.monitor_every": "argument monitor_every"}
+_INTEGRATE_SECTIONS = {"system": "the System", "integrator": "the Method", "map": "the Method's written_map",
+                       "initial": "argument initial", "problem": "argument problem", "output": "the arguments"}
+_FROM_SET = _re.compile(r"dvm\.integrate \(from --set\)(?=: (?:key '(?P<key>[^']+)'|character \d+ of the value: "
+                        r"in (?P<within>[A-Za-z_][\w.\[\]]*))|)")
+
+
+def _integrate_origin(key):
+    """What gave a scene key integrate wrote: "argument h", "the System", ..."""
+    if not key:
+        return "the arguments"
+    key = key.split("[")[0]
+    if key in _INTEGRATE_ARGUMENTS:
+        return _INTEGRATE_ARGUMENTS[key]
+    return _INTEGRATE_SECTIONS.get(key.split(".")[0], "the arguments")
+
+
+def _integrate_message(message):
+    """The scene reader's message for integrate's scene, where "(from --set)" (a key
+    without a position in a file) becomes the argument that gave the key:
+    "dvm.integrate (from argument h): key 'integrator.step': ..."."""
+    return _FROM_SET.sub(lambda m: f"dvm.integrate (from {_integrate_origin(m.group('key') or m.group('within'))})",
+                         message)
 
 
 # ---- convergence studies ----------------------------------------------------------------
@@ -461,6 +575,85 @@ def converge(scene, steps=None, t_end=None, max_steps=None):
     if report.get("failure"):
         raise StepFailure("a run of the convergence study did not converge: " + report["failure"], study)
     return study
+
+
+# ---- map checks ----------------------------------------------------------------------
+
+class MapCheck:
+    """The identity checks of a discretization map (:func:`check_map`): every field of
+    ``dvm check-map``'s JSON as an attribute: ``map``, ``space`` ("R^n", "S^2",
+    "SO(3)"), ``theta``, ``dim`` (the dimension the identities were checked in; on a
+    manifold its chart's), ``claims_symmetric``, ``residuals`` (a dict: each identity's
+    largest residual over the sample points), ``tolerance`` and ``passed`` (every
+    identity holds to the tolerance and adjoint_difference matches the symmetry claim;
+    ``dvm check-map`` exits with status 1 when not). ``report`` is the whole dict."""
+
+    def __init__(self, report):
+        self.report = report
+
+    def __getattr__(self, name):
+        report = self.__dict__.get("report", {})
+        if name in report:
+            return report[name]
+        raise AttributeError(f"'MapCheck' has no attribute '{name}' (its fields: {', '.join(report)})")
+
+    def __bool__(self):
+        return bool(self.report.get("passed"))
+
+    def __repr__(self):
+        worst = max(self.report.get("residuals", {}).items(), key=lambda kv: -1.0 if kv[1] is None else kv[1],
+                    default=(None, None))
+        return (f"<dvm.MapCheck {self.report.get('map')} on {self.report.get('space')}: "
+                f"{'passed' if self.report.get('passed') else 'failed'} (largest residual {worst[1]!r}, "
+                f"{worst[0]})>")
+
+
+def _finite_option(option, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not _math.isfinite(value):
+        raise InputError(f"{option}: got '{value}', expected a finite number")
+    return float(value)
+
+
+def check_map(map, theta=None, dim=None, tolerance=1e-12):
+    """Checks the identities of a discretization map, as ``dvm check-map`` does:
+    R_d(x, 0) = (x, x), T R^2 - T R^1 = Id, the inverse's round trip, the adjoint's
+    involution and the symmetry claim, the same axioms for the tangent lift, the
+    symplecticity and round trip of the cotangent lift; on S^2 and SO(3) in a chart,
+    and the closed-form inverse on the manifold. Each residual is the largest over
+    random sample points (the same points every call).
+
+    map: a map's name (:func:`maps` lists them; ``dvm check-map NAME``), or a
+    :class:`Scene`: the map it runs, a written one from its [map] section
+    (``dvm check-map --scene FILE``). theta: the theta of a theta map (``--theta``,
+    default the map's own; a scene's is its integrator.theta); dim: 1 to 4, the
+    dimension of R^n the identities are checked in (``--dim``, default 2; maps on a
+    manifold take none); tolerance: ``--tolerance`` (default 1e-12).
+
+    Returns a :class:`MapCheck` (true when the check passed). Raises
+    :class:`InputError` with the program's message (naming its options) for an unknown
+    map, a theta, dim or tolerance it refuses.
+    """
+    if theta is not None:
+        given, theta = theta, _finite_option("--theta", theta)
+        if not (0.0 <= theta <= 1.0):
+            raise InputError(f"--theta: got {given}, expected a number in [0, 1]")
+    if dim is not None:
+        d = _finite_option("--dim", dim)
+        if d != int(d) or d < 1 or d > 4:
+            raise InputError("--dim: expected 1, 2, 3 or 4")
+        dim = int(d)
+    tolerance = _finite_option("--tolerance", tolerance)
+    if not (tolerance > 0):
+        raise InputError("--tolerance: expected a positive number")
+    if isinstance(map, Scene):
+        if theta is not None:
+            raise InputError("--theta: with --scene, the scene's integrator.theta is the map's (use --set)")
+        text = _call(_dvm._check_scene_map, map._handle, dim or 0, tolerance)
+    elif isinstance(map, str):
+        text = _call(_dvm._check_map, map, -1.0 if theta is None else theta, dim or 0, tolerance)
+    else:
+        raise TypeError("check_map: expected a map's name or a dvm.Scene, got " + type(map).__name__)
+    return MapCheck(_json.loads(text))
 
 
 # ---- listings -----------------------------------------------------------------------

@@ -7,7 +7,8 @@ import numpy as np
 import numpy.typing as npt
 
 _Value = Union[bool, int, float, str, Sequence[Any], Mapping[str, Any], np.ndarray]
-_Progress = Optional[Callable[[int, int], Any]]
+# None, True (a bar on stderr) or a function progress(step, steps)
+_Progress = Union[None, bool, Callable[[int, int], Any]]
 
 class InputError(ValueError):
     message: str
@@ -93,6 +94,21 @@ class Convergence:
 
 def converge(scene: Scene, steps: Optional[Sequence[int]] = ..., t_end: Optional[float] = ...,
              max_steps: Optional[int] = ...) -> Convergence: ...
+class MapCheck:
+    report: Dict[str, Any]
+    map: str
+    space: str
+    theta: Optional[float]
+    dim: int
+    claims_symmetric: bool
+    residuals: Dict[str, Optional[float]]
+    tolerance: float
+    passed: bool
+    def __getattr__(self, name: str) -> Any: ...
+    def __bool__(self) -> bool: ...
+
+def check_map(map: Union[str, Scene], theta: Optional[float] = ..., dim: Optional[int] = ...,
+              tolerance: float = ...) -> MapCheck: ...
 def systems() -> List[Dict[str, Any]]: ...
 def maps() -> List[Dict[str, Any]]: ...
 def methods() -> List[Dict[str, Any]]: ...
