@@ -9,22 +9,9 @@
 #include "mechanics/systems.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "tests/address_sanitizer.h"
 
 namespace dvm::verification {
-
-// True in a build with AddressSanitizer (`make sanitize`; g++ defines
-// __SANITIZE_ADDRESS__, clang answers __has_feature).
-#if defined(__SANITIZE_ADDRESS__)
-inline constexpr bool kAddressSanitizer = true;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-inline constexpr bool kAddressSanitizer = true;
-#else
-inline constexpr bool kAddressSanitizer = false;
-#endif
-#else
-inline constexpr bool kAddressSanitizer = false;
-#endif
 
 // Step count of a long-horizon loop (bounded energy, drift of momentum maps, staying on
 // the manifold over 10^5 to 10^6 steps): n, or n / 10 under AddressSanitizer.
@@ -33,7 +20,7 @@ inline constexpr bool kAddressSanitizer = false;
 // test_verification_manifolds at -O2). A tenth of the loop runs the same code path for
 // the sanitizers to check; `make test` asserts the long-time properties at full length.
 // Tolerances that depend on n are computed from the returned count.
-constexpr std::int64_t long_horizon(std::int64_t n) { return kAddressSanitizer ? n / 10 : n; }
+constexpr std::int64_t long_horizon(std::int64_t n) { return dvm_tests::kAddressSanitizer ? n / 10 : n; }
 
 // (q, p) at time t_end = steps * h from (q0, p0), by the position-momentum method of
 // the map. Fails the calling test (returns NaN) if any step fails.
