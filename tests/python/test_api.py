@@ -2,7 +2,6 @@
 # shipped scenes they restate; the arrays' shapes, dtypes, names and memory; the
 # listings; overrides; progress.
 import json
-import os
 
 import numpy as np
 import pytest
