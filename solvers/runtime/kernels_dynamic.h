@@ -150,7 +150,20 @@ struct DynamicView {
     row[2 * n() + 1] = E;
     if (own_invariant_count(L) > 0) written_invariant_values(L, q, p, row + 2 * n() + 2);
   }
-  double energy(const Point& q, const Covector& p) const { return dynamic_energy(L, q, legendre_inverse(L, q, p), p); }
+  // E at (q, p), v = FL^{-1}(q, p) as legendre_inverse finds it (a closed form, else
+  // Newton's method from v = 0), in the view's workspace: a run monitors the energy
+  // every step by default, and vectors allocated per call are a visible part of a
+  // written system's step (compare `dvm run` of a written scene with
+  // integrator.monitor_every at its default and at the step count).
+  double energy(const Point& q, const Covector& p) const {
+    if (velocity_.size() != n()) {
+      velocity_.resize(n());
+      legendre_.resize(n());
+    }
+    velocity_.setZero();
+    dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_);
+    return dynamic_energy(L, q, velocity_, p);
+  }
   int invariant_count() const { return static_cast<int>(dynamic_invariant_names(L).size()); }
   void invariants(const Point& q, const Covector& p, double* out) const { dynamic_invariant_values(L, q, p, out); }
   std::vector<InvariantReport> invariant_reports(const double* I0) const {
@@ -174,6 +187,10 @@ struct DynamicView {
     }
   }
   bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
+
+  // energy()'s workspace (sized at the first call; a copy of the view has its own)
+  mutable Eigen::VectorXd velocity_ = Eigen::VectorXd();
+  mutable dynamic_detail::LegendreWork legendre_ = dynamic_detail::LegendreWork(0);
 };
 
 // Whether a run-time-sized system is separable: declared (n bodies), or read off the
