@@ -1473,6 +1473,11 @@ bool sweep_mpi_built() { return true; }
 
 SweepRanks::SweepRanks() {
   if (!launched_by_mpirun()) return;
+  // A rank waiting in MPI (a worker for its next row, a rank that has finished) yields
+  // its core instead of spinning on it: the rows of the other ranks and threads need
+  // the cores (bench_sweep_mpi.sh measures the difference). A value the user set for
+  // this OpenMPI parameter stays.
+  setenv("OMPI_MCA_mpi_yield_when_idle", "1", 0);
   // only the main thread calls MPI (the other threads run rows)
   int provided = 0;
   MPI_Init_thread(nullptr, nullptr, MPI_THREAD_FUNNELED, &provided);
