@@ -1,8 +1,9 @@
 #!/bin/sh
 # The parallel efficiency of dvm sweep across ranks (OpenMPI's mpirun), beside that of
-# threads: the sweep of bench_sweep with 4 times its steps (200 pendulum runs of mixed
-# cost, 20 step counts from 2000 to 4 10^4 times 10 compositions of the midpoint map of
-# 1 to 17 substeps, so that the start of mpirun is a small part), timed by wall clock
+# threads: the sweep of bench_sweep with 20 times its steps (200 pendulum runs of mixed
+# cost, 20 step counts from 10^4 to 2 10^5 times 10 compositions of the midpoint map of
+# 1 to 17 substeps, so that the start of mpirun, a fixed cost of a fraction of a
+# second, is a small part of the sweep), timed by wall clock
 # in this one script
 #   T_1  dvm sweep --jobs 1 (the baseline)
 #   M_1  mpirun -n 1 dvm sweep (the baseline with MPI's start and the ranks' protocol)
@@ -38,7 +39,7 @@ map = "midpoint"
 step = 0.01
 steps = 100
 SCENE
-set -- sweep "$tmp/scene.toml" --vary integrator.steps=2000:40000:20 \
+set -- sweep "$tmp/scene.toml" --vary integrator.steps=10000:200000:20 \
   --vary 'integrator.composition=[none, triple-jump, suzuki5, kahan-li6, kahan-li8, mclachlan4, yoshida6a, yoshida6b, yoshida8a, suzuki-umeno8]'
 root=""
 [ "$(id -u)" = 0 ] && root=--allow-run-as-root

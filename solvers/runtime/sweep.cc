@@ -1474,9 +1474,9 @@ bool sweep_mpi_built() { return true; }
 SweepRanks::SweepRanks() {
   if (!launched_by_mpirun()) return;
   // A rank waiting in MPI (a worker for its next row, a rank that has finished) yields
-  // its core instead of spinning on it: the rows of the other ranks and threads need
-  // the cores (bench_sweep_mpi.sh measures the difference). A value the user set for
-  // this OpenMPI parameter stays.
+  // its core instead of spinning on it, which slows the rows that the other ranks and
+  // threads run on the same cores (bench_sweep_mpi.sh measures the ranks' parallel
+  // efficiency). A value the user set for this OpenMPI parameter stays.
   setenv("OMPI_MCA_mpi_yield_when_idle", "1", 0);
   // only the main thread calls MPI (the other threads run rows)
   int provided = 0;
