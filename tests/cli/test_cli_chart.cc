@@ -144,6 +144,23 @@ bool has_gnuplot() {
   return false;
 }
 
+// The stability boundary of a parameter value's runs, (step, stable) in any order,
+// computed here from the table as a stability chart must draw it: the largest step
+// whose run and the runs of every smaller step are stable, and the smallest unstable
+// step (NaN where there is none).
+std::pair<double, double> stability_boundary(std::vector<std::pair<double, bool>> runs) {
+  std::sort(runs.begin(), runs.end());
+  double stable = NAN, unstable = NAN;
+  for (const auto& [h, ok] : runs) {
+    if (!ok) {
+      unstable = h;
+      break;
+    }
+    stable = h;
+  }
+  return {stable, unstable};
+}
+
 }  // namespace
 
 BOOST_AUTO_TEST_CASE(work_precision_and_error_h_draw_the_ok_rows_of_each_method) {
@@ -274,15 +291,7 @@ BOOST_AUTO_TEST_CASE(the_stability_map_of_the_compositions_brackets_the_threshol
   for (std::size_t k = 0; k < order.size(); ++k) {
     const std::string& c = order[k];
     auto r = runs[c];
-    std::sort(r.begin(), r.end());
-    double stable = NAN, unstable = NAN;
-    for (const auto& [h, ok] : r) {
-      if (!ok) {
-        unstable = h;
-        break;
-      }
-      stable = h;
-    }
+    const auto [stable, unstable] = stability_boundary(r);
     BOOST_TEST_CONTEXT(c << ": threshold " << threshold[c] << ", stable to " << stable / threshold[c]
                          << " of it, unstable from " << unstable / threshold[c]) {
       BOOST_TEST_REQUIRE(rows[k].size() == 5u);
@@ -338,15 +347,7 @@ BOOST_AUTO_TEST_CASE(the_solver_failure_boundary_over_the_amplitude) {
         if (row.at("values").at("integrator.composition") == c &&
             row.at("values").at("initial.q").at(0).get<double>() == q0)
           r.emplace_back(row.at("values").at("integrator.step").get<double>(), row.at("status") == "ok");
-      std::sort(r.begin(), r.end());
-      double stable = NAN, unstable = NAN;
-      for (const auto& [h, ok] : r) {
-        if (!ok) {
-          unstable = h;
-          break;
-        }
-        stable = h;
-      }
+      const auto [stable, unstable] = stability_boundary(r);
       failures += !std::isnan(unstable);
       BOOST_TEST(number(bs[b].rows[k][0]) == q0);
       BOOST_TEST(same(number(bs[b].rows[k][1]), stable), c << " q0 = " << q0);
