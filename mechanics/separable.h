@@ -12,9 +12,9 @@
 //
 // SeparableParts serves Gauss collocation on the stage forces (solvers/collocation_step.h);
 // the explicit kicks and drifts of the Euler maps (solvers/splitting_step.h) keep their
-// own force and velocity calls (the same code held in this class moved Stormer-Verlet in
-// bench_ratios from 1.44 to 1.81 times Odeint's velocity_verlet: GCC inlines the loop
-// differently) and share factor_mass_matrix.
+// own force and velocity calls (the same code held in this class made Stormer-Verlet
+// markedly slower against Odeint's velocity_verlet in bench_ratios: GCC inlines the
+// loop differently) and share factor_mass_matrix.
 #pragma once
 
 #include <Eigen/Cholesky>

@@ -59,8 +59,8 @@ SpherePowerMap<K> at_theta(const SpherePowerMap<K>& R, double th) {
 // written in the scene, W. The kernels are instantiated once for both (the steps,
 // maps, compositions, Galerkin step and Hamiltonian steps of a space are most
 // of the build); the price is one predictable branch per evaluation of L or H, and GCC
-// inlining the Jet arithmetic differently: per step from 0.83 to 1.16 times the
-// per-system build (solvers/README.md).
+// inlining the Jet arithmetic differently, faster for some systems and slower for
+// others than a build per system (the charts' rigid-body suite times the steps).
 template <class B, class W>
 struct BuiltinOr {
   using Manifold = typename B::Manifold;

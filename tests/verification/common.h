@@ -16,8 +16,8 @@ namespace dvm::verification {
 // Step count of a long-horizon loop (bounded energy, drift of momentum maps, staying on
 // the manifold over 10^5 to 10^6 steps): n, or n / 10 under AddressSanitizer.
 // ASan checks every load and store of the nested Jets in a manifold step, which makes
-// these loops 20 to 70 times slower than in Release (measured per test case of
-// test_verification_manifolds at -O2). A tenth of the loop runs the same code path for
+// these loops far more than ten times slower than in Release (time the test cases of
+// test_verification_manifolds in both builds). A tenth of the loop runs the same code path for
 // the sanitizers to check; `make test` asserts the long-time properties at full length.
 // Tolerances that depend on n are computed from the returned count.
 constexpr std::int64_t long_horizon(std::int64_t n) { return dvm_tests::kAddressSanitizer ? n / 10 : n; }
