@@ -60,7 +60,7 @@ SpherePowerMap<K> at_theta(const SpherePowerMap<K>& R, double th) {
 // maps, compositions, Galerkin step and Hamiltonian steps of a space are most
 // of the build); the price is one predictable branch per evaluation of L or H, and GCC
 // inlining the Jet arithmetic differently, faster for some systems and slower for
-// others than a build per system (the charts' rigid-body suite times the steps).
+// others than a build per system.
 template <class B, class W>
 struct BuiltinOr {
   using Manifold = typename B::Manifold;
