@@ -797,6 +797,15 @@ std::string num17(double x) {
 
 std::string integer(std::int64_t x) { return std::to_string(x); }
 
+// The CSV's columns from a run's report, in order, between the row's own columns and
+// the final state's components: sweep_csv writes them, read_sweep_cells reads a JSON
+// table into them (cpu_seconds is the row's; failed_step and failed_time are the
+// failure's step and time).
+constexpr const char* kRunColumns[] = {
+    "system", "map", "form", "composition", "method", "step", "steps", "t_final", "wall_seconds", "cpu_seconds",
+    "energy_initial", "energy_final", "max_abs_energy_error", "solver_iterations", "jacobians",
+    "max_step_iterations", "order", "failed_step", "failed_time"};
+
 }  // namespace
 
 std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
@@ -808,10 +817,7 @@ std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
   for (const char* c : {"status", "code", "message"}) head.push_back(c);
   if (o.error) head.push_back("error");
   if (o.error && o.max_error) head.push_back("max_error");
-  for (const char* c : {"system", "map", "form", "composition", "method", "step", "steps", "t_final", "wall_seconds",
-                        "cpu_seconds", "energy_initial", "energy_final", "max_abs_energy_error", "solver_iterations",
-                        "jacobians", "max_step_iterations", "order", "failed_step", "failed_time"})
-    head.push_back(c);
+  for (const char* c : kRunColumns) head.push_back(c);
   for (std::size_t k = 0; k < nq; ++k) head.push_back("q_final[" + std::to_string(k) + "]");
   for (std::size_t k = 0; k < np; ++k) head.push_back("p_final[" + std::to_string(k) + "]");
   std::string out;
@@ -1420,15 +1426,7 @@ SweepCells read_sweep_cells(const std::string& path) {
   for (const std::string& k : t.varied) t.head.push_back(k);
   for (const char* c : {"status", "code", "message"}) t.head.push_back(c);
   for (const std::string& e : errors) t.head.push_back(e);
-  const std::vector<std::string> run_fields = {"system", "map", "form", "composition", "method", "step", "steps",
-                                               "t_final", "wall_seconds"};
-  const std::vector<std::string> run_after = {"energy_initial", "energy_final", "max_abs_energy_error",
-                                              "solver_iterations", "jacobians", "max_step_iterations", "order"};
-  for (const std::string& c : run_fields) t.head.push_back(c);
-  t.head.push_back("cpu_seconds");
-  for (const std::string& c : run_after) t.head.push_back(c);
-  t.head.push_back("failed_step");
-  t.head.push_back("failed_time");
+  for (const char* c : kRunColumns) t.head.push_back(c);
   for (std::size_t k = 0; k < nq; ++k) t.head.push_back("q_final[" + std::to_string(k) + "]");
   for (std::size_t k = 0; k < np; ++k) t.head.push_back("p_final[" + std::to_string(k) + "]");
   for (const JValue& r : rows) {
@@ -1442,13 +1440,16 @@ SweepCells read_sweep_cells(const std::string& path) {
     for (const std::string& e : errors) c.push_back(cell(r.find(e)));
     const JValue* run = r.find("run");
     if (run && run->kind == JValue::object) {
-      for (const std::string& f : run_fields) c.push_back(cell(run->find(f)));
-      c.push_back(cell(r.find("cpu_seconds")));
-      for (const std::string& f : run_after) c.push_back(cell(run->find(f)));
       const JValue* failure = run->find("failure");
-      const bool failed = failure && failure->kind == JValue::object;
-      c.push_back(failed ? cell(failure->find("step")) : "");
-      c.push_back(failed ? cell(failure->find("time")) : "");
+      if (failure && failure->kind != JValue::object) failure = nullptr;
+      for (const std::string f : kRunColumns) {
+        if (f == "cpu_seconds")
+          c.push_back(cell(r.find(f)));
+        else if (f == "failed_step" || f == "failed_time")
+          c.push_back(failure ? cell(failure->find(f == "failed_step" ? "step" : "time")) : "");
+        else
+          c.push_back(cell(run->find(f)));
+      }
       auto components = [&](const char* name, std::size_t n) {
         const JValue* v = run->find(name);
         for (std::size_t k = 0; k < n; ++k)
