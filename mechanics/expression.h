@@ -1170,11 +1170,13 @@ inline NodePtr simplify_node(NodePtr n) {
   if (n->kids.empty()) return n;
   bool all_const = true;
   for (const auto& k : n->kids) all_const = all_const && k->is_const();
-  Expression::Instr dummy{};
   if (all_const) {
+    Expression::Instr in{};  // the node's own constant operand or power (x + c, x^n, ...)
+    in.c = n->c;
+    in.index = n->index;
     double x;
     if (n->kids.size() == 1)
-      x = Expression::unary<double>(n->op, n->kids[0]->c, dummy);
+      x = Expression::unary<double>(n->op, n->kids[0]->c, in);
     else
       x = n->op == O::Pow ? std::pow(n->kids[0]->c, n->kids[1]->c)
                           : Expression::binary<double>(n->op, n->kids[0]->c, n->kids[1]->c);
