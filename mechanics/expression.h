@@ -239,6 +239,21 @@ class Expression {
   static VelocitySplit split_velocity(const std::string& text, const ExpressionSymbols& symbols,
                                       Expression* kinetic = nullptr, Expression* potential = nullptr);
 
+  // For a text quadratic in the n velocities, L = v^T M(q) v / 2 + U(q) (VelocitySplit::
+  // quadratic), the entries of M(q) read off its terms, each an expression in q (block
+  // 0): M_ii = d2L/dv_i^2, M_ij = d2L/dv_i dv_j, found per term by polarisation (a term
+  // t of degree 2 has M_ii = 2 t(e_i) and M_ij = t(e_i + e_j) - t(e_i) - t(e_j)), the
+  // velocities set to those constants and the result folded (so a term a_dot * b_dot *
+  // c(q) gives M_ab = c(q) alone). `mass` receives the upper triangle row by row
+  // (n (n + 1) / 2 entries), `potential` U(q). Returns false, leaving both as they were,
+  // when the text is not quadratic, n > kMaxMassEntries, a definition the text uses
+  // depends on the velocities, or a term in several velocities does not vanish when
+  // all but one are zero (its cross entries would be differences that can cancel; the
+  // caller then forms M from gradients). Throws ExpressionError as parse does.
+  static constexpr int kMaxMassEntries = 8;
+  static bool split_mass(const std::string& text, const ExpressionSymbols& symbols, int n,
+                         std::vector<Expression>& mass, Expression& potential);
+
   // One operation on scalars of any type: the same code folds constants (T = double)
   // and evaluates (any T).
   template <class T>
@@ -1717,6 +1732,194 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
   assemble(kin, 0.0, "the kinetic", kinetic);
   assemble(pot, constant_term, "the potential", potential);
   return out;
+}
+
+namespace expression_detail {
+
+// A copy of `term` with the block-1 variables (the velocities) replaced by the constants
+// e[index], products and quotients with a zero factor folded to zero and zero addends
+// dropped (for the finite values of the other variables that a mass matrix is formed
+// at, these are the values the operations would give), then simplified. `budget`: the
+// nodes still allowed (Expression::kMaxNodes), decreased; null when it runs out.
+inline NodePtr substitute_velocities(const Node& term, const double* e, std::size_t& budget) {
+  using O = Expression::Op;
+  std::vector<NodePtr> stack;
+  auto constant = [](std::size_t pos, double c) {
+    auto n = std::make_unique<Node>();
+    n->op = O::Const;
+    n->pos = pos;
+    n->c = c;
+    return n;
+  };
+  auto zero = [](const NodePtr& n) { return n->is_const() && n->c == 0.0; };
+  for (const Node* src : post_order(term)) {
+    if (budget == 0) return nullptr;
+    --budget;
+    std::vector<NodePtr> kids(src->kids.size());
+    for (std::size_t k = kids.size(); k-- > 0;) {
+      kids[k] = std::move(stack.back());
+      stack.pop_back();
+    }
+    if (src->op == O::Var && src->block == 1) {
+      stack.push_back(constant(src->pos, e[src->index]));
+      continue;
+    }
+    const bool zero_product =
+        ((src->op == O::Mul) && (zero(kids[0]) || zero(kids[1]))) ||
+        ((src->op == O::Div || src->op == O::DivC || src->op == O::Neg) && zero(kids[0])) ||
+        (src->op == O::MulC && (zero(kids[0]) || src->c == 0.0)) ||
+        (src->op == O::PowI && src->index > 0 && zero(kids[0]));
+    if (zero_product) {
+      stack.push_back(constant(src->pos, 0.0));
+      continue;
+    }
+    if ((src->op == O::Add || src->op == O::Sub) && zero(kids[1])) {
+      stack.push_back(std::move(kids[0]));
+      continue;
+    }
+    if (src->op == O::Add && zero(kids[0])) {
+      stack.push_back(std::move(kids[1]));
+      continue;
+    }
+    auto n = std::make_unique<Node>();
+    n->op = src->op == O::Sub && zero(kids[0]) ? O::Neg : src->op;
+    n->pos = src->pos;
+    n->c = src->c;
+    n->block = src->block;
+    n->index = src->index;
+    if (src->op == O::Sub && zero(kids[0]))
+      n->kids.push_back(std::move(kids[1]));
+    else
+      n->kids = std::move(kids);
+    stack.push_back(std::move(n));
+  }
+  return simplify(std::move(stack.back()));
+}
+
+}  // namespace expression_detail
+
+inline bool Expression::split_mass(const std::string& text, const ExpressionSymbols& symbols, int n,
+                                   std::vector<Expression>& mass, Expression& potential) {
+  using namespace expression_detail;
+  using O = Op;
+  if (n < 1 || n > kMaxMassEntries) return false;
+  Parser p(text, symbols);
+  NodePtr root = simplify(p.parse());
+  Definitions& defs = p.definitions();
+  std::vector<Degree> def_degrees;
+  for (const auto& tree : defs.trees) {
+    def_degrees.push_back(term_degree(*tree, def_degrees));
+    if (def_degrees.back().degree != 0) return false;  // a definition in the velocities
+  }
+  double constant_term = 0.0;
+  std::vector<Term> terms = additive_terms(root, constant_term);
+  const auto entry = [n](int i, int j) { return i * n - i * (i - 1) / 2 + (j - i); };  // i <= j
+  std::vector<NodePtr> sums(static_cast<std::size_t>(n * (n + 1) / 2));
+  auto node = [](O op, double c) {
+    auto x = std::make_unique<Node>();
+    x->op = op;
+    x->pos = 0;
+    x->c = c;
+    return x;
+  };
+  auto add = [&](NodePtr& sum, NodePtr x, double scale) {
+    if (x->is_const() && x->c == 0.0) return;
+    if (scale != 1.0) {
+      NodePtr m = node(O::MulC, scale);
+      m->kids.push_back(std::move(x));
+      x = std::move(m);
+    }
+    if (!sum) {
+      sum = std::move(x);
+      return;
+    }
+    NodePtr a = node(O::Add, 0.0);
+    a->kids.push_back(std::move(sum));
+    a->kids.push_back(std::move(x));
+    sum = std::move(a);
+  };
+  std::size_t budget = kMaxNodes;
+  std::vector<Term> pot;
+  std::vector<double> e(static_cast<std::size_t>(n), 0.0);
+  for (const Term& t : terms) {
+    const Degree d = term_degree(**t.slot, def_degrees);
+    if (d.degree == 0) {
+      pot.push_back(t);
+      continue;
+    }
+    if (d.degree != 2) return false;
+    std::vector<int> used;  // the velocities the term reads
+    for (const Node* x : post_order(**t.slot))
+      if (x->op == O::Var && x->block == 1 && std::find(used.begin(), used.end(), x->index) == used.end())
+        used.push_back(x->index);
+    std::sort(used.begin(), used.end());
+    std::vector<NodePtr> at_unit(used.size());  // t(e_i)
+    for (std::size_t a = 0; a < used.size(); ++a) {
+      e[static_cast<std::size_t>(used[a])] = 1.0;
+      at_unit[a] = substitute_velocities(**t.slot, e.data(), budget);
+      e[static_cast<std::size_t>(used[a])] = 0.0;
+      if (!at_unit[a]) return false;
+    }
+    // a term in two or more velocities is read off only where t(e_i) folds to zero for
+    // each of them (c(q) v_i v_j, not (v_i + v_j)^2 c(q)): then M_ij = t(e_i + e_j)
+    // exactly, where the difference t(e_i + e_j) - t(e_i) - t(e_j) could cancel
+    if (used.size() > 1)
+      for (const NodePtr& x : at_unit)
+        if (!(x->is_const() && x->c == 0.0)) return false;
+    for (std::size_t a = 0; a < used.size(); ++a)
+      for (std::size_t b = a + 1; b < used.size(); ++b) {
+        e[static_cast<std::size_t>(used[a])] = e[static_cast<std::size_t>(used[b])] = 1.0;
+        NodePtr both = substitute_velocities(**t.slot, e.data(), budget);
+        e[static_cast<std::size_t>(used[a])] = e[static_cast<std::size_t>(used[b])] = 0.0;
+        if (!both) return false;
+        add(sums[static_cast<std::size_t>(entry(used[a], used[b]))], std::move(both), t.scale);
+      }
+    for (std::size_t a = 0; a < used.size(); ++a)
+      add(sums[static_cast<std::size_t>(entry(used[a], used[a]))], std::move(at_unit[a]), 2.0 * t.scale);
+  }
+  auto emit_sum = [&](NodePtr sum, const std::string& what) {
+    Expression r;
+    r.text_ = what + " of: " + text;
+    if (!sum) sum = node(O::Const, 0.0);
+    sum = simplify(std::move(sum));
+    // the definitions this sum reads, and theirs (a definition reads lower slots only)
+    std::vector<bool> needed(defs.trees.size(), false);
+    auto mark = [&](const Node& tree) {
+      for (const Node* x : post_order(tree))
+        if (x->op == O::Var && x->block == 3) needed[static_cast<std::size_t>(x->index)] = true;
+    };
+    mark(*sum);
+    for (std::size_t k = defs.trees.size(); k-- > 0;)
+      if (needed[k]) mark(*defs.trees[k]);
+    for (std::size_t k = 0; k < defs.trees.size(); ++k)
+      if (needed[k]) {
+        r.depth_ = std::max(r.depth_, emit(*defs.trees[k], r.tape_));
+        Instr let{};
+        let.op = O::Let;
+        let.index = static_cast<std::int32_t>(k);
+        r.tape_.push_back(let);
+        r.definitions_ = static_cast<int>(k) + 1;  // the slots (gradient() zeroes their adjoints)
+      }
+    r.depth_ = std::max(r.depth_, emit_blocked(sum, r.tape_, r.blocks_));
+    require_depth(r.depth_);
+    return r;
+  };
+  std::vector<Expression> entries;
+  for (int i = 0; i < n; ++i)
+    for (int j = i; j < n; ++j)
+      entries.push_back(emit_sum(std::move(sums[static_cast<std::size_t>(entry(i, j))]),
+                                 "M(q) entry (" + std::to_string(i) + ", " + std::to_string(j) + ")"));
+  NodePtr u;  // (a term of degree 0 may still read a velocity, as v^0: set to 0 here)
+  std::fill(e.begin(), e.end(), 0.0);
+  for (Term& t : pot) {
+    NodePtr x = substitute_velocities(**t.slot, e.data(), budget);
+    if (!x) return false;
+    add(u, std::move(x), t.scale);
+  }
+  if (constant_term != 0.0) add(u, node(O::Const, constant_term), 1.0);
+  potential = emit_sum(std::move(u), "the potential terms");
+  mass = std::move(entries);
+  return true;
 }
 
 }  // namespace dvm

@@ -94,6 +94,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       volatile double t = kin(q, v, p) + pot(q, v, p);
       (void)t;
     }
+    // M(q) read off the terms: its first column against L_v(q, e_1), as the gradient finds it
+    std::vector<dvm::Expression> mass;
+    dvm::Expression u;
+    if (s.quadratic && !momenta && dvm::Expression::split_mass(text, sym, 5, mass, u)) {
+      double unit[5] = {1, 0, 0, 0, 0}, g0[5] = {0, 0, 0, 0, 0}, g1[5] = {0, 0, 0, 0, 0}, column[5];
+      e.gradient(q, unit, g0, g1);
+      for (int i = 0; i < 5; ++i) column[i] = mass[static_cast<std::size_t>(i)](q);  // row 0: (0, i)
+      agree(column, g1, 5);
+      volatile double t = u(q);
+      (void)t;
+    }
   } catch (const dvm::ExpressionError&) {
     __builtin_trap();  // parse accepted it
   }

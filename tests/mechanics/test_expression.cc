@@ -7,6 +7,7 @@
 #include <boost/test/unit_test.hpp>
 
 #include <random>
+#include <tuple>
 
 #include <ceres/jet.h>
 
@@ -767,6 +768,81 @@ BOOST_AUTO_TEST_CASE(the_velocity_split_sorts_terms_by_their_degree_in_v) {
         BOOST_TEST(pot(q, zero) == pot(q, v));
       }
     }
+  }
+}
+
+// The mass matrix of a text quadratic in v, read off its terms (Expression::split_mass):
+// against d2L/dv2 from the reverse gradient at the unit vectors (L_v(q, e_j) = M(q) e_j),
+// and L = v^T M v / 2 + U at random points; an entry is an expression in q alone, and a
+// term in a_dot * b_dot enters no diagonal entry.
+BOOST_AUTO_TEST_CASE(the_mass_matrix_is_read_off_a_quadratic_text) {
+  ExpressionSymbols s;
+  s.arrays.push_back({"q", 0, 0, 3, ExpressionSymbols::Boundary::fixed});
+  s.arrays.push_back({"q_dot", 1, 0, 3, ExpressionSymbols::Boundary::fixed});
+  s.constants = {{"m", 2.0}};
+  s.definitions = {{"c12", "cos(q[1] - q[2])"}};
+  const std::vector<std::string> quadratic = {
+      "q_dot[1]^2 + q_dot[2]^2 + q_dot[1]*q_dot[2]*c12 + cos(q[1])",
+      "(1 + q[1]^2)*q_dot[1]^2/2 - q[1]^2 + 3",
+      "(2*q_dot[2])^2*exp(q[3]) - m*q_dot[2]*q_dot[3]*sin(q[1]) - (q[2] - q[1])^4 + (q_dot[1]/2)*q_dot[1]",
+      "-(q_dot[3]*q[1])*(q_dot[1]*q[2])/4 + m/2*sum(i, 1, 3, (1 + q[i]^2)*q_dot[i]^2)",
+      "q_dot[1]^2 + q_dot[2]^2 + q_dot[3]^2",  // constant M (split_mass accepts it too)
+      "q_dot[1]^2 + q_dot[2]^0*q[1]",          // a velocity in a term of degree 0
+  };
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (const std::string& text : quadratic) {
+    BOOST_TEST_CONTEXT(text) {
+      std::vector<Expression> M;
+      Expression pot;
+      BOOST_TEST_REQUIRE(Expression::split_mass(text, s, 3, M, pot));
+      BOOST_TEST_REQUIRE(M.size() == 6u);
+      for (const Expression& e : M) BOOST_TEST((!e.uses(1, 0) && !e.uses(1, 1) && !e.uses(1, 2)));
+      BOOST_TEST((!pot.uses(1, 0) && !pot.uses(1, 1) && !pot.uses(1, 2)));  // U is called with q alone
+      const Expression L = Expression::parse(text, s);
+      for (int t = 0; t < 4; ++t) {
+        double q[3], v[3], zero[3] = {0, 0, 0};
+        for (int i = 0; i < 3; ++i) q[i] = U(rng), v[i] = U(rng);
+        double Mq[3][3];
+        for (int i = 0, k = 0; i < 3; ++i)
+          for (int j = i; j < 3; ++j, ++k) Mq[i][j] = Mq[j][i] = M[static_cast<std::size_t>(k)](q);
+        double quad = 0.0;
+        for (int j = 0; j < 3; ++j) {
+          double unit[3] = {0, 0, 0}, gq[3] = {0, 0, 0}, gv[3] = {0, 0, 0};
+          unit[j] = 1.0;
+          L.gradient(q, unit, gq, gv);
+          for (int i = 0; i < 3; ++i) {
+            BOOST_TEST(std::fabs(Mq[i][j] - gv[i]) <= 1e-14 * std::fmax(1.0, std::fabs(gv[i])));
+            quad += v[i] * Mq[i][j] * v[j];
+          }
+        }
+        BOOST_TEST(pot(q) == L(q, zero));
+        const double l = L(q, v);
+        BOOST_TEST(std::fabs(quad / 2 + pot(q) - l) <= 1e-14 * std::fmax(1.0, std::fabs(l)));
+      }
+    }
+  }
+  // zero products folded: the coupling enters only entry (0, 1), and the constant
+  // diagonal entries are constants
+  std::vector<Expression> M;
+  Expression pot;
+  BOOST_TEST_REQUIRE(Expression::split_mass(quadratic[0], s, 3, M, pot));
+  BOOST_TEST(M[0].tape().size() == 1u);
+  BOOST_TEST(M[3].tape().size() == 1u);
+  BOOST_TEST(M[1].uses(0, 0));
+  BOOST_TEST(!M[0].uses(0, 0));
+  // not read off: terms not quadratic in v, a definition in the velocities, a term in
+  // two velocities that does not vanish with one of them (cross entries by differences),
+  // too many coordinates; the outputs are left as they were
+  ExpressionSymbols d = s;
+  d.definitions.push_back({"K", "(1 + q[1]^2)*q_dot[1]^2"});
+  for (const auto& [text, symbols, n] : std::vector<std::tuple<std::string, ExpressionSymbols, int>>{
+           {"q_dot[1]^2 + q[2]*q_dot[1]", s, 3}, {"q_dot[1]^4", s, 3}, {"cos(q_dot[1])", s, 3},
+           {"K - q[1]^2", d, 3}, {"(q_dot[1] + q_dot[2])^2*cos(q[1])", s, 3},
+           {"q_dot[1]^2", s, Expression::kMaxMassEntries + 1}}) {
+    std::vector<Expression> out;
+    BOOST_TEST(!Expression::split_mass(text, symbols, n, out, pot), text);
+    BOOST_TEST(out.empty());
   }
 }
 
