@@ -204,8 +204,14 @@ double inf_norm(const Eigen::PlainObjectBase<Derived>& x) {
 template <int K = Eigen::Dynamic>
 class DenseLUOf {
  public:
-  DenseLUOf() = default;
-  explicit DenseLUOf(int n) { resize(n); }
+  DenseLUOf() {
+    if constexpr (K != Eigen::Dynamic) {  // fixed storage starts defined (a copy of an unused factor reads it)
+      lu_.setZero();
+      piv_.setZero();
+      inverse_pivot_.setZero();
+    }
+  }
+  explicit DenseLUOf(int n) : DenseLUOf() { resize(n); }
   void resize(int n) {
     if (K != Eigen::Dynamic && n != K)
       throw std::invalid_argument("DenseLUOf<" + std::to_string(K) + ">: a matrix of size " + std::to_string(n));
@@ -837,6 +843,11 @@ struct WrittenParts {
   // The potential's gradient as a DerivativeProgram (separable only; null where none
   // is built: then its tape's reverse mode).
   std::shared_ptr<const DerivativeProgram> potential_program;
+  // When quadratic with M depending on q (and n <= Expression::kMaxMassEntries): the
+  // entries of M(q) read off the text (Expression::split_mass), upper triangle row by
+  // row, and U(q), its terms free of the velocities (`potential` then holds U).
+  std::vector<Expression> mass_entries;
+  bool has_mass_entries() const { return !mass_entries.empty(); }
 
   // A full M is formed from n gradients of the kinetic tape and factored; beyond this
   // size (a dense factor of 8 n^2 bytes) such a system takes the generic path.
@@ -850,6 +861,9 @@ struct WrittenParts {
     });
     split = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), &kinetic,
                                        &potential);
+    if (split.quadratic && !split.constant_mass)
+      Expression::split_mass(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), n, mass_entries,
+                             potential);
     if (!split.constant_mass || split.kinetic_terms == 0) return;
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
     Eigen::VectorXd e(n), g0(n), g1(n);
@@ -909,8 +923,9 @@ class WrittenDynamic {
   bool separable() const { return parts_->separable; }
   // v = FL^{-1}(q, p) where the text's structure gives it by a linear solve: v = M^{-1} p
   // for a separable L (M constant, factored once), and v = M(q)^{-1} p for a text that is
-  // quadratic in the velocities, L = v^T M(q) v / 2 + U(q) (p = M(q) v; column i of M(q)
-  // is L_v(q, e_i), a gradient each, then factored). Returns false otherwise, and
+  // quadratic in the velocities, L = v^T M(q) v / 2 + U(q) (p = M(q) v; M(q) from the
+  // entries read off the text (WrittenParts::mass_entries), else column i of M(q) is
+  // L_v(q, e_i), a gradient each; then factored). Returns false otherwise, and
   // where M(q) is singular: Newton's method then (which reports the degeneracy).
   bool closed_velocity(const DynIn& q, const DynIn& p, DynOut v) const {
     if (parts_->separable) {
@@ -919,14 +934,26 @@ class WrittenDynamic {
     }
     if (mass_.unit.size() != dim()) return false;  // not quadratic in the velocities
     Mass& m = mass_;
-    for (int i = 0; i < dim(); ++i) {
-      m.unit[i] = 1.0;
-      gradient(q, m.unit, Lq_, Lv_);
-      m.M.col(i) = Lv_;
-      m.unit[i] = 0.0;
+    if (parts_->has_mass_entries()) {
+      const int n = dim();
+      std::size_t k = 0;
+      for (int i = 0; i < n; ++i)
+        for (int j = i; j < n; ++j, ++k) m.M(i, j) = m.M(j, i) = parts_->mass_entries[k](q.data());
+    } else {
+      for (int i = 0; i < dim(); ++i) {
+        m.unit[i] = 1.0;
+        gradient(q, m.unit, Lq_, Lv_);
+        m.M.col(i) = Lv_;
+        m.unit[i] = 0.0;
+      }
     }
-    if (!m.lu.factor(m.M)) return false;
-    m.lu.solve(p, v);
+    if (dim() == 2) {  // the same elimination, unrolled (two degrees of freedom are common)
+      if (!m.lu2.factor(m.M)) return false;
+      m.lu2.solve(p, v);
+    } else {
+      if (!m.lu.factor(m.M)) return false;
+      m.lu.solve(p, v);
+    }
     return v.allFinite();
   }
 
@@ -953,9 +980,11 @@ class WrittenDynamic {
 
   // The monitored energy at (q, p) with v = FL^{-1}(q, p): the written one if given,
   // else E_L = <L_v, v> - L = <p, v> - L(q, v) (L_v(q, v) = p, to the tolerance v was
-  // solved to).
+  // solved to); for L = v^T M(q) v / 2 + U(q) with M's entries read off the text, that
+  // is <p, v> / 2 - U(q): U's terms evaluated, not L's.
   double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
     if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
+    if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - parts_->potential(q.data());
     return p.dot(v) - value(q, v);
   }
   bool has_hamiltonian() const { return !system_->hamiltonian.empty(); }
@@ -981,6 +1010,7 @@ class WrittenDynamic {
     Eigen::VectorXd unit;  // e_i, zero between uses
     Eigen::MatrixXd M;
     DenseLU lu;
+    DenseLUOf<2> lu2;  // used instead when n = 2
   };
   std::shared_ptr<const WrittenSystem> system_;
   dynamic_detail::TapeDerivatives tape_;
