@@ -843,7 +843,7 @@ struct WrittenParts {
   // The potential's gradient as a DerivativeProgram (separable only; null where none
   // is built: then its tape's reverse mode).
   std::shared_ptr<const DerivativeProgram> potential_program;
-  // When quadratic with M depending on q (and n <= Expression::kMaxMassEntries): the
+  // When quadratic with M depending on q (and n <= Expression::kMaxMassDim): the
   // entries of M(q) read off the text (Expression::split_mass), upper triangle row by
   // row, and U(q), its terms free of the velocities (`potential` then holds U).
   std::vector<Expression> mass_entries;
@@ -861,9 +861,14 @@ struct WrittenParts {
     });
     split = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), &kinetic,
                                        &potential);
-    if (split.quadratic && !split.constant_mass)
-      Expression::split_mass(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), n, mass_entries,
-                             potential);
+    if (split.quadratic && !split.constant_mass) {
+      try {
+        Expression::split_mass(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), n, mass_entries,
+                               potential);
+      } catch (const ExpressionError&) {  // a limit met by the rewritten entries (the text itself
+        mass_entries.clear();             // parsed above): M then comes from gradients
+      }
+    }
     if (!split.constant_mass || split.kinetic_terms == 0) return;
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
     Eigen::VectorXd e(n), g0(n), g1(n);

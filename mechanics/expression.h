@@ -246,11 +246,11 @@ class Expression {
   // velocities set to those constants and the result folded (so a term a_dot * b_dot *
   // c(q) gives M_ab = c(q) alone). `mass` receives the upper triangle row by row
   // (n (n + 1) / 2 entries), `potential` U(q). Returns false, leaving both as they were,
-  // when the text is not quadratic, n > kMaxMassEntries, a definition the text uses
+  // when the text is not quadratic, n > kMaxMassDim, a definition the text uses
   // depends on the velocities, or a term in several velocities does not vanish when
   // all but one are zero (its cross entries would be differences that can cancel; the
   // caller then forms M from gradients). Throws ExpressionError as parse does.
-  static constexpr int kMaxMassEntries = 8;
+  static constexpr int kMaxMassDim = 8;
   static bool split_mass(const std::string& text, const ExpressionSymbols& symbols, int n,
                          std::vector<Expression>& mass, Expression& potential);
 
@@ -1802,7 +1802,7 @@ inline bool Expression::split_mass(const std::string& text, const ExpressionSymb
                                    std::vector<Expression>& mass, Expression& potential) {
   using namespace expression_detail;
   using O = Op;
-  if (n < 1 || n > kMaxMassEntries) return false;
+  if (n < 1 || n > kMaxMassDim) return false;
   Parser p(text, symbols);
   NodePtr root = simplify(p.parse());
   Definitions& defs = p.definitions();

@@ -839,7 +839,7 @@ BOOST_AUTO_TEST_CASE(the_mass_matrix_is_read_off_a_quadratic_text) {
   for (const auto& [text, symbols, n] : std::vector<std::tuple<std::string, ExpressionSymbols, int>>{
            {"q_dot[1]^2 + q[2]*q_dot[1]", s, 3}, {"q_dot[1]^4", s, 3}, {"cos(q_dot[1])", s, 3},
            {"K - q[1]^2", d, 3}, {"(q_dot[1] + q_dot[2])^2*cos(q[1])", s, 3},
-           {"q_dot[1]^2", s, Expression::kMaxMassEntries + 1}}) {
+           {"q_dot[1]^2", s, Expression::kMaxMassDim + 1}}) {
     std::vector<Expression> out;
     BOOST_TEST(!Expression::split_mass(text, symbols, n, out, pot), text);
     BOOST_TEST(out.empty());
