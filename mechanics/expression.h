@@ -1326,6 +1326,31 @@ struct Term {
   NodePtr* slot;
   double scale;
 };
+// A node of no children (a constant, or an operation whose kids the caller adds).
+inline NodePtr make_node(Expression::Op op, double c, std::size_t pos = 0) {
+  auto n = std::make_unique<Node>();
+  n->op = op;
+  n->pos = pos;
+  n->c = c;
+  return n;
+}
+// sum += scale * x, a tree of Add nodes (sum null: x alone)
+inline void add_scaled(NodePtr& sum, NodePtr x, double scale) {
+  using O = Expression::Op;
+  if (scale != 1.0) {
+    NodePtr m = make_node(O::MulC, scale);
+    m->kids.push_back(std::move(x));
+    x = std::move(m);
+  }
+  if (!sum) {
+    sum = std::move(x);
+    return;
+  }
+  NodePtr a = make_node(O::Add, 0.0);
+  a->kids.push_back(std::move(sum));
+  a->kids.push_back(std::move(x));
+  sum = std::move(a);
+}
 inline std::vector<Term> additive_terms(NodePtr& root, double& constant_term) {
   using O = Expression::Op;
   std::vector<Term> terms, work{{&root, 1.0}};
@@ -1692,32 +1717,10 @@ inline VelocitySplit Expression::split_velocity(const std::string& text, const E
   auto assemble = [&](std::vector<Term>& group, double c, const char* what, Expression* e) {
     if (!e) return;
     NodePtr sum;
-    auto node = [](O op, double k) {
-      auto n = std::make_unique<Node>();
-      n->op = op;
-      n->pos = 0;
-      n->c = k;
-      return n;
-    };
-    for (Term& t : group) {
-      NodePtr x = std::move(*t.slot);
-      if (t.scale != 1.0) {
-        NodePtr m = node(O::MulC, t.scale);
-        m->kids.push_back(std::move(x));
-        x = std::move(m);
-      }
-      if (!sum) {
-        sum = std::move(x);
-      } else {
-        NodePtr a = node(O::Add, 0.0);
-        a->kids.push_back(std::move(sum));
-        a->kids.push_back(std::move(x));
-        sum = std::move(a);
-      }
-    }
-    if (!sum) sum = node(O::Const, c);
+    for (Term& t : group) add_scaled(sum, std::move(*t.slot), t.scale);
+    if (!sum) sum = make_node(O::Const, c);
     else if (c != 0.0) {
-      NodePtr a = node(O::AddC, c);
+      NodePtr a = make_node(O::AddC, c);
       a->kids.push_back(std::move(sum));
       sum = std::move(a);
     }
@@ -1744,13 +1747,7 @@ namespace expression_detail {
 inline NodePtr substitute_velocities(const Node& term, const double* e, std::size_t& budget) {
   using O = Expression::Op;
   std::vector<NodePtr> stack;
-  auto constant = [](std::size_t pos, double c) {
-    auto n = std::make_unique<Node>();
-    n->op = O::Const;
-    n->pos = pos;
-    n->c = c;
-    return n;
-  };
+  auto constant = [](std::size_t pos, double c) { return make_node(O::Const, c, pos); };
   auto zero = [](const NodePtr& n) { return n->is_const() && n->c == 0.0; };
   for (const Node* src : post_order(term)) {
     if (budget == 0) return nullptr;
@@ -1815,28 +1812,8 @@ inline bool Expression::split_mass(const std::string& text, const ExpressionSymb
   std::vector<Term> terms = additive_terms(root, constant_term);
   const auto entry = [n](int i, int j) { return i * n - i * (i - 1) / 2 + (j - i); };  // i <= j
   std::vector<NodePtr> sums(static_cast<std::size_t>(n * (n + 1) / 2));
-  auto node = [](O op, double c) {
-    auto x = std::make_unique<Node>();
-    x->op = op;
-    x->pos = 0;
-    x->c = c;
-    return x;
-  };
-  auto add = [&](NodePtr& sum, NodePtr x, double scale) {
-    if (x->is_const() && x->c == 0.0) return;
-    if (scale != 1.0) {
-      NodePtr m = node(O::MulC, scale);
-      m->kids.push_back(std::move(x));
-      x = std::move(m);
-    }
-    if (!sum) {
-      sum = std::move(x);
-      return;
-    }
-    NodePtr a = node(O::Add, 0.0);
-    a->kids.push_back(std::move(sum));
-    a->kids.push_back(std::move(x));
-    sum = std::move(a);
+  auto add = [](NodePtr& sum, NodePtr x, double scale) {  // zeros (folded products) left out
+    if (!(x->is_const() && x->c == 0.0)) add_scaled(sum, std::move(x), scale);
   };
   std::size_t budget = kMaxNodes;
   std::vector<Term> pot;
@@ -1880,7 +1857,7 @@ inline bool Expression::split_mass(const std::string& text, const ExpressionSymb
   auto emit_sum = [&](NodePtr sum, const std::string& what) {
     Expression r;
     r.text_ = what + " of: " + text;
-    if (!sum) sum = node(O::Const, 0.0);
+    if (!sum) sum = make_node(O::Const, 0.0);
     sum = simplify(std::move(sum));
     // the definitions this sum reads, and theirs (a definition reads lower slots only)
     std::vector<bool> needed(defs.trees.size(), false);
@@ -1916,7 +1893,7 @@ inline bool Expression::split_mass(const std::string& text, const ExpressionSymb
     if (!x) return false;
     add(u, std::move(x), t.scale);
   }
-  if (constant_term != 0.0) add(u, node(O::Const, constant_term), 1.0);
+  if (constant_term != 0.0) add(u, make_node(O::Const, constant_term), 1.0);
   potential = emit_sum(std::move(u), "the potential terms");
   mass = std::move(entries);
   return true;
