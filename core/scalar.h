@@ -94,6 +94,47 @@ inline double max_abs(const Eigen::MatrixBase<Derived>& x) {
   return m;
 }
 
+// max |x_i| over a vector or matrix of doubles, NaN if any entry is NaN (as max_abs above,
+// in plain loops over the storage: four running maxima, which do not
+// wait on each other, where one would make each comparison wait on the last).
+// (fixed sizes: one pass over a few entries, inlined)
+template <class Derived>
+[[gnu::always_inline]] inline double inf_norm_fixed(const Eigen::PlainObjectBase<Derived>& x) {
+  const double* d = x.data();
+  double m = 0.0;
+  bool nan = false;
+  for (Eigen::Index i = 0; i < Derived::SizeAtCompileTime; ++i) {
+    const double a = std::fabs(d[i]);
+    nan |= a != a;
+    m = a > m ? a : m;
+  }
+  return nan ? NAN : m;
+}
+template <class Derived>
+double inf_norm(const Eigen::PlainObjectBase<Derived>& x) {
+  if constexpr (Derived::SizeAtCompileTime != Eigen::Dynamic && Derived::SizeAtCompileTime <= 16)
+    return inf_norm_fixed(x);
+  const double* d = x.data();
+  const Eigen::Index n = x.size();
+  double m[4] = {0.0, 0.0, 0.0, 0.0};
+  bool nan = false;
+  const Eigen::Index n4 = n - n % 4;  // (the bounds named once: g++ misreads a shared index
+                                      // at a fixed size and warns of an overflow)
+  for (Eigen::Index i = 0; i < n4; i += 4)
+    for (int k = 0; k < 4; ++k) {
+      const double a = std::fabs(d[i + k]);
+      nan |= a != a;
+      m[k] = a > m[k] ? a : m[k];
+    }
+  for (Eigen::Index i = n4; i < n; ++i) {
+    const double a = std::fabs(d[i]);
+    nan |= a != a;
+    m[0] = a > m[0] ? a : m[0];
+  }
+  const double m01 = m[1] > m[0] ? m[1] : m[0], m23 = m[3] > m[2] ? m[3] : m[2];
+  return nan ? NAN : m23 > m01 ? m23 : m01;
+}
+
 }  // namespace dvm
 
 // Mixed Jet / arithmetic operators, found by argument-dependent lookup on Jet.

@@ -105,6 +105,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/dense_solve.h"
 #include "core/map_operations.h"
 #include "core/scalar.h"
 #include "mechanics/derivative_program.h"
@@ -117,9 +118,7 @@
 
 namespace dvm {
 
-using DynIn = Eigen::Ref<const Eigen::VectorXd>;
-using DynOut = Eigen::Ref<Eigen::VectorXd>;
-using DynMatOut = Eigen::Ref<Eigen::MatrixXd>;
+// (DynIn, DynOut, DynMatOut: core/dense_solve.h)
 
 // Whether S is a run-time-sized system (the concept above).
 template <class S, class = void>
@@ -152,147 +151,9 @@ struct has_runtime_velocity<S, std::void_t<decltype(bool(std::declval<const S&>(
                                    std::declval<DynOut>())))>> : std::true_type {};
 
 namespace dynamic_detail {
-
-// max |x_i| over a vector or matrix of doubles, NaN if any entry is NaN (as max_abs of
-// core/scalar.h, in plain loops over the storage: four running maxima, which do not
-// wait on each other, where one would make each comparison wait on the last).
-// (fixed sizes: one pass over a few entries, inlined)
-template <class Derived>
-[[gnu::always_inline]] inline double inf_norm_fixed(const Eigen::PlainObjectBase<Derived>& x) {
-  const double* d = x.data();
-  double m = 0.0;
-  bool nan = false;
-  for (Eigen::Index i = 0; i < Derived::SizeAtCompileTime; ++i) {
-    const double a = std::fabs(d[i]);
-    nan |= a != a;
-    m = a > m ? a : m;
-  }
-  return nan ? NAN : m;
-}
-template <class Derived>
-double inf_norm(const Eigen::PlainObjectBase<Derived>& x) {
-  if constexpr (Derived::SizeAtCompileTime != Eigen::Dynamic && Derived::SizeAtCompileTime <= 16)
-    return inf_norm_fixed(x);
-  const double* d = x.data();
-  const Eigen::Index n = x.size();
-  double m[4] = {0.0, 0.0, 0.0, 0.0};
-  bool nan = false;
-  Eigen::Index i = 0;
-  for (; i + 4 <= n; i += 4)
-    for (int k = 0; k < 4; ++k) {
-      const double a = std::fabs(d[i + k]);
-      nan |= a != a;
-      m[k] = a > m[k] ? a : m[k];
-    }
-  for (; i < n; ++i) {
-    const double a = std::fabs(d[i]);
-    nan |= a != a;
-    m[0] = a > m[0] ? a : m[0];
-  }
-  const double m01 = m[1] > m[0] ? m[1] : m[0], m23 = m[3] > m[2] ? m[3] : m[2];
-  return nan ? NAN : m23 > m01 ? m23 : m01;
-}
-
+using ::dvm::inf_norm;  // (core/scalar.h)
 }  // namespace dynamic_detail
 
-// LU factorisation with partial pivoting, P A = L U, of a square matrix of run-time
-// size, in storage sized once: factor() and solve() allocate nothing. Singular to
-// working precision means a pivot not above 1e-14 max|A| (the rule of solve_dense,
-// core/dense_solve.h) or not finite. Unblocked, column oriented: meant for the dense
-// step matrices of a few to a few hundred unknowns. K: the size where it is known at
-// compile time (the loops then have fixed lengths; DenseLU is the run-time-sized one).
-template <int K = Eigen::Dynamic>
-class DenseLUOf {
- public:
-  DenseLUOf() {
-    if constexpr (K != Eigen::Dynamic) {  // fixed storage starts defined (a copy of an unused factor reads it)
-      lu_.setZero();
-      piv_.setZero();
-      inverse_pivot_.setZero();
-    }
-  }
-  explicit DenseLUOf(int n) : DenseLUOf() { resize(n); }
-  void resize(int n) {
-    if (K != Eigen::Dynamic && n != K)
-      throw std::invalid_argument("DenseLUOf<" + std::to_string(K) + ">: a matrix of size " + std::to_string(n));
-    lu_.resize(n, n);
-    piv_.resize(n);
-    inverse_pivot_.resize(n);
-  }
-  int size() const { return static_cast<int>(lu_.rows()); }
-
-  // Factors A (size() x size()); false if A is singular to working precision. amax:
-  // max |A_ij| (NaN if A holds a NaN) where the caller has it already.
-  bool factor(const Eigen::Ref<const Eigen::MatrixXd>& A, double amax = -1.0) {
-    if (A.rows() != size()) resize(static_cast<int>(A.rows()));  // allocates only here
-    const int n = size();
-    if (A.outerStride() == A.rows())
-      std::copy(A.data(), A.data() + A.size(), lu_.data());
-    else
-      lu_ = A;
-    const double tiny = 1e-14 * (amax >= 0.0 || amax != amax ? amax : dynamic_detail::inf_norm(lu_));
-    if (!std::isfinite(tiny)) return false;
-    for (int k = 0; k < n; ++k) {
-      int p = k;
-      double best = std::fabs(lu_(k, k));
-      for (int i = k + 1; i < n; ++i) {
-        const double a = std::fabs(lu_(i, k));
-        if (a > best) {
-          best = a;
-          p = i;
-        }
-      }
-      piv_[k] = p;
-      if (!(best > tiny) || !std::isfinite(best)) return false;
-      if (p != k) lu_.row(k).swap(lu_.row(p));
-      const double inv = 1.0 / lu_(k, k);
-      inverse_pivot_[k] = inv;  // (the solves multiply: no division on their path)
-      for (int i = k + 1; i < n; ++i) lu_(i, k) *= inv;
-      for (int j = k + 1; j < n; ++j) {
-        const double u = lu_(k, j);
-        if (u == 0.0) continue;
-        double* col = lu_.col(j).data();
-        const double* l = lu_.col(k).data();
-        for (int i = k + 1; i < n; ++i) col[i] -= l[i] * u;
-      }
-    }
-    return true;
-  }
-
-  // x = A^{-1} b after a successful factor(); x may be b itself.
-  void solve(const DynIn& b, DynOut x) const {
-    const int n = size();
-    if (x.data() != b.data()) x = b;
-    for (int k = 0; k < n; ++k) {
-      const int p = piv_[k];
-      if (p != k) std::swap(x[k], x[p]);
-    }
-    for (int k = 0; k < n; ++k) {
-      const double xk = x[k];
-      if (xk == 0.0) continue;
-      const double* l = lu_.col(k).data();
-      for (int i = k + 1; i < n; ++i) x[i] -= l[i] * xk;
-    }
-    for (int k = n - 1; k >= 0; --k) {
-      x[k] *= inverse_pivot_[k];
-      const double xk = x[k];
-      const double* u = lu_.col(k).data();
-      for (int i = 0; i < k; ++i) x[i] -= u[i] * xk;
-    }
-  }
-
-  // A^{-1} into `out` (size() x size()).
-  void inverse(DynMatOut out) const {
-    out.setIdentity();
-    for (int j = 0; j < size(); ++j) solve(out.col(j), out.col(j));
-  }
-
- private:
-  Eigen::Matrix<double, K, K> lu_;
-  Eigen::Matrix<int, K, 1> piv_;
-  Eigen::Matrix<double, K, 1> inverse_pivot_;
-};
-using DenseLU = DenseLUOf<>;
 
 namespace dynamic_detail {
 

@@ -28,7 +28,7 @@
 // plus the extrapolated errors of the last two extrapolations, 2 d_n - d_{n-1} (see
 // galerkin_step.h); otherwise X_j = (j/s) dq from the caller's guess.
 //
-// The Jacobian is factored by DenseLU (mechanics/dynamic_system.h) and inverted; it is
+// The Jacobian is factored by DenseLU (core/dense_solve.h) and inverted; it is
 // refused as singular when a pivot is not above 1e-14 max|J| or when its reciprocal
 // condition in the 1-norm, computed from the inverse, is not above 1e-13 (GalerkinStep's
 // threshold on Eigen's estimate of the same number). Only Newton's method is offered:
