@@ -47,7 +47,7 @@
 
 #include "core/map_operations.h"
 #include "mechanics/hamiltonian.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -148,12 +148,11 @@ class HamiltonianStep {
     V fq, fp;
     hamiltonian_vector_field(H_, q0, p0, fq, fp);
     const double s0 = std::fabs(h_) * std::fmax(max_abs(fq), max_abs(fp));
-    auto scale_of = [s0](const V2& x, const M2& J) { return s0 + max_abs(J) * max_abs(x); };
     V2 x = stack(dq, dp);
     const double x0 = std::fmax(max_abs(q0), max_abs(p0));
     StepSummary s;
     try {
-      s = solve_step_system<2 * N>(f, x, x0, options_, scale_of);
+      s = solve_step_system<2 * N>(f, x, x0, options_, s0);
     } catch (const std::domain_error& e) {
       s.converged = false;
       s.message = e.what();

@@ -24,7 +24,7 @@
 #include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/manifold_systems.h"
 #include "solvers/integrate.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -83,12 +83,9 @@ class ManifoldStep {
     const Vec<double, n> p0l = M::covector_to_local(q0, p0);
     Residual f{&dl_, q0, p0l};
     const double pscale = max_abs(p0l);
-    auto scale_of = [pscale](const Vec<double, n>& x, const Mat<double, n, n>& J) {
-      return pscale + max_abs(J) * max_abs(x);
-    };
     StepSummary s;
     try {
-      s = solve_step_system<n>(f, xi, 1.0, options_, scale_of);
+      s = solve_step_system<n>(f, xi, 1.0, options_, pscale);
       if (s.converged) {
         const Point raw = M::chart(q0, xi);
         const double defect = M::point_defect(raw);

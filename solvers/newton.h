@@ -1,8 +1,12 @@
 // Solving the small fixed-size nonlinear systems of a step, F(x) = 0, x in R^N.
 //
-// F is a functor `template <class T> bool operator()(const T* x, T* r) const`, as
-// Ceres' autodiff expects; its Jacobian comes from ceres::Jet. Two solvers:
-//   newton  Newton's method, J dx = -F, one Jacobian evaluation per iteration;
+// The options and the report of every step's solve (StepOptions, StepSummary), the
+// stopping rule every Newton iteration of dvm judges by (newton_verdict), and
+// ceres::TinySolver as the second solver of the systems written as a functor
+// `template <class T> bool operator()(const T* x, T* r) const`, as Ceres' autodiff
+// expects, whose Jacobian comes from ceres::Jet:
+//   newton  Newton's method, J dx = -F, one Jacobian evaluation per iteration
+//           (solve_newton, by the one driver: solvers/newton_driver.h);
 //   tiny    ceres::TinySolver (Levenberg-Marquardt on the normal equations).
 // Both report a StepSummary. Convergence is judged on the residual itself (Newton
 // then applies the correction from that last evaluation),
@@ -98,76 +102,11 @@ inline NewtonVerdict newton_verdict_floored(StepSummary& s, double dxn, double x
   return verdict;
 }
 
-// dx with J dx = r; false if J is singular to working precision.
-template <int N>
-bool newton_update(const Mat<double, N, N>& J, const Vec<double, N>& r, Vec<double, N>& dx) {
-  if constexpr (N <= 4) {
-    bool invertible = false;
-    Mat<double, N, N> Jinv;
-    double det = 0.0;
-    J.computeInverseAndDetWithCheck(Jinv, det, invertible, 0.0);
-    if (!invertible || !std::isfinite(det)) return false;
-    dx = Jinv * r;
-    return true;
-  } else {
-    try {
-      dx = solve_dense<double, N, N>(J, r);
-      return true;
-    } catch (const std::domain_error&) {
-      return false;
-    }
-  }
-}
-
-// Newton's method from x (updated in place). `scale_of(x, J)` gives the scale of
-// the residual terms at x; x0 is the size of the point x is an increment of.
-template <int N, class F, class Scale>
-StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, const Scale& scale_of) {
-  using D = ceres::Jet<double, N>;
-  StepSummary s;
-  Vec<D, N> xd, rd;
-  Vec<double, N> r, dx;
-  Mat<double, N, N> J;
-  double dxn = INFINITY;
-  for (int it = 0; it < opt.max_iterations; ++it) {
-    for (int i = 0; i < N; ++i) xd[i] = D(x[i], i);
-    f(xd.data(), rd.data());
-    for (int i = 0; i < N; ++i) {
-      r[i] = rd[i].a;
-      J.row(i) = rd[i].v.transpose();
-    }
-    s.iterations = s.jacobians = it + 1;
-    s.residual = max_abs(r);
-    s.scale = scale_of(x, J) + opt.absolute_floor;
-    if (!std::isfinite(s.residual) || !std::isfinite(max_abs(J))) {
-      s.message = "non-finite residual or Jacobian";
-      return s;
-    }
-    const NewtonVerdict verdict = newton_verdict_floored(s, dxn, max_abs(x) + x0, opt, max_abs(J));
-    if (verdict == NewtonVerdict::failed) return s;
-    if (verdict == NewtonVerdict::converged) {
-      // Apply the Newton correction already paid for: it takes the residual from
-      // the tolerance (or the stall level) down to round-off. Without it the
-      // accepted residuals, all of one sign when the starting guess errs smoothly,
-      // would add up over many steps and show as a drift of conserved quantities.
-      // The reported residual is the one measured before this last correction.
-      if (newton_update<N>(J, r, dx)) x -= dx;
-      return s;
-    }
-    if (!newton_update<N>(J, r, dx)) {
-      s.message = "singular step Jacobian";
-      return s;
-    }
-    x -= dx;
-    dxn = max_abs(dx);
-  }
-  s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
-  return s;
-}
-
 // The same system solved by ceres::TinySolver, with the result checked here.
-template <int N, class F, class Scale>
-StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, const Scale& scale_of) {
+// s0: as for solve_newton (solvers/newton_driver.h), the residual's scale at x is
+// s0 + max|J| max|x|.
+template <int N, class F>
+StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
   using AD = ceres::TinySolverAutoDiffFunction<F, N, N>;
   AD fn(f);  // holds a reference to f, which outlives it
   ceres::TinySolver<AD> solver;
@@ -182,7 +121,7 @@ StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptio
   Vec<double, N> r = Vec<double, N>::Zero();
   Mat<double, N, N> J = Mat<double, N, N>::Zero();
   fn(x.data(), r.data(), J.data());
-  const double scale0 = scale_of(x, J) + opt.absolute_floor;
+  const double scale0 = s0 + max_abs(J) * max_abs(x) + opt.absolute_floor;
   const double target = opt.residual_tolerance * scale0;
   solver.options.cost_threshold = 0.5 * target * target;
   const auto& summary = solver.Solve(fn, &x);
@@ -190,17 +129,10 @@ StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptio
   s.iterations = s.jacobians = summary.iterations + 1;
   fn(x.data(), r.data(), J.data());
   s.residual = max_abs(r);
-  s.scale = scale_of(x, J) + opt.absolute_floor;
+  s.scale = s0 + max_abs(J) * max_abs(x) + opt.absolute_floor;
   s.converged = std::isfinite(s.residual) && s.residual <= opt.accept_tolerance * s.scale;
   if (!s.converged) s.message = "TinySolver ended above the residual tolerance";
   return s;
-}
-
-template <int N, class F, class Scale>
-StepSummary solve_step_system(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt,
-                              const Scale& scale_of) {
-  return opt.solver == SolverKind::newton ? solve_newton<N>(f, x, x0, opt, scale_of)
-                                          : solve_tiny<N>(f, x, x0, opt, scale_of);
 }
 
 }  // namespace dvm

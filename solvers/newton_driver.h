@@ -29,8 +29,13 @@
 //
 // Linear algebra policies LA: `bool factor(const Matrix& J, double Jmax)` (false where J is
 // singular to working precision) and `void solve(const Vector& r, Vector& dx)` (dx =
-// J^{-1} r, dx may alias r). DenseLUOf<K> (mechanics/dynamic_system.h) is one; BandedLU and
-// the sparse factorisations of the separable steps are others.
+// J^{-1} r, dx may alias r). DenseLUOf<K> (core/dense_solve.h) and FixedLU<N> below are
+// dense ones; the tridiagonal and banded eliminations of the chains and the sparse
+// factorisations of the separable steps are others.
+//
+// solve_newton (below) is the driver on an equation written as a Ceres-style functor,
+// its Jacobian from ceres::Jet, at fixed size: the map-based steps (PositionMomentumStep,
+// HamiltonianStep, SodeStep, ManifoldStep) solve by it.
 #pragma once
 
 #include <cmath>
@@ -38,7 +43,8 @@
 #include <type_traits>
 #include <utility>
 
-#include "mechanics/dynamic_system.h"
+#include "core/dense_solve.h"
+#include "core/scalar.h"
 #include "solvers/newton.h"
 
 namespace dvm {
@@ -76,7 +82,7 @@ namespace driver_detail {
 
 template <class V>
 double norm(const V& x) {
-  return dynamic_detail::inf_norm(x);
+  return inf_norm(x);
 }
 
 // "singular step Jacobian", with the factorisation that failed where the policy names it
@@ -179,6 +185,87 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
   }
   return fail("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +
               std::to_string(s.jacobians) + " Jacobians formed)");
+}
+
+// The dense factorisation of a fixed-size step: Eigen's closed-form inverse up to 4
+// unknowns (singular where its determinant is zero or not finite), DenseLUOf<N> above.
+template <int N>
+class FixedLU {
+ public:
+  bool factor(const Mat<double, N, N>& J, double Jmax) {
+    if constexpr (N <= 4) {
+      bool invertible = false;
+      double det = 0.0;
+      J.computeInverseAndDetWithCheck(f_, det, invertible, 0.0);
+      return invertible && std::isfinite(det);
+    } else {
+      return f_.factor(J, Jmax);
+    }
+  }
+  void solve(const Vec<double, N>& r, Vec<double, N>& dx) const {
+    if constexpr (N <= 4)
+      dx = f_ * r;  // (a product: Eigen evaluates it into a temporary, so dx may alias r)
+    else
+      f_.solve(r, dx);
+  }
+
+ private:
+  std::conditional_t<(N <= 4), Mat<double, N, N>, DenseLUOf<N>> f_;
+};
+
+// An equation written as a Ceres-style functor f(x, r) of N unknowns and N residuals,
+// for the driver: the Jacobian from one level of Jets, the residual's scale
+// s0 + max|J| max|x| (s0: the size of the terms that make up F where they do not scale
+// with the unknowns, e.g. |p0|), the unknowns an increment of a point of size x0.
+template <int N, class F>
+class JetEquation {
+ public:
+  using Vector = Vec<double, N>;
+  using Matrix = Mat<double, N, N>;
+  JetEquation(const F& f, double s0, double x0) : f_(f), s0_(s0), x0_(x0) {}
+
+  // (The driver asks for the residual alone only with a kept Jacobian; solve_newton forms
+  // one at every iteration. It goes through the Jets, so that f is not instantiated on
+  // doubles for nothing.)
+  void residual(const Vector& x, Vector& r) const {
+    Matrix J;
+    jacobian(x, r, J);
+  }
+  double jacobian(const Vector& x, Vector& r, Matrix& J) const {
+    using D = ceres::Jet<double, N>;
+    Vec<D, N> xd, rd;
+    for (int i = 0; i < N; ++i) xd[i] = D(x[i], i);
+    f_(xd.data(), rd.data());
+    for (int i = 0; i < N; ++i) {
+      r[i] = rd[i].a;
+      J.row(i) = rd[i].v.transpose();
+    }
+    return max_abs(J);
+  }
+  double scale(const Vector& x, double Jmax) const { return s0_ + Jmax * max_abs(x); }
+  double offset() const { return x0_; }
+
+ private:
+  const F& f_;
+  double s0_, x0_;
+};
+
+// Newton's method on f(x) = 0 from x (updated in place), a Jacobian formed and factored
+// at every iteration; s0 and x0 as for JetEquation.
+template <int N, class F>
+StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
+  JetEquation<N, F> eq(f, s0, x0);
+  FixedLU<N> la;
+  Vec<double, N> r, dx, start;
+  Mat<double, N, N> J;
+  DriverState state;
+  return newton_drive(eq, la, Refresh::every_iteration, opt, x, r, dx, J, state, start);
+}
+
+// The solver StepOptions::solver names: solve_newton or solve_tiny (solvers/newton.h).
+template <int N, class F>
+StepSummary solve_step_system(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
+  return opt.solver == SolverKind::newton ? solve_newton<N>(f, x, x0, opt, s0) : solve_tiny<N>(f, x, x0, opt, s0);
 }
 
 }  // namespace dvm

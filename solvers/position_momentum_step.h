@@ -15,7 +15,7 @@
 #pragma once
 
 #include "mechanics/discrete_lagrangian.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -61,15 +61,12 @@ class PositionMomentumStep {
   StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     Residual f{&dl_, q0, p0};
     const double pscale = max_abs(p0);
-    auto scale_of = [pscale](const V& x, const Mat<double, N, N>& J) {
-      return pscale + max_abs(J) * max_abs(x);
-    };
     StepSummary s;
     try {
       if constexpr (Tiny)
-        s = solve_step_system<N>(f, dq, max_abs(q0), options_, scale_of);
+        s = solve_step_system<N>(f, dq, max_abs(q0), options_, pscale);
       else
-        s = solve_newton<N>(f, dq, max_abs(q0), options_, scale_of);
+        s = solve_newton<N>(f, dq, max_abs(q0), options_, pscale);
       if (s.converged) {
         V d2;
         dl_.D2Ld_and_shift(q0, dq, d2, dp);

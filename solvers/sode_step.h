@@ -49,7 +49,7 @@
 #include "core/map_operations.h"
 #include "mechanics/hamiltonian.h"
 #include "mechanics/lagrangian.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -98,13 +98,10 @@ template <int N, class Step>
 StepSummary solve_increments(const Step& step, const Vec<double, 2 * N>& Y0, double s0, const StepOptions& options,
                              Vec<double, N>& dq, Vec<double, N>& dv) {
   IncrementResidual<Step, 2 * N> f{&step, Y0};
-  auto scale_of = [s0](const Vec<double, 2 * N>& x, const Mat<double, 2 * N, 2 * N>& J) {
-    return s0 + max_abs(J) * max_abs(x);
-  };
   Vec<double, 2 * N> x = stack(dq, dv);
   StepSummary s;
   try {
-    s = solve_step_system<2 * N>(f, x, max_abs(Y0), options, scale_of);
+    s = solve_step_system<2 * N>(f, x, max_abs(Y0), options, s0);
   } catch (const std::domain_error& e) {
     s.converged = false;
     s.message = e.what();
