@@ -9,8 +9,8 @@
 //   p0 = -D1 L_d = M D / h - h (1 - theta) F(q_theta),
 //   p1 =  D2 L_d = M D / h + h theta F(q_theta),   so  p1 - p0 = h F(q_theta).
 // The step solves the first for D by simplified Newton on the residual
-// p0 - M D / h + h (1 - theta) F(q0 + theta D), with the stopping rule and final
-// correction of solve_newton. Its Jacobian -(M / h + h theta (1 - theta) Hess V) comes
+// p0 - M D / h + h (1 - theta) F(q0 + theta D), by the one Newton driver
+// (solvers/newton_driver.h). Its Jacobian -(M / h + h theta (1 - theta) Hess V) comes
 // from one level of Jets through the system's gradient (its closed form where it has
 // one), where the generic PositionMomentumStep differentiates L_d twice through the
 // inverse map for every iteration; the residual itself is one force in doubles. The
@@ -24,12 +24,10 @@
 #include <string>
 #include <utility>
 
-#include <Eigen/LU>
-
 #include "mechanics/lagrangian.h"
 #include "mechanics/separable.h"
 #include "mechanics/structure.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -52,52 +50,19 @@ class SeparableThetaStep {
   double step_size() const { return h_; }
 
   // One step from (q0, p0): dq holds the starting guess on entry and q1 - q0 on return,
-  // dp receives p1 - p0 = h F(q_theta). Simplified Newton: the Jacobian is formed and
+  // dp receives p1 - p0 = h F(q_theta). Simplified Newton by the driver
+  // (solvers/newton_driver.h, Refresh::within_step): the Jacobian is formed and
   // factored at the starting guess and formed again only where an iteration fails to
-  // shrink the residual fourfold; the stopping rule and the final correction are those
-  // of solve_newton (solvers/newton.h).
+  // shrink the residual fourfold.
   StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
-    const StepOptions& opt = options_;
-    const double pscale = max_abs(p0), x0 = max_abs(q0);
-    StepSummary s;
-    V F, r, dx;
+    Equation eq{*this, q0, p0, max_abs(p0), max_abs(q0)};
+    FixedLU<N> la;
+    V r, dx, start;
     Mat<double, N, N> J;
-    Eigen::PartialPivLU<Mat<double, N, N>> lu;
-    bool have_jacobian = false;
-    double dxn = INFINITY, last = INFINITY;
-    for (int it = 0; it < opt.max_iterations; ++it) {
-      force(q0 + theta_ * dq, F);
-      r.noalias() = p0 - M_ * dq / h_ + (h_ * (1.0 - theta_)) * F;
-      s.residual = max_abs(r);
-      if (!have_jacobian || !(s.residual <= 0.25 * last)) {
-        jacobian(q0 + theta_ * dq, J);
-        lu.compute(J);
-        have_jacobian = true;
-        ++s.jacobians;
-      }
-      s.iterations = it + 1;
-      last = s.residual;
-      s.scale = pscale + max_abs(J) * max_abs(dq) + opt.absolute_floor;
-      if (!std::isfinite(s.residual) || !std::isfinite(max_abs(J))) {
-        s.message = "non-finite residual or Jacobian";
-        return s;
-      }
-      const NewtonVerdict verdict = newton_verdict_floored(s, dxn, max_abs(dq) + x0, opt, max_abs(J));
-      if (verdict == NewtonVerdict::failed) return s;
-      dx = lu.solve(r);  // J dx = r; the Jacobian of r is -J
-      if (!std::isfinite(max_abs(dx))) {
-        s.converged = false;
-        s.message = "singular step Jacobian";
-        return s;
-      }
-      dq += dx;
-      if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
-      dxn = max_abs(dx);
-    }
-    if (!s.converged) {
-      s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
-      return s;
-    }
+    DriverState state;
+    StepSummary s = newton_drive(eq, la, Refresh::within_step, options_, dq, r, dx, J, state, start);
+    if (!s.converged) return s;
+    V F;
     force(q0 + theta_ * dq, F);
     dp = h_ * F;
     if (!std::isfinite(max_abs(dp))) {
@@ -108,6 +73,30 @@ class SeparableThetaStep {
   }
 
  private:
+  // The equation in D = q1 - q0 for the driver: F(D) = -(p0 - M D / h + h (1 - theta)
+  // F(q_theta)), whose Jacobian is J = M / h + h theta (1 - theta) Hess V (the sign turned
+  // so that J is the matrix jacobian() forms).
+  struct Equation {
+    using Vector = V;
+    using Matrix = Mat<double, N, N>;
+    const SeparableThetaStep& st;
+    const V& q0;
+    const V& p0;
+    double pscale, x0;
+    void residual(const V& D, V& r) const {
+      V F;
+      st.force(q0 + st.theta_ * D, F);
+      r = -(p0 - st.M_ * D / st.h_ + (st.h_ * (1.0 - st.theta_)) * F);
+    }
+    double jacobian(const V& D, V& r, Matrix& J) const {
+      residual(D, r);
+      st.jacobian(q0 + st.theta_ * D, J);
+      return max_abs(J);
+    }
+    double scale(const V& D, double Jmax) const { return pscale + Jmax * max_abs(D); }
+    double offset() const { return x0; }
+  };
+
   void force(const V& q, V& F) const {
     V dLdv;
     gradient_of(L_, q, V::Zero().eval(), F, dLdv);
