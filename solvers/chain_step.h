@@ -16,9 +16,9 @@
 // matrix does the same elimination plus symbolic analysis, permutation and, in Ceres,
 // the normal equations J^T J (pentadiagonal, squared condition number) and per-solve
 // setup of the trust-region machinery; the direct tridiagonal Newton costs a few
-// multiply-adds per particle per iteration and is exact Newton. Measured in
-// examples/bench/bench_chain.cc: the same step as a reused ceres::Problem costs 44x,
-// 121x and 174x more at n = 1e2, 1e3, 1e4. The elimination has
+// multiply-adds per particle per iteration and is exact Newton
+// (examples/bench/bench_chain.cc times the same step as a reused ceres::Problem
+// against it). The elimination has
 // no pivoting: it is stable when the Jacobian is diagonally dominant or definite,
 // which holds when every spring is convex where it is used (Hess V positive
 // semi-definite, so -J is positive definite) and also when h^2 |V''| stays below
@@ -34,7 +34,7 @@
 
 #include "core/discretization_map.h"
 #include "mechanics/chain.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -51,7 +51,10 @@ class ChainStep {
     x_.resize(n);
     g_.resize(n);
     r_.resize(n);
+    dx_.resize(n);
+    start_.resize(n);
     diag_.resize(n);
+    piv_.resize(n);
     off_.resize(std::max(n - 1, 0));
     c_.resize(n);
     d_.resize(n);
@@ -62,87 +65,107 @@ class ChainStep {
   const ThetaMap& map() const { return map_; }
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
-  // dp receives p1 - p0.
+  // dp receives p1 - p0. Newton's method by the driver (solvers/newton_driver.h), the
+  // tridiagonal Jacobian formed and factored at every iteration.
   StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
-    const int n = chain_.n;
-    const double th = map_.theta(), m = chain_.m;
-    const double a = h_ * (1.0 - th);    // weight of grad V in F
-    const double b = h_ * th * (1.0 - th);  // weight of Hess V in dF/ddq
-    const double pscale = max_abs(p0);
-    StepSummary s;
-    double dxn = INFINITY;
-    for (int it = 0; it < options_.max_iterations; ++it) {
-      x_ = q0 + th * dq;
-      chain_.gradient(x_, g_);
-      r_ = p0 - (m / h_) * dq - a * g_;
-      s.iterations = s.jacobians = it + 1;
-      s.residual = max_abs(r_);
-      s.scale = pscale + std::fabs(m / h_) * max_abs(dq) + std::fabs(a) * chain_.gradient_scale(x_) +
-                options_.absolute_floor;
-      if (!std::isfinite(s.residual)) {
-        s.message = "non-finite residual";
-        return s;
-      }
-      if (newton_verdict(s, dxn, max_abs(dq) + max_abs(q0), options_) != NewtonVerdict::iterate) break;
-      // Solve (-J) delta = r with -J = (m/h) I + b Hess V(x), then dq += delta.
-      chain_.hessian(x_, diag_, off_);
-      if (!solve_tridiagonal(m / h_, b)) {
-        s.message = "non-positive pivot in the tridiagonal step Jacobian (a strongly non-convex spring)";
-        return s;
-      }
-      dq += r_;  // r_ now holds delta
-      dxn = max_abs(r_);
-    }
-    if (!s.converged) {
-      if (s.message.empty())
-        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-      return s;
-    }
-    // As solve_newton does (solvers/newton.h): apply the correction of the accepted
-    // residual, which takes it from the tolerance down to round-off (the reported
-    // residual is the one measured before it).
-    chain_.hessian(x_, diag_, off_);
-    if (solve_tridiagonal(m / h_, b)) dq += r_;
+    const double th = map_.theta();
+    Equation eq{*this, q0, p0, h_ * (1.0 - th), h_ * th * (1.0 - th), max_abs(p0), max_abs(q0)};
+    Tridiagonal la{*this, chain_.m / h_, eq.b};
+    StepSummary s = newton_drive(eq, la, Refresh::every_iteration, options_, dq, r_, dx_, unused_, state_, start_);
+    if (!s.converged) return s;
     x_ = q0 + th * dq;
     chain_.gradient(x_, g_);
     dp = -h_ * g_;
-    (void)n;
     return s;
   }
 
  private:
-  // Solves (d0 I + b T) y = r_ in place, T = tridiag(off_, diag_, off_). Returns false on a
-  // non-positive pivot. A backward substep (h < 0) has d0 < 0 and b <= 0: the system is
-  // solved as (-d0 I - b T) y = -r_, positive definite where V is convex.
-  bool solve_tridiagonal(double d0, double b) const {
-    const int n = chain_.n;
-    if (d0 < 0.0) {
-      d0 = -d0;
-      b = -b;
-      r_ = -r_;
+  // The equation for the driver, with dq = q1 - q0 and x = q0 + theta dq:
+  //   F(dq) = p0 - (m/h) dq - a grad V(x),   dF/ddq = -((m/h) I + b Hess V(x)),
+  // a = h (1 - theta), b = h theta (1 - theta). The Jacobian lives in the step's diag_
+  // and off_ (Hess V's diagonals), not in the driver's matrix.
+  struct Equation {
+    using Vector = V;
+    using Matrix = Eigen::MatrixXd;
+    const ChainStep& st;
+    const V& q0;
+    const V& p0;
+    double a, b, pscale, x0;
+    void residual(const V& dq, V& r) const {
+      st.x_ = q0 + st.map_.theta() * dq;
+      st.chain_.gradient(st.x_, st.g_);
+      r = p0 - (st.chain_.m / st.h_) * dq - a * st.g_;
     }
-    // forward elimination (Thomas): c_ = modified super-diagonal, d_ = modified rhs
-    double piv = d0 + b * diag_[0];
-    if (!(piv > 0.0)) return false;
-    c_[0] = n > 1 ? b * off_[0] / piv : 0.0;
-    d_[0] = r_[0] / piv;
-    for (int i = 1; i < n; ++i) {
-      const double lower = b * off_[i - 1];
-      piv = d0 + b * diag_[i] - lower * c_[i - 1];
+    // max |J_ij| of J = -((m/h) I + b T), T = tridiag(off_, diag_, off_)
+    double jacobian(const V& dq, V& r, Matrix&) const {
+      residual(dq, r);
+      st.chain_.hessian(st.x_, st.diag_, st.off_);
+      const double d0 = st.chain_.m / st.h_;
+      double m = 0.0;
+      for (Eigen::Index i = 0; i < st.diag_.size(); ++i) m = std::fmax(m, std::fabs(d0 + b * st.diag_[i]));
+      const double off = std::fabs(b) * inf_norm(st.off_);
+      return std::isfinite(m) && std::isfinite(off) ? std::fmax(m, off) : INFINITY;
+    }
+    // the size of F's terms at dq (the gradient's own terms, not only their sum)
+    double scale(const V& dq, double) const {
+      return pscale + std::fabs(st.chain_.m / st.h_) * max_abs(dq) + std::fabs(a) * st.chain_.gradient_scale(st.x_);
+    }
+    double offset() const { return x0; }
+  };
+
+  // The factorisation of -J = d0 I + b T by elimination without pivoting (Thomas): the
+  // pivots and the modified super-diagonal once, the right-hand sides in solve(). A
+  // backward substep (h < 0) has d0 < 0 and b <= 0: it factors -d0 I - b T, positive
+  // definite where V is convex, and turns the right-hand side's sign. factor() is false
+  // on a non-positive pivot.
+  struct Tridiagonal {
+    const ChainStep& st;
+    double d0, b;
+    bool factor(const Eigen::MatrixXd&, double) {
+      negated = d0 < 0.0;
+      const double e0 = negated ? -d0 : d0, eb = negated ? -b : b;
+      const int n = st.chain_.n;
+      double piv = e0 + eb * st.diag_[0];
       if (!(piv > 0.0)) return false;
-      c_[i] = i + 1 < n ? b * off_[i] / piv : 0.0;
-      d_[i] = (r_[i] - lower * d_[i - 1]) / piv;
+      st.piv_[0] = piv;
+      st.c_[0] = n > 1 ? eb * st.off_[0] / piv : 0.0;
+      for (int i = 1; i < n; ++i) {
+        const double lower = eb * st.off_[i - 1];
+        piv = e0 + eb * st.diag_[i] - lower * st.c_[i - 1];
+        if (!(piv > 0.0)) return false;
+        st.piv_[i] = piv;
+        st.c_[i] = i + 1 < n ? eb * st.off_[i] / piv : 0.0;
+      }
+      b_used = eb;
+      return true;
     }
-    r_[n - 1] = d_[n - 1];
-    for (int i = n - 2; i >= 0; --i) r_[i] = d_[i] - c_[i] * r_[i + 1];
-    return true;
-  }
+    // dx = J^{-1} r = -(d0 I + b T)^{-1} r
+    void solve(const V& r, V& dx) const {
+      const int n = st.chain_.n;
+      V& y = st.d_;
+      y[0] = (negated ? -r[0] : r[0]) / st.piv_[0];
+      for (int i = 1; i < n; ++i) {
+        const double lower = b_used * st.off_[i - 1];
+        y[i] = ((negated ? -r[i] : r[i]) - lower * y[i - 1]) / st.piv_[i];
+      }
+      dx[n - 1] = -y[n - 1];
+      for (int i = n - 2; i >= 0; --i) {
+        y[i] = y[i] - st.c_[i] * y[i + 1];
+        dx[i] = -y[i];
+      }
+    }
+    const char* name() const { return "tridiagonal elimination without pivoting"; }
+    bool negated = false;
+    double b_used = 0.0;
+  };
 
   FPUChain chain_;
   ThetaMap map_;
   double h_;
   StepOptions options_;
-  mutable V x_, g_, r_, diag_, off_, c_, d_;
+  mutable V x_, g_, r_, dx_, start_, diag_, off_, piv_, c_, d_;
+  mutable Eigen::MatrixXd unused_;  // (the driver's matrix: the Jacobian lives in diag_ and off_)
+  mutable DriverState state_;
 };
 
 }  // namespace dvm
