@@ -20,9 +20,9 @@
 // from xi as ManifoldStep forms it (Sphere::relative_chart), so the two steps solve the
 // same equation: they agree to round-off at K = 1 to 4 (tests/solvers/test_sphere_chain.cc).
 //
-// Newton is simplified: the Jacobian is formed and factored at the starting guess and
-// again only where an iteration fails to shrink the residual fourfold; the stopping
-// rule and the final correction are those of solve_newton (solvers/newton.h). It has
+// Newton is simplified (the driver of solvers/newton_driver.h with Refresh::within_step):
+// the Jacobian is formed and factored at the starting guess and again only where an
+// iteration fails to shrink the residual fourfold. It has
 // the contract of a manifold step for `integrate` and ComposedPointStep
 // (M = DynamicSpherePower, n = Eigen::Dynamic). Workspace is allocated at construction
 // and shared by copies: steps must not run on two threads at once.
@@ -37,7 +37,7 @@
 
 #include "core/manifold_maps.h"
 #include "mechanics/spherical_chain.h"
-#include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -79,54 +79,12 @@ class SphereChainStep {
     }
     Work& w = *work_;
     const V pi0 = M::covector_to_local(q0, p0);
-    const double pscale = max_abs(pi0);
-    const StepOptions& opt = options_;
     try {
-      bool have_jacobian = false;
-      double dxn = INFINITY, last = INFINITY, Jmax = 0.0;
-      for (int it = 0; it < opt.max_iterations; ++it) {
-        s.iterations = it + 1;
-        evaluate(q0, xi, !have_jacobian);
-        w.r = pi0 + w.d1;
-        s.residual = max_abs(w.r);
-        bool refresh = !have_jacobian;
-        if (!refresh && !(s.residual <= 0.25 * last)) {
-          refresh = true;
-          evaluate(q0, xi, true);  // the same point, now with the Jacobian's blocks
-          w.r = pi0 + w.d1;
-          s.residual = max_abs(w.r);
-        }
-        if (refresh) {
-          Jmax = jacobian_size();
-          have_jacobian = true;
-          ++s.jacobians;
-          if (std::isfinite(Jmax) && !w.solver->factor(w.D, w.B, w.C, 1.0 / h_)) {
-            s.message = "singular step Jacobian (banded LU of the chain)";
-            return s;
-          }
-        }
-        last = s.residual;
-        s.scale = pscale + Jmax * max_abs(xi) + opt.absolute_floor;
-        if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
-          s.message = "non-finite residual or Jacobian";
-          return s;
-        }
-        const NewtonVerdict verdict = newton_verdict_floored(s, dxn, max_abs(xi) + 1.0, opt, Jmax);
-        if (verdict == NewtonVerdict::failed) return s;
-        w.solver->solve(w.r, w.dx);  // J dx = r; the step is -dx
-        if (!std::isfinite(max_abs(w.dx))) {
-          s.converged = false;
-          s.message = "singular step Jacobian";
-          return s;
-        }
-        xi -= w.dx;
-        if (verdict == NewtonVerdict::converged) break;  // (the correction already paid for, applied)
-        dxn = max_abs(w.dx);
-      }
-      if (!s.converged) {
-        s.message = "no convergence within " + std::to_string(opt.max_iterations) + " iterations";
-        return s;
-      }
+      Equation eq{*this, q0, pi0, max_abs(pi0)};
+      Banded la{w, 1.0 / h_};
+      DriverState state;
+      s = newton_drive(eq, la, Refresh::within_step, options_, xi, w.r, w.dx, w.unused, state, w.start);
+      if (!s.converged) return s;
       finish(q0, xi, s, q1, p1);
     } catch (const std::domain_error& e) {
       s.converged = false;
@@ -167,6 +125,7 @@ class SphereChainStep {
       r.resize(2 * K);
       dx.resize(2 * K);
       A3.resize(2 * K);
+      start.resize(2 * K);
     }
     std::shared_ptr<ChainCouplingSolve> solver;
     std::vector<Mat<double, 2, 2>> D;
@@ -174,10 +133,40 @@ class SphereChainStep {
     // per link: d^2 U_i / deta_e dxi_s (3 components x 4) and d^2 (X_i)_3 / deta_e dxi_s
     std::vector<Mat<double, 3, 4>> d2U;
     std::vector<Mat<double, 2, 2>> d2X;
-    V U, MU, d1, r, dx, A3;
+    V U, MU, d1, r, dx, A3, start;
+    Eigen::MatrixXd unused;  // (the driver's matrix: the Jacobian lives in the blocks)
   };
 
  private:
+  // The equation in xi for the driver: F(xi) = pi0 + D1 L_d(q0, chart(q0, xi)), its
+  // Jacobian the blocks D, B, C (evaluate) factored by ChainCouplingSolve.
+  struct Equation {
+    using Vector = V;
+    using Matrix = Eigen::MatrixXd;
+    const SphereChainStep& st;
+    const V& q0;
+    const V& pi0;
+    double pscale;
+    void residual(const V& xi, V& r) const {
+      st.evaluate(q0, xi, false);
+      r = pi0 + st.work_->d1;
+    }
+    double jacobian(const V& xi, V& r, Matrix&) const {
+      st.evaluate(q0, xi, true);
+      r = pi0 + st.work_->d1;
+      return st.jacobian_size();
+    }
+    double scale(const V& xi, double Jmax) const { return pscale + Jmax * max_abs(xi); }
+    double offset() const { return 1.0; }  // (xi is a chart coordinate; the points have norm 1)
+  };
+  struct Banded {
+    Work& w;
+    double inverse_step;
+    bool factor(const Eigen::MatrixXd&, double) { return w.solver->factor(w.D, w.B, w.C, inverse_step); }
+    void solve(const V& r, V& dx) const { w.solver->solve(r, dx); }
+    const char* name() const { return "banded LU of the chain"; }
+  };
+
   using J2 = ceres::Jet<double, 2>;
   using JJ = ceres::Jet<J2, 2>;
 
