@@ -846,11 +846,13 @@ class WrittenDynamic {
 
   // The monitored energy at (q, p) with v = FL^{-1}(q, p): the written one if given,
   // else E_L = <L_v, v> - L = <p, v> - L(q, v) (L_v(q, v) = p, to the tolerance v was
-  // solved to); for L = v^T M(q) v / 2 + U(q) with M's entries read off the text, that
-  // is <p, v> / 2 - U(q): U's terms evaluated, not L's.
+  // solved to); for L = v^T M v / 2 + U(q), M constant or with its entries read off the
+  // text, that is <p, v> / 2 - U(q): U's terms evaluated, not L's. (A separable text's U
+  // is its terms of degree 0 in the velocities, which may still name one, as x_dot^0.)
   double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
     if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
     if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - parts_->potential(q.data());
+    if (parts_->separable) return 0.5 * p.dot(v) - parts_->potential(q.data(), v.data());
     return p.dot(v) - value(q, v);
   }
   bool has_hamiltonian() const { return !system_->hamiltonian.empty(); }

@@ -359,6 +359,22 @@ BOOST_AUTO_TEST_CASE(legendre_maps_of_dynamic_systems) {
   BOOST_TEST(rel_diff(legendre_inverse(B, q, p), v) <= 1e-14);
   BOOST_TEST(rel_diff(legendre_inverse_checked(L, q, p), v) <= 1e-14);
   BOOST_TEST(std::fabs(L.energy_at(q, v, p) - energy(kPendulum2, fixed<2>(q), fixed<2>(v))) <= 1e-14);
+  // separable texts: E = <p, v>/2 - U(q) from the potential's terms, against the closed
+  // forms; a constant M that is not diagonal, and a term of degree 0 that names a
+  // velocity (x_dot^0), which U is evaluated with
+  const WrittenDynamic K(written_kepler());
+  BOOST_TEST(K.parts().separable);
+  const VectorXd qk = random_vector(2, 1.0, 7), vk = random_vector(2, 1.0, 8);
+  const double Ek = energy(kKepler, fixed<2>(qk), fixed<2>(vk));
+  const double terms = vk.squaredNorm() / 2 + 1.5 / qk.norm();  // (E is their difference)
+  BOOST_TEST(std::fabs(K.energy_at(qk, vk, legendre(K, qk, vk)) - Ek) <= 4e-15 * terms);  // (a few roundings of the terms)
+  const WrittenDynamic C(written({"x", "y"}, {{"k", 3.0}},
+                                 "x_dot^2 + x_dot*y_dot + y_dot^2 + k*x_dot^0*cos(x) - y^2/2"));
+  BOOST_TEST(C.parts().separable);
+  BOOST_TEST(!C.parts().split.diagonal);
+  const VectorXd pc = legendre(C, qk, vk);
+  const double Ec = vk[0] * vk[0] + vk[0] * vk[1] + vk[1] * vk[1] - 3.0 * std::cos(qk[0]) + qk[1] * qk[1] / 2;
+  BOOST_TEST(std::fabs(C.energy_at(qk, vk, pc) - Ec) <= 4e-15 * (vk.squaredNorm() * 1.5 + 3.0 + qk[1] * qk[1]));
   const NBodyDynamic Nb(1.0, {1.0, 2.0});
   const VectorXd qn = random_vector(6, 1.0, 3), pn = random_vector(6, 1.0, 4);
   BOOST_TEST(rel_diff(legendre(Nb, qn, legendre_inverse(Nb, qn, pn)), pn) <= 1e-16);
