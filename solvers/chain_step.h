@@ -102,13 +102,19 @@ class ChainStep {
       st.chain_.hessian(st.x_, st.diag_, st.off_);
       const double d0 = st.chain_.m / st.h_;
       double m = 0.0;
-      for (Eigen::Index i = 0; i < st.diag_.size(); ++i) m = std::fmax(m, std::fabs(d0 + b * st.diag_[i]));
-      const double off = std::fabs(b) * inf_norm(st.off_);
-      return std::isfinite(m) && std::isfinite(off) ? std::fmax(m, off) : INFINITY;
+      bool nan = false;
+      const Eigen::Index n = st.diag_.size();
+      for (Eigen::Index i = 0; i < n; ++i) {
+        const double e = std::fabs(d0 + b * st.diag_[i]), o = i + 1 < n ? std::fabs(b * st.off_[i]) : 0.0;
+        nan |= e != e || o != o;
+        m = e > m ? e : m;
+        m = o > m ? o : m;
+      }
+      return nan || !(m < INFINITY) ? INFINITY : m;
     }
     // the size of F's terms at dq (the gradient's own terms, not only their sum)
-    double scale(const V& dq, double) const {
-      return pscale + std::fabs(st.chain_.m / st.h_) * max_abs(dq) + std::fabs(a) * st.chain_.gradient_scale(st.x_);
+    double scale(double dqn, double) const {
+      return pscale + std::fabs(st.chain_.m / st.h_) * dqn + std::fabs(a) * st.chain_.gradient_scale(st.x_);
     }
     double offset() const { return x0; }
   };

@@ -135,7 +135,7 @@ class ThetaEquation {
     const double m = dynamic_detail::inf_norm(J);
     return std::isfinite(m) ? m : INFINITY;
   }
-  double scale(const Vector& D, double Jmax) const { return pscale_ + Jmax * dynamic_detail::inf_norm(D); }
+  double scale(double Dn, double Jmax) const { return pscale_ + Jmax * Dn; }
   double offset() const { return q0size_; }
 
   // p1 - p0 = h L_q at the solution D.
@@ -367,7 +367,7 @@ class HamiltonianThetaEquation {
     const double m = dynamic_detail::inf_norm(J);
     return std::isfinite(m) ? m : INFINITY;
   }
-  double scale(const Vector& y, double Jmax) const { return s0_ + Jmax * dynamic_detail::inf_norm(y); }
+  double scale(double yn, double Jmax) const { return s0_ + Jmax * yn; }
   double offset() const { return x0_; }
 
  private:

@@ -8,8 +8,9 @@
 //   double jacobian(const Vector& x, Vector& r, Matrix& J)
 //                                             r = F(x) and J = dF/dx at x; returns max|J_ij|
 //                                             (INFINITY where it is not finite)
-//   double scale(const Vector& x, double Jmax) const  the size of the terms F is made of at
-//                                             x, which the residual is judged against
+//   double scale(double xn, double Jmax) const  the size of the terms F is made of at x,
+//                                             which the residual is judged against
+//                                             (xn = max|x_i|, Jmax: the Jacobian's)
 //   double offset() const                      the size of the point x is an increment of
 //                                             (round-off in forming it sets a floor under F)
 // The equation holds its data (the step's start, its time, its size) and may keep what
@@ -102,11 +103,12 @@ std::string singular(const LA& la) {
 }  // namespace driver_detail
 
 // Solves F(x) = 0 from x (the guess in, the solution out; dx the correction applied last,
-// zero if none). r, dx: workspace of x's size;
+// zero if none). r, dx: workspace of x's size; start: too, used with a kept Jacobian only;
 // J: of the Jacobian's; la: the factorisation; state: what is kept across steps
 // (Refresh::across_steps; else only within this call). A non-finite residual at an
 // iterate reached through a kept Jacobian starts the iteration again from the guess
 // with a fresh one. Throws nothing itself; the equation's exceptions pass through.
+// (Every return is of the one summary s, so that it is built in the caller's storage.)
 template <class E, class LA>
 StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt, typename E::Vector& x,
                          typename E::Vector& r, typename E::Vector& dx, typename E::Matrix& J, DriverState& state,
@@ -117,14 +119,13 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
   const double x0 = eq.offset();
   double dxn = INFINITY, last = INFINITY;
   bool formed = false;  // a Jacobian formed in this call
-  start = x;
-  auto fail = [&](std::string message) {
+  if (refresh != Refresh::every_iteration) start = x;
+  auto failed = [&](std::string message) {
     s.converged = false;
     s.message = std::move(message);
-    return s;
   };
   for (int it = 0; it < opt.max_iterations; ++it) {
-    const double xn = norm(x);
+    double xn = norm(x);
     bool fresh = !state.valid || refresh == Refresh::every_iteration;
     double kept_scale = 0.0;  // the residual's scale with the kept Jacobian (when it serves)
     if (!fresh) {
@@ -133,12 +134,13 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
       if (!std::isfinite(s.residual) && !formed) {
         // a kept Jacobian took the iterate out of the equation's domain: from the guess again
         x = start;
+        xn = norm(x);
         state.valid = false;
         dxn = last = INFINITY;
         fresh = true;
       } else {
         const double Jmax = state.Jmax;
-        kept_scale = eq.scale(x, Jmax) + opt.absolute_floor;
+        kept_scale = eq.scale(xn, Jmax) + opt.absolute_floor;
         fresh = !kept_jacobian_serves(s, last, it, kept_scale, opt,
                                       [&](StepSummary& probe) {
                                         return newton_verdict_floored(probe, dxn, xn + x0, opt, Jmax);
@@ -154,21 +156,23 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
       if (std::isfinite(state.Jmax) && !state.valid) {
         // singular: accepted only where the stopping rule accepts the iterate as it is
         s.iterations = it + 1;
-        s.scale = eq.scale(x, state.Jmax) + opt.absolute_floor;
+        s.scale = eq.scale(xn, state.Jmax) + opt.absolute_floor;
         if (std::isfinite(s.residual) &&
             newton_verdict_floored(s, dxn, xn + x0, opt, state.Jmax) == NewtonVerdict::converged) {
           dx.setZero();  // (no correction applied)
           return s;
         }
-        return fail(driver_detail::singular(la));
+        failed(driver_detail::singular(la));
+        return s;
       }
     }
     s.iterations = it + 1;
     const double Jmax = state.Jmax;
-    s.scale = fresh ? eq.scale(x, Jmax) + opt.absolute_floor : kept_scale;
+    s.scale = fresh ? eq.scale(xn, Jmax) + opt.absolute_floor : kept_scale;
     if (!std::isfinite(s.residual) || !std::isfinite(Jmax)) {
       state.valid = false;
-      return fail("non-finite residual or Jacobian");
+      failed("non-finite residual or Jacobian");
+      return s;
     }
     const NewtonVerdict verdict = newton_verdict_floored(s, dxn, xn + x0, opt, Jmax);
     if (verdict == NewtonVerdict::failed) return s;
@@ -176,15 +180,17 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
     const double step = norm(dx);
     if (!std::isfinite(step)) {
       state.valid = false;
-      return fail(driver_detail::singular(la));
+      failed(driver_detail::singular(la));
+      return s;
     }
     x -= dx;  // (on convergence too: the correction already paid for)
     if (verdict == NewtonVerdict::converged) return s;
     dxn = step;
     last = s.residual;
   }
-  return fail("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +
-              std::to_string(s.jacobians) + " Jacobians formed)");
+  failed("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +
+         std::to_string(s.jacobians) + " Jacobians formed)");
+  return s;
 }
 
 // The dense factorisation of a fixed-size step: Eigen's closed-form inverse up to 4
@@ -242,7 +248,7 @@ class JetEquation {
     }
     return max_abs(J);
   }
-  double scale(const Vector& x, double Jmax) const { return s0_ + Jmax * max_abs(x); }
+  double scale(double xn, double Jmax) const { return s0_ + Jmax * xn; }
   double offset() const { return x0_; }
 
  private:

@@ -134,7 +134,7 @@ class SeparableThetaNewton {
       residual(D, r);
       return step.jacobian(base.x_);
     }
-    double scale(const V& D, double Jmax) const { return pscale + Jmax * dynamic_detail::inf_norm(D); }
+    double scale(double Dn, double Jmax) const { return pscale + Jmax * Dn; }
     double offset() const { return x0; }
   };
   struct Factor {

@@ -93,7 +93,7 @@ class SeparableThetaStep {
       st.jacobian(q0 + st.theta_ * D, J);
       return max_abs(J);
     }
-    double scale(const V& D, double Jmax) const { return pscale + Jmax * max_abs(D); }
+    double scale(double Dn, double Jmax) const { return pscale + Jmax * Dn; }
     double offset() const { return x0; }
   };
 

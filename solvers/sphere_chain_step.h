@@ -156,7 +156,7 @@ class SphereChainStep {
       r = pi0 + st.work_->d1;
       return st.jacobian_size();
     }
-    double scale(const V& xi, double Jmax) const { return pscale + Jmax * max_abs(xi); }
+    double scale(double xin, double Jmax) const { return pscale + Jmax * xin; }
     double offset() const { return 1.0; }  // (xi is a chart coordinate; the points have norm 1)
   };
   struct Banded {
