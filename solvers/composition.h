@@ -20,7 +20,6 @@
 // Both types plug into `integrate` (they have N, step_size() and step(q, p, dq, dp)).
 #pragma once
 
-#include <Eigen/LU>
 #include <string>
 #include <utility>
 #include <vector>
@@ -28,6 +27,7 @@
 #include "core/map_operations.h"
 #include "solvers/composition_methods.h"
 #include "solvers/integrate.h"
+#include "solvers/newton_driver.h"
 #include "solvers/position_momentum_step.h"
 
 namespace dvm {
@@ -187,26 +187,60 @@ class ComposedLagrangianStep {
   }
 
   // One step: the same contract as CompositionStep::step. The nodes start from the
-  // guess split in proportion to the weights.
+  // guess split in proportion to the weights; Newton's method by the driver
+  // (solvers/newton_driver.h), the Jacobian formed and factored at every iteration.
   StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     const std::size_t S = substeps_.size();
     const int n = static_cast<int>(S) * N;
-    std::vector<V> inc(S);  // q_k - q_{k-1}
-    for (std::size_t k = 0; k < S; ++k) inc[k] = dq * substeps_[k].weight;
-    Eigen::VectorXd F(n);
+    Eigen::VectorXd x(n), r(n), dx(n), start(n);  // x: the increments q_k - q_{k-1}, k = 1..S
+    for (std::size_t k = 0; k < S; ++k) x.segment<N>(static_cast<int>(k) * N) = dq * substeps_[k].weight;
     Eigen::MatrixXd J(n, n);
-    StepSummary s;
-    double prev_step = INFINITY;
-    for (int it = 0; it < options_.max_iterations + 1; ++it) {
+    Equation eq{*this, q0, p0};
+    NodesLU la{DenseLU(n), Eigen::VectorXd(n)};
+    DriverState state;
+    StepSummary s = newton_drive(eq, la, Refresh::every_iteration, options_, x, r, dx, J, state, start);
+    if (!s.converged) return s;
+    CompensatedVector<N> Q(V::Zero());
+    for (std::size_t k = 0; k + 1 < S; ++k) Q.add(V(x.segment<N>(static_cast<int>(k) * N)));
+    const V last = x.segment<N>(static_cast<int>(S - 1) * N);
+    V D1, D2;
+    Mat<double, N, 2 * N> J1, J2;
+    pair(S - 1, V(q0 + Q.sum), last, D1, D2, J1, J2);
+    Q.add(last);
+    dq = Q.sum;
+    dp = D2 - p0;
+    return s;
+  }
+
+ private:
+  // The S N equations for the driver, in the increments x_k = q_k - q_{k-1}: equation k
+  // is D1 L_d^{(k)}(q_{k-1}, q_k) plus D2 L_d^{(k-1)}(q_{k-2}, q_{k-1}) (p0 for k = 1);
+  // the Jacobian formed is the one in the nodes q_1..q_S (block tridiagonal), which
+  // NodesLU turns into the correction of the increments. The residual's scale is the
+  // mean size of its terms, (|p0| + sum_k |D1_k|) / S.
+  struct Equation {
+    using Vector = Eigen::VectorXd;
+    using Matrix = Eigen::MatrixXd;
+    const ComposedLagrangianStep& st;
+    const V& q0;
+    const V& p0;
+    mutable double terms = 0.0;
+    void residual(const Vector& x, Vector& F) const {  // (the driver forms J at every iteration)
+      Matrix J(x.size(), x.size());
+      jacobian(x, F, J);
+    }
+    double jacobian(const Vector& x, Vector& F, Matrix& J) const {
+      const std::size_t S = st.substeps_.size();
       F.setZero();
       J.setZero();
       V a = q0;  // q_{k-1}
       double scale = max_abs(p0);
       for (std::size_t k = 0; k < S; ++k) {
+        const int r = static_cast<int>(k) * N;
+        const V inc = x.segment<N>(r);
         V D1, D2;
         Mat<double, N, 2 * N> J1, J2;
-        pair(k, a, inc[k], D1, D2, J1, J2);
-        const int r = static_cast<int>(k) * N;
+        st.pair(k, a, inc, D1, D2, J1, J2);
         // equation k (rows r..r+N): D1 of substep k, plus D2 of substep k-1 (or p0)
         F.segment<N>(r) += D1;
         if (k == 0) F.segment<N>(r) += p0;
@@ -219,54 +253,28 @@ class ComposedLagrangianStep {
           J.block<N, N>(r + N, r) += J2.template rightCols<N>();
         }
         scale += max_abs(D1);
-        a = a + inc[k];
+        a = a + inc;
       }
-      s.iterations = s.jacobians = it + 1;
-      s.residual = F.lpNorm<Eigen::Infinity>();
-      s.scale = scale / static_cast<double>(S) + options_.absolute_floor;
-      if (!std::isfinite(s.residual)) {
-        s.message = "non-finite residual";
-        return s;
-      }
-      const NewtonVerdict verdict = newton_verdict(s, prev_step, max_abs(q0) + max_abs(dq), options_);
-      if (verdict == NewtonVerdict::failed) break;
-      if (verdict == NewtonVerdict::iterate && it == options_.max_iterations) {
-        s.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-        return s;
-      }
-      const Eigen::PartialPivLU<Eigen::MatrixXd> lu(J);
-      const Eigen::VectorXd delta = lu.solve(F);  // change of the nodes q_1..q_S
-      const bool finite = std::isfinite(delta.lpNorm<Eigen::Infinity>());
-      if (!finite && verdict == NewtonVerdict::iterate) {
-        s.message = "singular composed Jacobian";
-        return s;
-      }
-      // On convergence too, as solve_newton does (solvers/newton.h): the correction
-      // of the accepted residual takes it from the tolerance down to round-off (the
-      // reported residual is the one measured before it).
-      if (finite) {
-        for (std::size_t k = 0; k < S; ++k) {
-          V dk = delta.segment<N>(static_cast<int>(k) * N);
-          if (k > 0) dk -= delta.segment<N>(static_cast<int>(k - 1) * N);
-          inc[k] -= dk;
-        }
-      }
-      if (verdict == NewtonVerdict::converged) break;
-      prev_step = delta.lpNorm<Eigen::Infinity>();
+      terms = scale / static_cast<double>(S);
+      return inf_norm(J);
     }
-    if (!s.converged) return s;
-    CompensatedVector<N> Q(V::Zero());
-    for (std::size_t k = 0; k + 1 < S; ++k) Q.add(inc[k]);
-    V D1, D2;
-    Mat<double, N, 2 * N> J1, J2;
-    pair(S - 1, V(q0 + Q.sum), inc[S - 1], D1, D2, J1, J2);
-    Q.add(inc[S - 1]);
-    dq = Q.sum;
-    dp = D2 - p0;
-    return s;
-  }
+    double scale(double, double) const { return terms; }
+    double offset() const { return max_abs(q0); }
+  };
+  // The nodes' Jacobian factored; solve() gives the change of the increments, the
+  // differences of the nodes' changes J^{-1} r.
+  struct NodesLU {
+    DenseLU lu;
+    Eigen::VectorXd delta;
+    bool factor(const Eigen::MatrixXd& J, double Jmax) { return lu.factor(J, Jmax); }
+    void solve(const Eigen::VectorXd& r, Eigen::VectorXd& dx) {
+      lu.solve(r, delta);
+      for (Eigen::Index i = dx.size() - 1; i >= N; --i) dx[i] = delta[i] - delta[i - N];
+      dx.head<N>() = delta.head<N>();
+    }
+    const char* name() const { return "dense LU of the composed Jacobian"; }
+  };
 
- private:
   template <class DL>
   static void pair_of(const DL& dl, const V& a, const V& d, V& D1, V& D2, Mat<double, N, 2 * N>& J1,
                       Mat<double, N, 2 * N>& J2) {
