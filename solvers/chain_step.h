@@ -54,7 +54,6 @@ class ChainStep {
     dx_.resize(n);
     start_.resize(n);
     diag_.resize(n);
-    piv_.resize(n);
     off_.resize(std::max(n - 1, 0));
     c_.resize(n);
     d_.resize(n);
@@ -96,21 +95,16 @@ class ChainStep {
       st.chain_.gradient(st.x_, st.g_);
       r = p0 - (st.chain_.m / st.h_) * dq - a * st.g_;
     }
-    // max |J_ij| of J = -((m/h) I + b T), T = tridiag(off_, diag_, off_)
+    // J = -((m/h) I + b T), T = tridiag(off_, diag_, off_), formed: Hess V into diag_
+    // and off_. Returns |m/h| + |b| max(|diag_|, |off_|), which bounds max|J_ij| and is
+    // within a factor 6 of it (|diag_i| <= 2 max|off_|), measured by two passes that do
+    // not wait on each other's comparisons; it only sets the round-off floor of the
+    // stopping rule (the chain's scale is its own).
     double jacobian(const V& dq, V& r, Matrix&) const {
       residual(dq, r);
       st.chain_.hessian(st.x_, st.diag_, st.off_);
-      const double d0 = st.chain_.m / st.h_;
-      double m = 0.0;
-      bool nan = false;
-      const Eigen::Index n = st.diag_.size();
-      for (Eigen::Index i = 0; i < n; ++i) {
-        const double e = std::fabs(d0 + b * st.diag_[i]), o = i + 1 < n ? std::fabs(b * st.off_[i]) : 0.0;
-        nan |= e != e || o != o;
-        m = e > m ? e : m;
-        m = o > m ? o : m;
-      }
-      return nan || !(m < INFINITY) ? INFINITY : m;
+      const double m = std::fabs(st.chain_.m / st.h_) + std::fabs(b) * std::max(inf_norm(st.diag_), inf_norm(st.off_));
+      return m < INFINITY ? m : INFINITY;  // (NaN too)
     }
     // the size of F's terms at dq (the gradient's own terms, not only their sum)
     double scale(double dqn, double) const {
@@ -119,57 +113,55 @@ class ChainStep {
     double offset() const { return x0; }
   };
 
-  // The factorisation of -J = d0 I + b T by elimination without pivoting (Thomas): the
-  // pivots and the modified super-diagonal once, the right-hand sides in solve(). A
-  // backward substep (h < 0) has d0 < 0 and b <= 0: it factors -d0 I - b T, positive
-  // definite where V is convex, and turns the right-hand side's sign. factor() is false
-  // on a non-positive pivot.
+  // The driver's linear algebra: -J = d0 I + b T eliminated without pivoting (Thomas)
+  // together with the right-hand side, in solve(), as one pass: its two recurrences (the
+  // pivots, the right-hand side) then overlap, where a factorisation first and a solve
+  // after would run one after the other (bench_chain times the step). So factor() has
+  // nothing to do, and a non-positive pivot leaves a non-finite correction, which the
+  // driver reports as a singular Jacobian. A backward substep (h < 0) has d0 < 0 and
+  // b <= 0: it is solved as (-d0 I - b T) y = -r, positive definite where V is convex.
   struct Tridiagonal {
     const ChainStep& st;
     double d0, b;
-    bool factor(const Eigen::MatrixXd&, double) {
-      negated = d0 < 0.0;
-      const double e0 = negated ? -d0 : d0, eb = negated ? -b : b;
-      const int n = st.chain_.n;
-      double piv = e0 + eb * st.diag_[0];
-      if (!(piv > 0.0)) return false;
-      st.piv_[0] = piv;
-      st.c_[0] = n > 1 ? eb * st.off_[0] / piv : 0.0;
-      for (int i = 1; i < n; ++i) {
-        const double lower = eb * st.off_[i - 1];
-        piv = e0 + eb * st.diag_[i] - lower * st.c_[i - 1];
-        if (!(piv > 0.0)) return false;
-        st.piv_[i] = piv;
-        st.c_[i] = i + 1 < n ? eb * st.off_[i] / piv : 0.0;
-      }
-      b_used = eb;
-      return true;
-    }
+    bool factor(const Eigen::MatrixXd&, double) { return true; }
     // dx = J^{-1} r = -(d0 I + b T)^{-1} r
     void solve(const V& r, V& dx) const {
       const int n = st.chain_.n;
+      const bool neg = d0 < 0.0;
+      const double e0 = neg ? -d0 : d0, eb = neg ? -b : b;
+      V& c = st.c_;
       V& y = st.d_;
-      y[0] = (negated ? -r[0] : r[0]) / st.piv_[0];
+      double piv = e0 + eb * st.diag_[0];
+      if (!(piv > 0.0)) {
+        dx.setConstant(NAN);
+        return;
+      }
+      c[0] = n > 1 ? eb * st.off_[0] / piv : 0.0;
+      y[0] = (neg ? -r[0] : r[0]) / piv;
       for (int i = 1; i < n; ++i) {
-        const double lower = b_used * st.off_[i - 1];
-        y[i] = ((negated ? -r[i] : r[i]) - lower * y[i - 1]) / st.piv_[i];
+        const double lower = eb * st.off_[i - 1];
+        piv = e0 + eb * st.diag_[i] - lower * c[i - 1];
+        if (!(piv > 0.0)) {
+          dx.setConstant(NAN);
+          return;
+        }
+        c[i] = i + 1 < n ? eb * st.off_[i] / piv : 0.0;
+        y[i] = ((neg ? -r[i] : r[i]) - lower * y[i - 1]) / piv;
       }
       dx[n - 1] = -y[n - 1];
       for (int i = n - 2; i >= 0; --i) {
-        y[i] = y[i] - st.c_[i] * y[i + 1];
+        y[i] = y[i] - c[i] * y[i + 1];
         dx[i] = -y[i];
       }
     }
     const char* name() const { return "tridiagonal elimination without pivoting"; }
-    bool negated = false;
-    double b_used = 0.0;
   };
 
   FPUChain chain_;
   ThetaMap map_;
   double h_;
   StepOptions options_;
-  mutable V x_, g_, r_, dx_, start_, diag_, off_, piv_, c_, d_;
+  mutable V x_, g_, r_, dx_, start_, diag_, off_, c_, d_;
   mutable Eigen::MatrixXd unused_;  // (the driver's matrix: the Jacobian lives in diag_ and off_)
   mutable DriverState state_;
 };
