@@ -1020,7 +1020,7 @@ struct ScalarEquation {
     J(0, 0) = df(x[0]);
     return std::isfinite(J(0, 0)) ? std::fabs(J(0, 0)) : INFINITY;
   }
-  double scale(const Vector& x, double Jmax) const { return std::fabs(c) + Jmax * std::fabs(x[0]); }
+  double scale(double xn, double Jmax) const { return std::fabs(c) + Jmax * xn; }
   double offset() const { return 0.0; }
 };
 }  // namespace
