@@ -52,7 +52,6 @@ class ChainStep {
     g_.resize(n);
     r_.resize(n);
     dx_.resize(n);
-    start_.resize(n);
     diag_.resize(n);
     off_.resize(std::max(n - 1, 0));
     c_.resize(n);
@@ -70,7 +69,8 @@ class ChainStep {
     const double th = map_.theta();
     Equation eq{*this, q0, p0, h_ * (1.0 - th), h_ * th * (1.0 - th), max_abs(p0), max_abs(q0)};
     Tridiagonal la{*this, chain_.m / h_, eq.b};
-    StepSummary s = newton_drive(eq, la, Refresh::every_iteration, options_, dq, r_, dx_, unused_, state_, start_);
+    DriverState state;  // (nothing is kept between steps: a Jacobian at every iteration)
+    StepSummary s = newton_drive(eq, la, Refresh::every_iteration, options_, dq, r_, dx_, unused_, state, unused_guess_);
     if (!s.converged) return s;
     x_ = q0 + th * dq;
     chain_.gradient(x_, g_);
@@ -161,9 +161,11 @@ class ChainStep {
   ThetaMap map_;
   double h_;
   StepOptions options_;
-  mutable V x_, g_, r_, dx_, start_, diag_, off_, c_, d_;
-  mutable Eigen::MatrixXd unused_;  // (the driver's matrix: the Jacobian lives in diag_ and off_)
-  mutable DriverState state_;
+  mutable V x_, g_, r_, dx_, diag_, off_, c_, d_;
+  // (the driver's matrix and kept guess, which a step solved by Newton's method at every
+  // iteration never touches: the Jacobian lives in diag_ and off_)
+  mutable Eigen::MatrixXd unused_;
+  mutable V unused_guess_;
 };
 
 }  // namespace dvm
