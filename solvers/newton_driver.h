@@ -13,6 +13,10 @@
 //                                             (xn = max|x_i|, Jmax: the Jacobian's)
 //   double offset() const                      the size of the point x is an increment of
 //                                             (round-off in forming it sets a floor under F)
+// and optionally
+//   double norm(const Vector& v) const         the max norm the driver measures in, where the
+//                                             equation checks finiteness itself (default:
+//                                             inf_norm, NaN where any v_i is NaN)
 // The equation holds its data (the step's start, its time, its size) and may keep what
 // it evaluated at the last x (the caller reads the solution's by-products from it).
 //
@@ -23,8 +27,9 @@
 //     residual from the tolerance down to round-off; the reported residual is the one
 //     measured before it);
 //   - the refresh of the Jacobian (Refresh policies below): formed at every iteration,
-//     kept within a step while each iteration shrinks the residual fourfold, or kept
-//     across steps by the same rule;
+//     kept within a step while each iteration shrinks the residual fourfold, kept across
+//     steps by the same rule, or kept across steps while each correction shrinks
+//     fourfold;
 //   - StepSummary::iterations counts Newton iterations (residuals evaluated and judged),
 //     StepSummary::jacobians the Jacobians formed and factored.
 //
@@ -56,7 +61,15 @@ enum class Refresh {
   within_step,      // a Jacobian formed in the step serves later iterations of it while
                     // each shrinks the residual fourfold (kept_jacobian_serves)
   across_steps,     // the same, and the factorisation of an earlier step serves the next
+  contracting,      // kept across steps while the corrections contract: refreshed (once in
+                    // a step) where a correction after the first exceeds a quarter of the
+                    // one before, or where the iteration stalls above its tolerance; the
+                    // simplified Newton of implicit Runge-Kutta codes (Hairer and Wanner,
+                    // Solving ODEs II, IV.8), which the Galerkin steps use
 };
+
+// Whether the driver keeps a factorisation from one call to the next.
+constexpr bool keeps_across_steps(Refresh r) { return r == Refresh::across_steps || r == Refresh::contracting; }
 
 // What the driver keeps between steps (Refresh::across_steps).
 struct DriverState {
@@ -81,9 +94,20 @@ bool kept_jacobian_serves(const StepSummary& s, double last, int it, double scal
 
 namespace driver_detail {
 
-template <class V>
-double norm(const V& x) {
-  return inf_norm(x);
+// The norm the driver measures x, F(x) and the corrections in: the equation's own
+// (double norm(const Vector&) const) where it has one, else max|v_i| with a NaN anywhere
+// giving NaN (inf_norm).
+template <class E, class = void>
+struct has_norm : std::false_type {};
+template <class E>
+struct has_norm<E, std::void_t<decltype(std::declval<const E&>().norm(std::declval<const typename E::Vector&>()))>>
+    : std::true_type {};
+template <class E>
+double norm(const E& eq, const typename E::Vector& v) {
+  if constexpr (has_norm<E>::value)
+    return eq.norm(v);
+  else
+    return inf_norm(v);
 }
 
 // "singular step Jacobian", with the factorisation that failed where the policy names it
@@ -109,13 +133,18 @@ std::string singular(const LA& la) {
 // iterate reached through a kept Jacobian starts the iteration again from the guess
 // with a fresh one. Throws nothing itself; the equation's exceptions pass through.
 // (Every return is of the one summary s, so that it is built in the caller's storage.)
+// newton_drive_inlined is the same, inlined into its caller: for a step whose iterations
+// cost little beside the driver's own bookkeeping (the Galerkin steps; bench_galerkin_kepler
+// measures them).
 template <class E, class LA>
-StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt, typename E::Vector& x,
-                         typename E::Vector& r, typename E::Vector& dx, typename E::Matrix& J, DriverState& state,
-                         typename E::Vector& start) {
-  using driver_detail::norm;
+[[gnu::always_inline]] inline StepSummary newton_drive_inlined(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
+                                                               typename E::Vector& x, typename E::Vector& r,
+                                                               typename E::Vector& dx, typename E::Matrix& J,
+                                                               DriverState& state, typename E::Vector& start) {
+  auto norm = [&eq](const typename E::Vector& v) { return driver_detail::norm(eq, v); };
   StepSummary s;
-  if (refresh != Refresh::across_steps) state.valid = false;
+  if (!keeps_across_steps(refresh)) state.valid = false;
+  const bool contracting = refresh == Refresh::contracting;
   const double x0 = eq.offset();
   double dxn = INFINITY, last = INFINITY;
   bool formed = false;  // a Jacobian formed in this call
@@ -123,12 +152,24 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
   auto failed = [&](std::string message) {
     s.converged = false;
     s.message = std::move(message);
+    if (contracting) state.valid = false;
   };
   for (int it = 0; it < opt.max_iterations; ++it) {
     double xn = norm(x);
     bool fresh = !state.valid || refresh == Refresh::every_iteration;
     double kept_scale = 0.0;  // the residual's scale with the kept Jacobian (when it serves)
-    if (!fresh) {
+    if (!fresh && contracting) {
+      eq.residual(x, r);
+      s.residual = norm(r);
+      kept_scale = eq.scale(xn, state.Jmax) + opt.absolute_floor;
+      if (!std::isfinite(s.residual) && !formed) {
+        x = start;  // as below
+        xn = norm(x);
+        state.valid = false;
+        dxn = last = INFINITY;
+        fresh = true;
+      }
+    } else if (!fresh) {
       eq.residual(x, r);
       s.residual = norm(r);
       if (!std::isfinite(s.residual) && !formed) {
@@ -175,7 +216,17 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
       return s;
     }
     const NewtonVerdict verdict = newton_verdict_floored(s, dxn, xn + x0, opt, Jmax);
-    if (verdict == NewtonVerdict::failed) return s;
+    if (verdict == NewtonVerdict::failed) {
+      if (!contracting || formed) {
+        if (contracting) state.valid = false;
+        return s;
+      }
+      // stalled on a kept Jacobian: a fresh one at this iterate
+      s.message.clear();
+      state.valid = false;
+      dxn = INFINITY;
+      continue;
+    }
     la.solve(r, dx);
     const double step = norm(dx);
     if (!std::isfinite(step)) {
@@ -185,12 +236,25 @@ StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
     }
     x -= dx;  // (on convergence too: the correction already paid for)
     if (verdict == NewtonVerdict::converged) return s;
+    if (contracting && it >= 1 && !formed && step > 0.25 * dxn) {
+      // the corrections contract poorly: a fresh Jacobian at the new iterate
+      state.valid = false;
+      dxn = INFINITY;
+      continue;
+    }
     dxn = step;
     last = s.residual;
   }
   failed("no convergence within " + std::to_string(opt.max_iterations) + " iterations (" +
          std::to_string(s.jacobians) + " Jacobians formed)");
   return s;
+}
+
+template <class E, class LA>
+StepSummary newton_drive(E& eq, LA& la, Refresh refresh, const StepOptions& opt, typename E::Vector& x,
+                         typename E::Vector& r, typename E::Vector& dx, typename E::Matrix& J, DriverState& state,
+                         typename E::Vector& start) {
+  return newton_drive_inlined(eq, la, refresh, opt, x, r, dx, J, state, start);
 }
 
 // The dense factorisation of a fixed-size step: Eigen's closed-form inverse up to 4
