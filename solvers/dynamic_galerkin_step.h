@@ -19,11 +19,11 @@
 //         + b_i l_j'(c_i)   (l_k(c_i) L_qv^T + (l_k'(c_i)/h) L_vv) ],
 // what GalerkinStep obtains by differentiating L_q and L_v with Jets.
 //
-// The solve, as GalerkinStep: simplified Newton with the Jacobian inverted once and
-// reused across iterations and steps while the corrections contract (ratio below
-// `contraction`, default 0.25), refreshed when they do not or when the iteration stalls
-// on an old Jacobian; stopping rule newton_verdict with scale |p0| + |J| |X| and stall
-// size |X| + |q0|; the correction of the accepted residual applied. Starting guess of a
+// The solve, as GalerkinStep: the one driver (solvers/newton_driver.h) with
+// Refresh::contracting, the Jacobian inverted once and reused across iterations and
+// steps while the corrections contract fourfold, refreshed when they do not or when the
+// iteration stalls on an old Jacobian; the residual's scale |p0| + |J| |X|, the
+// increments those of a point of size |q0|. Starting guess of a
 // step that continues the previous one: the previous polynomial extrapolated, E X_prev,
 // plus the extrapolated errors of the last two extrapolations, 2 d_n - d_{n-1} (see
 // galerkin_step.h); otherwise X_j = (j/s) dq from the caller's guess.
@@ -51,6 +51,7 @@
 #include "mechanics/quadrature.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -79,7 +80,7 @@ class DynamicGalerkinStep {
       for (int j = 0; j < s; ++j) WAf_[i][j] = h_ * t_.WA[i][j];
     }
     const int K = s * n;
-    for (V* x : {&X_, &Xprev_, &Xext_, &R_, &delta_}) x->setZero(K);
+    for (V* x : {&X_, &Xprev_, &Xext_, &R_, &delta_, &start_}) x->setZero(K);
     guess_.zero_like(X_);
     q_end_.setZero(n);
     force_.setZero(n);
@@ -97,8 +98,8 @@ class DynamicGalerkinStep {
     dg_.setZero(n, n);
     dpk_.setZero(n, n);
     J_.setZero(K, K);
-    Jinv_.setZero(K, K);
-    lu_.resize(K);
+    lu_.inv.setZero(K, K);
+    lu_.lu.resize(K);
   }
 
   double step_size() const { return h_; }
@@ -108,7 +109,6 @@ class DynamicGalerkinStep {
   const Quadrature& quadrature() const { return quad_; }
   const Sys& lagrangian() const { return L_; }
   long jacobian_updates() const { return jacobian_updates_; }
-  void set_contraction(double c) { contraction_ = c; }
   double last_guess_error() const {
     return guess_measured_ ? (guess_.err1 - guess_.corr).template lpNorm<Eigen::Infinity>() : NAN;
   }
@@ -117,7 +117,7 @@ class DynamicGalerkinStep {
   }
   void reset() const {
     have_prev_ = false;
-    lu_valid_ = false;
+    kept_.valid = false;
     guess_.forget();
     guess_measured_ = false;
   }
@@ -145,75 +145,31 @@ class DynamicGalerkinStep {
       guess_.forget();
     }
     have_prev_ = false;
-    bool fresh = false;
+    Equation eq{*this, q0, p0, dynamic_detail::inf_norm(p0), dynamic_detail::inf_norm(q0)};
     try {
-      if (!lu_valid_) {
-        refresh(q0);
-        ++sum.jacobians;
-        fresh = true;
-      }
-      double dxn = INFINITY;
-      const double pscale = dynamic_detail::inf_norm(p0), q0size = dynamic_detail::inf_norm(q0);
-      for (int it = 0; it < options_.max_iterations; ++it) {
-        residual(q0, p0);
-        sum.iterations = it + 1;
-        sum.residual = dynamic_detail::inf_norm(R_);
-        const double xn = dynamic_detail::inf_norm(X_);
-        sum.scale = pscale + Jmax_ * xn + options_.absolute_floor;
-        if (!std::isfinite(sum.residual)) {
-          sum.message = "non-finite residual";
-          return sum;
-        }
-        const NewtonVerdict verdict = newton_verdict(sum, dxn, xn + q0size, options_);
-        apply_inverse();  // delta_ = J^{-1} R
-        if (verdict == NewtonVerdict::converged) {
-          X_ -= delta_;
-          dq = X_.segment((s - 1) * n, n);
-          dp = force_;
-          if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
-            sum.converged = false;
-            sum.message = "non-finite step";
-            return sum;
-          }
-          if (continues) {
-            guess_.record(X_, Xext_);
-            guess_measured_ = true;
-          }
-          Xprev_ = X_;
-          q_end_ = q0 + dq;
-          have_prev_ = true;
-          return sum;
-        }
-        if (verdict == NewtonVerdict::failed) {
-          if (fresh) return sum;
-          sum.message.clear();  // stalled on an old Jacobian: refresh and go on
-          refresh(q0);
-          ++sum.jacobians;
-          fresh = true;
-          dxn = INFINITY;
-          continue;
-        }
-        X_ -= delta_;
-        const double nd = dynamic_detail::inf_norm(delta_);
-        if (!std::isfinite(nd)) {
-          sum.message = "singular Galerkin step Jacobian";
-          lu_valid_ = false;
-          return sum;
-        }
-        if (it >= 1 && nd > contraction_ * dxn && !fresh) {
-          refresh(q0);
-          ++sum.jacobians;
-          fresh = true;
-          dxn = INFINITY;
-          continue;
-        }
-        dxn = nd;
-      }
-      sum.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-    } catch (const std::domain_error& e) {
+      sum = newton_drive(eq, lu_, Refresh::contracting, options_, X_, R_, delta_, J_, kept_, start_);
+    } catch (const std::domain_error& e) {  // L undefined at a node
+      sum.converged = false;
       sum.message = e.what();
+      kept_.valid = false;
     }
-    lu_valid_ = false;
+    jacobian_updates_ += sum.jacobians;
+    if (!sum.converged) return sum;
+    dq = X_.segment((s - 1) * n, n);
+    dp = force_;  // the force quadrature at the last evaluation (before the final correction)
+    if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
+      sum.converged = false;
+      sum.message = "non-finite step";
+      kept_.valid = false;
+      return sum;
+    }
+    if (continues) {
+      guess_.record(X_, Xext_);
+      guess_measured_ = true;
+    }
+    Xprev_ = X_;
+    q_end_ = q0 + dq;
+    have_prev_ = true;
     return sum;
   }
 
@@ -224,9 +180,9 @@ class DynamicGalerkinStep {
   //   x = q0 + X A, v = X B / h (n x m), R = h G WA + P WB (n x s), force = h G b,
   // in plain loops (Eigen's expressions of run-time size cost more than the arithmetic
   // at the small sizes that matter most).
-  void residual(const V& q0, const V& p0) const {
+  void residual(const V& q0, const V& p0, const V& x_in, V& r_out) const {
     const int s = s_, m = quad_.points, n = L_.dim();
-    const double* X = X_.data();
+    const double* X = x_in.data();
     for (int i = 0; i < m; ++i) {
       double* x = xs_.col(i).data();
       double* v = vs_.col(i).data();
@@ -245,7 +201,7 @@ class DynamicGalerkinStep {
       for (int a = 0; a < n; ++a) x[a] += q0[a];
       L_.gradient(xs_.col(i), vs_.col(i), G_.col(i), P_.col(i));
     }
-    double* R = R_.data();
+    double* R = r_out.data();
     for (int j = 0; j < s; ++j) {
       double* r = R + j * n;
       for (int a = 0; a < n; ++a) r[a] = WAf_[0][j] * G_(a, 0);
@@ -262,17 +218,55 @@ class DynamicGalerkinStep {
     }
   }
 
-  // delta_ = Jinv_ R_, as a sum of columns (GalerkinStep::apply_inverse).
-  void apply_inverse() const {
-    const Eigen::Index K = R_.size();
-    double* d = delta_.data();
-    for (Eigen::Index i = 0; i < K; ++i) d[i] = 0.0;
-    for (Eigen::Index k = 0; k < K; ++k) {
-      const double r = R_[k];
-      const double* c = Jinv_.col(k).data();
-      for (Eigen::Index i = 0; i < K; ++i) d[i] += c[i] * r;
+  // The step equation for the driver, as GalerkinStep's.
+  struct Equation {
+    using Vector = V;
+    using Matrix = Eigen::MatrixXd;
+    const DynamicGalerkinStep& step;
+    const V& q0;
+    const V& p0;
+    double pscale, q0size;
+    void residual(const Vector& x, Vector& r) const { step.residual(q0, p0, x, r); }
+    double jacobian(const Vector& x, Vector& r, Matrix& J) const {
+      const double Jmax = step.form_jacobian(q0, x, J);
+      step.residual(q0, p0, x, r);
+      return Jmax;
     }
-  }
+    double scale(double xn, double Jmax) const { return pscale + Jmax * xn; }
+    double offset() const { return q0size; }
+  };
+
+  // The Jacobian factored by DenseLU and kept as its inverse (applied as a sum of
+  // columns at every iteration); singular where DenseLU finds it so or where its
+  // reciprocal condition in the 1-norm, computed from the inverse, is not above 1e-13
+  // (GalerkinStep's threshold on Eigen's estimate of the same number, which allocates
+  // for run-time sizes).
+  struct InverseLU {
+    DenseLU lu;
+    Eigen::MatrixXd inv;
+    bool factor(const Eigen::MatrixXd& J, double Jmax) {
+      if (!lu.factor(J, Jmax)) return false;
+      lu.inverse(inv);
+      double nJ = 0.0, nI = 0.0;
+      for (Eigen::Index c = 0; c < J.cols(); ++c) {
+        nJ = std::fmax(nJ, J.col(c).template lpNorm<1>());
+        const double ci = inv.col(c).template lpNorm<1>();
+        nI = std::isnan(ci) ? ci : std::fmax(nI, ci);
+      }
+      return 1.0 / (nJ * nI) > 1e-13;
+    }
+    void solve(const V& r, V& dx) const {
+      const Eigen::Index K = r.size();
+      double* d = dx.data();
+      for (Eigen::Index i = 0; i < K; ++i) d[i] = 0.0;
+      for (Eigen::Index k = 0; k < K; ++k) {
+        const double rk = r[k];
+        const double* c = inv.col(k).data();
+        for (Eigen::Index i = 0; i < K; ++i) d[i] += c[i] * rk;
+      }
+    }
+    const char* name() const { return "LU with reciprocal condition above 1e-13"; }
+  };
 
   // Xext_ = E Xprev_: the previous polynomial at this step's control points.
   void extrapolate() const {
@@ -288,18 +282,19 @@ class DynamicGalerkinStep {
     }
   }
 
-  // The Jacobian dR/dX at the current nodes X_, inverted.
-  void refresh(const V& q0) const {
+  // The Jacobian dR/dX at the nodes of the increments X into J; returns max|J_ij|
+  // (not finite where an entry is not).
+  double form_jacobian(const V& q0, const V& X, Eigen::MatrixXd& J) const {
     const int s = s_, n = L_.dim();
-    J_.setZero();
+    J.setZero();
     const double inv_h = 1.0 / h_;
     for (int i = 0; i < quad_.points; ++i) {
       // the node as GalerkinStep::node: x = q0 + sum_j A_ij X_j, v = (sum_j B_ij X_j) / h
       x_ = q0;
       v_.setZero();
       for (int j = 1; j <= s; ++j) {
-        x_ += t_.A[i][j] * X_.segment((j - 1) * n, n);
-        v_ += t_.B[i][j] * X_.segment((j - 1) * n, n);
+        x_ += t_.A[i][j] * X.segment((j - 1) * n, n);
+        v_ += t_.B[i][j] * X.segment((j - 1) * n, n);
       }
       v_ *= inv_h;
       L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
@@ -307,25 +302,10 @@ class DynamicGalerkinStep {
         // d(h g_i)/dX_k and d(p_i)/dX_k
         dg_ = h_ * (t_.A[i][k] * Lqq_ + (t_.B[i][k] / h_) * Lqv_);
         dpk_ = t_.A[i][k] * Lqv_.transpose() + (t_.B[i][k] / h_) * Lvv_;
-        for (int j = 0; j < s; ++j) J_.block(j * n, (k - 1) * n, n, n) += t_.WA[i][j] * dg_ + t_.WB[i][j] * dpk_;
+        for (int j = 0; j < s; ++j) J.block(j * n, (k - 1) * n, n, n) += t_.WA[i][j] * dg_ + t_.WB[i][j] * dpk_;
       }
     }
-    if (!std::isfinite(J_.template lpNorm<Eigen::Infinity>())) throw std::domain_error("non-finite Galerkin Jacobian");
-    Jmax_ = J_.cwiseAbs().maxCoeff();
-    if (!lu_.factor(J_)) throw std::domain_error("singular Galerkin step Jacobian");
-    lu_.inverse(Jinv_);
-    // the reciprocal condition in the 1-norm, from the inverse (GalerkinStep asks
-    // Eigen's LU for its estimate of the same number, which allocates for run-time sizes)
-    double nJ = 0.0, nI = 0.0;
-    for (Eigen::Index c = 0; c < J_.cols(); ++c) {
-      nJ = std::fmax(nJ, J_.col(c).template lpNorm<1>());
-      const double ci = Jinv_.col(c).template lpNorm<1>();
-      nI = std::isnan(ci) ? ci : std::fmax(nI, ci);
-    }
-    const double rcond = 1.0 / (nJ * nI);
-    if (!(rcond > 1e-13)) throw std::domain_error("singular Galerkin step Jacobian");
-    lu_valid_ = true;
-    ++jacobian_updates_;
+    return max_abs(J);
   }
 
   Sys L_;
@@ -338,15 +318,14 @@ class DynamicGalerkinStep {
   std::array<std::array<double, SMax + 1>, MMax> WAf_{};
   std::array<std::array<double, MMax>, SMax> Af_{}, Bf_{};
   // workspace and the state carried from step to step (as GalerkinStep)
-  mutable V X_, Xprev_, R_, delta_, Xext_;
+  mutable V X_, Xprev_, R_, delta_, Xext_, start_;
   mutable ExtrapolationErrors<V> guess_;
   mutable bool guess_measured_ = false;
   mutable V q_end_, force_, Lq_, Lv_, x_, v_;
-  mutable Eigen::MatrixXd xs_, vs_, G_, P_, Lqq_, Lqv_, Lvv_, dg_, dpk_, J_, Jinv_;
-  mutable DenseLU lu_;
-  double contraction_ = 0.25;
-  mutable double Jmax_ = 0.0;
-  mutable bool lu_valid_ = false, have_prev_ = false;
+  mutable Eigen::MatrixXd xs_, vs_, G_, P_, Lqq_, Lqv_, Lvv_, dg_, dpk_, J_;
+  mutable InverseLU lu_;
+  mutable DriverState kept_;  // whether lu_ holds a Jacobian kept across steps
+  mutable bool have_prev_ = false;
   mutable long jacobian_updates_ = 0;
 };
 

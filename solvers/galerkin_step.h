@@ -31,11 +31,11 @@
 // at the solution: the momentum increment is the quadrature of the force, added
 // without cancellation.
 //
-// The solve is a simplified Newton iteration: the Jacobian (from the Hessian of L at
-// the quadrature points, by automatic differentiation through dL/dq, dL/dv) is
-// factored once and reused across iterations and steps while the iteration contracts
-// (ratio of successive corrections below `contraction`); it is refreshed when the
-// contraction is poor or the iteration stalls. The starting guess for a step that
+// The solve is a simplified Newton iteration, the one driver (solvers/newton_driver.h)
+// with Refresh::contracting: the Jacobian (from the Hessian of L at the quadrature
+// points, by automatic differentiation through dL/dq, dL/dv) is inverted once and
+// reused across iterations and steps while the corrections contract fourfold; it is
+// refreshed when they do not or the iteration stalls. The starting guess for a step that
 // continues the previous one is the previous step's polynomial extrapolated to the
 // new control points, E X_prev (error O(h^{s+1}), stage order s), corrected by the
 // errors of that same extrapolation at the two previous steps: along a trajectory
@@ -47,9 +47,9 @@
 // Geometric Numerical Integration, Sect. VIII.6.1, discuss starting approximations
 // for implicit Runge-Kutta methods: the extrapolated collocation polynomial, and
 // improvements that spend extra evaluations of the vector field; this correction
-// spends none.) Stopping rule: newton_verdict, as every
-// Newton loop of dvm; iterations are bounded by StepOptions::max_iterations and a
-// step that does not converge is reported in its StepSummary.
+// spends none.) Stopping rule: the driver's, as every Newton iteration of dvm;
+// iterations are bounded by StepOptions::max_iterations and a step that does not
+// converge is reported in its StepSummary.
 //
 // The step type fits `integrate` (N, step_size(), step(q, p, dq, dp)); it keeps the
 // previous step's polynomial and the factored Jacobian in mutable members, so one
@@ -68,6 +68,7 @@
 #include "mechanics/quadrature.h"
 #include "solvers/integrate.h"
 #include "solvers/newton.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -201,7 +202,8 @@ class GalerkinStep {
     R_.setZero(s * N);
     delta_.setZero(s * N);
     J_.setZero(s * N, s * N);
-    Jinv_.setZero(s * N, s * N);
+    lu_.inv.setZero(s * N, s * N);
+    start_.setZero(s * N);
   }
 
   double step_size() const { return h_; }
@@ -211,8 +213,6 @@ class GalerkinStep {
   const System& lagrangian() const { return L_; }
   // Jacobian evaluations and factorisations since construction.
   long jacobian_updates() const { return jacobian_updates_; }
-  // Refresh the Jacobian when a correction is larger than `c` times the previous one.
-  void set_contraction(double c) { contraction_ = c; }
   // Diagnostics of the starting guess of the last step, if it converged and continued
   // its predecessor (NaN otherwise), in the max norm over the s N unknowns: the
   // distance of the guess used, and of the plain extrapolation E X_prev, from the
@@ -226,7 +226,7 @@ class GalerkinStep {
   // Forget the previous step (its polynomial and the Jacobian).
   void reset() const {
     have_prev_ = false;
-    lu_valid_ = false;
+    kept_.valid = false;
     guess_.forget();
     guess_measured_ = false;
   }
@@ -266,7 +266,6 @@ class GalerkinStep {
   // step continues the previous one), q1 - q0 on return; dp receives p1 - p0.
   StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
     const int s = s_;
-    StepSummary sum;
     guess_measured_ = false;
     const bool continues = have_prev_ && max_abs(V(q0 - q_end_)) <= 1e-12 * (max_abs(q0) + max_abs(dq)) + 1e-300;
     if (continues) {
@@ -278,82 +277,32 @@ class GalerkinStep {
       guess_.forget();
     }
     have_prev_ = false;
-    bool fresh = false;
+    Equation eq{*this, q0, p0, max_abs(p0), max_abs(q0)};
+    StepSummary sum;
     try {
-      if (!lu_valid_) {
-        refresh(q0);
-        ++sum.jacobians;
-        fresh = true;
-      }
-      V force;
-      double dxn = INFINITY;
-      const double pscale = max_abs(p0), q0size = max_abs(q0);
-      for (int it = 0; it < options_.max_iterations; ++it) {
-        if constexpr (S > 0) {
-          if (quad_.points == S)
-            residual_fast<S>(q0, p0, force);
-          else
-            residual_fast<S + 1>(q0, p0, force);
-        } else
-          residual<double>(q0, p0, X_, R_, force);
-        sum.iterations = it + 1;
-        sum.residual = R_.template lpNorm<Eigen::Infinity>();
-        const double xn = X_.template lpNorm<Eigen::Infinity>();
-        sum.scale = pscale + Jmax_ * xn + options_.absolute_floor;
-        if (!std::isfinite(sum.residual)) {
-          sum.message = "non-finite residual";
-          return sum;
-        }
-        const NewtonVerdict verdict = newton_verdict(sum, dxn, xn + q0size, options_);
-        apply_inverse();  // delta_ = J^{-1} R
-        if (verdict == NewtonVerdict::converged) {
-          X_ -= delta_;  // the correction already paid for (see solve_newton)
-          dq = X_.template segment<N>((s - 1) * N);
-          dp = force;
-          if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
-            sum.converged = false;
-            sum.message = "non-finite step";
-            return sum;
-          }
-          if (continues) {
-            guess_.record(X_, Xext_);
-            guess_measured_ = true;
-          }
-          Xprev_ = X_;
-          q_end_ = q0 + dq;
-          have_prev_ = true;
-          return sum;
-        }
-        if (verdict == NewtonVerdict::failed) {
-          if (fresh) return sum;
-          sum.message.clear();  // stalled on an old Jacobian: refresh and go on
-          refresh(q0);
-          ++sum.jacobians;
-          fresh = true;
-          dxn = INFINITY;
-          continue;
-        }
-        X_ -= delta_;
-        const double n = delta_.template lpNorm<Eigen::Infinity>();
-        if (!std::isfinite(n)) {
-          sum.message = "singular Galerkin step Jacobian";
-          lu_valid_ = false;
-          return sum;
-        }
-        if (it >= 1 && n > contraction_ * dxn && !fresh) {
-          refresh(q0);
-          ++sum.jacobians;
-          fresh = true;
-          dxn = INFINITY;
-          continue;
-        }
-        dxn = n;
-      }
-      sum.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-    } catch (const std::domain_error& e) {
+      sum = newton_drive_inlined(eq, lu_, Refresh::contracting, options_, X_, R_, delta_, J_, kept_, start_);
+    } catch (const std::domain_error& e) {  // L undefined at a node
+      sum.converged = false;
       sum.message = e.what();
+      kept_.valid = false;
     }
-    lu_valid_ = false;
+    jacobian_updates_ += sum.jacobians;
+    if (!sum.converged) return sum;
+    dq = X_.template segment<N>((s - 1) * N);
+    dp = force_;  // the force quadrature at the last evaluation (before the final correction)
+    if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
+      sum.converged = false;
+      sum.message = "non-finite step";
+      kept_.valid = false;
+      return sum;
+    }
+    if (continues) {
+      guess_.record(X_, Xext_);
+      guess_measured_ = true;
+    }
+    Xprev_ = X_;
+    q_end_ = q0 + dq;
+    have_prev_ = true;
     return sum;
   }
 
@@ -414,9 +363,9 @@ class GalerkinStep {
   // (With m fixed at compile time the products and the loop over the points are
   // unrolled: about 20% less time per evaluation than with m read at run time.)
   template <int M>
-  void residual_fast(const V& q0, const V& p0, V& force) const {
+  void residual_fast(const V& q0, const V& p0, const XV<double>& x, XV<double>& r, V& force) const {
     using NM = Eigen::Matrix<double, N, M>;
-    const Eigen::Map<const Eigen::Matrix<double, N, SMax>> X(X_.data());
+    const Eigen::Map<const Eigen::Matrix<double, N, SMax>> X(x.data());
     NM xs, vs, G, P;
     xs.noalias() = X * Af_.template leftCols<M>();
     xs.colwise() += q0;
@@ -427,21 +376,70 @@ class GalerkinStep {
       G.col(i) = g;
       P.col(i) = p;
     }
-    Eigen::Map<Eigen::Matrix<double, N, SMax>> R(R_.data());
+    Eigen::Map<Eigen::Matrix<double, N, SMax>> R(r.data());
     R.noalias() = G * WAf_.template topRows<M>();
     R.noalias() += P * WBf_.template topRows<M>();
     R.col(0) += p0;
     force.noalias() = G * bh_.template head<M>();
   }
 
-  void apply_inverse() const {
+  // The residual R(x) at the increments x, and the force quadrature into force_.
+  void evaluate(const V& q0, const V& p0, const XV<double>& x, XV<double>& r) const {
     if constexpr (S > 0) {
-      // as a sum of columns: packet operations down each column of the fixed size
-      delta_ = Jinv_.col(0) * R_[0];
-      for (int k = 1; k < K; ++k) delta_ += Jinv_.col(k) * R_[k];
+      if (quad_.points == S)
+        residual_fast<S>(q0, p0, x, r, force_);
+      else
+        residual_fast<S + 1>(q0, p0, x, r, force_);
     } else
-      delta_.noalias() = Jinv_ * R_;
+      residual<double>(q0, p0, x, r, force_);
   }
+
+  // The step equation for the driver: R(X) = 0 in the increments X, its scale
+  // |p0| + max|J| max|X|, the increments those of a point of size |q0|.
+  struct Equation {
+    using Vector = XV<double>;
+    using Matrix = XM;
+    const GalerkinStep& step;
+    const V& q0;
+    const V& p0;
+    double pscale, q0size;
+    void residual(const Vector& x, Vector& r) const { step.evaluate(q0, p0, x, r); }
+    double jacobian(const Vector& x, Vector& r, Matrix& J) const {
+      const double Jmax = step.form_jacobian(q0, x, J);
+      step.evaluate(q0, p0, x, r);
+      return Jmax;
+    }
+    double scale(double xn, double Jmax) const { return pscale + Jmax * xn; }
+    double offset() const { return q0size; }
+    // Eigen's packet maximum, which need not carry a NaN through: a non-finite step is
+    // refused after the solve, where dq and dp are checked (the NaN-carrying maximum costs
+    // a few percent of a step at these sizes; bench_galerkin_kepler)
+    double norm(const Vector& v) const { return v.template lpNorm<Eigen::Infinity>(); }
+  };
+
+  // The Jacobian's factorisation, kept as its inverse (applied as a matrix-vector
+  // product at every iteration); singular where Eigen's estimate of its reciprocal
+  // condition is not above 1e-13.
+  struct InverseLU {
+    XM inv;
+    bool factor(const XM& J, double /*Jmax*/) {
+      const Eigen::PartialPivLU<XM> lu(J);
+      if (!(lu.rcond() > 1e-13)) return false;
+      inv = lu.inverse();
+      return true;
+    }
+    void solve(const XV<double>& r, XV<double>& dx) const {
+      if constexpr (S > 0) {
+        // as a sum of columns: packet operations down each column of the fixed size, into
+        // a local (registers) that dx, which might alias r, is not
+        XV<double> sum = inv.col(0) * r[0];
+        for (int k = 1; k < K; ++k) sum += inv.col(k) * r[k];
+        dx = sum;
+      } else
+        dx.noalias() = inv * r;
+    }
+    const char* name() const { return "LU with reciprocal condition above 1e-13"; }
+  };
 
   // Xext_ = the previous step's polynomial extrapolated to this step's control
   // points, relative to this step's start: Xext_j = sum_k E_jk Xprev_k.
@@ -453,16 +451,17 @@ class GalerkinStep {
     }
   }
 
-  // The Jacobian dR/dX at the current nodes X_, factored.
-  void refresh(const V& q0) const {
+  // The Jacobian dR/dX at the nodes of the increments X into J; returns max|J_ij|
+  // (INFINITY where an entry is not finite).
+  double form_jacobian(const V& q0, const XV<double>& X, XM& J) const {
     const int s = s_;
     using D = ceres::Jet<double, 2 * N>;
-    J_.setZero(s * N, s * N);
+    J.setZero(s * N, s * N);
     V x, v;
     Vec<D, N> xd, vd, g, p;
     Mat<double, N, N> Gq, Gv, Pq, Pv;
     for (int i = 0; i < quad_.points; ++i) {
-      node(i, q0, X_, x, v);
+      node(i, q0, X, x, v);
       for (int a = 0; a < N; ++a) {
         xd[a] = seed<double, 2 * N>(x[a], a);
         vd[a] = seed<double, 2 * N>(v[a], N + a);
@@ -479,16 +478,10 @@ class GalerkinStep {
         const Mat<double, N, N> dg = h_ * (t_.A[i][k] * Gq + (t_.B[i][k] / h_) * Gv);
         const Mat<double, N, N> dp = t_.A[i][k] * Pq + (t_.B[i][k] / h_) * Pv;
         for (int j = 0; j < s; ++j)
-          J_.template block<N, N>(j * N, (k - 1) * N) += t_.WA[i][j] * dg + t_.WB[i][j] * dp;
+          J.template block<N, N>(j * N, (k - 1) * N) += t_.WA[i][j] * dg + t_.WB[i][j] * dp;
       }
     }
-    if (!std::isfinite(J_.template lpNorm<Eigen::Infinity>())) throw std::domain_error("non-finite Galerkin Jacobian");
-    Jmax_ = J_.cwiseAbs().maxCoeff();
-    const Eigen::PartialPivLU<XM> lu(J_);
-    if (!(lu.rcond() > 1e-13)) throw std::domain_error("singular Galerkin step Jacobian");
-    Jinv_ = lu.inverse();  // applied as a matrix-vector product in every iteration
-    lu_valid_ = true;
-    ++jacobian_updates_;
+    return max_abs(J);
   }
 
   System L_;
@@ -505,8 +498,9 @@ class GalerkinStep {
                                     WBf_ = Eigen::Matrix<double, MMax, SMax>::Zero();
   Eigen::Matrix<double, MMax, 1> bh_ = Eigen::Matrix<double, MMax, 1>::Zero();
   // workspace and the state carried from step to step
-  mutable XV<double> X_, Xprev_, R_;
+  mutable XV<double> X_, Xprev_, R_, start_;
   mutable XV<double> delta_;
+  mutable V force_ = V::Zero();  // the force quadrature at the last residual
   // the predictor: the plain extrapolation of this step and the errors of the plain
   // extrapolations of the last two steps; guess_measured_: the last step converged
   // continuing its predecessor, so guess_.err1 and guess_.corr are its extrapolation
@@ -514,10 +508,11 @@ class GalerkinStep {
   mutable XV<double> Xext_;
   mutable ExtrapolationErrors<XV<double>> guess_;
   mutable bool guess_measured_ = false;
-  mutable XM J_, Jinv_;
-  double contraction_ = 0.25;
-  mutable double Jmax_ = 0.0;
-  mutable bool lu_valid_ = false, have_prev_ = false;
+  // the Jacobian, its inverse and whether it is kept (Refresh::contracting)
+  mutable XM J_;
+  mutable InverseLU lu_;
+  mutable DriverState kept_;
+  mutable bool have_prev_ = false;
   mutable V q_end_ = V::Zero();
   mutable long jacobian_updates_ = 0;
 };

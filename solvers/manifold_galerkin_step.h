@@ -56,6 +56,7 @@
 #include "mechanics/manifold_systems.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/manifold_step.h"
+#include "solvers/newton_driver.h"
 
 namespace dvm {
 
@@ -226,8 +227,8 @@ void set_bottom_value(T& t, double v) {
 // (internal control points are stationary, so how they move with eps does not
 // matter). The chain rule gives all of them from derivatives of L at the quadrature
 // nodes (action_gradient); the Jacobian in X (central differences of them) is factored
-// and reused across iterations and steps while the iteration contracts, as in
-// solvers/galerkin_step.h.
+// and reused across iterations and steps while the corrections contract, by the one
+// driver with Refresh::contracting, as in solvers/galerkin_step.h.
 //
 // The stage count s (1..kGalerkinMaxStages) is a run-time argument: the vectors and
 // matrices of the stage system have run-time sizes in storage of the largest size
@@ -277,9 +278,9 @@ class ManifoldGalerkinStep {
           if (m != k) l *= (t - static_cast<long double>(m) / S) / (static_cast<long double>(k - m) / S);
         E_[j][k] = static_cast<double>(l);
       }
-    Xprev_ = X_ = R_ = delta_ = XV::Zero(SN_);
+    Xprev_ = X_ = R_ = delta_ = start_ = XV::Zero(SN_);
     G_ = GV::Zero(n + SN_);
-    J_ = Jinv_ = JM::Zero(SN_, SN_);
+    J_ = lu_.inv = JM::Zero(SN_, SN_);
   }
 
   double step_size() const { return h_; }
@@ -338,71 +339,26 @@ class ManifoldGalerkinStep {
       for (int j = 1; j <= S; ++j) X_.template segment<n>((j - 1) * n) = (static_cast<double>(j) / S) * xi;
     }
     have_prev_ = false;
+    Equation eq{*this, q0, pi0, max_abs(pi0)};
     StepSummary sum;
-    bool fresh = false;
     try {
-      if (!lu_valid_) {
-        refresh(q0, pi0);
-        ++sum.jacobians;
-        fresh = true;
-      }
-      const double pscale = max_abs(pi0);
-      double dxn = INFINITY;
+      sum = newton_drive(eq, lu_, Refresh::contracting, options_, X_, R_, delta_, J_, kept_, start_);
+      jacobian_updates_ += sum.jacobians;
+      if (!sum.converged) return sum;
       V pi1;
-      for (int it = 0; it < options_.max_iterations; ++it) {
-        residual(q0, pi0, pi1);
-        sum.iterations = it + 1;
-        sum.residual = max_abs(R_);
-        sum.scale = pscale + Jmax_ * max_abs(X_) + options_.absolute_floor;
-        if (!std::isfinite(sum.residual)) {
-          sum.message = "non-finite residual";
-          break;
-        }
-        const NewtonVerdict verdict = newton_verdict(sum, dxn, max_abs(X_), options_);
-        if (verdict == NewtonVerdict::converged) {
-          X_.noalias() -= Jinv_.lazyProduct(R_);  // the correction already paid for
-          residual(q0, pi0, pi1);      // p1 at the corrected nodes
-          xi = X_.template segment<n>((S - 1) * n);
-          leave_chart<M>(q0, xi, pi1, sum, q1, p1);
-          if (!sum.converged) return sum;
-          Xprev_ = X_;
-          prev_centre_ = q0;
-          prev_end_ = q1;
-          have_prev_ = true;
-          return sum;
-        }
-        if (verdict == NewtonVerdict::failed) {
-          if (fresh) break;
-          sum.message.clear();
-          refresh(q0, pi0);
-          ++sum.jacobians;
-          fresh = true;
-          dxn = INFINITY;
-          continue;
-        }
-        delta_.noalias() = Jinv_.lazyProduct(R_);
-        X_ -= delta_;
-        const double d = max_abs(delta_);
-        if (!std::isfinite(d)) {
-          sum.message = "singular Galerkin step Jacobian";
-          break;
-        }
-        if (it >= 1 && d > contraction_ * dxn && !fresh) {
-          refresh(q0, pi0);
-          ++sum.jacobians;
-          fresh = true;
-          dxn = INFINITY;
-          continue;
-        }
-        dxn = d;
-      }
-      if (sum.message.empty())
-        sum.message = "no convergence within " + std::to_string(options_.max_iterations) + " iterations";
-    } catch (const std::domain_error& e) {
+      residual(q0, pi0, X_, R_, pi1);  // p1 at the corrected nodes
+      xi = X_.template segment<n>((S - 1) * n);
+      leave_chart<M>(q0, xi, pi1, sum, q1, p1);
+      if (!sum.converged) return sum;
+      Xprev_ = X_;
+      prev_centre_ = q0;
+      prev_end_ = q1;
+      have_prev_ = true;
+    } catch (const std::domain_error& e) {  // L or the chart undefined at a node
+      sum.converged = false;
       sum.message = e.what();
+      kept_.valid = false;
     }
-    sum.converged = false;
-    lu_valid_ = false;
     return sum;
   }
 
@@ -414,13 +370,50 @@ class ManifoldGalerkinStep {
     return s;
   }
 
-  // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{s-1}) at eps = 0 and pi1 = dA/dX_s.
-  void residual(const Point& q0, const V& pi0, V& pi1) const {
-    action_gradient(q0, X_, G_);
-    R_ = G_.head(SN_);
-    R_.template head<n>() += pi0;
+  // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{s-1}) at eps = 0 and pi1 = dA/dX_s, at the
+  // control points X.
+  void residual(const Point& q0, const V& pi0, const XV& X, XV& R, V& pi1) const {
+    action_gradient(q0, X, G_);
+    R = G_.head(SN_);
+    R.template head<n>() += pi0;
     pi1 = G_.template tail<n>();
   }
+
+  // The step equation for the driver: R(X) = 0, its scale |p0| + max|J| max|X|; the
+  // coordinates X are those of points near the chart's centre (offset 0).
+  struct Equation {
+    using Vector = XV;
+    using Matrix = JM;
+    const ManifoldGalerkinStep& step;
+    const Point& q0;
+    const V& pi0;
+    double pscale;
+    void residual(const Vector& x, Vector& r) const {
+      V pi1;
+      step.residual(q0, pi0, x, r, pi1);
+    }
+    double jacobian(const Vector& x, Vector& r, Matrix& J) const {
+      const double Jmax = step.form_jacobian(q0, pi0, x, J);
+      residual(x, r);
+      return Jmax;
+    }
+    double scale(double xn, double Jmax) const { return pscale + Jmax * xn; }
+    double offset() const { return 0.0; }
+  };
+
+  // The Jacobian's factorisation, kept as its inverse; singular where Eigen's estimate
+  // of its reciprocal condition is not above 1e-13.
+  struct InverseLU {
+    JM inv;
+    bool factor(const JM& J, double /*Jmax*/) {
+      const Eigen::PartialPivLU<JM> lu(J);
+      if (!(lu.rcond() > 1e-13)) return false;
+      inv = lu.inverse();
+      return true;
+    }
+    void solve(const XV& r, XV& dx) const { dx.noalias() = inv.lazyProduct(r); }
+    const char* name() const { return "LU with reciprocal condition above 1e-13"; }
+  };
 
  public:
   // The gradient of the action A(eps, X) at eps = 0, in the order (eps, X_1, .., X_s)
@@ -470,29 +463,21 @@ class ManifoldGalerkinStep {
   // rate near that, and the solution is the zero of the residual, which is exact, to the
   // iteration's tolerance. (Nested Jets would give it exactly, at the price of L's
   // second derivatives compiled in a Jet type of its own.)
-  void refresh(const Point& q0, const V& pi0) const {
-    const XV X0 = X_;
-    const double size = std::fmax(max_abs(X0), 1e-300);
-    XV Rp, Rm;
+  // (Into J at the control points X; returns max|J_ij|, not finite where an entry is not.)
+  double form_jacobian(const Point& q0, const V& pi0, const XV& X, JM& J) const {
+    const double size = std::fmax(max_abs(X), 1e-300);
+    XV Xk = X, Rp, Rm;
     V pi1;
     for (int k = 0; k < SN_; ++k) {
-      const double dk = 6e-6 * std::fmax(std::fabs(X0[k]), size);  // ~ cbrt(machine epsilon)
-      X_[k] = X0[k] + dk;
-      residual(q0, pi0, pi1);
-      Rp = R_;
-      X_[k] = X0[k] - dk;
-      residual(q0, pi0, pi1);
-      Rm = R_;
-      X_[k] = X0[k];
-      J_.col(k) = (Rp - Rm) / (2.0 * dk);
+      const double dk = 6e-6 * std::fmax(std::fabs(X[k]), size);  // ~ cbrt(machine epsilon)
+      Xk[k] = X[k] + dk;
+      residual(q0, pi0, Xk, Rp, pi1);
+      Xk[k] = X[k] - dk;
+      residual(q0, pi0, Xk, Rm, pi1);
+      Xk[k] = X[k];
+      J.col(k) = (Rp - Rm) / (2.0 * dk);
     }
-    if (!std::isfinite(max_abs(J_))) throw std::domain_error("non-finite Galerkin Jacobian");
-    Jmax_ = max_abs(J_);
-    const Eigen::PartialPivLU<JM> lu(J_);
-    if (!(lu.rcond() > 1e-13)) throw std::domain_error("singular Galerkin step Jacobian");
-    Jinv_ = lu.inverse();
-    lu_valid_ = true;
-    ++jacobian_updates_;
+    return max_abs(J);
   }
 
   System L_;
@@ -506,13 +491,12 @@ class ManifoldGalerkinStep {
   mutable XV Xprev_;
   mutable Point prev_centre_ = M::sample_point(), prev_end_ = M::sample_point();
   mutable bool have_prev_ = false;
-  mutable XV X_, R_, delta_;
+  mutable XV X_, R_, delta_, start_;
   mutable GV G_;
   mutable std::optional<detail::SeededCharts<M>> charts_;  // at the centre of the last gradient
-  mutable JM J_, Jinv_;
-  double contraction_ = 0.25;
-  mutable double Jmax_ = 0.0;
-  mutable bool lu_valid_ = false;
+  mutable JM J_;
+  mutable InverseLU lu_;
+  mutable DriverState kept_;  // whether lu_ holds a Jacobian kept across steps
   mutable long jacobian_updates_ = 0;
 };
 
