@@ -412,8 +412,8 @@ class GalerkinStep {
     double scale(double xn, double Jmax) const { return pscale + Jmax * xn; }
     double offset() const { return q0size; }
     // Eigen's packet maximum, which need not carry a NaN through: a non-finite step is
-    // refused after the solve, where dq and dp are checked (the NaN-carrying maximum costs
-    // a few percent of a step at these sizes; bench_galerkin_kepler)
+    // refused after the solve, where dq and dp are checked (the NaN-carrying maximum is the
+    // slower at these sizes; bench_galerkin_kepler measures the step)
     double norm(const Vector& v) const { return v.template lpNorm<Eigen::Infinity>(); }
   };
 
