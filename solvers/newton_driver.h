@@ -158,18 +158,7 @@ template <class E, class LA>
     double xn = norm(x);
     bool fresh = !state.valid || refresh == Refresh::every_iteration;
     double kept_scale = 0.0;  // the residual's scale with the kept Jacobian (when it serves)
-    if (!fresh && contracting) {
-      eq.residual(x, r);
-      s.residual = norm(r);
-      kept_scale = eq.scale(xn, state.Jmax) + opt.absolute_floor;
-      if (!std::isfinite(s.residual) && !formed) {
-        x = start;  // as below
-        xn = norm(x);
-        state.valid = false;
-        dxn = last = INFINITY;
-        fresh = true;
-      }
-    } else if (!fresh) {
+    if (!fresh) {
       eq.residual(x, r);
       s.residual = norm(r);
       if (!std::isfinite(s.residual) && !formed) {
@@ -182,10 +171,11 @@ template <class E, class LA>
       } else {
         const double Jmax = state.Jmax;
         kept_scale = eq.scale(xn, Jmax) + opt.absolute_floor;
-        fresh = !kept_jacobian_serves(s, last, it, kept_scale, opt,
-                                      [&](StepSummary& probe) {
-                                        return newton_verdict_floored(probe, dxn, xn + x0, opt, Jmax);
-                                      });
+        // (Refresh::contracting judges the kept Jacobian by the correction, below)
+        if (!contracting)
+          fresh = !kept_jacobian_serves(s, last, it, kept_scale, opt, [&](StepSummary& probe) {
+            return newton_verdict_floored(probe, dxn, xn + x0, opt, Jmax);
+          });
       }
     }
     if (fresh) {
