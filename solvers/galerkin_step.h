@@ -431,7 +431,8 @@ class GalerkinStep {
     void solve(const XV<double>& r, XV<double>& dx) const {
       if constexpr (S > 0) {
         // as a sum of columns: packet operations down each column of the fixed size, into
-        // a local (registers) that dx, which might alias r, is not
+        // a local, which stays in registers where dx, a reference the compiler cannot
+        // tell apart from r, would be stored at every column
         XV<double> sum = inv.col(0) * r[0];
         for (int k = 1; k < K; ++k) sum += inv.col(k) * r[k];
         dx = sum;
@@ -452,7 +453,7 @@ class GalerkinStep {
   }
 
   // The Jacobian dR/dX at the nodes of the increments X into J; returns max|J_ij|
-  // (INFINITY where an entry is not finite).
+  // (not finite where an entry is not).
   double form_jacobian(const V& q0, const XV<double>& X, XM& J) const {
     const int s = s_;
     using D = ceres::Jet<double, 2 * N>;

@@ -35,7 +35,7 @@
 //
 // Linear algebra policies LA: `bool factor(const Matrix& J, double Jmax)` (false where J is
 // singular to working precision) and `void solve(const Vector& r, Vector& dx)` (dx =
-// J^{-1} r, dx may alias r). DenseLUOf<K> (core/dense_solve.h) and FixedLU<N> below are
+// J^{-1} r; the driver passes two distinct vectors). DenseLUOf<K> (core/dense_solve.h) and FixedLU<N> below are
 // dense ones; the tridiagonal and banded eliminations of the chains and the sparse
 // factorisations of the separable steps are others.
 //
@@ -71,7 +71,7 @@ enum class Refresh {
 // Whether the driver keeps a factorisation from one call to the next.
 constexpr bool keeps_across_steps(Refresh r) { return r == Refresh::across_steps || r == Refresh::contracting; }
 
-// What the driver keeps between steps (Refresh::across_steps).
+// What the driver keeps between steps (Refresh::across_steps and Refresh::contracting).
 struct DriverState {
   bool valid = false;  // a factorisation is held
   double Jmax = 0.0;   // the largest entry of the Jacobian factored
@@ -207,13 +207,10 @@ template <class E, class LA>
     }
     const NewtonVerdict verdict = newton_verdict_floored(s, dxn, xn + x0, opt, Jmax);
     if (verdict == NewtonVerdict::failed) {
-      if (!contracting || formed) {
-        if (contracting) state.valid = false;
-        return s;
-      }
+      if (contracting) state.valid = false;
+      if (!contracting || formed) return s;
       // stalled on a kept Jacobian: a fresh one at this iterate
       s.message.clear();
-      state.valid = false;
       dxn = INFINITY;
       continue;
     }
