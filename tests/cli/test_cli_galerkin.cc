@@ -10,8 +10,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <cstdlib>
-#include <sstream>
 #include <string>
 #include <vector>
 
@@ -209,74 +207,4 @@ BOOST_AUTO_TEST_CASE(galerkin_on_so3_matches_an_order_8_composition) {
                                                      "integrator.method=galerkin", "integrator.stages=2"});
   BOOST_TEST(invariant_error(b, "spatial angular momentum") <= 1e-13);
   BOOST_TEST(json_number(b, "max_abs_energy_error") <= 1e-6);
-}
-
-namespace {
-
-// A row of bench_galerkin_kepler's tables: the method (text before a run of two or more
-// spaces) and the numbers after it ("nan" where there is none).
-struct BenchRow {
-  std::string method;
-  std::vector<double> numbers;
-};
-std::vector<BenchRow> bench_rows(const std::string& text, const std::string& header) {
-  std::vector<BenchRow> rows;
-  std::istringstream in(text.substr(text.find(header) + header.size()));
-  std::string line;
-  std::getline(in, line);  // the rest of the header line
-  while (std::getline(in, line) && !line.empty()) {
-    const std::size_t gap = line.find("  ");
-    if (gap == std::string::npos) break;
-    BenchRow r{line.substr(0, gap), {}};
-    std::istringstream nums(line.substr(gap));
-    std::string w;
-    while (nums >> w) r.numbers.push_back(w == "nan" ? NAN : std::strtod(w.c_str(), nullptr));
-    rows.push_back(r);
-  }
-  return rows;
-}
-const BenchRow* find_row(const std::vector<BenchRow>& rows, const std::string& method) {
-  for (const BenchRow& r : rows)
-    if (r.method == method) return &r;
-  return nullptr;
-}
-
-}  // namespace
-
-// bench_galerkin_kepler --smoke: its sweeps are parsed and checked against what the
-// methods are (no timing): the fitted orders 2s of Gauss and Lobatto with s stages and
-// 4 of Odeint's RKN steppers, s = 6 at round-off, the stage count at run time and the
-// runtime's `dvm run` row giving the step's error to the bit, and the ratio lines there.
-BOOST_AUTO_TEST_CASE(the_galerkin_benchmark_measures_what_the_methods_are) {
-  const Output o = run_program(BENCH_GALERKIN_KEPLER, {"--smoke"});
-  BOOST_TEST_REQUIRE(o.status == 0, o.err);
-  const std::vector<BenchRow> sweep = bench_rows(o.out, "jac/st");
-  const std::vector<BenchRow> summary = bench_rows(o.out, "min_error");
-  BOOST_TEST_REQUIRE(sweep.size() >= 20u, o.out);
-  for (const BenchRow& r : sweep) {
-    BOOST_TEST_REQUIRE(r.numbers.size() == 5u, r.method);
-    BOOST_TEST(std::isfinite(r.numbers[1]), r.method << ": error");
-  }
-  const std::vector<std::pair<std::string, double>> orders = {
-      {"galerkin gauss s=2", 4}, {"galerkin gauss s=3", 6}, {"galerkin gauss s=4", 8},
-      {"galerkin lobatto s=3", 6}, {"odeint rkn_sb3a_mclachlan", 4}, {"odeint rkn_sb3a_m4_mclachlan", 4}};
-  for (const auto& [method, order] : orders) {
-    const BenchRow* r = find_row(summary, method);
-    BOOST_TEST_REQUIRE(r != nullptr, method);
-    BOOST_TEST(std::fabs(r->numbers.at(0) - order) <= 0.25, method << ": fitted order " << r->numbers.at(0));
-  }
-  const BenchRow* s6 = find_row(sweep, "galerkin gauss s=6");
-  const BenchRow* run_time = find_row(sweep, "galerkin gauss s=6 (run-time s)");
-  const BenchRow* through_run = find_row(sweep, "dvm run gauss s=6");
-  BOOST_TEST_REQUIRE((s6 && run_time && through_run));
-  BOOST_TEST(s6->numbers[1] <= 1e-13);  // order 12 at 200 steps: round-off
-  BOOST_TEST(run_time->numbers[1] == s6->numbers[1]);
-  BOOST_TEST(through_run->numbers[1] == s6->numbers[1]);
-  BOOST_TEST(through_run->numbers[0] == s6->numbers[0]);
-  for (const char* ratio : {"ratio best-odeint / best-galerkin = ", "ratio dvm run / galerkin gauss s=6 at equal steps = "}) {
-    const std::size_t at = o.out.find(ratio);
-    BOOST_TEST_REQUIRE(at != std::string::npos, ratio);
-    const double x = std::strtod(o.out.c_str() + at + std::string(ratio).size(), nullptr);
-    BOOST_TEST((std::isfinite(x) && x > 0.0), ratio << x);
-  }
 }

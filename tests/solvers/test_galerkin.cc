@@ -2,14 +2,17 @@
 // reduction to the midpoint discrete Lagrangian for s = 1, measured orders 2s on
 // Kepler (exact solution) and the pendulum (long-double RK4 reference), symplecticity
 // of the one-step map through the solve, bounded energy error over 10^6 steps, and a
-// non-converging step reported with bounded iterations.
+// non-converging step reported with bounded iterations; the run-time-sized step
+// (solvers/dynamic_galerkin_step.h) against the fixed-size one at every stage count.
 #define BOOST_TEST_MODULE galerkin
 #include <boost/test/unit_test.hpp>
 
 #include <cmath>
 #include <vector>
 
+#include "mechanics/dynamic_system.h"
 #include "mechanics/systems.h"
+#include "solvers/dynamic_galerkin_step.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/position_momentum_step.h"
@@ -401,4 +404,65 @@ BOOST_AUTO_TEST_CASE(a_step_that_does_not_converge_is_reported_with_bounded_iter
   BOOST_TEST(c.iterations <= opt2.max_iterations);
   BOOST_TEST(!c.converged);
   BOOST_TEST(!c.message.empty());
+}
+
+// DynamicGalerkinStep (sizes at run time) against GalerkinStep<Kepler, S> (S stages at
+// compile time), Gauss and Lobatto, s = 1..6: the same states over 100 steps to
+// round-off, and the same simplified Newton (the Jacobian refreshed as often, the same
+// guess error).
+namespace {
+
+template <class Step, class VecT>
+std::vector<Eigen::VectorXd> states(const Step& S, VecT q, VecT p, const VecT& v0, int steps) {
+  std::vector<Eigen::VectorXd> out;
+  const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const auto& qk, const auto& pk, const StepSummary&) {
+    Eigen::VectorXd y(2 * qk.size());
+    y << qk, pk;
+    out.push_back(y);
+  });
+  BOOST_TEST(!run.failed, run.failure.message);
+  return out;
+}
+
+// the largest difference relative to the largest state
+double states_difference(const std::vector<Eigen::VectorXd>& a, const std::vector<Eigen::VectorXd>& b) {
+  BOOST_REQUIRE(a.size() == b.size());
+  double d = 0.0, m = 0.0;
+  for (std::size_t k = 0; k < a.size(); ++k) {
+    d = std::fmax(d, (a[k] - b[k]).cwiseAbs().maxCoeff());
+    m = std::fmax(m, b[k].cwiseAbs().maxCoeff());
+  }
+  return d / m;
+}
+
+template <int S>
+void check_against_dynamic(QuadratureKind kind) {
+  const Kepler K(1.5);
+  V2 q0, p0;
+  verification::kepler_initial(0.6, q0, p0);
+  const V2 v0 = legendre_inverse(K, q0, p0);
+  const double h = 0.05;
+  BOOST_TEST_CONTEXT(to_string(kind) << " s = " << S) {
+    const GalerkinStep<Kepler, S> F(K, kind, S, h);
+    const DynamicGalerkinStep<FixedAsDynamic<Kepler>> D(FixedAsDynamic<Kepler>(K), kind, S, h);
+    BOOST_TEST(D.order() == 2 * S);
+    const auto a = states(F, q0, p0, v0, 100);
+    const auto b = states(D, Eigen::VectorXd(q0), Eigen::VectorXd(p0), Eigen::VectorXd(v0), 100);
+    BOOST_TEST(states_difference(b, a) <= 1e-13);
+    BOOST_TEST(D.jacobian_updates() == F.jacobian_updates());
+    BOOST_TEST(std::fabs(D.last_guess_error() - F.last_guess_error()) <= 1e-3 * F.last_guess_error() + 1e-16);
+  }
+}
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_run_time_sized_step_equals_the_fixed_size_step) {
+  for (QuadratureKind kind : {QuadratureKind::gauss, QuadratureKind::lobatto}) {
+    check_against_dynamic<1>(kind);
+    check_against_dynamic<2>(kind);
+    check_against_dynamic<3>(kind);
+    check_against_dynamic<4>(kind);
+    check_against_dynamic<5>(kind);
+    check_against_dynamic<6>(kind);
+  }
 }
