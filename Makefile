@@ -54,9 +54,9 @@ SAN_CXX   := clang++-14
 # clang-14 compiles our template-heavy test files faster than g++ and in less memory;
 # -gline-tables-only keeps file:line in the symbolized stack traces without full debug
 # information (which costs much more compile time and memory).
-# -O2, not -O1: the heavy suites (test_product, test_composition_verification) run much
-# faster under the sanitizers, which is worth the longer build; time `make sanitize`
-# with each to compare (CPU time, /usr/bin/time).
+# -O2, not -O1: under the sanitizers -O1 compiles no faster and the suites run longer;
+# time `make sanitize` with each to compare (CPU time, /usr/bin/time; SAN_FLAGS on the
+# command line).
 # toml++'s internal debug assertions are off, as in the shipped (NDEBUG, g++) build, where
 # they are no-ops: the sanitizers and fuzzers check what ships. (Without NDEBUG this also
 # keeps TOML_ASSERT_ASSUME from becoming clang's __builtin_assume.) Several of them fail
