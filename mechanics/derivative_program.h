@@ -696,7 +696,14 @@ class DerivativeProgramBuilder {
       int f[kMaxFactors], m = 0;
       factors_of(a, f, m);
       factors_of(b, f, m);
-      std::sort(f, f + m, std::greater<int>());
+      // largest first, by insertion: at most kMaxFactors entries (std::sort on such an
+      // array draws a false -Warray-bounds from g++ 12 at -O3)
+      for (int i = 1; i < m; ++i) {
+        const int x = f[i];
+        int j = i;
+        for (; j > 0 && f[j - 1] < x; --j) f[j] = f[j - 1];
+        f[j] = x;
+      }
       int p = f[0];
       for (int i = 1; i < m; ++i) p = op2(Op::Mul, p, f[i]);
       return p;
