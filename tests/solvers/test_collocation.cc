@@ -26,35 +26,14 @@
 #include "mechanics/written_lagrangian.h"
 #include "solvers/collocation_step.h"
 #include "solvers/integrate.h"
+#include "tests/solvers/trajectories.h"
 
 using namespace dvm;
 using Eigen::VectorXd;
+using dvm_test::trajectory;
+using dvm_test::trajectory_difference;
 
 namespace {
-
-// (q, p) after every step, one vector per step.
-template <class Step, class V>
-std::vector<VectorXd> trajectory(const Step& S, V q, V p, const V& v0, int steps) {
-  std::vector<VectorXd> out;
-  const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const V& qk, const V& pk, const StepSummary&) {
-    VectorXd y(2 * qk.size());
-    y << qk, pk;
-    out.push_back(y);
-  });
-  BOOST_TEST(!run.failed, run.failure.message);
-  return out;
-}
-
-// max over the steps of |a - b|, relative to the largest |b|
-double difference(const std::vector<VectorXd>& a, const std::vector<VectorXd>& b) {
-  BOOST_REQUIRE(a.size() == b.size());
-  double d = 0.0, s = 0.0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    d = std::fmax(d, (a[k] - b[k]).cwiseAbs().maxCoeff());
-    s = std::fmax(s, b[k].cwiseAbs().maxCoeff());
-  }
-  return d / s;
-}
 
 // Collocation against the generic Galerkin step on a fixed-size system, s = 1..6.
 template <class S>
@@ -64,7 +43,7 @@ void check_against_generic(const S& L, const Vec<double, S::dim>& q0, const Vec<
   for (int s = 1; s <= kGalerkinMaxStages; ++s) {
     const SeparableGaussStep<S> C(L, s, h, StepOptions{}, q0);
     const GalerkinStep<S> G(L, QuadratureKind::gauss, s, h);
-    const double d = difference(trajectory(C, q0, p0, v0, steps), trajectory(G, q0, p0, v0, steps));
+    const double d = trajectory_difference(trajectory(C, q0, p0, v0, steps), trajectory(G, q0, p0, v0, steps));
     BOOST_TEST_MESSAGE(L.name() << " s = " << s << ": relative difference " << d << ", sweeps "
                                 << static_cast<double>(C.forces()) / (s * steps) << " per step");
     BOOST_TEST(d <= 1e-12, L.name() << " s = " << s << ": " << d);
@@ -138,7 +117,7 @@ BOOST_AUTO_TEST_CASE(equals_the_generic_galerkin_step) {
   const V2 q0(0.4, 0.0), p0(0.0, 2.0);
   const SeparableGaussStep<Kepler, 6> A(K, 6, 0.05, StepOptions{}, q0);
   const SeparableGaussStep<Kepler> B(K, 6, 0.05, StepOptions{}, q0);
-  BOOST_TEST(difference(trajectory(A, q0, p0, p0, 200), trajectory(B, q0, p0, p0, 200)) <= 1e-15);
+  BOOST_TEST(trajectory_difference(trajectory(A, q0, p0, p0, 200), trajectory(B, q0, p0, p0, 200)) <= 1e-15);
   BOOST_CHECK_THROW((SeparableGaussStep<Kepler, 6>(K, 4, 0.05, StepOptions{}, q0)), std::invalid_argument);
   BOOST_CHECK_THROW(SeparableGaussStep<Kepler>(K, 7, 0.05, StepOptions{}, q0), std::invalid_argument);
   BOOST_CHECK_THROW(SeparableGaussStep<Kepler>(K, 2, 0.0, StepOptions{}, q0), std::invalid_argument);
@@ -155,9 +134,9 @@ BOOST_AUTO_TEST_CASE(run_time_sized_systems_equal_the_dynamic_galerkin_step) {
     const SeparableGaussStep<NBodyDynamic> C(D, s, 0.01, StepOptions{}, q);
     const DynamicGalerkinStep<NBodyDynamic> G(D, QuadratureKind::gauss, s, 0.01);
     const auto a = trajectory(C, q, p, v, 100);
-    BOOST_TEST(difference(a, trajectory(G, q, p, v, 100)) <= 1e-12, "n bodies, s = " << s);
+    BOOST_TEST(trajectory_difference(a, trajectory(G, q, p, v, 100)) <= 1e-12, "n bodies, s = " << s);
     const SeparableGaussStep<NBody<3>> F(NBody<3>(1.0, {1.0, 1.0, 0.1}), s, 0.01, StepOptions{}, Vec<double, 9>(q));
-    BOOST_TEST(difference(a, trajectory(F, Vec<double, 9>(q), Vec<double, 9>(p), Vec<double, 9>(v), 100)) <= 1e-13);
+    BOOST_TEST(trajectory_difference(a, trajectory(F, Vec<double, 9>(q), Vec<double, 9>(p), Vec<double, 9>(v), 100)) <= 1e-13);
   }
   // a written FPU-like chain of 40 particles with walls, a sum in its text
   auto w = std::make_shared<WrittenSystem>();
@@ -174,7 +153,7 @@ BOOST_AUTO_TEST_CASE(run_time_sized_systems_equal_the_dynamic_galerkin_step) {
   const VectorXd px = legendre(L, x, u);
   const SeparableGaussStep<WrittenSeparable, 0, WrittenDynamic> C(WrittenSeparable(L), L, 4, 0.05, StepOptions{}, x);
   const DynamicGalerkinStep<WrittenDynamic> G(L, QuadratureKind::gauss, 4, 0.05);
-  BOOST_TEST(difference(trajectory(C, x, px, u, 100), trajectory(G, x, px, u, 100)) <= 1e-12);
+  BOOST_TEST(trajectory_difference(trajectory(C, x, px, u, 100), trajectory(G, x, px, u, 100)) <= 1e-12);
   BOOST_TEST(C.newton_steps() == 0);
 }
 
@@ -189,7 +168,7 @@ BOOST_AUTO_TEST_CASE(steps_that_do_not_contract_are_solved_by_newton) {
       const SeparableGaussStep<HarmonicOscillator> C(L, s, 0.1, StepOptions{}, q0);
       const GalerkinStep<HarmonicOscillator> G(L, QuadratureKind::gauss, s, 0.1);
       BOOST_TEST_CONTEXT("h omega = " << homega << ", s = " << s) {
-        BOOST_TEST(difference(trajectory(C, q0, p0, p0, 50), trajectory(G, q0, p0, p0, 50)) <= 1e-12);
+        BOOST_TEST(trajectory_difference(trajectory(C, q0, p0, p0, 50), trajectory(G, q0, p0, p0, 50)) <= 1e-12);
         BOOST_TEST(C.newton_steps() == (homega > 1.0 ? 50 : 0));
       }
     }

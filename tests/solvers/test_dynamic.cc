@@ -79,10 +79,13 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include "solvers/position_momentum_step.h"
 #include "tests/verification/common.h"
 #include "tests/random_vector.h"
+#include "tests/solvers/trajectories.h"
 
 using namespace dvm;
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
+using dvm_test::trajectory;
+using dvm_test::trajectory_difference;
 
 static_assert(is_dynamic_system_v<NBodyDynamic> && is_dynamic_system_v<WrittenDynamic> &&
               is_dynamic_system_v<WrittenDynamicHamiltonian> && is_dynamic_system_v<FixedAsDynamic<Kepler>> &&
@@ -210,35 +213,6 @@ Derivatives nested_jets(const F& f, const VectorXd& q, const VectorXd& v) {
       d.Lvv(i, j) = y.v[N + j].v[N + i];
     }
   return d;
-}
-
-// Runs a step type with `integrate` and records the state after every step.
-template <class Step, class VecT>
-std::vector<VectorXd> trajectory(const Step& S, const VecT& q0, const VecT& p0, const VecT& v0, int steps,
-                                 RunSummary* summary = nullptr) {
-  std::vector<VectorXd> out;
-  VecT q = q0, p = p0;
-  const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const auto& qk, const auto& pk, const StepSummary&) {
-    VectorXd y(2 * qk.size());
-    y << qk, pk;
-    out.push_back(y);
-  });
-  if (summary) *summary = run;
-  BOOST_TEST(!run.failed, run.failure.message);
-  return out;
-}
-
-// The largest difference between two trajectories, relative to the largest state
-// (logged: the measured values behind the tolerance of the comparisons below).
-double trajectory_difference(const std::vector<VectorXd>& a, const std::vector<VectorXd>& b) {
-  BOOST_REQUIRE(a.size() == b.size());
-  double d = 0.0, s = 0.0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    d = std::fmax(d, (a[k] - b[k]).cwiseAbs().maxCoeff());
-    s = std::fmax(s, b[k].cwiseAbs().maxCoeff());
-  }
-  BOOST_TEST_MESSAGE("  trajectory difference " << d / s);
-  return d / s;
 }
 
 template <int N>

@@ -16,6 +16,7 @@
 #include "solvers/galerkin_step.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/position_momentum_step.h"
+#include "tests/solvers/trajectories.h"
 #include "tests/verification/common.h"
 
 using namespace dvm;
@@ -412,29 +413,6 @@ BOOST_AUTO_TEST_CASE(a_step_that_does_not_converge_is_reported_with_bounded_iter
 // guess error).
 namespace {
 
-template <class Step, class VecT>
-std::vector<Eigen::VectorXd> states(const Step& S, VecT q, VecT p, const VecT& v0, int steps) {
-  std::vector<Eigen::VectorXd> out;
-  const RunSummary run = integrate(S, 0.0, q, p, v0, steps, [&](std::int64_t, double, const auto& qk, const auto& pk, const StepSummary&) {
-    Eigen::VectorXd y(2 * qk.size());
-    y << qk, pk;
-    out.push_back(y);
-  });
-  BOOST_TEST(!run.failed, run.failure.message);
-  return out;
-}
-
-// the largest difference relative to the largest state
-double states_difference(const std::vector<Eigen::VectorXd>& a, const std::vector<Eigen::VectorXd>& b) {
-  BOOST_REQUIRE(a.size() == b.size());
-  double d = 0.0, m = 0.0;
-  for (std::size_t k = 0; k < a.size(); ++k) {
-    d = std::fmax(d, (a[k] - b[k]).cwiseAbs().maxCoeff());
-    m = std::fmax(m, b[k].cwiseAbs().maxCoeff());
-  }
-  return d / m;
-}
-
 template <int S>
 void check_against_dynamic(QuadratureKind kind) {
   const Kepler K(1.5);
@@ -446,9 +424,9 @@ void check_against_dynamic(QuadratureKind kind) {
     const GalerkinStep<Kepler, S> F(K, kind, S, h);
     const DynamicGalerkinStep<FixedAsDynamic<Kepler>> D(FixedAsDynamic<Kepler>(K), kind, S, h);
     BOOST_TEST(D.order() == 2 * S);
-    const auto a = states(F, q0, p0, v0, 100);
-    const auto b = states(D, Eigen::VectorXd(q0), Eigen::VectorXd(p0), Eigen::VectorXd(v0), 100);
-    BOOST_TEST(states_difference(b, a) <= 1e-13);
+    const auto a = dvm_test::trajectory(F, q0, p0, v0, 100);
+    const auto b = dvm_test::trajectory(D, Eigen::VectorXd(q0), Eigen::VectorXd(p0), Eigen::VectorXd(v0), 100);
+    BOOST_TEST(dvm_test::trajectory_difference(b, a) <= 1e-13);
     BOOST_TEST(D.jacobian_updates() == F.jacobian_updates());
     BOOST_TEST(std::fabs(D.last_guess_error() - F.last_guess_error()) <= 1e-3 * F.last_guess_error() + 1e-16);
   }
