@@ -134,8 +134,9 @@ std::string singular(const LA& la) {
 // with a fresh one. Throws nothing itself; the equation's exceptions pass through.
 // (Every return is of the one summary s, so that it is built in the caller's storage.)
 // newton_drive_inlined is the same, inlined into its caller: for a step whose iterations
-// cost little beside the driver's own bookkeeping (the Galerkin steps; bench_galerkin_kepler
-// measures them).
+// cost little beside the driver's own bookkeeping (the fixed-size Galerkin steps, measured
+// by bench_galerkin_kepler; the fixed-size steps solved by solve_newton below, measured by
+// the generic-midpoint rows of bench_ratios and bench_written_lagrangian).
 template <class E, class LA>
 [[gnu::always_inline]] inline StepSummary newton_drive_inlined(E& eq, LA& la, Refresh refresh, const StepOptions& opt,
                                                                typename E::Vector& x, typename E::Vector& r,
@@ -308,7 +309,8 @@ class JetEquation {
 };
 
 // Newton's method on f(x) = 0 from x (updated in place), a Jacobian formed and factored
-// at every iteration; s0 and x0 as for JetEquation.
+// at every iteration; s0 and x0 as for JetEquation. The driver is inlined here: a step of
+// one or two unknowns costs little more than the call and the driver's bookkeeping.
 template <int N, class F>
 StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
   JetEquation<N, F> eq(f, s0, x0);
@@ -316,7 +318,7 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
   Vec<double, N> r, dx, start;
   Mat<double, N, N> J;
   DriverState state;
-  return newton_drive(eq, la, Refresh::every_iteration, opt, x, r, dx, J, state, start);
+  return newton_drive_inlined(eq, la, Refresh::every_iteration, opt, x, r, dx, J, state, start);
 }
 
 // The solver StepOptions::solver names: solve_newton or solve_tiny (solvers/newton.h).
