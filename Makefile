@@ -74,6 +74,13 @@ FUZZ_SECONDS ?= 60
 # inputs up to 256 KiB: the corpus holds deep and long cases (15000 parentheses, sums of
 # 20000 terms, nested arrays) that a small -max_len would cut short
 FUZZ_MAX_LEN ?= 262144
+# seconds one input may take before libFuzzer reports it: well above the slowest text
+# the parser accepts, so that it reports hangs and work that grows faster than the
+# text, not size. A few bytes may unroll to Expression::kMaxNodes operations (a sum over
+# a long range, such as sum(i, 1, 174003, x*x_dot^2)), which the expression target parses
+# three times and splits by velocity degree and mass matrix, all under the sanitizers;
+# time such a text with `./build-sanitize/tests/fuzz/fuzz_expression FILE`.
+FUZZ_TIMEOUT ?= 60
 
 .PHONY: deps test-deps build run test bench charts clean sanitize fuzz fuzz-deps
 
@@ -164,7 +171,7 @@ fuzz: fuzz-deps
 	  mkdir -p $(SAN_BUILD)/corpus-$$t && \
 	  echo "fuzzing $$t for $(FUZZ_SECONDS) s" && \
 	  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=10 -rss_limit_mb=2048 -max_len=$(FUZZ_MAX_LEN) \
+	  ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=$(FUZZ_TIMEOUT) -rss_limit_mb=2048 -max_len=$(FUZZ_MAX_LEN) \
 	    -print_final_stats=1 -artifact_prefix=$(SAN_BUILD)/$$t- \
 	    $(SAN_BUILD)/corpus-$$t tests/fuzz/corpus/$$t || exit 1; \
 	done
