@@ -115,6 +115,37 @@ struct FPUChain {
     }
   }
 
+  // gradient(), hessian() and the two maxima of gradient_scale() in one pass over the
+  // bonds (each bond length formed once): g = grad V(q), Hess V(q) into diag and off,
+  // and on return the largest |spring force| and |spring stiffness|, so that
+  // gradient_scale(q) = force_max + stiffness_max * max_abs(q). The same operations in
+  // the same order as the three separate calls, so the same values.
+  void derivatives(const Eigen::VectorXd& q, Eigen::VectorXd& g, Eigen::VectorXd& diag, Eigen::VectorXd& off,
+                   double& force_max, double& stiffness_max) const {
+    g.setZero(n);
+    diag.setZero(n);
+    off.setZero(std::max(n - 1, 0));
+    double f_max = 0.0, s_max = 0.0;
+    for (int b = 0; b < bonds(); ++b) {
+      const double r = bond_length(q, b);
+      const double f = spring_force(r), s = spring_stiffness(r);
+      f_max = std::fmax(f_max, std::fabs(f));
+      s_max = std::fmax(s_max, std::fabs(s));
+      const int left = bond_left(b), right = bond_right(b);
+      if (right >= 0) {
+        g[right] += f;
+        diag[right] += s;
+      }
+      if (left >= 0) {
+        g[left] -= f;
+        diag[left] += s;
+      }
+      if (left >= 0 && right >= 0) off[left] -= s;
+    }
+    force_max = f_max;
+    stiffness_max = s_max;
+  }
+
   double energy(const Eigen::VectorXd& q, const Eigen::VectorXd& p) const {
     return p.squaredNorm() / (2.0 * m) + potential(q);
   }

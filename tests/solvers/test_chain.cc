@@ -45,6 +45,26 @@ BOOST_AUTO_TEST_CASE(gradient_and_hessian_match_automatic_differentiation) {
   }
 }
 
+// The one-pass derivatives the chain step uses give the separate calls' values exactly
+// (the same operations in the same order), at a state with springs of both signs.
+BOOST_AUTO_TEST_CASE(one_pass_derivatives_equal_the_separate_calls) {
+  for (bool fixed : {true, false})
+    for (int n : {1, 2, 7}) {
+      const FPUChain C(n, 1.3, 0.8, -0.7, 1.9, fixed);
+      const VectorXd q = random_vector(n, 0.9, 11);
+      VectorXd g, diag, off, g1, diag1, off1;
+      C.gradient(q, g);
+      C.hessian(q, diag, off);
+      double force_max = -1.0, stiffness_max = -1.0;
+      C.derivatives(q, g1, diag1, off1, force_max, stiffness_max);
+      BOOST_TEST(g1 == g);
+      BOOST_TEST(diag1 == diag);
+      BOOST_TEST(off1 == off);
+      BOOST_TEST(force_max + stiffness_max * max_abs(q) == C.gradient_scale(q));
+      BOOST_TEST((force_max > 0.0) == (C.bonds() > 0));  // (a free chain of one particle has no bond)
+    }
+}
+
 BOOST_AUTO_TEST_CASE(dynamic_chain_step_equals_the_generic_fixed_size_step) {
   constexpr int n = 5;
   for (bool fixed : {true, false})
