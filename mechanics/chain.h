@@ -77,8 +77,10 @@ struct FPUChain {
     return V;
   }
 
-  // g = grad V(q).
-  void gradient(const Eigen::VectorXd& q, Eigen::VectorXd& g) const {
+  // g = grad V(q), q any vector expression with q[i] (an Eigen::Ref of a run-time-sized
+  // system's interface reads in place, not through a temporary VectorXd).
+  template <class Vector>
+  void gradient(const Vector& q, Eigen::VectorXd& g) const {
     g.setZero(n);
     for (int b = 0; b < bonds(); ++b) {
       const double f = spring_force(bond_length(q, b));
