@@ -56,6 +56,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/LU>
 #include <cmath>
 #include <memory>
 #include <stdexcept>
@@ -236,6 +237,44 @@ class DynamicThetaStep {
 
   // The step of the adjoint map (1 - theta), of the same size.
   DynamicThetaStep adjoint() const { return DynamicThetaStep(L_, R_.adjoint(), h_, options_, keeps_jacobian()); }
+
+  // The derivative of the step (q0, p0) -> (q1, p1) = (q0 + dq, p0 + dp) at the dq that
+  // step() solved for, by the implicit function theorem on its equation (no finite
+  // differences). F(dq; q0, p0) = p0 + h (1 - theta) L_q(x, v) - L_v(x, v) = 0 with
+  // x = q0 + theta dq, v = dq / h, and F_D its Jacobian in dq (what the driver factors):
+  //   d dq = -F_D^{-1} (F_q0 dq0 + dp0),   F_q0 = h (1 - theta) L_qq - L_vq,
+  //   dp1  = dp0 + h L_qq (dq0 + theta d dq) + L_qv d dq     (p1 - p0 = h L_q(x, v)).
+  // A (2n x 2n, the coordinates then the momenta, for rows and columns) receives
+  // [dq1/dq0  dq1/dp0; dp1/dq0  dp1/dp0]. The step is the discrete flow of a discrete
+  // Lagrangian, which is symplectic (Marsden and West, Acta Numerica 2001), so
+  // A^T J A = J up to round-off and the tolerance dq was solved to. A does not depend on
+  // p0. Returns false where F_D is singular at dq. Allocates.
+  bool derivative(const V& q0, const V& dq, Eigen::MatrixXd& A) const {
+    const int n = L_.dim();
+    if (q0.size() != n || dq.size() != n)
+      throw std::invalid_argument("DynamicThetaStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates (dq " + std::to_string(dq.size()) + "); the system has " +
+                                  std::to_string(n));
+    using M = Eigen::MatrixXd;
+    const double th = R_.theta(), h = h_;
+    const V x = q0 + th * dq, v = dq / h;
+    V Lq(n), Lv(n);
+    M Lqq(n, n), Lqv(n, n), Lvv(n, n);
+    L_.hessian(x, v, Lq, Lv, Lqq, Lqv, Lvv);
+    const M Lvq = Lqv.transpose();
+    const M FD = (h * th * (1.0 - th)) * Lqq + (1.0 - th) * Lqv - th * Lvq - Lvv / h;
+    const Eigen::FullPivLU<M> lu(FD);
+    if (!lu.isInvertible() || !FD.allFinite()) return false;
+    const M Dq = -lu.solve(M(h * (1.0 - th) * Lqq - Lvq));  // d dq / d q0
+    const M Dp = -lu.inverse();                               // d dq / d p0
+    const M I = M::Identity(n, n);
+    A.resize(2 * n, 2 * n);
+    A.topLeftCorner(n, n) = I + Dq;
+    A.topRightCorner(n, n) = Dp;
+    A.bottomLeftCorner(n, n) = h * Lqq * (I + th * Dq) + Lqv * Dq;
+    A.bottomRightCorner(n, n) = I + (h * th) * Lqq * Dp + Lqv * Dp;
+    return A.allFinite();
+  }
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0.

@@ -629,6 +629,76 @@ BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
   }
 }
 
+// The step's derivative by the implicit function theorem against central differences
+// of the step itself, and symplectic: the written pendulum (n = 1), the written double
+// pendulum and Kepler (n = 2), for the midpoint and an asymmetric theta map.
+namespace {
+template <class Sys>
+void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0, double h) {
+  const int n = L.dim();
+  for (double theta : {0.5, 0.3}) {
+    BOOST_TEST_CONTEXT(L.name() << ", theta = " << theta) {
+      const DynamicThetaStep<Sys> S(L, ThetaMap(theta), h);
+      // the state (q1, p1) one step from (q, p)
+      auto flow = [&](const VectorXd& q, const VectorXd& p) {
+        VectorXd dq = h * legendre_inverse(L, q, p), dp = VectorXd::Zero(n);
+        BOOST_TEST_REQUIRE(S.step(0.0, q, p, dq, dp).converged);
+        VectorXd y(2 * n);
+        y << q + dq, p + dp;
+        return y;
+      };
+      VectorXd dq = h * legendre_inverse(L, q0, p0), dp = VectorXd::Zero(n);
+      BOOST_TEST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
+      MatrixXd A;
+      BOOST_TEST_REQUIRE(S.derivative(q0, dq, A));
+      BOOST_TEST(A.rows() == 2 * n);
+      BOOST_TEST(A.cols() == 2 * n);
+      // central differences, column by column (error ~ eps^2 from truncation, ~1e-16/eps
+      // from the solves, each converged to round-off)
+      const double eps = 1e-5;
+      MatrixXd C(2 * n, 2 * n);
+      for (int j = 0; j < 2 * n; ++j) {
+        VectorXd qa = q0, pa = p0, qb = q0, pb = p0;
+        if (j < n) {
+          qa[j] += eps;
+          qb[j] -= eps;
+        } else {
+          pa[j - n] += eps;
+          pb[j - n] -= eps;
+        }
+        C.col(j) = (flow(qa, pa) - flow(qb, pb)) / (2.0 * eps);
+      }
+      const double size = std::max(1.0, A.cwiseAbs().maxCoeff());
+      BOOST_TEST((A - C).cwiseAbs().maxCoeff() <= 1e-7 * size);
+      // A^T J A = J
+      MatrixXd J = MatrixXd::Zero(2 * n, 2 * n);
+      J.topRightCorner(n, n) = MatrixXd::Identity(n, n);
+      J.bottomLeftCorner(n, n) = -MatrixXd::Identity(n, n);
+      BOOST_TEST((A.transpose() * J * A - J).cwiseAbs().maxCoeff() <= 1e-12 * size * size);
+      // not the identity, nor the derivative of the step without its theta terms: the
+      // momenta move with the coordinates
+      BOOST_TEST(A.bottomLeftCorner(n, n).cwiseAbs().maxCoeff() > 1e-3);
+    }
+  }
+}
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_step_derivative_by_the_implicit_function_theorem) {
+  const auto pendulum = written({"theta"}, {{"m", 1.3}, {"l", 0.8}, {"g", 9.81}},
+                                "m*l^2*theta_dot^2/2 + m*g*l*cos(theta)");
+  VectorXd q1(1), p1(1);
+  q1 << 2.0;
+  p1 << 0.4;
+  check_step_derivative(WrittenDynamic(pendulum), q1, p1, 0.05);
+  VectorXd q2(2), p2(2);
+  q2 << 0.5, 0.3;
+  p2 << 0.2, -0.1;
+  check_step_derivative(WrittenDynamic(written_double_pendulum()), q2, p2, 0.02);
+  Vec<double, 2> qk, pk;
+  verification::kepler_initial(0.6, qk, pk);
+  check_step_derivative(FixedAsDynamic<Kepler>(kKepler), VectorXd(qk), VectorXd(pk), 0.01);
+}
+
 BOOST_AUTO_TEST_CASE(composed_dynamic_steps_equal_the_fixed_size_compositions) {
   // ComposedStep (solvers/composition.h) with N = Eigen::Dynamic: the dynamic theta step
   // and its adjoint (the same type) against CompositionStep<Kepler, ThetaMap>, and the
