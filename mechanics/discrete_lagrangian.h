@@ -103,6 +103,18 @@ class DiscreteLagrangian {
     return slopes<T, N>(a, b);
   }
 
+  // D2 L_d(q0, q0 + dq): moving q1 with q0 fixed moves dq alike.
+  template <class T>
+  V<T> D2Ld_increment(const V<T>& q0, const V<T>& dq) const {
+    using D = ceres::Jet<T, N>;
+    V<D> a, b;
+    for (int i = 0; i < N; ++i) {
+      a[i] = D(q0[i]);
+      b[i] = seed<T, N>(dq[i], i);
+    }
+    return slopes<T, N>(a, b);
+  }
+
   // D2 L_d(q0, q0 + dq) and (D1 + D2) L_d(q0, q0 + dq) in one evaluation: the
   // common shift of q0 and q1 moves q0 and leaves dq unchanged.
   void D2Ld_and_shift(const V<double>& q0, const V<double>& dq, V<double>& d2, V<double>& shift) const {

@@ -14,6 +14,8 @@
 // momentum carried by dq).
 #pragma once
 
+#include <Eigen/LU>
+
 #include "mechanics/discrete_lagrangian.h"
 #include "solvers/newton_driver.h"
 
@@ -54,6 +56,44 @@ class PositionMomentumStep {
       return true;
     }
   };
+
+  // The derivative of the step (q0, p0) -> (q1, p1) at the dq that step() solved for,
+  // by the implicit function theorem on its equation (no finite differences): with
+  // F(q0, dq) = D1 L_d(q0, q0 + dq) and G(q0, dq) = D2 L_d(q0, q0 + dq) (= p1), their
+  // derivatives in (q0, dq) by one Jet level over the slopes,
+  //   d dq = -F_dq^{-1} (F_q0 dq0 + dp0),   dp1 = G_q0 dq0 + G_dq d dq.
+  // A (2N x 2N, the coordinates then the momenta, for rows and columns) receives
+  // [dq1/dq0  dq1/dp0; dp1/dq0  dp1/dp0]: for any map, the flow of a discrete
+  // Lagrangian, so A^T J A = J (Marsden and West, Acta Numerica 2001) up to round-off
+  // and the tolerance dq was solved to. A does not depend on p0. Returns false where
+  // F_dq is singular (or A not finite) at dq; a map's domain error is thrown.
+  bool derivative(const V& q0, const V& dq, Mat<double, 2 * N, 2 * N>& A) const {
+    using D = ceres::Jet<double, 2 * N>;
+    using M = Mat<double, N, N>;
+    Vec<D, N> a, b;
+    for (int i = 0; i < N; ++i) {
+      a[i] = seed<double, 2 * N>(q0[i], i);
+      b[i] = seed<double, 2 * N>(dq[i], N + i);
+    }
+    const Vec<D, N> F = dl_.D1Ld_increment(a, b), G = dl_.D2Ld_increment(a, b);
+    M Fq, Fd, Gq, Gd;
+    for (int i = 0; i < N; ++i)
+      for (int j = 0; j < N; ++j) {
+        Fq(i, j) = F[i].v[j];
+        Fd(i, j) = F[i].v[N + j];
+        Gq(i, j) = G[i].v[j];
+        Gd(i, j) = G[i].v[N + j];
+      }
+    const Eigen::FullPivLU<M> lu(Fd);
+    if (!Fd.allFinite() || !lu.isInvertible()) return false;
+    const M Dq = -lu.solve(Fq);  // d dq / d q0
+    const M Dp = -lu.inverse();  // d dq / d p0
+    A.template topLeftCorner<N, N>() = M::Identity() + Dq;
+    A.template topRightCorner<N, N>() = Dp;
+    A.template bottomLeftCorner<N, N>() = Gq + Gd * Dq;
+    A.template bottomRightCorner<N, N>() = Gd * Dp;
+    return A.allFinite();
+  }
 
   // One step from (q0, p0). `dq` holds the starting guess on entry and the
   // increment q1 - q0 on return; `dp` receives p1 - p0. Map domain errors met in

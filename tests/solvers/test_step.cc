@@ -1,8 +1,10 @@
-// The position-momentum step: closed-form special cases, both solvers, failures.
+// The position-momentum step: closed-form special cases, both solvers, failures, and
+// its derivative (against the closed form, central differences and A^T J A = J).
 #define BOOST_TEST_MODULE solvers
 #include <boost/test/unit_test.hpp>
 
 #include "mechanics/systems.h"
+#include "mechanics/systems_classic.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 
@@ -132,4 +134,78 @@ BOOST_AUTO_TEST_CASE(compensated_sum_keeps_the_low_bits) {
   CompensatedVector<1> s(V1(1.0));
   for (int i = 0; i < 1000000; ++i) s.add(V1(1e-16));
   BOOST_TEST(std::fabs(s.sum[0] - (1.0 + 1e-10)) <= 2e-16);
+}
+
+// The step's derivative by the implicit function theorem. For the harmonic oscillator
+// the midpoint step is linear, z1 = (I - hA/2)^{-1} (I + hA/2) z0: its derivative is
+// that matrix.
+BOOST_AUTO_TEST_CASE(the_step_derivative_of_the_midpoint_oscillator_is_the_cayley_transform) {
+  const double w = 2.0, h = 0.1;
+  const PositionMomentumStep<HarmonicOscillator, ThetaMap> S(HarmonicOscillator(w), ThetaMap::midpoint(), h);
+  const V1 q0(0.7), p0(-0.3);
+  V1 dq = h * p0, dp;
+  BOOST_TEST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
+  Mat<double, 2, 2> A, G, I = Mat<double, 2, 2>::Identity();
+  BOOST_TEST_REQUIRE(S.derivative(q0, dq, A));
+  G << 0.0, 1.0, -w * w, 0.0;
+  const Mat<double, 2, 2> cayley = (I - 0.5 * h * G).inverse() * (I + 0.5 * h * G);
+  BOOST_TEST((A - cayley).cwiseAbs().maxCoeff() <= 1e-14);
+}
+
+// Against central differences of the step itself (relative 1e-7) and symplectic to
+// 1e-12, for closed-form gradients (pendulum, Kepler), automatic differentiation
+// (the double pendulum), the map given as a retraction (Kepler, GenericOnly), and a
+// symmetric and an asymmetric theta.
+namespace {
+template <class Step>
+void check_derivative(const Step& S, const Vec<double, Step::N>& q0, const Vec<double, Step::N>& p0,
+                      const Vec<double, Step::N>& guess) {
+  constexpr int N = Step::N;
+  using V = Vec<double, N>;
+  using Y = Vec<double, 2 * N>;  // (named out here: g++ 12 fails on it inside the lambda)
+  auto flow = [&](const V& q, const V& p) {
+    V dq = guess, dp;
+    BOOST_TEST_REQUIRE(S.step(0.0, q, p, dq, dp).converged);
+    Y y;
+    y << q + dq, p + dp;
+    return y;
+  };
+  V dq = guess, dp;
+  BOOST_TEST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
+  Mat<double, 2 * N, 2 * N> A, C;
+  BOOST_TEST_REQUIRE(S.derivative(q0, dq, A));
+  const double eps = 1e-5;
+  for (int j = 0; j < 2 * N; ++j) {
+    V qa = q0, pa = p0, qb = q0, pb = p0;
+    (j < N ? qa[j] : pa[j - N]) += eps;
+    (j < N ? qb[j] : pb[j - N]) -= eps;
+    C.col(j) = (flow(qa, pa) - flow(qb, pb)) / (2.0 * eps);
+  }
+  const double size = std::max(1.0, A.cwiseAbs().maxCoeff());
+  BOOST_TEST((A - C).cwiseAbs().maxCoeff() <= 1e-7 * size);
+  Mat<double, 2 * N, 2 * N> J = Mat<double, 2 * N, 2 * N>::Zero();
+  J.template topRightCorner<N, N>().setIdentity();
+  J.template bottomLeftCorner<N, N>() = -Mat<double, N, N>::Identity();
+  BOOST_TEST((A.transpose() * J * A - J).cwiseAbs().maxCoeff() <= 1e-12 * size * size);
+}
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_step_derivative_against_central_differences_and_symplectic) {
+  for (double theta : {0.5, 0.3}) {
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      const double h = 0.05;
+      const Pendulum P(1.3, 0.8, 9.81);
+      check_derivative(PositionMomentumStep<Pendulum, ThetaMap>(P, ThetaMap(theta), h), V1(2.0), V1(0.4),
+                       V1(h * 0.4 / (1.3 * 0.8 * 0.8)));
+      const V2 q0(0.4, 0.1), p0(0.2, 1.9);
+      check_derivative(PositionMomentumStep<Kepler, ThetaMap>(Kepler(), ThetaMap(theta), 0.02), q0, p0, 0.02 * p0);
+      check_derivative(PositionMomentumStep<GenericOnly<Kepler>, RetractionMap<EuclideanRetraction>>(
+                           GenericOnly<Kepler>{Kepler()}, RetractionMap<EuclideanRetraction>({}, theta), 0.02),
+                       q0, p0, 0.02 * p0);
+      const DoublePendulum D(1.3, 0.7, 1.1, 0.9, 9.81);
+      const V2 a0(0.5, 0.3), b0(0.2, -0.1);
+      check_derivative(PositionMomentumStep<DoublePendulum, ThetaMap>(D, ThetaMap(theta), 0.02), a0, b0,
+                       V2(0.02 * legendre_inverse(D, a0, b0)));
+    }
+  }
 }
