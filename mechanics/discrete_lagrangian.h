@@ -91,18 +91,6 @@ class DiscreteLagrangian {
     return D1Ld_increment(q0, V<T>(q1 - q0));
   }
 
-  // D2 L_d(q0, q1).
-  template <class T>
-  V<T> D2Ld(const V<T>& q0, const V<T>& q1) const {
-    using D = ceres::Jet<T, N>;
-    V<D> a, b;
-    for (int i = 0; i < N; ++i) {
-      a[i] = D(q0[i]);
-      b[i] = seed<T, N>(q1[i] - q0[i], i);
-    }
-    return slopes<T, N>(a, b);
-  }
-
   // D2 L_d(q0, q0 + dq): moving q1 with q0 fixed moves dq alike.
   template <class T>
   V<T> D2Ld_increment(const V<T>& q0, const V<T>& dq) const {
@@ -113,6 +101,12 @@ class DiscreteLagrangian {
       b[i] = seed<T, N>(dq[i], i);
     }
     return slopes<T, N>(a, b);
+  }
+
+  // D2 L_d(q0, q1).
+  template <class T>
+  V<T> D2Ld(const V<T>& q0, const V<T>& q1) const {
+    return D2Ld_increment(q0, V<T>(q1 - q0));
   }
 
   // D2 L_d(q0, q0 + dq) and (D1 + D2) L_d(q0, q0 + dq) in one evaluation: the

@@ -138,6 +138,9 @@ class ThetaEquation {
   }
   double scale(double Dn, double Jmax) const { return pscale_ + Jmax * Dn; }
   double offset() const { return q0size_; }
+  // L_qq and L_qv at the point of the last jacobian() (the step's derivative reads them).
+  const Matrix& Lqq() const { return Lqq_; }
+  const Matrix& Lqv() const { return Lqv_; }
 
   // p1 - p0 = h L_q at the solution D.
   void momentum(const Vector& D, Vector& dp) {
@@ -248,7 +251,9 @@ class DynamicThetaStep {
   // [dq1/dq0  dq1/dp0; dp1/dq0  dp1/dp0]. The step is the discrete flow of a discrete
   // Lagrangian, which is symplectic (Marsden and West, Acta Numerica 2001), so
   // A^T J A = J up to round-off and the tolerance dq was solved to. A does not depend on
-  // p0. Returns false where F_D is singular at dq. Allocates.
+  // p0. Returns false where F_D is singular (or not finite) at dq. F_D and L's blocks
+  // come from the step's own ThetaEquation, in its workspace (so, as step(), not from
+  // two threads at once). Allocates.
   bool derivative(const V& q0, const V& dq, Eigen::MatrixXd& A) const {
     const int n = L_.dim();
     if (q0.size() != n || dq.size() != n)
@@ -257,15 +262,16 @@ class DynamicThetaStep {
                                   std::to_string(n));
     using M = Eigen::MatrixXd;
     const double th = R_.theta(), h = h_;
-    const V x = q0 + th * dq, v = dq / h;
-    V Lq(n), Lv(n);
-    M Lqq(n, n), Lqv(n, n), Lvv(n, n);
-    L_.hessian(x, v, Lq, Lv, Lqq, Lqv, Lvv);
-    const M Lvq = Lqv.transpose();
-    const M FD = (h * th * (1.0 - th)) * Lqq + (1.0 - th) * Lqv - th * Lvq - Lvv / h;
+    Work& w = *work_;
+    w.q0 = q0;
+    w.p0.setZero();  // (F_D does not depend on p0)
+    w.D = dq;
+    w.eq.begin(w.q0, w.p0);
+    if (!std::isfinite(w.eq.jacobian(w.D, w.r, w.J))) return false;
+    const M FD = w.J, Lqq = w.eq.Lqq(), Lqv = w.eq.Lqv();
     const Eigen::FullPivLU<M> lu(FD);
-    if (!lu.isInvertible() || !FD.allFinite()) return false;
-    const M Dq = -lu.solve(M(h * (1.0 - th) * Lqq - Lvq));  // d dq / d q0
+    if (!lu.isInvertible()) return false;
+    const M Dq = -lu.solve(M(h * (1.0 - th) * Lqq - Lqv.transpose()));  // d dq / d q0
     const M Dp = -lu.inverse();                               // d dq / d p0
     const M I = M::Identity(n, n);
     A.resize(2 * n, 2 * n);
