@@ -65,11 +65,17 @@ struct WrittenSystem {
   // Quantities the scene asks to monitor besides the energy ([system] invariants: a
   // name and an expression in q, v and p, blocks 0, 1, 2, as the energy's), in order.
   std::vector<std::pair<std::string, Expression>> invariants;
+  // Generalized forces ([system] forces, R^n): {coordinate index, F_i(t, q, v)}, in the
+  // coordinates' order, one per coordinate that has one (mechanics/written_force.h). An
+  // expression of Kind::force: q (block 0, entries 0 .. dim() - 1), the time t (block 0,
+  // entry dim()) and v (block 1).
+  std::vector<std::pair<int, Expression>> forces;
   // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
   int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
 
-  // Which expression a text is for (decides the names it may use).
-  enum class Kind { lagrangian, energy, hamiltonian };
+  // Which expression a text is for (decides the names it may use): L in q and v; the
+  // energy and the invariants in q, v and p; H in q and p; a force in t, q and v.
+  enum class Kind { lagrangian, energy, hamiltonian, force };
 
   // Appends the array `name` of `size` coordinates (q, v, p named name[i],
   // name_dot[i], p_name[i]) to the state.
@@ -99,18 +105,20 @@ struct WrittenSystem {
       s.definitions = definitions;
       return s;
     }
+    const bool momenta = kind == Kind::energy || kind == Kind::hamiltonian;
     for (int i = 0; i < dim(); ++i) {
       if (array_of(i)) continue;
       const std::string& c = coordinates[static_cast<std::size_t>(i)];
       s.variables.push_back({c, 0, i});
       if (kind != Kind::hamiltonian) s.variables.push_back({c + "_dot", 1, i});
-      if (kind != Kind::lagrangian) s.variables.push_back({"p_" + c, 2, i});
+      if (momenta) s.variables.push_back({"p_" + c, 2, i});
     }
     for (const auto& a : arrays) {
       s.arrays.push_back({a.name, 0, a.offset, a.size, a.boundary});
       if (kind != Kind::hamiltonian) s.arrays.push_back({a.name + "_dot", 1, a.offset, a.size, a.boundary});
-      if (kind != Kind::lagrangian) s.arrays.push_back({"p_" + a.name, 2, a.offset, a.size, a.boundary});
+      if (momenta) s.arrays.push_back({"p_" + a.name, 2, a.offset, a.size, a.boundary});
     }
+    if (kind == Kind::force) s.variables.push_back({"t", 0, dim()});
     s.constants = params;
     s.constant_arrays = param_arrays;
     s.definitions = definitions;

@@ -95,6 +95,7 @@ class ComposedStep {
           substeps_[k].adjoint ? dual_[index_[k]].step(tk, q, p, d, e) : plain_[index_[k]].step(tk, q, p, d, e);
       total.iterations += s.iterations;
       total.jacobians += s.jacobians;
+      total.work += s.work;
       if (!(s.residual / s.scale <= total.residual / std::fmax(total.scale, 1e-300))) {
         total.residual = s.residual;
         total.scale = s.scale;

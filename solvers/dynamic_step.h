@@ -14,7 +14,9 @@
 //    then dp = p1 - p0 = h L_q(x, v) (the common shift of q0 and q1 leaves v unchanged:
 //    no cancellation). With dx/ddq = theta I and dv/ddq = I / h, the Jacobian is
 //      dF/ddq = h theta (1 - theta) L_qq + (1 - theta) L_qv - theta L_qv^T - L_vv / h,
-//    built from one call of the system's hessian() per Newton iteration.
+//    built from one call of the system's hessian() per Newton iteration. A generalized
+//    force F(t, q, v) enters by the discrete Lagrange-d'Alembert principle as
+//    L_q + F in both equations (ThetaEquation below).
 //
 // 2. Hamiltonian step (paper Sec. 5.1, Eq. 5.1; solvers/hamiltonian_step.h). The
 //    inverse of the cotangent lift of the theta map sends (q0, p0; q1, p1) to the base
@@ -61,6 +63,7 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 
 #include "core/discretization_map.h"
 #include "mechanics/dynamic_system.h"
@@ -92,17 +95,38 @@ inline bool sizes_match(int n, const Eigen::VectorXd& q0, const Eigen::VectorXd&
 
 // The position-momentum equation of the theta map (paper Sec. 5.3) for a run-time-sized
 // Lagrangian Sys, over its derivative blocks: for the increment D = q1 - q0,
-//   F(D) = p0 + h (1 - theta) L_q(x, v) - L_v(x, v),   x = q0 + theta D,  v = D / h,
-//   dF/dD = h theta (1 - theta) L_qq + (1 - theta) L_qv - theta L_qv^T - L_vv / h,
-// and p1 - p0 = h L_q(x, v) at the solution. The equation of solvers/newton_driver.h;
-// K: the number of coordinates where it is known when compiled (else Dynamic).
-template <class Sys, int K = Eigen::Dynamic>
+//   F(D) = p0 + h (1 - theta) G(x, v) - L_v(x, v),   x = q0 + theta D,  v = D / h,
+//   dF/dD = h theta (1 - theta) G_q + (1 - theta) G_v - theta L_qv^T - L_vv / h,
+// and p1 - p0 = h G(x, v) at the solution, with G = L_q (G_q = L_qq, G_v = L_qv), or
+// G = L_q + F with a generalized force F(t, q, v) (mechanics/written_force.h). The force
+// enters by the discrete Lagrange-d'Alembert principle (Marsden and West, Acta Numerica
+// 2001, Sec. 3.2) with the discrete forces of the map and quadrature of L_d: the virtual
+// work h <F, delta x> at the node x = q0 + theta D, t = t0 + theta h, whose variation
+// delta x = (1 - theta) delta q0 + theta delta q1 gives
+//   F_d^- = h (1 - theta) F,   F_d^+ = h theta F,
+// and the forced discrete Legendre transforms p0 = -D1 L_d - F_d^-, p1 = D2 L_d + F_d^+
+// are the equation above. It is the unforced step with L_q replaced by L_q + F at the
+// same point, so the adjoint of the forced theta step is the forced (1 - theta) step and
+// its compositions keep their order. The work of the force over the step, h <F, v> =
+// <F(t, x, v), D> at the solution, is the same quadrature (work()). The equation of
+// solvers/newton_driver.h; K: the number of coordinates where it is known when compiled
+// (else Dynamic); Force: the type of the force (NoForce: none, and no trace of one in the
+// compiled equation; WrittenForce).
+struct NoForce {
+  int dim() const { return 0; }
+};
+template <class Sys, int K = Eigen::Dynamic, class Force = NoForce>
 class ThetaEquation {
  public:
   using Vector = Eigen::Matrix<double, K, 1>;
   using Matrix = Eigen::Matrix<double, K, K>;
+  static constexpr bool kForced = !std::is_same_v<Force, NoForce>;
 
-  ThetaEquation(const Sys& L, double theta, double h) : L_(&L), th_(theta), h_(h) {
+  // force: the generalized force (an object of the caller's, used from one thread at a
+  // time); required where Force is not NoForce
+  ThetaEquation(const Sys& L, double theta, double h, const Force* force = nullptr)
+      : L_(&L), force_(force), th_(theta), h_(h) {
+    if (kForced && !force_) throw std::invalid_argument("ThetaEquation: a forced equation needs its force");
     const int n = L.dim();
     x_.resize(n);
     v_.resize(n);
@@ -111,47 +135,67 @@ class ThetaEquation {
     Lqq_.resize(n, n);
     Lqv_.resize(n, n);
     Lvv_.resize(n, n);
+    if constexpr (kForced) {
+      F_.resize(n);
+      Fq_.resize(n, n);
+      Fv_.resize(n, n);
+    }
   }
-  // The start of the step.
-  void begin(const Vector& q0, const Vector& p0) {
+  // The start of the step, at time t0 (read by a force only).
+  void begin(const Vector& q0, const Vector& p0, double t0 = 0.0) {
     q0_ = &q0;
     p0_ = &p0;
+    if constexpr (kForced) t_ = t0 + th_ * h_;
     pscale_ = dynamic_detail::inf_norm(p0);
     q0size_ = dynamic_detail::inf_norm(q0);
   }
   void residual(const Vector& D, Vector& r) {
     at(D);
     L_->gradient(x_, v_, Lq_, Lv_);
+    if constexpr (kForced) add_force();
     form(r);
   }
   double jacobian(const Vector& D, Vector& r, Matrix& J) {
     at(D);
     L_->hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
+    if constexpr (kForced) add_force_and_jacobian();
     form(r);
     const double a = h_ * th_ * (1.0 - th_), b = 1.0 - th_, inv_h = 1.0 / h_;
     const Eigen::Index n = J.rows();
     for (Eigen::Index j = 0; j < n; ++j)
       for (Eigen::Index i = 0; i < n; ++i)
         J(i, j) = a * Lqq_(i, j) + b * Lqv_(i, j) - th_ * Lqv_(j, i) - inv_h * Lvv_(i, j);
+    if constexpr (kForced) J += a * Fq_ + b * Fv_;
     const double m = dynamic_detail::inf_norm(J);
     return std::isfinite(m) ? m : INFINITY;
   }
   double scale(double Dn, double Jmax) const { return pscale_ + Jmax * Dn; }
   double offset() const { return q0size_; }
-  // L_qq and L_qv at the point of the last jacobian() (the step's derivative reads them).
+  // L_qq and L_qv at the point of the last jacobian() (the step's derivative reads them),
+  // and with a force its F_q and F_v there.
   const Matrix& Lqq() const { return Lqq_; }
   const Matrix& Lqv() const { return Lqv_; }
+  const Matrix& Fq() const { return Fq_; }
+  const Matrix& Fv() const { return Fv_; }
 
-  // p1 - p0 = h L_q at the solution D.
+  // p1 - p0 = h G at the solution D.
   void momentum(const Vector& D, Vector& dp) {
     at(D);
     L_->gradient(x_, v_, Lq_, Lv_);
+    if constexpr (kForced) add_force();
     for (Eigen::Index i = 0; i < dp.size(); ++i) dp[i] = h_ * Lq_[i];
+  }
+  // The work of the force over the step, <F(t, x, v), D>, after momentum(D) (0 without
+  // a force).
+  double work(const Vector& D) const {
+    if constexpr (kForced) return F_.dot(D);
+    return (void)D, 0.0;
   }
   // The same from L_q of the last evaluation and the correction c applied after it (x
   // moved by -theta c, v by -c / h), to first order with the blocks of the last Jacobian:
   // for a correction at the residual's tolerance what this leaves out (c times the change
   // of the Hessian since, and c^2) lies below the round-off of dp, for one gradient less.
+  // Without a force only (with one the step calls momentum(), which also gives the work).
   void momentum_after(const Vector& c, Vector& dp) const {
     const Eigen::Index n = dp.size();
     const double inv_h = 1.0 / h_;
@@ -163,6 +207,14 @@ class ThetaEquation {
   }
 
  private:
+  void add_force() {
+    force_->value(t_, x_, v_, F_);
+    Lq_ += F_;
+  }
+  void add_force_and_jacobian() {
+    force_->jacobian(t_, x_, v_, F_, Fq_, Fv_);
+    Lq_ += F_;
+  }
   // x = q0 + theta D, v = D / h (as ThetaMap::inverse_increment and DiscreteLagrangian)
   void at(const Vector& D) {
     const double inv_h = 1.0 / h_;
@@ -180,12 +232,13 @@ class ThetaEquation {
   }
 
   const Sys* L_;
-  double th_, h_;
+  const Force* force_;
+  double th_, h_, t_ = 0.0;
   const Vector* q0_ = nullptr;
   const Vector* p0_ = nullptr;
   double pscale_ = 0.0, q0size_ = 0.0;
-  Vector x_, v_, Lq_, Lv_;
-  Matrix Lqq_, Lqv_, Lvv_;
+  Vector x_, v_, Lq_, Lv_, F_;  // Lq_: G = L_q (+ F), what the equation reads
+  Matrix Lqq_, Lqv_, Lvv_, Fq_, Fv_;
 };
 
 // The position-momentum step of the theta map for a run-time-sized Lagrangian Sys: the
@@ -196,8 +249,9 @@ class ThetaEquation {
 // Refresh of the Jacobian: kept across steps (keep_jacobian), else kept within each step
 // where K is known (a step that converges in two iterations then costs one Hessian of L
 // and two gradients instead of two Hessians and a gradient, and forms dp from the last
-// gradient), else formed at every iteration.
-template <class Sys, int K = Eigen::Dynamic>
+// gradient), else formed at every iteration. Force: the type of a generalized force
+// (ThetaEquation), NoForce for none.
+template <class Sys, int K = Eigen::Dynamic, class Force = NoForce>
 class DynamicThetaStep {
   static_assert(is_dynamic_system_v<Sys>, "DynamicThetaStep needs a run-time-sized system (dynamic_system.h)");
 
@@ -205,17 +259,26 @@ class DynamicThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
+  static constexpr bool kForced = ThetaEquation<Sys, K, Force>::kForced;
+
   // keep_jacobian: the factorisation of an earlier step kept while it serves
-  // (Refresh::across_steps); otherwise as the comment above says.
-  DynamicThetaStep(Sys L, ThetaMap R, double h, StepOptions options = {}, bool keep_jacobian = false)
-      : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options) {
+  // (Refresh::across_steps); otherwise as the comment above says. force: the generalized
+  // force F(t, q, v) (ThetaEquation), required where Force is not NoForce; each copy of
+  // the step evaluates its own copy of it.
+  DynamicThetaStep(Sys L, ThetaMap R, double h, StepOptions options = {}, bool keep_jacobian = false,
+                   std::shared_ptr<const Force> force = nullptr)
+      : L_(std::move(L)), R_(std::move(R)), h_(h), options_(options), force_(std::move(force)) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
     const int n = L_.dim();
     if (K != Eigen::Dynamic && n != K)
       throw std::invalid_argument("DynamicThetaStep<" + std::to_string(K) + ">: a system of " + std::to_string(n) +
                                   " coordinates");
-    work_ = std::make_shared<Work>(L_, R_.theta(), h_, n);
+    if (kForced && !force_) throw std::invalid_argument("DynamicThetaStep: a forced step needs its force");
+    if (kForced && force_->dim() != n)
+      throw std::invalid_argument("DynamicThetaStep: a force of " + std::to_string(force_->dim()) +
+                                  " components for a system of " + std::to_string(n) + " coordinates");
+    work_ = std::make_shared<Work>(L_, R_.theta(), h_, n, force_.get());
     refresh_ = keep_jacobian ? Refresh::across_steps : K != Eigen::Dynamic ? Refresh::within_step
                                                                            : Refresh::every_iteration;
     kept_ = std::make_shared<Kept>(n);
@@ -223,8 +286,8 @@ class DynamicThetaStep {
   // A copy has its own equation and workspace (reading its own L); a factorisation kept
   // across steps is shared with it.
   DynamicThetaStep(const DynamicThetaStep& o)
-      : L_(o.L_), R_(o.R_), h_(o.h_), options_(o.options_), refresh_(o.refresh_) {
-    work_ = std::make_shared<Work>(L_, R_.theta(), h_, L_.dim());
+      : L_(o.L_), R_(o.R_), h_(o.h_), options_(o.options_), force_(o.force_), refresh_(o.refresh_) {
+    work_ = std::make_shared<Work>(L_, R_.theta(), h_, L_.dim(), force_.get());
     kept_ = refresh_ == Refresh::across_steps ? o.kept_ : std::make_shared<Kept>(L_.dim());
   }
   DynamicThetaStep& operator=(const DynamicThetaStep&) = delete;
@@ -237,9 +300,13 @@ class DynamicThetaStep {
   const ThetaMap& map() const { return R_; }
   const StepOptions& options() const { return options_; }
   int dim() const { return L_.dim(); }
+  const std::shared_ptr<const Force>& force() const { return force_; }
 
-  // The step of the adjoint map (1 - theta), of the same size.
-  DynamicThetaStep adjoint() const { return DynamicThetaStep(L_, R_.adjoint(), h_, options_, keeps_jacobian()); }
+  // The step of the adjoint map (1 - theta), of the same size (with a force: the forced
+  // step of the adjoint map, ThetaEquation).
+  DynamicThetaStep adjoint() const {
+    return DynamicThetaStep(L_, R_.adjoint(), h_, options_, keeps_jacobian(), force_);
+  }
 
   // The derivative of the step (q0, p0) -> (q1, p1) = (q0 + dq, p0 + dp) at the dq that
   // step() solved for, by the implicit function theorem on its equation (no finite
@@ -254,7 +321,11 @@ class DynamicThetaStep {
   // p0. Returns false where F_D is singular (or not finite) at dq. F_D and L's blocks
   // come from the step's own ThetaEquation, in its workspace (so, as step(), not from
   // two threads at once). Allocates.
-  bool derivative(const V& q0, const V& dq, Eigen::MatrixXd& A) const {
+  // With a force F(t, q, v) the equation reads G = L_q + F for L_q (ThetaEquation), so
+  // L_qq and L_qv above become G_q = L_qq + F_q and G_v = L_qv + F_v, except in F_q0's
+  // L_vq (from L_v alone); t0 is the time the step starts at. A is then not symplectic.
+  bool derivative(const V& q0, const V& dq, Eigen::MatrixXd& A) const { return derivative(0.0, q0, dq, A); }
+  bool derivative(double t0, const V& q0, const V& dq, Eigen::MatrixXd& A) const {
     const int n = L_.dim();
     if (q0.size() != n || dq.size() != n)
       throw std::invalid_argument("DynamicThetaStep::derivative: a state of " + std::to_string(q0.size()) +
@@ -266,25 +337,30 @@ class DynamicThetaStep {
     w.q0 = q0;
     w.p0.setZero();  // (F_D does not depend on p0)
     w.D = dq;
-    w.eq.begin(w.q0, w.p0);
+    w.eq.begin(w.q0, w.p0, t0);
     if (!std::isfinite(w.eq.jacobian(w.D, w.r, w.J))) return false;
-    const M FD = w.J, Lqq = w.eq.Lqq(), Lqv = w.eq.Lqv();
+    const M FD = w.J, Lvq = w.eq.Lqv().transpose();
+    M Gq = w.eq.Lqq(), Gv = w.eq.Lqv();
+    if constexpr (kForced) {
+      Gq += w.eq.Fq();
+      Gv += w.eq.Fv();
+    }
     const Eigen::FullPivLU<M> lu(FD);
     if (!lu.isInvertible()) return false;
-    const M Dq = -lu.solve(M(h * (1.0 - th) * Lqq - Lqv.transpose()));  // d dq / d q0
-    const M Dp = -lu.inverse();                               // d dq / d p0
+    const M Dq = -lu.solve(M(h * (1.0 - th) * Gq - Lvq));  // d dq / d q0
+    const M Dp = -lu.inverse();                             // d dq / d p0
     const M I = M::Identity(n, n);
     A.resize(2 * n, 2 * n);
     A.topLeftCorner(n, n) = I + Dq;
     A.topRightCorner(n, n) = Dp;
-    A.bottomLeftCorner(n, n) = h * Lqq * (I + th * Dq) + Lqv * Dq;
-    A.bottomRightCorner(n, n) = I + (h * th) * Lqq * Dp + Lqv * Dp;
+    A.bottomLeftCorner(n, n) = h * Gq * (I + th * Dq) + Gv * Dq;
+    A.bottomRightCorner(n, n) = I + (h * th) * Gq * Dp + Gv * Dp;
     return A.allFinite();
   }
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
   // dp receives p1 - p0.
-  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     const int n = K == Eigen::Dynamic ? L_.dim() : K;
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
@@ -295,16 +371,17 @@ class DynamicThetaStep {
       w.q0 = q0;
       w.p0 = p0;
       w.D = dq;
-      w.eq.begin(w.q0, w.p0);
+      w.eq.begin(w.q0, w.p0, t);
       s = newton_drive(w.eq, k.lu, refresh_, options_, w.D, w.r, w.dx, w.J, k.state, w.start);
       dq = w.D;
       if (s.converged) {
-        if (K != Eigen::Dynamic && refresh_ == Refresh::within_step &&
+        if (K != Eigen::Dynamic && refresh_ == Refresh::within_step && !kForced &&
             s.residual <= options_.residual_tolerance * s.scale)
           w.eq.momentum_after(w.dx, w.dp);  // (w.dx: the correction applied last)
         else
           w.eq.momentum(w.D, w.dp);
         dp = w.dp;
+        if constexpr (kForced) s.work = w.eq.work(w.D);
         if (!std::isfinite(dynamic_detail::inf_norm(w.dp))) {
           s.converged = false;
           s.message = "non-finite momentum";
@@ -324,7 +401,8 @@ class DynamicThetaStep {
   using SM = Eigen::Matrix<double, K, K>;
   // The equation and the driver's workspace, sized once.
   struct Work {
-    Work(const Sys& L, double theta, double h, int n) : eq(L, theta, h) {
+    Work(const Sys& L, double theta, double h, int n, const Force* f)
+        : force(f ? std::make_unique<Force>(*f) : nullptr), eq(L, theta, h, force.get()) {
       q0.resize(n);
       p0.resize(n);
       D.resize(n);
@@ -334,7 +412,8 @@ class DynamicThetaStep {
       start.resize(n);
       J.resize(n, n);
     }
-    ThetaEquation<Sys, K> eq;
+    std::unique_ptr<Force> force;  // this step's copy of the force (its workspace)
+    ThetaEquation<Sys, K, Force> eq;
     SV q0, p0, D, r, dx, dp, start;
     SM J;
   };
@@ -350,6 +429,7 @@ class DynamicThetaStep {
   ThetaMap R_;
   double h_;
   StepOptions options_;
+  std::shared_ptr<const Force> force_;
   Refresh refresh_ = Refresh::every_iteration;
   std::shared_ptr<Work> work_;
   std::shared_ptr<Kept> kept_;

@@ -64,6 +64,7 @@ struct StepSummary {
   int jacobians = 0;      // Jacobians formed (fewer than iterations where one is kept)
   double residual = NAN;  // |F|_inf at the returned x
   double scale = NAN;     // the scale the residual was judged against
+  double work = 0.0;      // a step with forces: their discrete work over the step (else 0)
   std::string message;    // why a solve failed
 };
 

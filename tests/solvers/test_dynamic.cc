@@ -2,7 +2,8 @@
 // solvers/dynamic_galerkin_step.h): derivatives of every dynamic system against the
 // fixed-size systems and nested Jets; each step against its fixed-size counterpart;
 // adjoints and composition; written chains of 10 and 50 coordinates and 10 bodies
-// (momentum conserved to round-off, bounded energy error); measured orders; a degenerate
+// (momentum conserved to round-off, bounded energy error); measured orders; forces (orders
+// against the driven damped oscillator, work and impulse balances); a degenerate
 // Lagrangian reported as a failure; steps that allocate nothing (those that keep their
 // Jacobian across steps included).
 //
@@ -68,6 +69,7 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include "mechanics/hamiltonian.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
+#include "mechanics/written_force.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/composition.h"
 #include "solvers/dense_separable_step.h"
@@ -109,6 +111,14 @@ std::shared_ptr<WrittenSystem> written(std::vector<std::string> coords, std::vec
   s->check_names();
   s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian), blocks);
   if (!H.empty()) s->hamiltonian = Expression::parse(H, s->symbols(WrittenSystem::Kind::hamiltonian));
+  return s;
+}
+
+// The system with generalized forces {coordinate index, F_i(t, q, v) as text}.
+std::shared_ptr<WrittenSystem> with_forces(std::shared_ptr<WrittenSystem> s,
+                                           const std::vector<std::pair<int, std::string>>& forces) {
+  for (const auto& [i, text] : forces)
+    s->forces.emplace_back(i, Expression::parse(text, s->symbols(WrittenSystem::Kind::force)));
   return s;
 }
 
@@ -633,24 +643,28 @@ BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
 // of the step itself, and symplectic: the written pendulum (n = 1), the written double
 // pendulum and Kepler (n = 2), for the midpoint and an asymmetric theta map.
 namespace {
-template <class Sys>
-void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0, double h) {
+// With a force (and a step starting at t0 != 0, which a time-dependent force reads) the
+// step is not symplectic: A^T J A = J is then asserted to fail, by more than the
+// tolerance it holds to without one.
+template <class Sys, class Force = NoForce>
+void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0, double h,
+                           std::shared_ptr<const Force> force = nullptr, double t0 = 0.0) {
   const int n = L.dim();
   for (double theta : {0.5, 0.3}) {
-    BOOST_TEST_CONTEXT(L.name() << ", theta = " << theta) {
-      const DynamicThetaStep<Sys> S(L, ThetaMap(theta), h);
+    BOOST_TEST_CONTEXT(L.name() << ", theta = " << theta << (force ? ", forced" : "")) {
+      const DynamicThetaStep<Sys, Eigen::Dynamic, Force> S(L, ThetaMap(theta), h, {}, false, force);
       // the state (q1, p1) one step from (q, p)
       auto flow = [&](const VectorXd& q, const VectorXd& p) {
         VectorXd dq = h * legendre_inverse(L, q, p), dp = VectorXd::Zero(n);
-        BOOST_TEST_REQUIRE(S.step(0.0, q, p, dq, dp).converged);
+        BOOST_TEST_REQUIRE(S.step(t0, q, p, dq, dp).converged);
         VectorXd y(2 * n);
         y << q + dq, p + dp;
         return y;
       };
       VectorXd dq = h * legendre_inverse(L, q0, p0), dp = VectorXd::Zero(n);
-      BOOST_TEST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
+      BOOST_TEST_REQUIRE(S.step(t0, q0, p0, dq, dp).converged);
       MatrixXd A;
-      BOOST_TEST_REQUIRE(S.derivative(q0, dq, A));
+      BOOST_TEST_REQUIRE(S.derivative(t0, q0, dq, A));
       BOOST_TEST(A.rows() == 2 * n);
       BOOST_TEST(A.cols() == 2 * n);
       // central differences, column by column (error ~ eps^2 from truncation, ~1e-16/eps
@@ -674,7 +688,11 @@ void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0,
       MatrixXd J = MatrixXd::Zero(2 * n, 2 * n);
       J.topRightCorner(n, n) = MatrixXd::Identity(n, n);
       J.bottomLeftCorner(n, n) = -MatrixXd::Identity(n, n);
-      BOOST_TEST((A.transpose() * J * A - J).cwiseAbs().maxCoeff() <= 1e-12 * size * size);
+      const double defect = (A.transpose() * J * A - J).cwiseAbs().maxCoeff();
+      if (force)
+        BOOST_TEST(defect > 1e-6 * size * size);
+      else
+        BOOST_TEST(defect <= 1e-12 * size * size);
       // not the identity, nor the derivative of the step without its theta terms: the
       // momenta move with the coordinates
       BOOST_TEST(A.bottomLeftCorner(n, n).cwiseAbs().maxCoeff() > 1e-3);
@@ -697,6 +715,14 @@ BOOST_AUTO_TEST_CASE(the_step_derivative_by_the_implicit_function_theorem) {
   Vec<double, 2> qk, pk;
   verification::kepler_initial(0.6, qk, pk);
   check_step_derivative(FixedAsDynamic<Kepler>(kKepler), VectorXd(qk), VectorXd(pk), 0.01);
+  // with forces in t, q and v: a damped, driven pendulum; a double pendulum damped at its
+  // second joint and driven at its first (F_q and F_v both enter)
+  const auto driven = with_forces(written({"theta"}, {{"m", 1.3}, {"l", 0.8}, {"g", 9.81}, {"c", 0.7}},
+                                          "m*l^2*theta_dot^2/2 + m*g*l*cos(theta)"),
+                                  {{0, "-c*theta_dot*(1 + theta^2) + 2*cos(3*t)"}});
+  check_step_derivative(WrittenDynamic(driven), q1, p1, 0.05, std::make_shared<const WrittenForce>(driven), 0.7);
+  const auto damped2 = with_forces(written_double_pendulum(), {{0, "sin(2*t)*cos(b)"}, {1, "-0.5*(b_dot - a_dot)"}});
+  check_step_derivative(WrittenDynamic(damped2), q2, p2, 0.02, std::make_shared<const WrittenForce>(damped2), 1.3);
 }
 
 BOOST_AUTO_TEST_CASE(composed_dynamic_steps_equal_the_fixed_size_compositions) {
@@ -863,6 +889,181 @@ BOOST_AUTO_TEST_CASE(measured_orders_of_the_dynamic_steps) {
 }
 
 // ---------------------------------------------------------------------------------
+// Forces (discrete Lagrange-d'Alembert, solvers/dynamic_step.h).
+
+namespace {
+// m x'' + c x' + k x = A cos(w t): L = m x_dot^2/2 - k x^2/2, F = -c x_dot + A cos(w t),
+// and its exact solution from (x0, v0) at t = 0: the steady oscillation a cos wt + b sin wt
+// plus the damped free oscillation that matches the initial state.
+struct DrivenOscillator {
+  double m = 1.3, k = 2.0, c = 0.4, A = 0.8, w = 1.7;
+  std::shared_ptr<WrittenSystem> text() const {
+    return with_forces(written({"x"}, {{"m", m}, {"k", k}, {"c", c}, {"A", A}, {"w", w}}, "m*x_dot^2/2 - k*x^2/2"),
+                       {{0, "-c*x_dot + A*cos(w*t)"}});
+  }
+  // (x, p) at t from (x0, v0)
+  void exact(double t, double x0, double v0, double& x, double& p) const {
+    const double d = k - m * w * w, det = d * d + c * c * w * w;
+    const double a = A * d / det, b = A * c * w / det;  // d a + c w b = A, d b - c w a = 0
+    const double g = c / (2.0 * m), wd = std::sqrt(k / m - g * g);
+    const double X = x0 - a, Y = (v0 - b * w + g * X) / wd;  // the free part's cos and sin amplitudes
+    const double e = std::exp(-g * t), C = std::cos(wd * t), S = std::sin(wd * t);
+    x = a * std::cos(w * t) + b * std::sin(w * t) + e * (X * C + Y * S);
+    const double v = -a * w * std::sin(w * t) + b * w * std::cos(w * t) + e * (-g * (X * C + Y * S) + wd * (Y * C - X * S));
+    p = m * v;
+  }
+};
+}  // namespace
+
+// The forced steps converge to the exact solution of the damped, driven oscillator at
+// their orders: the midpoint 2, the explicit Euler map 1, the Stormer-Verlet composition
+// of the theta = 0.3 step with its adjoint 2 (which needs the adjoint of the forced step
+// to be the forced (1 - theta) step), the triple jump of the midpoint 4. A force read at
+// the start of the step instead of at the map's node t0 + theta h leaves the midpoint
+// first order.
+BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_their_orders) {
+  const DrivenOscillator osc;
+  const auto text = osc.text();
+  const auto force = std::make_shared<WrittenForce>(text);
+  const WrittenDynamic L(text);
+  const double T = 2.0, x0 = 1.0, v0 = 0.3;
+  double xe, pe;
+  osc.exact(T, x0, v0, xe, pe);
+  using Step = DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce>;
+  auto error_of = [&](const auto& S, double h) {
+    VectorXd q(1), p(1), v(1);
+    q << x0;
+    p << osc.m * v0;
+    v << v0;
+    const RunSummary run = integrate(S, 0.0, q, p, v, std::lround(T / h), [](auto&&...) {});
+    BOOST_TEST(!run.failed, run.failure.message);
+    return std::fmax(std::fabs(q[0] - xe), std::fabs(p[0] - pe));
+  };
+  auto composed = [&](double theta, const char* scheme, double h) {
+    const ThetaMap R(theta);
+    return ComposedStep<Step>(
+        h, substeps(find_composition(scheme), R.symmetric()),
+        [&](double hk) { return Step(L, R, hk, {}, false, force); },
+        [&](double hk) { return Step(L, R, hk, {}, false, force).adjoint(); });
+  };
+  std::vector<double> hs, mid, euler, verlet, jump;
+  for (int k = 0; k < 5; ++k) {
+    const double h = 0.1 / std::pow(2.0, k);
+    hs.push_back(h);
+    mid.push_back(error_of(Step(L, ThetaMap::midpoint(), h, {}, false, force), h));
+    euler.push_back(error_of(Step(L, ThetaMap(0.0), h, {}, false, force), h));
+    verlet.push_back(error_of(composed(0.3, "stormer-verlet", h), h));
+    jump.push_back(error_of(composed(0.5, "triple-jump:4", h), h));
+  }
+  const double o_mid = verification::fit_order(hs, mid), o_euler = verification::fit_order(hs, euler);
+  const double o_verlet = verification::fit_order(hs, verlet), o_jump = verification::fit_order(hs, jump);
+  BOOST_TEST_MESSAGE("forced orders: midpoint " << o_mid << ", explicit Euler " << o_euler << ", theta 0.3 with its adjoint "
+                                                << o_verlet << ", triple jump " << o_jump);
+  BOOST_TEST(std::fabs(o_mid - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_euler - 1.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_verlet - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_jump - 4.0) <= 0.2);
+  BOOST_TEST(mid.back() <= 1e-4);  // close to the solution, not only converging
+}
+
+// One forced step of the oscillator, whose equation is linear in D = q1 - q0, against
+// the equation solved by hand: with x = q0 + theta D, v = D / h and the discrete forces
+// F_d^- = h (1 - theta) F, F_d^+ = h theta F at (t0 + theta h, x, v),
+//   p0 + h (1 - theta) (-k x - c v + f) - m v = 0,   f = A cos(w (t0 + theta h)),
+//   D = (p0 + h (1 - theta) (f - k q0)) / (m / h + (1 - theta) c + h theta (1 - theta) k),
+//   p1 - p0 = h (-k x - c v + f),
+// which pins the split of the force between the two ends (theta and 1 - theta swapped is
+// also consistent, and of the same order once composed with its adjoint).
+BOOST_AUTO_TEST_CASE(one_forced_step_solves_the_discrete_lagrange_dalembert_equation) {
+  const DrivenOscillator o;
+  const auto text = o.text();
+  const double h = 0.1, t0 = 0.9, q0 = 0.6, p0 = -0.3;
+  for (double theta : {0.0, 0.3, 0.5, 1.0}) {
+    BOOST_TEST_CONTEXT("theta = " << theta) {
+      const DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce> S(WrittenDynamic(text), ThetaMap(theta), h, {},
+                                                                              false, std::make_shared<WrittenForce>(text));
+      VectorXd q(1), p(1), dq(1), dp(1);
+      q << q0;
+      p << p0;
+      dq << h * p0 / o.m;
+      const StepSummary s = S.step(t0, q, p, dq, dp);
+      BOOST_TEST_REQUIRE(s.converged);
+      const double b = 1.0 - theta, f = o.A * std::cos(o.w * (t0 + theta * h));
+      const double D = (p0 + h * b * (f - o.k * q0)) / (o.m / h + b * o.c + h * theta * b * o.k);
+      const double x = q0 + theta * D, v = D / h, F = -o.c * v + f;
+      BOOST_TEST(std::fabs(dq[0] - D) <= 1e-15);
+      BOOST_TEST(std::fabs(dp[0] - h * (-o.k * x + F)) <= 1e-15);
+      BOOST_TEST(std::fabs(s.work - F * D) <= 1e-16);
+    }
+  }
+}
+
+// The balances the discrete Lagrange-d'Alembert principle gives exactly:
+// - energy: for the midpoint map and a quadratic L the step is the implicit midpoint rule
+//   of the forced equations, so E_{k+1} - E_k = <F(t, x, v), dq>, the step's work
+//   (StepSummary::work): E_N - E_0 = W_N to round-off;
+// - momentum (forced Noether): along a coordinate L does not depend on, p_{k+1} - p_k =
+//   h F at the map's node (t_k + theta h, q_k + theta dq, dq / h), recomputed here from
+//   the trajectory, at theta = 0.3 with a force in t, q and v.
+BOOST_AUTO_TEST_CASE(the_forced_step_balances_energy_and_momentum_by_the_work_and_impulse) {
+  const DrivenOscillator osc;
+  const auto text = osc.text();
+  const WrittenDynamic L(text);
+  const double h = 0.05;
+  {
+    const DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce> S(L, ThetaMap::midpoint(), h, {}, false,
+                                                                            std::make_shared<WrittenForce>(text));
+    VectorXd q(1), p(1), dq(1), dp(1);
+    q << 1.0;
+    p << 0.2;
+    dq = h * p / osc.m;
+    auto energy = [&](const VectorXd& x, const VectorXd& y) { return y[0] * y[0] / (2 * osc.m) + osc.k * x[0] * x[0] / 2; };
+    const double E0 = energy(q, p);
+    double W = 0.0, largest = 0.0;
+    for (int k = 0; k < 2000; ++k) {
+      const StepSummary s = S.step(k * h, q, p, dq, dp);
+      BOOST_TEST_REQUIRE(s.converged);
+      q += dq;
+      p += dp;
+      W += s.work;
+      largest = std::fmax(largest, std::fabs(W));
+    }
+    BOOST_TEST(largest > 0.1);  // the force does work
+    BOOST_TEST(std::fabs(energy(q, p) - E0 - W) <= 1e-13 * std::fmax(E0, largest));
+  }
+  // x cyclic, y an oscillator; forces in both, the one along x in t, x, y and x_dot
+  const auto planar = with_forces(written({"x", "y"}, {{"c", 0.3}}, "(x_dot^2 + y_dot^2)/2 - y^2/2 + x_dot*y_dot/4"),
+                                  {{0, "-c*x_dot + cos(2*t)*y*cos(x)"}, {1, "-c*y_dot"}});
+  const WrittenDynamic P(planar);
+  const double theta = 0.3;
+  const DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce> S(P, ThetaMap(theta), h, {}, false,
+                                                                          std::make_shared<WrittenForce>(planar));
+  VectorXd q(2), p(2), dq(2), dp(2);
+  q << 0.4, 1.0;
+  p << 0.5, -0.2;
+  dq = h * legendre_inverse(P, q, p);
+  const double c = 0.3;
+  double impulse = 0.0, compensation = 0.0, largest = 0.0;
+  const double px0 = p[0];
+  for (int k = 0; k < 400; ++k) {
+    const double t = k * h;
+    const StepSummary s = S.step(t, q, p, dq, dp);
+    BOOST_TEST_REQUIRE(s.converged, "step " << k << ": " << s.message);
+    // h F_x at the node, from the states alone
+    const double x = q[0] + theta * dq[0], y = q[1] + theta * dq[1], xdot = dq[0] / h;
+    const double term = h * (-c * xdot + std::cos(2 * (t + theta * h)) * y * std::cos(x)) - compensation;
+    const double sum = impulse + term;
+    compensation = (sum - impulse) - term;
+    impulse = sum;
+    largest = std::fmax(largest, std::fabs(impulse));
+    q += dq;
+    p += dp;
+  }
+  BOOST_TEST(largest > 0.1);
+  BOOST_TEST(std::fabs((p[0] - px0) - impulse) <= 1e-13 * std::fmax(1.0, largest));
+}
+
+// ---------------------------------------------------------------------------------
 // Failures.
 
 BOOST_AUTO_TEST_CASE(a_degenerate_written_lagrangian_is_reported_not_crashed) {
@@ -990,6 +1191,15 @@ BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
   const VectorXd qk = qf, pk = pf, gk = h * pk;
   BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic>(WrittenDynamic(text), ThetaMap(0.3), h), qk, pk, gk, 5) == 0);
   BOOST_TEST(allocations_in_steps(DynamicThetaStep<WrittenDynamic, 2>(WrittenDynamic(text), ThetaMap(0.3), h), qk, pk, gk, 5) == 0);
+  {  // with a force: its value and Jacobian too
+    const auto driven = DrivenOscillator().text();
+    const auto force = std::make_shared<WrittenForce>(driven);
+    const VectorXd q1 = VectorXd::Constant(1, 0.7), p1 = VectorXd::Constant(1, 0.2), g1 = h * p1;
+    using Dyn = DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce>;
+    using One = DynamicThetaStep<WrittenDynamic, 1, WrittenForce>;
+    BOOST_TEST(allocations_in_steps(Dyn(WrittenDynamic(driven), ThetaMap(0.3), h, {}, false, force), q1, p1, g1, 5) == 0);
+    BOOST_TEST(allocations_in_steps(One(WrittenDynamic(driven), ThetaMap(0.3), h, {}, false, force), q1, p1, g1, 5) == 0);
+  }
   BOOST_TEST(allocations_in_steps(DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian>(WrittenDynamicHamiltonian(text),
                                                                                         ThetaMap::midpoint(), h),
                                   qk, pk, gk, 5) == 0);
