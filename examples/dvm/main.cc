@@ -112,7 +112,9 @@ const char* kRunHelp =
     "              sums of many terms, over 32 coordinates) or tape, and\n"
     "              compiled (true with system.compile), compile_seconds and\n"
     "              interpreted (what the step still evaluates interpreted: \"\",\n"
-    "              or the sparse Hessian of U of separable-sparse-newton))\n"
+    "              or the sparse Hessian of U of separable-sparse-newton));\n"
+    "              with [system] forces, forced (true), work, energy_balance_final\n"
+    "              and max_abs_energy_balance\n"
     "  --npy PATH  also write the rows as a NumPy .npy file (float64, shape\n"
     "              rows x columns, the CSV's columns as --csv states them),\n"
     "              overriding [output] npy; their names go beside it in PATH.json,\n"
@@ -170,6 +172,19 @@ const char* kRunHelp =
     "                               initial values and largest errors in the report\n"
     "                               (JSON invariants), a CSV column each after energy\n"
     "                               (momenta of cyclic coordinates are added after them)\n"
+    "    forces = { x = \"EXPR\" }    strings, optional, on R^n: the generalized force\n"
+    "                               along each named coordinate (the others 0), in the\n"
+    "                               time t, x and x_dot, e.g. \"-c*x_dot + A*cos(w*t)\"\n"
+    "                               (damping, a drive). It enters by the discrete\n"
+    "                               Lagrange-d'Alembert principle with the map's own\n"
+    "                               node: the lagrangian form of the theta-family maps,\n"
+    "                               composed or not (not splittings into kicks and\n"
+    "                               drifts); any other form or method is refused (exit\n"
+    "                               2). The report adds forced, work (W, the force's\n"
+    "                               discrete work from t = 0), energy_balance_final and\n"
+    "                               max_abs_energy_balance (E - E_0 - W); the CSV a\n"
+    "                               last column, work. A coordinate with a force is not\n"
+    "                               reported as cyclic\n"
     "    name = \"...\"               string, optional; the system's name in reports\n"
     "    compile = false            true: on R^n, the derivative programs of L (and H)\n"
     "                               compiled to machine code by the C compiler ($DVM_CC,\n"
@@ -668,10 +683,10 @@ std::string run_help() {
   std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", "system", "space", "forms", "comp.", "galerkin",
                 "boundary-value");
   h += line;
-  auto row = [&](const dvm::SystemEntry& e, const char* space = nullptr) {
+  auto row = [&](const dvm::SystemEntry& e, const char* space = nullptr, const char* name = nullptr) {
     std::string forms;
     for (dvm::Form f : e.caps.forms) forms += (forms.empty() ? "" : ",") + std::string(dvm::to_string(f));
-    std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", e.name.c_str(),
+    std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", name ? name : e.name.c_str(),
                   space ? space : dvm::to_string(e.space),
                   forms.c_str(), e.caps.composition ? "yes" : "no", e.caps.galerkin ? "yes" : "no",
                   e.caps.boundary_value ? "yes" : "no");
@@ -680,6 +695,7 @@ std::string run_help() {
   for (const auto& e : dvm::system_registry()) row(e);
   for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation}) row(dvm::written_system_entry(sp));
   row(dvm::written_system_entry(dvm::Space::sphere, 2), "(S^2)^K");
+  row(dvm::written_system_entry(dvm::Space::euclidean, 1, true), nullptr, "lagrangian, forces");
   return h;
 }
 

@@ -127,16 +127,23 @@ class StepperRun final : public Run {
   RunReport execute(Recorder* rec) override {
     RunReport r = base_;
     const double h = stepper_.step_size();
-    std::vector<double> row_values(static_cast<std::size_t>(view_.row_size()));
+    // with forces, a last column: the work W_k done by them since t = 0
+    const bool forced = r.forced;
+    const std::size_t row_size = static_cast<std::size_t>(view_.row_size());
+    std::vector<double> row_values(row_size + (forced ? 1 : 0));
     if (rec) {
-      rec->open(view_.columns(), output_rows(steps_, rec->every()));
+      std::vector<std::string> columns = view_.columns();
+      if (forced) columns.push_back("work");
+      rec->open(columns, output_rows(steps_, rec->every()));
       view_.fill_row(row_values.data(), 0.0, q0_, p0_, E0_);
+      if (forced) row_values[row_size] = 0.0;
       rec->row(row_values.data());
     }
     const int n_inv = view_.invariant_count();
     double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
     view_.invariants(q0_, p0_, I0);
     double max_energy_error = 0.0, E = E0_, defect = view_.point_defect(q0_);
+    double W = 0.0, W_c = 0.0, max_balance = 0.0;  // the work (compensated sum) and |E - E0 - W|
     Point q = q0_;
     Covector p = p0_;
     const std::int64_t monitor_every = rec ? std::max<std::int64_t>(1, rec->spec().monitor_every) : 1;
@@ -144,6 +151,7 @@ class StepperRun final : public Run {
     auto monitor = [&](std::int64_t k, const Point& qk, const Covector& pk) {
       E = view_.energy(qk, pk);
       max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0_));
+      if (forced) max_balance = std::fmax(max_balance, std::fabs((E - E0_) - W));
       if (n_inv > 0) {
         view_.invariants(qk, pk, Ik);
         for (int i = 0; i < n_inv; ++i) Ierr[i] = std::fmax(Ierr[i], std::fabs(Ik[i] - I0[i]));
@@ -158,7 +166,12 @@ class StepperRun final : public Run {
     const bool rows = rec && rec->writes_rows();
     const std::int64_t every = rec ? std::max<std::int64_t>(1, rec->every()) : 1;
     std::int64_t next_row = rows ? every : -1, next_monitor = monitor_every;
-    auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary&) {
+    auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary& s) {
+      if (forced) {  // (Kahan-Babuska, as the state's sums)
+        const double y = s.work - W_c, sum = W + y;
+        W_c = (sum - W) - y;
+        W = sum;
+      }
       const bool row = rows && (k == next_row || k == steps_);
       if (row && k == next_row) next_row += every;
       const bool due = k == next_monitor;
@@ -167,6 +180,7 @@ class StepperRun final : public Run {
       if (rec) {
         if (row) {
           view_.fill_row(row_values.data(), t, qk, pk, E);
+          if (forced) row_values[row_size] = W;
           rec->row(row_values.data());
         }
         rec->progress(k, steps_, h);
@@ -189,6 +203,8 @@ class StepperRun final : public Run {
     r.energy_initial = E0_;
     r.energy_final = E;
     r.max_abs_energy_error = max_energy_error;
+    r.work = W;
+    r.max_abs_energy_balance = max_balance;
     r.solver_iterations = r.loop.solver_iterations;
     r.jacobians = r.loop.jacobians;
     r.max_step_iterations = r.loop.max_step_iterations;

@@ -32,6 +32,7 @@
 
 #include "mechanics/dynamic_system.h"
 #include "mechanics/hamiltonian.h"
+#include "mechanics/written_force.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/dense_separable_step.h"
@@ -57,9 +58,17 @@ inline void dynamic_invariant_values(const NBodyDynamic&, const Eigen::VectorXd&
   const auto m = NBodyDynamic::momenta(q, p);
   for (int i = 0; i < 6; ++i) out[i] = m[static_cast<std::size_t>(i)];
 }
+// A coordinate that L does not depend on and no force acts along: its momentum is
+// conserved (with a force along it, it changes by the force's impulse).
+inline bool conserved_momentum(const WrittenDynamic& L, int i) {
+  if (!L.cyclic(i)) return false;
+  for (const auto& f : L.system()->forces)
+    if (f.first == i) return false;
+  return true;
+}
 // The scene's own invariants ([system] invariants, in its order), then the momentum of
-// each coordinate that L does not depend on (cyclic: conserved), up to
-// kMaxInvariantValues in all.
+// each coordinate that L does not depend on and no force acts along (cyclic: conserved),
+// up to kMaxInvariantValues in all.
 inline std::vector<InvariantReport> dynamic_invariant_names(const WrittenDynamic& L) {
   std::vector<InvariantReport> out;
   for (const auto& [name, expression] : L.system()->invariants) {
@@ -69,7 +78,7 @@ inline std::vector<InvariantReport> dynamic_invariant_names(const WrittenDynamic
     out.push_back(r);
   }
   for (int i = 0; i < L.dim() && static_cast<int>(out.size()) < kMaxInvariantValues; ++i)
-    if (L.cyclic(i)) {
+    if (conserved_momentum(L, i)) {
       InvariantReport r;
       r.name = "p_" + L.system()->coordinates[static_cast<std::size_t>(i)] + " (cyclic)";
       r.initial = {0.0};
@@ -99,7 +108,7 @@ inline void dynamic_invariant_values(const WrittenDynamic& L, const Eigen::Vecto
                                      double* out) {
   int k = written_invariant_values(L, q, p, out);
   for (int i = 0; i < L.dim() && k < kMaxInvariantValues; ++i)
-    if (L.cyclic(i)) out[k++] = p[i];
+    if (conserved_momentum(L, i)) out[k++] = p[i];
 }
 // n bodies: v = M^{-1} p in closed form, so <dL/dv, v> = <p, v> and E = <p, v> - L(q, v)
 // without the gradient (whose pair loop costs as much as L's)
@@ -355,6 +364,45 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
+
+  // system.forces: the forced position-momentum step (the registry's "lagrangian with
+  // forces" admits nothing else), never the structured paths below, whose equations
+  // have no force term; its sizes and Jacobian refresh as the unforced step's below
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+    if (pr.forced()) {
+      const auto force = std::make_shared<WrittenForce>(pr.written);
+      V F(n);
+      WrittenForce(*force).value(0.0, q, v0, F);
+      if (!F.allFinite()) {
+        std::ostringstream m;
+        m.precision(17);
+        m << pr.forces_where << ": the force is not finite at the initial state (t = 0): F = [";
+        for (int i = 0; i < n; ++i) m << (i ? ", " : "") << F[i];
+        throw InputError(m.str() + "]");
+      }
+      if (me.galerkin || me.form != Form::lagrangian)  // (validate refuses it first)
+        throw InputError(pr.forces_where + ": forces enter the lagrangian form of the theta-family maps only");
+      dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.forces");
+      base.forced = true;
+      const ThetaMap R = dynamic_theta_map(me);
+      if (n <= kFixedWrittenMaxDim && me.use_structure) {
+        auto run_fixed = [&](auto k) {
+          constexpr int K = decltype(k)::value;
+          auto make = [&](double hk, const ThetaMap& Rk) {
+            return DynamicThetaStep<Sys, K, WrittenForce>(L, Rk, hk, opt, false, force);
+          };
+          return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+        };
+        if (n == 1) return run_fixed(std::integral_constant<int, 1>());
+        return run_fixed(std::integral_constant<int, 2>());
+      }
+      const bool keep = me.use_structure && n >= kKeptJacobianMinDim;
+      if (keep) base.step_path = StepPath::kept_jacobian_newton;
+      auto make = [&](double hk, const ThetaMap& Rk) {
+        return DynamicThetaStep<Sys, Eigen::Dynamic, WrittenForce>(L, Rk, hk, opt, keep, force);
+      };
+      return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+    }
 
   if (me.form == Form::lagrangian && !me.galerkin) {
     const ThetaMap R = dynamic_theta_map(me);

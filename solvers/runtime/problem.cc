@@ -99,6 +99,8 @@ std::string form_list(const std::vector<Form>& forms) {
 
 }  // namespace
 
+bool Problem::forced() const { return written && !written->forces.empty(); }
+
 void require_boundary_value(const SystemEntry& sys) {
   if (!sys.caps.boundary_value)
     throw InputError("problem.kind: boundary-value problems run on the fixed-size R^n systems, the spherical "
@@ -134,7 +136,7 @@ void validate(const Problem& pr, const Method& me) {
     const Space space = pr.written->space == WrittenSystem::Space::sphere     ? Space::sphere
                         : pr.written->space == WrittenSystem::Space::rotation ? Space::rotation
                                                                               : Space::euclidean;
-    if (&sys != &written_system_entry(space, pr.written->factors))
+    if (&sys != &written_system_entry(space, pr.written->factors, !pr.written->forces.empty()))
       throw InputError(std::string("system.space: the written system lives on ") + to_string(space) +
                        " but the problem names the system entry \"" + name + "\" on " + to_string(sys.space));
   }
@@ -241,6 +243,9 @@ void validate(const Problem& pr, const Method& me) {
                                "\" is a splitting into kicks and drifts for separable systems: ";
       if (sys.space != Space::euclidean)
         throw InputError(what + "it runs on R^n, not on " + to_string(sys.space));
+      if (pr.forced())
+        throw InputError(what + "its kicks are the gradient of a potential, and system.forces are not (the forced "
+                                "step takes the other compositions)");
       if (me.form != Form::lagrangian && me.form != Form::hamiltonian)
         throw InputError(what + "expected form = \"lagrangian\" or \"hamiltonian\", got \"" +
                          std::string(to_string(me.form)) + "\"");

@@ -56,6 +56,9 @@ struct Problem {
   std::string origin;
   // Where the written system's texts are, for messages about them.
   std::string written_where, hamiltonian_where;
+  // Where the written system's forces are (system.forces), empty where it writes none.
+  std::string forces_where;
+  bool forced() const;  // the written system has forces (system.forces)
 };
 
 class WrittenRetraction;  // mechanics/written_retraction.h

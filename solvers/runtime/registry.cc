@@ -357,9 +357,30 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
                    did_you_mean(name, names));
 }
 
-const SystemEntry& written_system_entry(Space space, int factors) {
+const SystemEntry& written_system_entry(Space space, int factors, bool forced) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
+  // With forces: the theta-family maps in the lagrangian form, composed or not (the forced
+  // step of solvers/dynamic_step.h); the rest takes no force term.
+  static const SystemEntry rn_forced = {
+      "lagrangian with forces",
+      "written in the scene, with generalized forces",
+      Space::euclidean,
+      0,
+      {},
+      {{Form::lagrangian},
+       true,
+       true,
+       false,
+       false,
+       "system.forces enter the position-momentum step of the theta-family maps and its compositions; the "
+       "hamiltonian form, Galerkin, SODE, Newmark, boundary values, solver = \"tiny\" and written maps take no "
+       "forces",
+       false,
+       false},
+      factories::written,
+      "the coordinates"};
+  if (forced && space == Space::euclidean) return rn_forced;
   // On S^2 and SO(3) a written Lagrangian runs the steps of the built-in systems there;
   // its Hamiltonian form needs the written H (validate checks that it is given).
   static const SystemEntry sphere = {

@@ -162,7 +162,9 @@ const std::vector<SystemEntry>& system_registry();
 // Throws InputError ("<where>: unknown system ...; expected one of: ...").
 const SystemEntry& find_system_entry(const std::string& name, const std::string& where);
 // The entry of Lagrangians written in a scene on R^n, S^2, (S^2)^K (space sphere,
-// factors K = 2..4) or SO(3) (name "lagrangian", not listed as built-in).
-const SystemEntry& written_system_entry(Space space = Space::euclidean, int factors = 1);
+// factors K = 2..4) or SO(3) (name "lagrangian", not listed as built-in); `forced`: on
+// R^n with forces (system.forces), "lagrangian with forces", which runs what the forced
+// step is built for.
+const SystemEntry& written_system_entry(Space space = Space::euclidean, int factors = 1, bool forced = false);
 
 }  // namespace dvm

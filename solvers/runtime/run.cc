@@ -182,6 +182,11 @@ std::string report_json(const RunReport& r) {
   j.arr("q_final", r.q_final).arr("p_final", r.p_final);
   j.num("energy_initial", r.energy_initial).num("energy_final", r.energy_final);
   j.num("max_abs_energy_error", r.max_abs_energy_error);
+  if (r.forced)
+    j.boolean("forced", true)
+        .num("work", r.work)
+        .num("energy_balance_final", r.energy_final - r.energy_initial - r.work)
+        .num("max_abs_energy_balance", r.max_abs_energy_balance);
   if (r.max_point_defect >= 0.0) j.num("max_point_defect", r.max_point_defect);
   if (r.momentum_spread >= 0.0) j.num("vertical_angular_momentum_spread", r.momentum_spread);
   if (r.boundary_value) j.num("max_del_residual", r.max_del_residual).num("residual_scale", r.residual_scale);
@@ -228,6 +233,9 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
                   r.method_label.c_str(), r.step, static_cast<long long>(r.steps), r.t_final);
       std::fprintf(to, "  %-44s %22s %12s\n", "quantity", "initial", "max |change|");
       std::fprintf(to, "  %-44s %22.15g %12.3e\n", "energy", r.energy_initial, r.max_abs_energy_error);
+      if (r.forced)
+        std::fprintf(to, "  forces: work W = %.15g to t = %.6g; energy balance |E - E_0 - W| at most %.3e\n", r.work,
+                     r.t_final, r.max_abs_energy_balance);
       for (const InvariantReport& inv : r.invariants)
         for (std::size_t c = 0; c < inv.initial.size(); ++c) {
           const std::string n = inv.initial.size() > 1 ? inv.name + " [" + std::to_string(c) + "]" : inv.name;

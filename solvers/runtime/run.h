@@ -119,6 +119,12 @@ struct RunReport {
   // distances between runs.
   std::vector<double> q_embedded;
   double energy_initial = 0.0, energy_final = 0.0, max_abs_energy_error = 0.0;
+  // A system with forces (system.forces): the discrete work W_k of the forces from t = 0
+  // (the sum of each step's, StepSummary::work) and the energy balance E_k - E_0 - W_k,
+  // its largest magnitude over the monitored steps; max_abs_energy_error is then the
+  // energy's change, not a conservation error.
+  bool forced = false;
+  double work = 0.0, max_abs_energy_balance = 0.0;
   double max_point_defect = -1.0;  // manifolds only (< 0: not reported)
   std::vector<InvariantReport> invariants;
   double wall_seconds = 0.0;

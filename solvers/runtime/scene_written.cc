@@ -1,5 +1,6 @@
 #include "solvers/runtime/scene_written.h"
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <map>
@@ -329,10 +330,43 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
       }
     }
   }
+  // [system] forces = { coordinate = "F_i(t, q, v)", ... }: generalized forces, by the
+  // discrete Lagrange-d'Alembert principle (mechanics/written_force.h)
+  if (const toml::node* f = sys.get("forces")) {
+    const std::string key = "system.forces";
+    if (!f->is_table())
+      throw InputError(key_where(path, *f, key) + ": expected a table of coordinate = \"expression\" (the generalized "
+                                                  "force along that coordinate, in t, the coordinates and velocities)");
+    if (w->space != WrittenSystem::Space::euclidean)
+      throw InputError(key_where(path, *f, key) + ": forces are written on R^n; on S^2 and SO(3) a written system "
+                                                  "is conservative");
+    for (const auto& [name, node] : *f->as_table()) {
+      const std::string k = key + "." + std::string(name.str());
+      int index = -1;
+      for (std::size_t i = 0; i < w->coordinates.size(); ++i)
+        if (w->coordinates[i] == name.str()) index = static_cast<int>(i);
+      if (index < 0) {
+        std::string known;
+        for (std::size_t i = 0; i < w->coordinates.size() && i < 12; ++i)
+          known += (i ? ", " : "") + w->coordinates[i];
+        if (w->coordinates.size() > 12) known += ", ...";
+        throw InputError(key_where(path, node, k) + ": '" + std::string(name.str()) +
+                         "' is not a coordinate; a force is keyed by the coordinate it acts along (" + known + ")");
+      }
+      if (!node.is_string()) throw InputError(key_where(path, node, k) + ": expected a string (an expression)");
+      try {
+        w->forces.emplace_back(index, Expression::parse(*node.value<std::string>(), w->symbols(WrittenSystem::Kind::force)));
+      } catch (const ExpressionError& e) {
+        throw InputError(string_location(path, node, e.offset) + ": in " + k + ": " + e.what());
+      }
+    }
+    std::sort(w->forces.begin(), w->forces.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    if (!w->forces.empty()) pr.forces_where = key_where(path, *f, key);
+  }
   const toml::node* L = sys.get("lagrangian");
   pr.written_where = key_where(path, *L, "system.lagrangian");
   if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
-  pr.system = &written_system_entry(space, w->factors);
+  pr.system = &written_system_entry(space, w->factors, !w->forces.empty());
   pr.dim = w->dim();
   pr.written = std::move(w);
 }

@@ -598,7 +598,7 @@ BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
   refused({"system.ends={ x = \"fixed\" }"}, "'x' is not an array of coordinates");
   refused({"system.lagrangian=\"q_dot[5]^2\""}, "index 5 of 'q_dot' is outside 1 to 4");
   refused({"system.lagrangian=\"q_dot^2\""}, "'q_dot' is an array of 4 entries");
-  refused({"system.lagrangian=\"q_dot[1]^2 + t\""}, "time is not a variable of written systems yet");
+  refused({"system.lagrangian=\"q_dot[1]^2 + t\""}, "the time is a variable of the forces (system.forces) only");
   refused({"system.params={ n = 4, k = [] }"}, "expected a non-empty list of numbers");
   refused({"initial.q=\"1/(i - 2)\""}, "the expression is not finite at i = 2");
   refused({"initial.q=\"x*i\""}, "in initial.q (an expression in i = 1 ... 4 and the parameters): unknown name 'x'");
@@ -726,4 +726,82 @@ BOOST_AUTO_TEST_CASE(spherical_chain_of_many_links_from_expressions) {
   const Output r = run_json("chain.toml", {"--set", "initial.q=[\"1\", \"0\", \"0\"]"});
   BOOST_TEST(r.status == 2);
   BOOST_TEST(r.err.find("a list of expressions is taken on S^2 and (S^2)^n") != std::string::npos, r.err);
+}
+
+// [system] forces (discrete Lagrange-d'Alembert, solvers/dynamic_step.h) end to end: the
+// shipped damped oscillator near its exact solution, its energy balance E - E_0 - W to
+// round-off (a quadratic L, the midpoint map), the work in the JSON and as the CSV's last
+// column, compositions and `dvm converge` with a force; every form, method and key the
+// forced step does not take refused with exit 2, naming the keys.
+BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_the_keys) {
+  const std::string csv = temp_dir() + "/damped.csv";
+  const Output o = dvm({"run", scene("damped_oscillator.toml"), "--json", "--csv", csv});
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  const Json j = parse_json(o.out);
+  BOOST_TEST(j.at("forced").get<bool>());
+  const double W = j.at("work").get<double>(), E0 = j.at("energy_initial").get<double>(),
+               E = j.at("energy_final").get<double>();
+  BOOST_TEST(W < -0.4);  // the damping takes most of the energy 1/2 by t = 50
+  BOOST_TEST(std::fabs(E - E0 - W) <= 1e-14);
+  BOOST_TEST(std::fabs(j.at("energy_balance_final").get<double>()) <= 1e-14);
+  BOOST_TEST(j.at("max_abs_energy_balance").get<double>() <= 1e-14);
+  // x(50) = exp(-2.5) (cos(50 w) + 0.05/w sin(50 w)), w = sqrt(1 - 0.05^2)
+  const double w = std::sqrt(1.0 - 0.0025), x = std::exp(-2.5) * (std::cos(50 * w) + 0.05 / w * std::sin(50 * w));
+  const double x_final = json_array(o.out, "q_final").at(0);
+  BOOST_TEST(std::fabs(x_final - x) <= 2e-5);
+  BOOST_TEST(std::fabs(x_final - x) > 1e-7);  // second order at h = 0.01, not exact
+  // the CSV: t, x, p_x, energy, work; its last row the report's
+  std::ifstream in(csv);
+  std::string header, line, last;
+  std::getline(in, header);
+  BOOST_TEST(header == "t,x,p_x,energy,work");
+  while (std::getline(in, line))
+    if (!line.empty()) last = line;
+  BOOST_TEST_REQUIRE(last.rfind(',') != std::string::npos);
+  BOOST_TEST(std::stod(last.substr(last.rfind(',') + 1)) == W);
+  // composed: order 4 brings it to the solution (1e-9 at h = 0.01)
+  const Output c = dvm({"run", scene("damped_oscillator.toml"), "--json", "--no-output", "--set",
+                        "integrator.composition=\"triple-jump:4\""});
+  BOOST_TEST_REQUIRE(c.status == 0, c.err);
+  BOOST_TEST(std::fabs(json_array(c.out, "q_final").at(0) - x) <= 1e-9);
+  BOOST_TEST(std::fabs(json_number(c.out, "energy_balance_final")) <= 1e-14);
+  // converge: against the order-8 composition of the forced midpoint step (Galerkin
+  // takes no force)
+  const Output v = dvm({"converge", scene("damped_oscillator.toml"), "--t-end", "10", "--steps-list", "100,200,400",
+                        "--json"});
+  BOOST_TEST_REQUIRE(v.status == 0, v.err);
+  BOOST_TEST(std::fabs(parse_json(v.out).at("fitted_order").get<double>() - 2.0) <= 0.05, v.out);
+  // a drive in t: the driven Duffing oscillator runs
+  const Output d = dvm({"run", scene("driven_duffing.toml"), "--json", "--no-output", "--set", "integrator.t_end=20"});
+  BOOST_TEST(d.status == 0, d.err);
+  BOOST_TEST(parse_json(d.out).at("forced").get<bool>());
+
+  auto refused = [&](const std::string& scene_name, std::vector<std::string> sets, std::vector<std::string> says) {
+    std::vector<std::string> args = {"run", scene(scene_name), "--no-output"};
+    for (const auto& s : sets) {
+      args.push_back("--set");
+      args.push_back(s);
+    }
+    const Output r = dvm(args);
+    BOOST_TEST_CONTEXT(sets.front()) {
+      BOOST_TEST(r.status == 2);
+      BOOST_TEST(r.out.empty());
+      for (const std::string& s : says) BOOST_TEST(r.err.find(s) != std::string::npos, r.err);
+    }
+  };
+  refused("damped_oscillator.toml", {"integrator.form=hamiltonian"}, {"integrator.form", "system.forces"});
+  refused("damped_oscillator.toml", {"integrator.method=galerkin"}, {"integrator.method", "system.forces"});
+  refused("damped_oscillator.toml", {"integrator.form=sode1"}, {"integrator.form", "system.forces"});
+  refused("damped_oscillator.toml", {"integrator.map=explicit-euler", "integrator.composition=blanes-moan4"},
+          {"integrator.composition", "system.forces"});
+  refused("damped_oscillator.toml", {"system.forces={ y = \"-x_dot\" }"},
+          {"system.forces.y", "'y' is not a coordinate", "(x)"});
+  refused("damped_oscillator.toml", {"system.forces={ x = \"-c*\" }"}, {"in system.forces.x", "after '*'"});
+  refused("damped_oscillator.toml", {"system.forces={ x = \"-p_x\" }"}, {"in system.forces.x", "unknown name 'p_x'"});
+  refused("damped_oscillator.toml", {"system.forces={ x = 1.0 }"}, {"system.forces.x", "expected a string"});
+  refused("damped_oscillator.toml", {"system.forces=\"-c*x_dot\""}, {"system.forces", "expected a table"});
+  refused("damped_oscillator.toml", {"system.forces={ x = \"log(x - 1)\" }"},
+          {"system.forces", "not finite at the initial state"});
+  refused("pendulum.toml", {"system.forces={ theta = \"0\" }"}, {"system.forces", "belongs to a written system"});
+  refused("spherical_pendulum_written.toml", {"system.forces={ x = \"0\" }"}, {"system.forces", "on R^n"});
 }
