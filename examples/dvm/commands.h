@@ -19,6 +19,7 @@ struct RunOptions {
   bool json = false;
   bool quiet = false;
   bool no_output = false;  // --no-output: the scene's [output] csv and npy are not written
+  std::string linearize;   // --linearize PATH: the derivative of every step (.npy)
   bool converge = false;                 // `dvm converge`: a convergence study instead of a run
   std::vector<std::int64_t> steps_list;  // converge: the step counts (empty: the default)
   double t_end = 0.0;                    // converge: the time span (0: the scene's)

@@ -67,7 +67,7 @@ const char* kVersionHelp =
 
 const char* kRunHelp =
     "usage: dvm run SCENE.toml [--set section.key=value]... [--csv PATH] [--npy PATH]\n"
-    "               [--no-output] [--json] [--quiet]\n"
+    "               [--no-output] [--linearize PATH] [--json] [--quiet]\n"
     "\n"
     "Integrates the scene with the position-momentum form of the discrete Lagrangian\n"
     "L_d(q0, q1) = h L(R_d^{-1}(q0, q1) / h) of the scene's discretization map.\n"
@@ -121,6 +121,18 @@ const char* kRunHelp =
     "              {\"columns\": [...], \"npy\": FILE} (none when PATH is a stream)\n"
     "  --no-output write no rows: the scene's [output] csv and npy are not written\n"
     "              (refused beside --csv or --npy)\n"
+    "  --linearize PATH\n"
+    "              also write the derivative of every step as a NumPy .npy file:\n"
+    "              row k holds t_k, then the 2n x 2n Jacobian A_k of the step\n"
+    "              (q_k, p_k) -> (q_{k+1}, p_{k+1}) row by row, coordinates before\n"
+    "              momenta (columns t, A[0,0], A[0,1], ..., named in PATH.json):\n"
+    "              A = np.load(PATH)[:, 1:].reshape(-1, 2*n, 2*n). Each A_k comes\n"
+    "              from the implicit function theorem on the solved step equation\n"
+    "              (no finite differences; symplectic without forces). For\n"
+    "              Lagrangians written on R^n, the lagrangian form of the\n"
+    "              theta-family maps without a composition, forces included (the\n"
+    "              generic step is taken where the text's structure would give\n"
+    "              another); anything else is refused (exit 2)\n"
     "  --quiet     print nothing on success and no progress (errors still go to\n"
     "              stderr); progress (step, time, rate, time left) is shown on\n"
     "              stderr only when stderr is a terminal\n"
@@ -763,8 +775,12 @@ int cmd_run(const std::vector<std::string>& args) {
       o.quiet = true;
     } else if (a == "--no-output") {
       o.no_output = true;
+    } else if (a == "--linearize") {
+      o.linearize = value("--linearize");
+      if (o.linearize.empty()) usage_error("--linearize needs a file name", kRunHelp);
     } else if (!a.empty() && a[0] == '-') {
-      usage_error(unknown_option(a, {"--set", "--csv", "--npy", "--no-output", "--json", "--quiet", "--help"}),
+      usage_error(unknown_option(a, {"--set", "--csv", "--npy", "--no-output", "--linearize", "--json", "--quiet",
+                                     "--help"}),
                   kRunHelp);
     } else if (scene.empty()) {
       scene = a;

@@ -16,13 +16,21 @@ int run_scene(const Scene& s, const RunOptions& o) {
     const ConvergeReport r = converge(s.problem, s.method, co);
     return print_converge(r, o.json);
   }
-  const auto run = make_run(s.problem, s.method);
+  Method method = s.method;
+  method.linearize = !o.linearize.empty();
+  const auto run = make_run(s.problem, method);
   OutputSpec out;
   out.csv = o.csv.empty() ? s.csv : o.csv;
   out.npy = o.npy.empty() ? s.npy : o.npy;
   out.csv_source = output_source(s.path, o.csv, "--csv", "output.csv");
   out.npy_source = output_source(s.path, o.npy, "--npy", "output.npy");
   out.inputs = {s.path};
+  out.linearize = o.linearize;
+  out.linearize_source = "--linearize " + o.linearize;
+  for (const std::string* rows : {&out.csv, &out.npy})
+    if (!o.linearize.empty() && *rows == o.linearize)
+      throw InputError(out.linearize_source + ": the same file as the run's rows (" +
+                       (rows == &out.csv ? out.csv_source : out.npy_source) + ")");
   out.every = s.every;
   out.monitor_every = s.monitor_every;
   out.progress = !o.quiet;

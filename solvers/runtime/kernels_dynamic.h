@@ -404,7 +404,8 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
     }
 
-  if (me.form == Form::lagrangian && !me.galerkin) {
+  // (--linearize: the generic theta step, which gives its derivative)
+  if (me.form == Form::lagrangian && !me.galerkin && !me.linearize) {
     const ThetaMap R = dynamic_theta_map(me);
     if (splitting_applies(me, R)) {
       if constexpr (is_separable_v<Sys>)
@@ -449,7 +450,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   // Newton on the structured equation, with the sparse Hessian of U where the text of a
   // written Lagrangian gives one, a dense one otherwise (n bodies)
   if (me.form == Form::lagrangian && !me.galerkin && dynamic_separable(L) && separable_newton_applies(me) &&
-      n >= kStructuredNewtonMinDim) {
+      n >= kStructuredNewtonMinDim && !me.linearize) {
     const ThetaMap R = dynamic_theta_map(me);
     if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
       std::shared_ptr<SparsePotentialHessian> H;

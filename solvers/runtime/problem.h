@@ -95,6 +95,9 @@ struct Method {
   // or TinySolver on the step equation), e.g. to compare the two. solver = "tiny"
   // asks for the generic path too.
   bool use_structure = true;
+  // The run writes the derivative of every step (dvm run --linearize, OutputSpec::
+  // linearize): validate admits the steps that give one, and the kernels take them.
+  bool linearize = false;
   int max_iterations = 25;
   double tolerance = 2e-15;
 

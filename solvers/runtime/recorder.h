@@ -36,6 +36,11 @@ struct OutputSpec {
   std::string csv, npy;                 // empty: not written
   std::string csv_source, npy_source;   // what gave each path, for messages
   std::vector<std::string> inputs;      // files the run reads (the scene): never written over
+  // The derivative of every step (dvm run --linearize), a .npy file: one row per step k,
+  // t_k then the entries of the 2n x 2n Jacobian A_k of (q_k, p_k) -> (q_{k+1}, p_{k+1}),
+  // row by row (columns t, A[0,0], A[0,1], ...); empty: not written. The method must ask
+  // for it (Method::linearize).
+  std::string linearize, linearize_source;
   std::int64_t every = 1;
   // The energy, the invariants and the distance from the manifold are evaluated every
   // monitor_every steps, at every row written and at the last step, and the report's

@@ -805,3 +805,138 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
   refused("pendulum.toml", {"system.forces={ theta = \"0\" }"}, {"system.forces", "belongs to a written system"});
   refused("spherical_pendulum_written.toml", {"system.forces={ x = \"0\" }"}, {"system.forces", "on R^n"});
 }
+
+namespace {
+// The rows of a .npy file dvm wrote (float64, two dimensions): shape and values.
+struct NpyRows {
+  long long rows = 0;
+  int cols = 0;
+  std::vector<double> values;
+  double at(long long r, int c) const { return values.at(static_cast<std::size_t>(r * cols + c)); }
+};
+NpyRows read_npy(const std::string& path) {
+  const std::string bytes = slurp(path);
+  NpyRows out;
+  BOOST_REQUIRE(bytes.size() > 10 && bytes.compare(0, 6, "\x93NUMPY") == 0);
+  const std::size_t hlen = static_cast<unsigned char>(bytes[8]) + 256u * static_cast<unsigned char>(bytes[9]);
+  const std::string header = bytes.substr(10, hlen);
+  BOOST_REQUIRE(std::sscanf(header.c_str() + header.find("'shape': (") + 10, "%lld, %d", &out.rows, &out.cols) == 2);
+  BOOST_REQUIRE(bytes.size() == 10 + hlen + static_cast<std::size_t>(out.rows * out.cols) * 8);
+  out.values.resize(static_cast<std::size_t>(out.rows * out.cols));
+  std::memcpy(out.values.data(), bytes.data() + 10 + hlen, out.values.size() * 8);
+  return out;
+}
+}  // namespace
+
+// dvm run --linearize: the Jacobian of every step in a .npy file, row k = (t_k, A_k row
+// by row). A_0 against central differences of one-step runs of dvm itself (relative
+// 1e-7), for the written pendulum (symplectic: det A = 1 at every step) and the damped
+// oscillator (a force: det A < 1); the double pendulum's A_k symplectic, A^T J A = J; the
+// steps that give no derivative refused with exit 2 and nothing written.
+BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
+  const std::string dir = temp_dir();
+  // (q1, p1) after one step of h from the scene's start moved by (dq, dp); `momentum`:
+  // the scene's key of the initial momentum (initial.v where the mass is 1)
+  auto one_step = [&](const std::string& name, const std::string& momentum, int n, double q0, double p0, int j,
+                      double e) {
+    std::vector<double> q(static_cast<std::size_t>(n), 0.0), p(q);
+    q[0] = q0;
+    p[0] = p0;
+    (j < n ? q : p)[static_cast<std::size_t>(j % n)] += e;
+    auto list = [](const std::vector<double>& x) {
+      std::ostringstream s;
+      s.precision(17);
+      s << "[";
+      for (std::size_t i = 0; i < x.size(); ++i) s << (i ? ", " : "") << x[i];
+      return s.str() + "]";
+    };
+    const Output o = dvm({"run", scene(name), "--json", "--no-output", "--set", "integrator.t_end=0.01", "--set",
+                          "initial.q=" + list(q), "--set", momentum + "=" + list(p)});
+    BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+    std::vector<double> y = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
+    y.insert(y.end(), pf.begin(), pf.end());
+    return y;
+  };
+  struct Case {
+    std::string scene, momentum;
+    double q0, p0;
+    bool forced;
+  };
+  for (const Case& c : {Case{"pendulum_written.toml", "initial.p", 2.0, 0.3, false},
+                        Case{"damped_oscillator.toml", "initial.v", 1.0, 0.2, true}}) {
+    BOOST_TEST_CONTEXT(c.scene) {
+      const std::string path = dir + "/A_" + c.scene + ".npy";
+      const Output o = dvm({"run", scene(c.scene), "--json", "--no-output", "--linearize", path, "--set",
+                            "integrator.t_end=0.05", "--set", "initial.q=[" + std::to_string(c.q0) + "]", "--set",
+                            c.momentum + "=[" + std::to_string(c.p0) + "]"});
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      BOOST_TEST(json_string(o.out, "step_path") == "generic");
+      const NpyRows A = read_npy(path);
+      BOOST_TEST(A.rows == 5);
+      BOOST_TEST(A.cols == 5);
+      const Json names = parse_json(slurp(path + ".json"));
+      BOOST_TEST(names.at("columns").at(0).get<std::string>() == "t");
+      BOOST_TEST(names.at("columns").at(2).get<std::string>() == "A[0,1]");
+      for (long long k = 0; k < A.rows; ++k) {
+        BOOST_TEST(A.at(k, 0) == 0.01 * static_cast<double>(k), boost::test_tools::tolerance(1e-15));
+        const double det = A.at(k, 1) * A.at(k, 4) - A.at(k, 2) * A.at(k, 3);
+        if (c.forced)
+          BOOST_TEST(det < 1.0 - 1e-4);  // the damping contracts areas
+        else
+          BOOST_TEST(std::fabs(det - 1.0) <= 1e-13);
+      }
+      const double eps = 1e-5;
+      for (int j = 0; j < 2; ++j) {
+        const std::vector<double> a = one_step(c.scene, c.momentum, 1, c.q0, c.p0, j, eps),
+                                  b = one_step(c.scene, c.momentum, 1, c.q0, c.p0, j, -eps);
+        for (int i = 0; i < 2; ++i) {
+          const double central = (a[static_cast<std::size_t>(i)] - b[static_cast<std::size_t>(i)]) / (2 * eps);
+          BOOST_TEST(std::fabs(A.at(0, 1 + 2 * i + j) - central) <= 1e-7 * std::fmax(1.0, std::fabs(central)),
+                     "A(" << i << "," << j << ") = " << A.at(0, 1 + 2 * i + j) << ", central differences " << central);
+        }
+      }
+    }
+  }
+  // two coordinates: A_k^T J A_k = J at every step
+  const std::string path2 = dir + "/A2.npy";
+  const Output d = dvm({"run", scene("double_pendulum_written.toml"), "--no-output", "--quiet", "--linearize", path2,
+                        "--set", "integrator.t_end=0.03"});
+  BOOST_TEST_REQUIRE(d.status == 0, d.err);
+  const NpyRows A2 = read_npy(path2);
+  BOOST_TEST(A2.rows == 3);
+  BOOST_TEST(A2.cols == 17);
+  for (long long k = 0; k < A2.rows; ++k) {
+    double worst = 0.0;
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j) {
+        // (A^T J A)(i, j) = sum_r A(r, i) (J A)(r, j), J = [0 I; -I 0]
+        double s = 0.0;
+        for (int r = 0; r < 4; ++r) {
+          const double JA = r < 2 ? A2.at(k, 1 + 4 * (r + 2) + j) : -A2.at(k, 1 + 4 * (r - 2) + j);
+          s += A2.at(k, 1 + 4 * r + i) * JA;
+        }
+        const double J = (i < 2 && j == i + 2) ? 1.0 : (i >= 2 && j == i - 2) ? -1.0 : 0.0;
+        worst = std::fmax(worst, std::fabs(s - J));
+      }
+    BOOST_TEST(worst <= 1e-12);
+  }
+
+  auto refused = [&](const std::string& scene_name, std::vector<std::string> extra, const std::string& says) {
+    const std::string path = dir + "/refused.npy";
+    std::vector<std::string> args = {"run", scene(scene_name), "--linearize", path};
+    args.insert(args.end(), extra.begin(), extra.end());
+    if (std::find(extra.begin(), extra.end(), "--npy") == extra.end()) args.push_back("--no-output");
+    const Output r = dvm(args);
+    BOOST_TEST_CONTEXT(scene_name << (extra.empty() ? "" : " " + extra.back())) {
+      BOOST_TEST(r.status == 2);
+      BOOST_TEST(r.err.find(says) != std::string::npos, r.err);
+      BOOST_TEST(!file_exists(path));
+    }
+  };
+  refused("pendulum.toml", {}, "not the built-in system pendulum");
+  refused("pendulum_written.toml", {"--set", "integrator.composition=\"triple-jump:4\""}, "integrator.composition");
+  refused("pendulum_written.toml", {"--set", "integrator.method=galerkin"}, "integrator.method");
+  refused("pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
+  refused("spherical_pendulum_written.toml", {}, "on S^2");
+  refused("pendulum_written.toml", {"--npy", dir + "/refused.npy"}, "the same file as the run's rows");
+}
