@@ -803,7 +803,7 @@ std::string integer(std::int64_t x) { return std::to_string(x); }
 // failure's step and time).
 constexpr const char* kRunColumns[] = {
     "system", "map", "form", "composition", "method", "step", "steps", "t_final", "wall_seconds", "cpu_seconds",
-    "energy_initial", "energy_final", "max_abs_energy_error", "solver_iterations", "jacobians",
+    "energy_initial", "energy_final", "max_abs_energy_error", "work", "max_abs_energy_balance", "solver_iterations", "jacobians",
     "max_step_iterations", "order", "failed_step", "failed_time"};
 
 }  // namespace
@@ -838,7 +838,8 @@ std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
       for (const std::string& s :
            {r.system, r.map, r.form, r.composition, r.method, num17(r.step), integer(r.steps), num17(r.t_final),
             num17(r.wall_seconds), num17(row.cpu_seconds), num17(r.energy_initial), num17(r.energy_final),
-            num17(r.max_abs_energy_error), integer(r.solver_iterations), integer(r.jacobians),
+            num17(r.max_abs_energy_error), r.forced ? num17(r.work) : std::string(),
+            r.forced ? num17(r.max_abs_energy_balance) : std::string(), integer(r.solver_iterations), integer(r.jacobians),
             integer(r.max_step_iterations), r.order > 0 ? integer(r.order) : std::string(),
             failed ? integer(r.loop.failed_step) : std::string(), failed ? num17(r.loop.failed_time) : std::string()})
         c.push_back(s);
@@ -1235,6 +1236,11 @@ SweepRow row_from(const SweepOptions& o, const JValue& v, const std::string& tex
     r.energy_initial = number_or_nan(*run, "energy_initial", at);
     r.energy_final = number_or_nan(*run, "energy_final", at);
     r.max_abs_energy_error = number_or_nan(*run, "max_abs_energy_error", at);
+    if (const JValue* f = run->find("forced"); f && f->kind == JValue::boolean && f->b) {
+      r.forced = true;
+      r.work = number_or_nan(*run, "work", at);
+      r.max_abs_energy_balance = number_or_nan(*run, "max_abs_energy_balance", at);
+    }
     r.solver_iterations = static_cast<std::int64_t>(number_or_nan(*run, "solver_iterations", at));
     r.jacobians = static_cast<std::int64_t>(number_or_nan(*run, "jacobians", at));
     const double most = number_or_nan(*run, "max_step_iterations", at);

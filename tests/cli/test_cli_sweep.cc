@@ -153,6 +153,7 @@ BOOST_AUTO_TEST_CASE(a_sweep_equals_the_runs_done_one_by_one_on_1_and_2_threads)
     BOOST_TEST(std::strtod(c[column(head, "max_abs_energy_error")].c_str(), nullptr) ==
                run.at("max_abs_energy_error").get<double>());
     BOOST_TEST(std::stoll(c[column(head, "solver_iterations")]) == run.at("solver_iterations").get<long long>());
+    BOOST_TEST(c[column(head, "work")].empty());  // no forces
   }
   // the scene's [output] file is not written by a sweep
   BOOST_TEST(!file_exists("never-written.csv"));
@@ -582,4 +583,29 @@ BOOST_AUTO_TEST_CASE(max_error_along_the_run_is_that_of_the_written_trajectory) 
   BOOST_TEST(o.status == 2, o.err);
   BOOST_TEST(o.err.find("--max-error") != std::string::npos, o.err);
   BOOST_TEST(o.err.find("no exact solution") != std::string::npos, o.err);
+}
+
+// A sweep of a scene with [system] forces: its work and energy balance in the table,
+// each row's as its run reports them; the work grows with the damping (none at c = 0).
+BOOST_AUTO_TEST_CASE(a_sweep_of_a_forced_scene_tabulates_the_work_and_the_energy_balance) {
+  const Json j = sweep_json({"sweep", scene("damped_oscillator.toml"), "--vary", "system.params.c=[0.0, 0.1, 0.5]",
+                             "--vary", "integrator.t_end=[10.0]"},
+                            temp_dir() + "/forced", 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 3u);
+  const auto csv = csv_rows(slurp(temp_dir() + "/forced.csv"));
+  BOOST_TEST_REQUIRE(csv.size() == 4u);
+  const std::vector<std::string>& head = csv.front();
+  double previous = 1.0;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const Json& run = j.at("rows").at(i).at("run");
+    BOOST_TEST(run.at("forced").get<bool>());
+    const double W = std::strtod(csv[i + 1][column(head, "work")].c_str(), nullptr);
+    BOOST_TEST(W == run.at("work").get<double>());
+    BOOST_TEST(std::strtod(csv[i + 1][column(head, "max_abs_energy_balance")].c_str(), nullptr) ==
+               run.at("max_abs_energy_balance").get<double>());
+    BOOST_TEST(run.at("max_abs_energy_balance").get<double>() <= 1e-14);
+    BOOST_TEST(W < previous);
+    previous = W;
+  }
+  BOOST_TEST(j.at("rows").at(0).at("run").at("work").get<double>() == 0.0);
 }
