@@ -19,6 +19,14 @@
 //         + b_i l_j'(c_i)   (l_k(c_i) L_qv^T + (l_k'(c_i)/h) L_vv) ],
 // what GalerkinStep obtains by differentiating L_q and L_v with Jets.
 //
+// Forces. A generalized force F(t, q, v) (Force, e.g. WrittenForce; NoForce: none, as
+// in solvers/dynamic_step.h) enters by the discrete Lagrange-d'Alembert principle with
+// the same quadrature: the virtual work h sum_i b_i <F_i, delta x_i> at the nodes,
+// F_i = F(t0 + c_i h, x_i, v_i), delta x_i = sum_j l_j(c_i) delta q_j, is g_i = L_q + F_i
+// in the equations above (and in dp); in the Jacobian L_qq and L_qv become L_qq + F_q and
+// L_qv + F_v where they differentiate g_i (not in the p_i terms). The step reports the
+// force's work h sum_i b_i <F_i, v_i> (StepSummary::work), like dp at the last evaluation.
+//
 // The solve, as GalerkinStep: the one driver (solvers/newton_driver.h) with
 // Refresh::contracting, the Jacobian inverted once and reused across iterations and
 // steps while the corrections contract fourfold, refreshed when they do not or when the
@@ -44,6 +52,9 @@
 #include <Eigen/Core>
 #include <array>
 #include <cmath>
+#include <memory>
+#include <optional>
+#include <type_traits>
 #include <stdexcept>
 #include <string>
 
@@ -51,11 +62,12 @@
 #include "mechanics/quadrature.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/newton.h"
+#include "solvers/dynamic_step.h"
 #include "solvers/newton_driver.h"
 
 namespace dvm {
 
-template <class Sys>
+template <class Sys, class Force = NoForce>
 class DynamicGalerkinStep {
   static_assert(is_dynamic_system_v<Sys>, "DynamicGalerkinStep needs a run-time-sized system (dynamic_system.h)");
 
@@ -64,9 +76,18 @@ class DynamicGalerkinStep {
   static constexpr int SMax = kGalerkinMaxStages;
   static constexpr int MMax = SMax + 1;
   using V = Eigen::VectorXd;
+  static constexpr bool kForced = !std::is_same_v<Force, NoForce>;
 
-  DynamicGalerkinStep(Sys L, QuadratureKind kind, int stages, double h, StepOptions options = {})
+  // force: the generalized force, required where Force is not NoForce (the step keeps
+  // its own copy)
+  DynamicGalerkinStep(Sys L, QuadratureKind kind, int stages, double h, StepOptions options = {},
+                      std::shared_ptr<const Force> force = nullptr)
       : L_(std::move(L)), quad_(kind, check_stages(stages)), s_(stages), h_(h), options_(options), t_(quad_, s_) {
+    if constexpr (kForced) {
+      if (!force || force->dim() != L_.dim())
+        throw std::invalid_argument("DynamicGalerkinStep: a forced step needs a force of the system's dimension");
+      force_fn_.emplace(*force);
+    }
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
     if (options.solver != SolverKind::newton)
       throw std::invalid_argument("run-time-sized steps solve by Newton's method only (solver = \"newton\")");
@@ -100,6 +121,12 @@ class DynamicGalerkinStep {
     J_.setZero(K, K);
     lu_.inv.setZero(K, K);
     lu_.lu.resize(K);
+    if constexpr (kForced) {
+      F_.setZero(n, m);
+      Fcol_.setZero(n);
+      Fq_.setZero(n, n);
+      Fv_.setZero(n, n);
+    }
   }
 
   double step_size() const { return h_; }
@@ -124,8 +151,9 @@ class DynamicGalerkinStep {
 
   // One step from (q0, p0); dq carries a guess of q1 - q0 on entry (used unless the
   // step continues the previous one), q1 - q0 on return; dp receives p1 - p0.
-  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     const int s = s_, n = L_.dim();
+    t0_ = t;
     StepSummary sum;
     if (q0.size() != n || p0.size() != n || dq.size() != n) {
       sum.message = "the state has " + std::to_string(q0.size()) + " coordinates; the system has " +
@@ -157,6 +185,11 @@ class DynamicGalerkinStep {
     if (!sum.converged) return sum;
     dq = X_.segment((s - 1) * n, n);
     dp = force_;  // the force quadrature at the last evaluation (before the final correction)
+    if constexpr (kForced) {
+      double w = 0.0;
+      for (int i = 0; i < quad_.points; ++i) w += bh_[i] * F_.col(i).dot(vs_.col(i));
+      sum.work = w;
+    }
     if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
       sum.converged = false;
       sum.message = "non-finite step";
@@ -175,6 +208,8 @@ class DynamicGalerkinStep {
 
  private:
   static int check_stages(int s) { return check_galerkin_stages(s, 0); }
+  // the time of quadrature node i in the step that started at t0_
+  double node_time(int i) const { return t0_ + static_cast<double>(quad_.c[static_cast<std::size_t>(i)]) * h_; }
 
   // R_ and force_ at X_, as GalerkinStep::residual_fast:
   //   x = q0 + X A, v = X B / h (n x m), R = h G WA + P WB (n x s), force = h G b,
@@ -200,6 +235,11 @@ class DynamicGalerkinStep {
       }
       for (int a = 0; a < n; ++a) x[a] += q0[a];
       L_.gradient(xs_.col(i), vs_.col(i), G_.col(i), P_.col(i));
+      if constexpr (kForced) {
+        force_fn_->value(node_time(i), xs_.col(i), vs_.col(i), Fcol_);
+        F_.col(i) = Fcol_;
+        G_.col(i) += Fcol_;
+      }
     }
     double* R = r_out.data();
     for (int j = 0; j < s; ++j) {
@@ -298,9 +338,16 @@ class DynamicGalerkinStep {
       }
       v_ *= inv_h;
       L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
+      if constexpr (kForced) {  // g_i = L_q + F_i: F_q, F_v join the derivatives of g_i only
+        force_fn_->jacobian(node_time(i), x_, v_, Fcol_, Fq_, Fv_);
+        Fq_ += Lqq_;
+        Fv_ += Lqv_;
+      }
+      const Eigen::MatrixXd& Gq = kForced ? Fq_ : Lqq_;  // dg_i/dx, dg_i/dv
+      const Eigen::MatrixXd& Gv = kForced ? Fv_ : Lqv_;
       for (int k = 1; k <= s; ++k) {
         // d(h g_i)/dX_k and d(p_i)/dX_k
-        dg_ = h_ * (t_.A[i][k] * Lqq_ + (t_.B[i][k] / h_) * Lqv_);
+        dg_ = h_ * (t_.A[i][k] * Gq + (t_.B[i][k] / h_) * Gv);
         dpk_ = t_.A[i][k] * Lqv_.transpose() + (t_.B[i][k] / h_) * Lvv_;
         for (int j = 0; j < s; ++j) J.block(j * n, (k - 1) * n, n, n) += t_.WA[i][j] * dg_ + t_.WB[i][j] * dpk_;
       }
@@ -327,6 +374,12 @@ class DynamicGalerkinStep {
   mutable DriverState kept_;  // whether lu_ holds a Jacobian kept across steps
   mutable bool have_prev_ = false;
   mutable long jacobian_updates_ = 0;
+  // the force (a copy of the caller's: its workspace), its values at the nodes (n x m),
+  // and the start of the current step
+  mutable std::optional<Force> force_fn_;
+  mutable Eigen::MatrixXd F_, Fq_, Fv_;
+  mutable V Fcol_;
+  mutable double t0_ = 0.0;
 };
 
 }  // namespace dvm

@@ -380,10 +380,15 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         for (int i = 0; i < n; ++i) m << (i ? ", " : "") << F[i];
         throw InputError(m.str() + "]");
       }
-      if (me.galerkin || me.form != Form::lagrangian)  // (validate refuses it first)
-        throw InputError(pr.forces_where + ": forces enter the lagrangian form of the theta-family maps only");
-      dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.forces");
+      if (me.form != Form::lagrangian)  // (validate refuses it first)
+        throw InputError(pr.forces_where + ": forces enter the lagrangian form only");
       base.forced = true;
+      if (me.galerkin) {
+        dense_limit("integrator.method: method = \"galerkin\" with system.forces");
+        return stepper_run(view, DynamicGalerkinStep<Sys, WrittenForce>(L, me.quadrature, me.stages, h, opt, force), q,
+                           p, v0, base, pr.steps);
+      }
+      dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.forces");
       const ThetaMap R = dynamic_theta_map(me);
       if (n <= kFixedWrittenMaxDim && me.use_structure) {
         auto run_fixed = [&](auto k) {

@@ -360,8 +360,9 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
 const SystemEntry& written_system_entry(Space space, int factors, bool forced) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
-  // With forces: the theta-family maps in the lagrangian form, composed or not (the forced
-  // step of solvers/dynamic_step.h); the rest takes no force term.
+  // With forces: the lagrangian form, the theta-family maps composed or not and Galerkin
+  // (the forced steps of solvers/dynamic_step.h and dynamic_galerkin_step.h); the rest
+  // takes no force term.
   static const SystemEntry rn_forced = {
       "lagrangian with forces",
       "written in the scene, with generalized forces",
@@ -371,11 +372,11 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced) {
       {{Form::lagrangian},
        true,
        true,
+       true,
        false,
-       false,
-       "system.forces enter the position-momentum step of the theta-family maps and its compositions; the "
-       "hamiltonian form, Galerkin, SODE, Newmark, boundary values, solver = \"tiny\" and written maps take no "
-       "forces",
+       "system.forces enter the lagrangian form: the position-momentum step of the theta-family maps, its "
+       "compositions, and Galerkin; the hamiltonian form, SODE, Newmark, boundary values, solver = \"tiny\" and "
+       "written maps take no forces",
        false,
        false},
       factories::written,

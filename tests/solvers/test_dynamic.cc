@@ -918,7 +918,10 @@ struct DrivenOscillator {
 // The forced steps converge to the exact solution of the damped, driven oscillator at
 // their orders: the midpoint 2, the explicit Euler map 1, the Stormer-Verlet composition
 // of the theta = 0.3 step with its adjoint 2 (which needs the adjoint of the forced step
-// to be the forced (1 - theta) step), the triple jump of the midpoint 4. A force read at
+// to be the forced (1 - theta) step), the triple jump of the midpoint 4, Galerkin with
+// Gauss and Lobatto quadrature and s = 2 stages 4 (forces at the quadrature nodes, the
+// nodes' times t0 + c_i h); Galerkin Gauss s = 1, the midpoint rule, gives the forced
+// midpoint step's states to round-off. A force read at
 // the start of the step instead of at the map's node t0 + theta h leaves the midpoint
 // first order.
 BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_their_orders) {
@@ -946,7 +949,8 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
         [&](double hk) { return Step(L, R, hk, {}, false, force); },
         [&](double hk) { return Step(L, R, hk, {}, false, force).adjoint(); });
   };
-  std::vector<double> hs, mid, euler, verlet, jump;
+  using Galerkin = DynamicGalerkinStep<WrittenDynamic, WrittenForce>;
+  std::vector<double> hs, mid, euler, verlet, jump, gauss, lobatto;
   for (int k = 0; k < 5; ++k) {
     const double h = 0.1 / std::pow(2.0, k);
     hs.push_back(h);
@@ -954,16 +958,51 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
     euler.push_back(error_of(Step(L, ThetaMap(0.0), h, {}, false, force), h));
     verlet.push_back(error_of(composed(0.3, "stormer-verlet", h), h));
     jump.push_back(error_of(composed(0.5, "triple-jump:4", h), h));
+    gauss.push_back(error_of(Galerkin(L, QuadratureKind::gauss, 2, h, {}, force), h));
+    lobatto.push_back(error_of(Galerkin(L, QuadratureKind::lobatto, 2, h, {}, force), h));
   }
   const double o_mid = verification::fit_order(hs, mid), o_euler = verification::fit_order(hs, euler);
   const double o_verlet = verification::fit_order(hs, verlet), o_jump = verification::fit_order(hs, jump);
+  const double o_gauss = verification::fit_order(hs, gauss), o_lobatto = verification::fit_order(hs, lobatto);
   BOOST_TEST_MESSAGE("forced orders: midpoint " << o_mid << ", explicit Euler " << o_euler << ", theta 0.3 with its adjoint "
-                                                << o_verlet << ", triple jump " << o_jump);
+                                                << o_verlet << ", triple jump " << o_jump << ", Galerkin Gauss s = 2 "
+                                                << o_gauss << ", Lobatto s = 2 " << o_lobatto);
+  BOOST_TEST(std::fabs(o_gauss - 4.0) <= 0.2);
+  BOOST_TEST(std::fabs(o_lobatto - 4.0) <= 0.2);
   BOOST_TEST(std::fabs(o_mid - 2.0) <= 0.1);
   BOOST_TEST(std::fabs(o_euler - 1.0) <= 0.1);
   BOOST_TEST(std::fabs(o_verlet - 2.0) <= 0.1);
   BOOST_TEST(std::fabs(o_jump - 4.0) <= 0.2);
   BOOST_TEST(mid.back() <= 1e-4);  // close to the solution, not only converging
+  BOOST_TEST(gauss.back() <= 1e-9);
+  // Gauss s = 1 is the midpoint rule: the same states, step after step
+  {
+    const double h = 0.05;
+    const Galerkin G1(L, QuadratureKind::gauss, 1, h, {}, force);
+    const Step M(L, ThetaMap::midpoint(), h, {}, false, force);
+    VectorXd qa(1), pa(1), qb(1), pb(1), da(1), db(1), ea(1), eb(1);
+    qa << 1.0;
+    pa << 0.4;
+    qb = qa;
+    pb = pa;
+    da << 0.02;
+    db = da;
+    double W1 = 0.0, W2 = 0.0;
+    for (int k = 0; k < 200; ++k) {
+      const StepSummary s1 = G1.step(k * h, qa, pa, da, ea), s2 = M.step(k * h, qb, pb, db, eb);
+      BOOST_TEST_REQUIRE((s1.converged && s2.converged));
+      qa += da;
+      pa += ea;
+      qb += db;
+      pb += eb;
+      W1 += s1.work;
+      W2 += s2.work;
+    }
+    BOOST_TEST(std::fabs(qa[0] - qb[0]) <= 1e-13);
+    BOOST_TEST(std::fabs(pa[0] - pb[0]) <= 1e-13);
+    BOOST_TEST(std::fabs(W1 - W2) <= 1e-13);
+    BOOST_TEST(std::fabs(W1) > 0.1);
+  }
 }
 
 // One forced step of the oscillator, whose equation is linear in D = q1 - q0, against
