@@ -445,15 +445,23 @@ class DynamicThetaStep {
 // symplectic unless theta = 1/2). The Jacobian (H_pq = H_qp^T, b the weight of dp in P):
 //   [ I - h theta H_pq      -h b H_pp   ]
 //   [ h theta H_qq           I + h b H_qp ].
+// A generalized force F(t, q, v) (Force; NoForce: none) joins the momentum equation at
+// the node, with the velocity there, V = H_p(Q, P), and t = t0 + theta h:
+//   dp + h H_q(Q, P) - h F(t, Q, V) = 0,
+// the Hamilton equations of the forced system (p' = -H_q + F) by the same lift; its
+// Jacobian rows gain -h theta (F_q + F_v H_pq) and -h b F_v H_pp. The work of the force
+// over the step is <F, dq> at the last evaluation.
 // The equation of solvers/newton_driver.h.
-template <class Ham>
+template <class Ham, class Force = NoForce>
 class HamiltonianThetaEquation {
  public:
   using Vector = Eigen::VectorXd;
   using Matrix = Eigen::MatrixXd;
+  static constexpr bool kForced = !std::is_same_v<Force, NoForce>;
 
-  HamiltonianThetaEquation(const Ham& H, double theta, double h, bool on_bundle)
-      : H_(&H), th_(theta), b_(on_bundle ? theta : 1.0 - theta), h_(h) {
+  HamiltonianThetaEquation(const Ham& H, double theta, double h, bool on_bundle, const Force* force = nullptr)
+      : H_(&H), force_(force), th_(theta), b_(on_bundle ? theta : 1.0 - theta), h_(h) {
+    if (kForced && !force_) throw std::invalid_argument("HamiltonianThetaEquation: a forced equation needs its force");
     const int n = H.dim();
     x_.resize(n);
     p_.resize(n);
@@ -462,11 +470,18 @@ class HamiltonianThetaEquation {
     Hqq_.resize(n, n);
     Hqp_.resize(n, n);
     Hpp_.resize(n, n);
+    if constexpr (kForced) {
+      F_.resize(n);
+      Fq_.resize(n, n);
+      Fv_.resize(n, n);
+    }
   }
-  // The start of the step: the scale of the terms, |h| max(|H_p|, |H_q|) at (q0, p0).
-  void begin(const Vector& q0, const Vector& p0) {
+  // The start of the step, at time t0 (read by a force only): the scale of the terms,
+  // |h| max(|H_p|, |H_q|) at (q0, p0).
+  void begin(const Vector& q0, const Vector& p0, double t0 = 0.0) {
     q0_ = &q0;
     p0_ = &p0;
+    if constexpr (kForced) t_ = t0 + th_ * h_;
     H_->gradient(q0, p0, Hq_, Hp_);
     s0_ = std::fabs(h_) * std::fmax(dynamic_detail::inf_norm(Hp_), dynamic_detail::inf_norm(Hq_));
     x0_ = std::fmax(dynamic_detail::inf_norm(q0), dynamic_detail::inf_norm(p0));
@@ -474,11 +489,19 @@ class HamiltonianThetaEquation {
   void residual(const Vector& y, Vector& r) {
     at(y);
     H_->gradient(x_, p_, Hq_, Hp_);
+    if constexpr (kForced) {
+      force_->value(t_, x_, Hp_, F_);
+      Hq_ -= F_;
+    }
     form(y, r);
   }
   double jacobian(const Vector& y, Vector& r, Matrix& J) {
     at(y);
     H_->hessian(x_, p_, Hq_, Hp_, Hqq_, Hqp_, Hpp_);
+    if constexpr (kForced) {
+      force_->jacobian(t_, x_, Hp_, F_, Fq_, Fv_);
+      Hq_ -= F_;
+    }
     form(y, r);
     const Eigen::Index n = x_.size();
     const double ht = h_ * th_, hb = h_ * b_;
@@ -489,11 +512,20 @@ class HamiltonianThetaEquation {
         J(n + i, j) = ht * Hqq_(i, j);
         J(n + i, n + j) = (i == j ? 1.0 : 0.0) + hb * Hqp_(i, j);
       }
+    if constexpr (kForced) {  // dV/dQ = H_pq = H_qp^T, dV/dP = H_pp
+      J.bottomLeftCorner(n, n) -= ht * (Fq_ + Fv_ * Hqp_.transpose());
+      J.bottomRightCorner(n, n) -= hb * (Fv_ * Hpp_);
+    }
     const double m = dynamic_detail::inf_norm(J);
     return std::isfinite(m) ? m : INFINITY;
   }
   double scale(double yn, double Jmax) const { return s0_ + Jmax * yn; }
   double offset() const { return x0_; }
+  // The force's work over the step, <F, dq>, F from the last evaluation (0 without one).
+  double work(const Vector& y) const {
+    if constexpr (kForced) return F_.dot(y.head(F_.size()));
+    return (void)y, 0.0;
+  }
 
  private:
   void at(const Vector& y) {
@@ -512,18 +544,20 @@ class HamiltonianThetaEquation {
   }
 
   const Ham* H_;
-  double th_, b_, h_;
+  const Force* force_;
+  double th_, b_, h_, t_ = 0.0;
   const Vector* q0_ = nullptr;
   const Vector* p0_ = nullptr;
   double s0_ = 0.0, x0_ = 0.0;
-  Vector x_, p_, Hq_, Hp_;
-  Matrix Hqq_, Hqp_, Hpp_;
+  Vector x_, p_, Hq_, Hp_, F_;  // Hq_: H_q (- F), what the equation reads
+  Matrix Hqq_, Hqp_, Hpp_, Fq_, Fv_;
 };
 
 // The Hamiltonian step of the theta map for a run-time-sized Hamiltonian: the
 // HamiltonianThetaEquation solved by newton_drive with a dense LU, a Jacobian at every
-// iteration.
-template <class Ham>
+// iteration. Force: the type of a generalized force (HamiltonianThetaEquation), NoForce
+// for none.
+template <class Ham, class Force = NoForce>
 class DynamicHamiltonianThetaStep {
   static_assert(is_dynamic_system_v<Ham>,
                 "DynamicHamiltonianThetaStep needs a run-time-sized Hamiltonian (dynamic_system.h)");
@@ -532,16 +566,23 @@ class DynamicHamiltonianThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
-  DynamicHamiltonianThetaStep(Ham H, ThetaMap R, double h, StepOptions options = {}, bool on_bundle = false)
-      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), on_bundle_(on_bundle) {
+  static constexpr bool kForced = HamiltonianThetaEquation<Ham, Force>::kForced;
+
+  // force: required where Force is not NoForce; each copy of the step evaluates its own
+  // copy of it
+  DynamicHamiltonianThetaStep(Ham H, ThetaMap R, double h, StepOptions options = {}, bool on_bundle = false,
+                              std::shared_ptr<const Force> force = nullptr)
+      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), on_bundle_(on_bundle), force_(std::move(force)) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
-    work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_);
+    if (kForced && (!force_ || force_->dim() != H_.dim()))
+      throw std::invalid_argument("DynamicHamiltonianThetaStep: a forced step needs a force of the system's dimension");
+    work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_, force_.get());
   }
   // A copy has its own equation and workspace, reading its own H.
   DynamicHamiltonianThetaStep(const DynamicHamiltonianThetaStep& o)
-      : H_(o.H_), R_(o.R_), h_(o.h_), options_(o.options_), on_bundle_(o.on_bundle_) {
-    work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_);
+      : H_(o.H_), R_(o.R_), h_(o.h_), options_(o.options_), on_bundle_(o.on_bundle_), force_(o.force_) {
+    work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_, force_.get());
   }
   DynamicHamiltonianThetaStep& operator=(const DynamicHamiltonianThetaStep&) = delete;
 
@@ -553,12 +594,12 @@ class DynamicHamiltonianThetaStep {
 
   // The step of the adjoint map (1 - theta), of the same size.
   DynamicHamiltonianThetaStep adjoint() const {
-    return DynamicHamiltonianThetaStep(H_, R_.adjoint(), h_, options_, on_bundle_);
+    return DynamicHamiltonianThetaStep(H_, R_.adjoint(), h_, options_, on_bundle_, force_);
   }
 
   // One step from (q0, p0); (dq, dp) hold the starting guess on entry and the
   // increments on return.
-  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     const int n = H_.dim();
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
@@ -567,8 +608,9 @@ class DynamicHamiltonianThetaStep {
     w.y.head(n) = dq;
     w.y.tail(n) = dp;
     try {
-      w.eq.begin(q0, p0);
+      w.eq.begin(q0, p0, t);
       s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
+      if constexpr (kForced) s.work = w.eq.work(w.y);
     } catch (const std::domain_error& e) {
       s.converged = false;
       s.message = e.what();
@@ -580,7 +622,8 @@ class DynamicHamiltonianThetaStep {
 
  private:
   struct Work {
-    Work(const Ham& H, double theta, double h, bool on_bundle) : eq(H, theta, h, on_bundle) {
+    Work(const Ham& H, double theta, double h, bool on_bundle, const Force* f)
+        : force(f ? std::make_unique<Force>(*f) : nullptr), eq(H, theta, h, on_bundle, force.get()) {
       const int m = 2 * H.dim();
       y.resize(m);
       r.resize(m);
@@ -589,7 +632,8 @@ class DynamicHamiltonianThetaStep {
       J.resize(m, m);
       lu.resize(m);
     }
-    HamiltonianThetaEquation<Ham> eq;
+    std::unique_ptr<Force> force;  // this step's copy of the force (its workspace)
+    HamiltonianThetaEquation<Ham, Force> eq;
     Eigen::VectorXd y, r, dx, start;
     Eigen::MatrixXd J;
     DenseLU lu;
@@ -601,6 +645,7 @@ class DynamicHamiltonianThetaStep {
   double h_;
   StepOptions options_;
   bool on_bundle_;
+  std::shared_ptr<const Force> force_;
   std::shared_ptr<Work> work_;
 };
 

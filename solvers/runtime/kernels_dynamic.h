@@ -380,8 +380,8 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         for (int i = 0; i < n; ++i) m << (i ? ", " : "") << F[i];
         throw InputError(m.str() + "]");
       }
-      if (me.form != Form::lagrangian)  // (validate refuses it first)
-        throw InputError(pr.forces_where + ": forces enter the lagrangian form only");
+      if (me.form != Form::lagrangian && me.form != Form::hamiltonian)  // (validate refuses it first)
+        throw InputError(pr.forces_where + ": forces enter the lagrangian and hamiltonian forms only");
       base.forced = true;
       if (me.galerkin) {
         dense_limit("integrator.method: method = \"galerkin\" with system.forces");
@@ -390,6 +390,21 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       }
       dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.forces");
       const ThetaMap R = dynamic_theta_map(me);
+      if (me.form == Form::hamiltonian) {  // the forced Hamilton equations, as the unforced form below
+        const bool on_bundle = me.effective_lift() == Lift::none;
+        auto run_with = [&](const auto& H) {
+          using Step = DynamicHamiltonianThetaStep<std::decay_t<decltype(H)>, WrittenForce>;
+          auto make = [&](double hk, const ThetaMap& Rk) { return Step(H, Rk, hk, opt, on_bundle, force); };
+          return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+        };
+        if (hamiltonian) {
+          const auto H =
+              compiled_or_not([&](WrittenDerivatives m) { return WrittenDynamicHamiltonian(hamiltonian, m); }, pr);
+          base.compile_seconds += H.compile_seconds();
+          return run_with(H);
+        }
+        return run_with(LegendreDynamicHamiltonian<Sys>(L));
+      }
       if (n <= kFixedWrittenMaxDim && me.use_structure) {
         auto run_fixed = [&](auto k) {
           constexpr int K = decltype(k)::value;

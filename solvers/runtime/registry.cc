@@ -360,23 +360,22 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
 const SystemEntry& written_system_entry(Space space, int factors, bool forced) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
-  // With forces: the lagrangian form, the theta-family maps composed or not and Galerkin
-  // (the forced steps of solvers/dynamic_step.h and dynamic_galerkin_step.h); the rest
-  // takes no force term.
+  // With forces: the lagrangian form (the theta-family maps composed or not, Galerkin) and
+  // the hamiltonian form (the forced steps of solvers/dynamic_step.h and
+  // dynamic_galerkin_step.h); the rest takes no force term.
   static const SystemEntry rn_forced = {
       "lagrangian with forces",
       "written in the scene, with generalized forces",
       Space::euclidean,
       0,
       {},
-      {{Form::lagrangian},
+      {{Form::lagrangian, Form::hamiltonian},
        true,
        true,
        true,
        false,
-       "system.forces enter the lagrangian form: the position-momentum step of the theta-family maps, its "
-       "compositions, and Galerkin; the hamiltonian form, SODE, Newmark, boundary values, solver = \"tiny\" and "
-       "written maps take no forces",
+       "system.forces enter the lagrangian form (the theta-family maps, their compositions, Galerkin) and the "
+       "hamiltonian form; SODE, Newmark, boundary values, solver = \"tiny\" and written maps take no forces",
        false,
        false},
       factories::written,

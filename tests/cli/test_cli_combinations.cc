@@ -145,11 +145,10 @@ std::vector<SystemCaps> registry_systems() {
   w.forms = {"lagrangian", "hamiltonian"};
   w.retraction = w.composition = w.galerkin = true;  // written maps: no (run-time-sized steps)
   out.push_back(w);
-  // written on R^n with forces: the lagrangian form only (the forced theta step, its
-  // compositions, Galerkin)
+  // written on R^n with forces: the lagrangian form (the forced theta step, its
+  // compositions, Galerkin) and the hamiltonian form
   SystemCaps f = w;
   f.name = "lagrangian with forces";
-  f.forms = {"lagrangian"};
   out.push_back(f);
   // written on S^2 and SO(3): the capabilities of the spherical pendulum and the top
   for (const char* space : {"S^2", "SO(3)"}) {

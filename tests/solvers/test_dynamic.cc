@@ -920,8 +920,9 @@ struct DrivenOscillator {
 // of the theta = 0.3 step with its adjoint 2 (which needs the adjoint of the forced step
 // to be the forced (1 - theta) step), the triple jump of the midpoint 4, Galerkin with
 // Gauss and Lobatto quadrature and s = 2 stages 4 (forces at the quadrature nodes, the
-// nodes' times t0 + c_i h); Galerkin Gauss s = 1, the midpoint rule, gives the forced
-// midpoint step's states to round-off. A force read at
+// nodes' times t0 + c_i h), the Hamiltonian form's theta = 0.3 lift composed with its
+// adjoint 2; Galerkin Gauss s = 1 and the Hamiltonian midpoint (H from L and H written)
+// give the forced midpoint step's states to round-off. A force read at
 // the start of the step instead of at the map's node t0 + theta h leaves the midpoint
 // first order.
 BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_their_orders) {
@@ -950,7 +951,9 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
         [&](double hk) { return Step(L, R, hk, {}, false, force).adjoint(); });
   };
   using Galerkin = DynamicGalerkinStep<WrittenDynamic, WrittenForce>;
-  std::vector<double> hs, mid, euler, verlet, jump, gauss, lobatto;
+  std::vector<double> hs, mid, euler, verlet, jump, gauss, lobatto, lifted;
+  using HL = LegendreDynamicHamiltonian<WrittenDynamic>;
+  using Lifted = DynamicHamiltonianThetaStep<HL, WrittenForce>;
   for (int k = 0; k < 5; ++k) {
     const double h = 0.1 / std::pow(2.0, k);
     hs.push_back(h);
@@ -960,13 +963,23 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
     jump.push_back(error_of(composed(0.5, "triple-jump:4", h), h));
     gauss.push_back(error_of(Galerkin(L, QuadratureKind::gauss, 2, h, {}, force), h));
     lobatto.push_back(error_of(Galerkin(L, QuadratureKind::lobatto, 2, h, {}, force), h));
+    // the cotangent lift of the theta = 0.3 map composed with its adjoint
+    const ThetaMap R(0.3);
+    lifted.push_back(error_of(ComposedStep<Lifted>(
+                                  h, substeps(find_composition("stormer-verlet"), false),
+                                  [&](double hk) { return Lifted(HL(L), R, hk, {}, false, force); },
+                                  [&](double hk) { return Lifted(HL(L), R, hk, {}, false, force).adjoint(); }),
+                              h));
   }
   const double o_mid = verification::fit_order(hs, mid), o_euler = verification::fit_order(hs, euler);
   const double o_verlet = verification::fit_order(hs, verlet), o_jump = verification::fit_order(hs, jump);
   const double o_gauss = verification::fit_order(hs, gauss), o_lobatto = verification::fit_order(hs, lobatto);
+  const double o_lifted = verification::fit_order(hs, lifted);
+  BOOST_TEST(std::fabs(o_lifted - 2.0) <= 0.1);
   BOOST_TEST_MESSAGE("forced orders: midpoint " << o_mid << ", explicit Euler " << o_euler << ", theta 0.3 with its adjoint "
                                                 << o_verlet << ", triple jump " << o_jump << ", Galerkin Gauss s = 2 "
-                                                << o_gauss << ", Lobatto s = 2 " << o_lobatto);
+                                                << o_gauss << ", Lobatto s = 2 " << o_lobatto
+                                                << ", Hamiltonian theta 0.3 with its adjoint " << o_lifted);
   BOOST_TEST(std::fabs(o_gauss - 4.0) <= 0.2);
   BOOST_TEST(std::fabs(o_lobatto - 4.0) <= 0.2);
   BOOST_TEST(std::fabs(o_mid - 2.0) <= 0.1);
@@ -975,6 +988,51 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
   BOOST_TEST(std::fabs(o_jump - 4.0) <= 0.2);
   BOOST_TEST(mid.back() <= 1e-4);  // close to the solution, not only converging
   BOOST_TEST(gauss.back() <= 1e-9);
+  // The Hamiltonian form: the cotangent lift of the midpoint map with the force at its
+  // node, for a quadratic L the implicit midpoint rule of the forced equations as the
+  // forced midpoint step is: the same states and work, from H by the Legendre transform
+  // and from H written
+  {
+    const auto written_h = osc.text();
+    written_h->hamiltonian =
+        Expression::parse("p_x^2/(2*m) + k*x^2/2", written_h->symbols(WrittenSystem::Kind::hamiltonian));
+    const double h = 0.05;
+    using HL = LegendreDynamicHamiltonian<WrittenDynamic>;
+    const DynamicHamiltonianThetaStep<HL, WrittenForce> HS(HL(L), ThetaMap::midpoint(), h, {}, false, force);
+    const DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian, WrittenForce> WS(
+        WrittenDynamicHamiltonian(written_h), ThetaMap::midpoint(), h, {}, false, force);
+    const Step M(L, ThetaMap::midpoint(), h, {}, false, force);
+    VectorXd q0(1), p0(1);
+    q0 << 1.0;
+    p0 << 0.4;
+    VectorXd qa = q0, pa = p0, qb = q0, pb = p0, qc = q0, pc = p0, da(1), ea(1), db(1), eb(1), dc(1), ec(1);
+    da << 0.02;
+    db = dc = da;
+    ea.setZero();
+    ec.setZero();
+    double Wa = 0.0, Wb = 0.0, Wc = 0.0;
+    for (int k = 0; k < 200; ++k) {
+      const StepSummary a = HS.step(k * h, qa, pa, da, ea), b = M.step(k * h, qb, pb, db, eb),
+                        c = WS.step(k * h, qc, pc, dc, ec);
+      BOOST_TEST_REQUIRE((a.converged && b.converged && c.converged));
+      qa += da;
+      pa += ea;
+      qb += db;
+      pb += eb;
+      qc += dc;
+      pc += ec;
+      Wa += a.work;
+      Wb += b.work;
+      Wc += c.work;
+    }
+    BOOST_TEST(std::fabs(qa[0] - qb[0]) <= 1e-13);
+    BOOST_TEST(std::fabs(pa[0] - pb[0]) <= 1e-13);
+    BOOST_TEST(std::fabs(qc[0] - qb[0]) <= 1e-13);
+    BOOST_TEST(std::fabs(pc[0] - pb[0]) <= 1e-13);
+    BOOST_TEST(std::fabs(Wa - Wb) <= 1e-13);
+    BOOST_TEST(std::fabs(Wc - Wb) <= 1e-13);
+    BOOST_TEST(std::fabs(Wb) > 0.1);
+  }
   // Gauss s = 1 is the midpoint rule: the same states, step after step
   {
     const double h = 0.05;
