@@ -20,6 +20,8 @@
 //                   L by the Legendre transform
 //   galerkin        DynamicGalerkinStep<Sys>
 //   composition     ComposedStep of either step, the adjoint stages at 1 - theta
+//   system.forces   the theta, Galerkin and Hamiltonian steps with their Force
+//                   (WrittenForce), never the structured separable paths
 // Included only by the kernels_*.cc translation units.
 #pragma once
 
@@ -365,9 +367,10 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 
-  // system.forces: the forced position-momentum step (the registry's "lagrangian with
-  // forces" admits nothing else), never the structured paths below, whose equations
-  // have no force term; its sizes and Jacobian refresh as the unforced step's below
+  // system.forces: the forced steps (the forms and methods the registry's "lagrangian
+  // with forces" admits: the theta step, composed or not, Galerkin, the Hamiltonian
+  // step), never the structured paths below, whose equations have no force term; sizes
+  // and Jacobian refresh as the unforced steps' below
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.forced()) {
       const auto force = std::make_shared<WrittenForce>(pr.written);
