@@ -36,7 +36,6 @@ class WrittenForce {
   }
 
   int dim() const { return system_->dim(); }
-  const WrittenSystem& system() const { return *system_; }
 
   // F(t, q, v) into F (size dim()).
   template <class Q, class V, class Out>

@@ -19,8 +19,8 @@
 //         + b_i l_j'(c_i)   (l_k(c_i) L_qv^T + (l_k'(c_i)/h) L_vv) ],
 // what GalerkinStep obtains by differentiating L_q and L_v with Jets.
 //
-// Forces. A generalized force F(t, q, v) (Force, e.g. WrittenForce; NoForce: none, as
-// in solvers/dynamic_step.h) enters by the discrete Lagrange-d'Alembert principle with
+// Forces. A generalized force F(t, q, v) (Force, e.g. WrittenForce; NoForce of
+// solvers/newton.h: none) enters by the discrete Lagrange-d'Alembert principle with
 // the same quadrature: the virtual work h sum_i b_i <F_i, delta x_i> at the nodes,
 // F_i = F(t0 + c_i h, x_i, v_i), delta x_i = sum_j l_j(c_i) delta q_j, is g_i = L_q + F_i
 // in the equations above (and in dp); in the Jacobian L_qq and L_qv become L_qq + F_q and
@@ -54,7 +54,6 @@
 #include <cmath>
 #include <memory>
 #include <optional>
-#include <type_traits>
 #include <stdexcept>
 #include <string>
 
@@ -62,7 +61,6 @@
 #include "mechanics/quadrature.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/newton.h"
-#include "solvers/dynamic_step.h"
 #include "solvers/newton_driver.h"
 
 namespace dvm {
@@ -76,7 +74,7 @@ class DynamicGalerkinStep {
   static constexpr int SMax = kGalerkinMaxStages;
   static constexpr int MMax = SMax + 1;
   using V = Eigen::VectorXd;
-  static constexpr bool kForced = !std::is_same_v<Force, NoForce>;
+  static constexpr bool kForced = is_force_v<Force>;
 
   // force: the generalized force, required where Force is not NoForce (the step keeps
   // its own copy)

@@ -63,7 +63,6 @@
 #include <memory>
 #include <stdexcept>
 #include <string>
-#include <type_traits>
 
 #include "core/discretization_map.h"
 #include "mechanics/dynamic_system.h"
@@ -110,17 +109,14 @@ inline bool sizes_match(int n, const Eigen::VectorXd& q0, const Eigen::VectorXd&
 // its compositions keep their order. The work of the force over the step, h <F, v> =
 // <F(t, x, v), D> at the solution, is the same quadrature (work()). The equation of
 // solvers/newton_driver.h; K: the number of coordinates where it is known when compiled
-// (else Dynamic); Force: the type of the force (NoForce: none, and no trace of one in the
-// compiled equation; WrittenForce).
-struct NoForce {
-  int dim() const { return 0; }
-};
+// (else Dynamic); Force: the type of the force (NoForce, solvers/newton.h: none, and no
+// trace of one in the compiled equation; WrittenForce).
 template <class Sys, int K = Eigen::Dynamic, class Force = NoForce>
 class ThetaEquation {
  public:
   using Vector = Eigen::Matrix<double, K, 1>;
   using Matrix = Eigen::Matrix<double, K, K>;
-  static constexpr bool kForced = !std::is_same_v<Force, NoForce>;
+  static constexpr bool kForced = is_force_v<Force>;
 
   // force: the generalized force (an object of the caller's, used from one thread at a
   // time); required where Force is not NoForce
@@ -259,7 +255,7 @@ class DynamicThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
-  static constexpr bool kForced = ThetaEquation<Sys, K, Force>::kForced;
+  static constexpr bool kForced = is_force_v<Force>;
 
   // keep_jacobian: the factorisation of an earlier step kept while it serves
   // (Refresh::across_steps); otherwise as the comment above says. force: the generalized
@@ -274,10 +270,9 @@ class DynamicThetaStep {
     if (K != Eigen::Dynamic && n != K)
       throw std::invalid_argument("DynamicThetaStep<" + std::to_string(K) + ">: a system of " + std::to_string(n) +
                                   " coordinates");
-    if (kForced && !force_) throw std::invalid_argument("DynamicThetaStep: a forced step needs its force");
-    if (kForced && force_->dim() != n)
-      throw std::invalid_argument("DynamicThetaStep: a force of " + std::to_string(force_->dim()) +
-                                  " components for a system of " + std::to_string(n) + " coordinates");
+    if constexpr (kForced)
+      if (!force_ || force_->dim() != n)
+        throw std::invalid_argument("DynamicThetaStep: a forced step needs a force of the system's dimension");
     work_ = std::make_shared<Work>(L_, R_.theta(), h_, n, force_.get());
     refresh_ = keep_jacobian ? Refresh::across_steps : K != Eigen::Dynamic ? Refresh::within_step
                                                                            : Refresh::every_iteration;
@@ -300,7 +295,6 @@ class DynamicThetaStep {
   const ThetaMap& map() const { return R_; }
   const StepOptions& options() const { return options_; }
   int dim() const { return L_.dim(); }
-  const std::shared_ptr<const Force>& force() const { return force_; }
 
   // The step of the adjoint map (1 - theta), of the same size (with a force: the forced
   // step of the adjoint map, ThetaEquation).
@@ -457,7 +451,7 @@ class HamiltonianThetaEquation {
  public:
   using Vector = Eigen::VectorXd;
   using Matrix = Eigen::MatrixXd;
-  static constexpr bool kForced = !std::is_same_v<Force, NoForce>;
+  static constexpr bool kForced = is_force_v<Force>;
 
   HamiltonianThetaEquation(const Ham& H, double theta, double h, bool on_bundle, const Force* force = nullptr)
       : H_(&H), force_(force), th_(theta), b_(on_bundle ? theta : 1.0 - theta), h_(h) {
@@ -566,7 +560,7 @@ class DynamicHamiltonianThetaStep {
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
 
-  static constexpr bool kForced = HamiltonianThetaEquation<Ham, Force>::kForced;
+  static constexpr bool kForced = is_force_v<Force>;
 
   // force: required where Force is not NoForce; each copy of the step evaluates its own
   // copy of it
@@ -575,8 +569,9 @@ class DynamicHamiltonianThetaStep {
       : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), on_bundle_(on_bundle), force_(std::move(force)) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
-    if (kForced && (!force_ || force_->dim() != H_.dim()))
-      throw std::invalid_argument("DynamicHamiltonianThetaStep: a forced step needs a force of the system's dimension");
+    if constexpr (kForced)
+      if (!force_ || force_->dim() != H_.dim())
+        throw std::invalid_argument("DynamicHamiltonianThetaStep: a forced step needs a force of the system's dimension");
     work_ = std::make_shared<Work>(H_, R_.theta(), h_, on_bundle_, force_.get());
   }
   // A copy has its own equation and workspace, reading its own H.

@@ -33,6 +33,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <type_traits>
 
 #include "core/dense_solve.h"
 #include "core/scalar.h"
@@ -67,6 +68,13 @@ struct StepSummary {
   double work = 0.0;      // a step with forces: their discrete work over the step (else 0)
   std::string message;    // why a solve failed
 };
+
+// The force type of a step that takes none: the steps with a force term
+// (solvers/dynamic_step.h, dynamic_galerkin_step.h) take a Force type, NoForce by
+// default, so that an unforced step compiles to the same code as one written without.
+struct NoForce {};
+template <class Force>
+constexpr bool is_force_v = !std::is_same_v<Force, NoForce>;
 
 // The stopping rule shared by every Newton loop of dvm, judged after an evaluation
 // that filled s.residual and s.scale; dxn is the size of the last update and x_size

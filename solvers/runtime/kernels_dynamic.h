@@ -375,7 +375,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     if (pr.forced()) {
       const auto force = std::make_shared<WrittenForce>(pr.written);
       V F(n);
-      WrittenForce(*force).value(0.0, q, v0, F);
+      force->value(0.0, q, v0, F);
       if (!F.allFinite()) {
         std::ostringstream m;
         m.precision(17);
