@@ -913,8 +913,8 @@ BOOST_AUTO_TEST_CASE(monitor_every_evaluates_the_summary_less_often) {
 }
 
 BOOST_AUTO_TEST_CASE(readme_tables_agree_with_the_registries) {
-  // the systems and the maps on R^n in README.md, the maps on S^2 and SO(3) in
-  // core/README.md, the compositions in solvers/README.md
+  // the systems in README.md, the maps in core/README.md, the compositions in
+  // solvers/README.md
   std::string readme;
   for (const char* f : {"README.md", "core/README.md", "solvers/README.md"})
     readme += slurp(std::string(DVM_SCENES) + "/../../" + f);
