@@ -70,12 +70,17 @@ struct WrittenSystem {
   // expression of Kind::force: q (block 0, entries 0 .. dim() - 1), the time t (block 0,
   // entry dim()) and v (block 1).
   std::vector<std::pair<int, Expression>> forces;
+  // Holonomic constraints g_i(t, q) = 0 ([system] constraints, R^n), in the scene's
+  // order (mechanics/written_constraints.h). An expression of Kind::constraint: q
+  // (block 0, entries 0 .. dim() - 1) and the time t (block 0, entry dim()).
+  std::vector<Expression> constraints;
   // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
   int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
 
   // Which expression a text is for (decides the names it may use): L in q and v; the
-  // energy and the invariants in q, v and p; H in q and p; a force in t, q and v.
-  enum class Kind { lagrangian, energy, hamiltonian, force };
+  // energy and the invariants in q, v and p; H in q and p; a force in t, q and v; a
+  // constraint in t and q.
+  enum class Kind { lagrangian, energy, hamiltonian, force, constraint };
 
   // Appends the array `name` of `size` coordinates (q, v, p named name[i],
   // name_dot[i], p_name[i]) to the state.
@@ -106,19 +111,20 @@ struct WrittenSystem {
       return s;
     }
     const bool momenta = kind == Kind::energy || kind == Kind::hamiltonian;
+    const bool velocities = kind != Kind::hamiltonian && kind != Kind::constraint;
     for (int i = 0; i < dim(); ++i) {
       if (array_of(i)) continue;
       const std::string& c = coordinates[static_cast<std::size_t>(i)];
       s.variables.push_back({c, 0, i});
-      if (kind != Kind::hamiltonian) s.variables.push_back({c + "_dot", 1, i});
+      if (velocities) s.variables.push_back({c + "_dot", 1, i});
       if (momenta) s.variables.push_back({"p_" + c, 2, i});
     }
     for (const auto& a : arrays) {
       s.arrays.push_back({a.name, 0, a.offset, a.size, a.boundary});
-      if (kind != Kind::hamiltonian) s.arrays.push_back({a.name + "_dot", 1, a.offset, a.size, a.boundary});
+      if (velocities) s.arrays.push_back({a.name + "_dot", 1, a.offset, a.size, a.boundary});
       if (momenta) s.arrays.push_back({"p_" + a.name, 2, a.offset, a.size, a.boundary});
     }
-    if (kind == Kind::force) s.variables.push_back({"t", 0, dim()});
+    if (kind == Kind::force || kind == Kind::constraint) s.variables.push_back({"t", 0, dim()});
     s.constants = params;
     s.constant_arrays = param_arrays;
     s.definitions = definitions;

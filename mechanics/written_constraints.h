@@ -1,0 +1,107 @@
+// Holonomic constraints g(t, q) = 0 on R^n written in a scene ([system] constraints):
+// m expressions in the coordinates and the time t (rheonomic where t appears). They
+// restrict the motion to the submanifold N_t = {q : g(t, q) = 0}; the constrained
+// steps (solvers/constrained_step.h) keep q_k on it and the momenta on its hidden
+// constraint Dg(t, q) v + g_t(t, q) = 0, v = FL^{-1}(q, p).
+//
+// Each constraint is parsed with WrittenSystem::Kind::constraint (the coordinates, t,
+// the parameters and the definitions; no velocities). Evaluated in doubles; the rows
+// of Dg and the time derivatives g_t by reverse mode on each constraint's tape
+// (Expression::gradient), one pass per constraint.
+//
+// The measures of distance to the constraint that the runtime checks and reports are
+// relative (relative_residuals below): |g_i(t, q)| / (|grad g_i| |q|) (for
+// x^2 + y^2 - l^2 about the relative error of the length), and for the hidden
+// constraint |grad g_i . v + dg_i/dt| / (|grad g_i| |v|) (the relative size of the
+// velocity across the constraint), with |.| the Euclidean norm.
+//
+// Workspace is held per object: one object must not be used from two threads at once
+// (copies are independent).
+#pragma once
+
+#include <Eigen/Core>
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+
+#include "mechanics/written_lagrangian.h"
+
+namespace dvm {
+
+class WrittenConstraints {
+ public:
+  explicit WrittenConstraints(std::shared_ptr<const WrittenSystem> s) : system_(std::move(s)) {
+    if (!system_ || system_->space != WrittenSystem::Space::euclidean)
+      throw std::invalid_argument("WrittenConstraints: constraints are written on R^n");
+    if (system_->constraints.empty()) throw std::invalid_argument("WrittenConstraints: the system writes no constraints");
+    const int n = dim();
+    qt_.setZero(n + 1);
+    zero_.setZero(n + 1);
+    gq_.resize(n + 1);
+    gv_.resize(n + 1);
+  }
+
+  int dim() const { return system_->dim(); }
+  int count() const { return static_cast<int>(system_->constraints.size()); }
+
+  // g(t, q) into g (size count()).
+  template <class Q, class Out>
+  void value(double t, const Q& q, Out& g) const {
+    load(t, q);
+    const int m = count();
+    for (int i = 0; i < m; ++i) g[i] = system_->constraints[static_cast<std::size_t>(i)](qt_.data(), zero_.data());
+  }
+
+  // g, its Jacobian G(i, j) = dg_i/dq_j (count() x dim(), sized by the caller) and
+  // g_t(i) = dg_i/dt.
+  template <class Q, class Out, class Mat, class Out2>
+  void jacobian(double t, const Q& q, Out& g, Mat& G, Out2& gt) const {
+    load(t, q);
+    const int m = count(), n = dim();
+    for (int i = 0; i < m; ++i) {
+      const Expression& e = system_->constraints[static_cast<std::size_t>(i)];
+      g[i] = e(qt_.data(), zero_.data());
+      gq_.setZero();
+      gv_.setZero();
+      e.gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data());
+      for (int j = 0; j < n; ++j) G(i, j) = gq_[j];
+      gt[i] = gq_[n];
+    }
+  }
+
+  // The largest relative residuals of the constraint and of its hidden constraint at
+  // (t, q) with velocity v (the measures of the header comment; a term whose
+  // denominator is 0 counts its numerator).
+  void relative_residuals(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, double& position,
+                          double& velocity) const {
+    const int m = count(), n = dim();
+    g_.resize(m);
+    gt_.resize(m);
+    G_.resize(m, n);
+    jacobian(t, q, g_, G_, gt_);
+    const double qn = q.norm(), vn = v.norm();
+    position = velocity = 0.0;
+    for (int i = 0; i < m; ++i) {
+      const double gn = G_.row(i).norm();
+      const double a = std::fabs(g_[i]), b = std::fabs(G_.row(i).dot(v) + gt_[i]);
+      position = std::fmax(position, gn * qn > 0.0 ? a / (gn * qn) : a);
+      velocity = std::fmax(velocity, gn * vn > 0.0 ? b / (gn * vn) : b);
+    }
+  }
+
+ private:
+  template <class Q>
+  void load(double t, const Q& q) const {
+    const int n = dim();
+    for (int i = 0; i < n; ++i) qt_[i] = q[i];
+    qt_[n] = t;
+  }
+
+  std::shared_ptr<const WrittenSystem> system_;
+  mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient
+  mutable Eigen::VectorXd g_, gt_;
+  mutable Eigen::MatrixXd G_;
+};
+
+}  // namespace dvm

@@ -1,0 +1,348 @@
+// The position-momentum step of the theta maps under holonomic constraints g(t, q) = 0
+// (m of them, mechanics/written_constraints.h), for a run-time-sized Lagrangian: the
+// constrained discrete Euler-Lagrange equations with discrete multipliers and the
+// constrained discrete Legendre transforms (Marsden and West, Acta Numerica 2001,
+// Sec. 3.5), of which RATTLE is the Stormer-Verlet instance.
+//
+// With L_d(q0, q1) = h L(q0 + theta D, D / h), D = q1 - q0 (paper Sec. 5.3; the
+// unconstrained equation ThetaEquation of solvers/dynamic_step.h, a force included),
+// G0 = Dg(t0, q0), and t1 = t0 + h, one step from (q0, p0) solves
+//   1. p0 - G0^T lambda = -D1 L_d(q0, q1) - F_d^-,   g(t1, q1) = 0
+//      for (D, lambda) (n + m unknowns): the left constrained Legendre transform;
+//   2. p1 = D2 L_d(q0, q1) + F_d^+ - G1^T mu,   G1 v1 + g_t(t1, q1) = 0,
+//      v1 = FL^{-1}(q1, p1), G1 = Dg(t1, q1), for (v1, mu): the right one, which puts
+//      p1 on the hidden constraint (for L = v^T M(q) v / 2 - U(q): G1 M^{-1} p1 = -g_t).
+// Eliminating p0 between step k's second and step k + 1's first transform gives the
+// constrained discrete Euler-Lagrange equation D2 L_d(q_{k-1}, q_k) + D1 L_d(q_k,
+// q_{k+1}) + forces = G_k^T (lambda + mu). The positions q_k do not depend on how p_k
+// was chosen along the constraint normals (lambda absorbs any G0^T shift of p0), so
+// step 2 only chooses the representative of p1 that the energy and the next step's
+// guess are evaluated at. Without forces the map (q0, p0) -> (q1, p1) is symplectic on
+// the constraint's cotangent bundle, and for a scleronomic g the adjoint of the theta
+// step is the constrained (1 - theta) step (Prop. 2.4 of the paper for the map, the
+// construction symmetric in its two ends), so symmetric compositions raise its order as
+// they raise the unconstrained one's (Hairer, Lubich and Wanner, Geometric Numerical
+// Integration, VII.1.4 for RATTLE).
+//
+// Equation 1 is solved by newton_drive (solvers/newton_driver.h) with a dense LU of the
+// saddle-point Jacobian
+//   [ F_D               -s G0^T ]
+//   [ s G1(D)            0      ]
+// where F_D is ThetaEquation's Jacobian and the multiplier is carried as lambda / s:
+// s = max|F_D| / max|G0| (at the step's first Jacobian) makes the constraint rows and
+// the multiplier column of the size of the others, so that the driver's one stopping
+// rule judges them alike. Equation 2 is linear in mu and, for a Lagrangian quadratic in
+// the velocities, in v1: one solve of [L_vv G1^T; G1 0] (Newton's method on it
+// otherwise, from v1 = D / h).
+//
+// Workspace is allocated at construction; a step allocates nothing. One object must
+// not be used from two threads at once (copies are independent).
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "solvers/dynamic_step.h"
+
+namespace dvm {
+
+// Equation 1 of the header comment, for solvers/newton_driver.h: the unknowns
+// y = (D, lambda / s).
+template <class Sys, class Con, class Force = NoForce>
+class ConstrainedThetaEquation {
+ public:
+  using Vector = Eigen::VectorXd;
+  using Matrix = Eigen::MatrixXd;
+
+  ConstrainedThetaEquation(const Sys& L, const Con& g, double theta, double h, const Force* force = nullptr)
+      : eq_(L, theta, h, force), g_(&g), h_(h), n_(L.dim()), m_(g.count()) {
+    D_.resize(n_);
+    rD_.resize(n_);
+    q1_.resize(n_);
+    g1_.resize(m_);
+    gt_.resize(m_);
+    JD_.resize(n_, n_);
+    G0_.resize(m_, n_);
+    G1_.resize(m_, n_);
+  }
+
+  // The start of the step at time t0; G0 = Dg(t0, q0).
+  void begin(const Vector& q0, const Vector& p0, double t0) {
+    q0_ = &q0;
+    t1_ = t0 + h_;
+    eq_.begin(q0, p0, t0);
+    g_->jacobian(t0, q0, g1_, G0_, gt_);
+    g0max_ = dynamic_detail::inf_norm(G0_);
+    s_ = 0.0;
+  }
+  void residual(const Vector& y, Vector& r) {
+    split(y);
+    eq_.residual(D_, rD_);
+    g_->value(t1_, q1_, g1_);
+    form(y, r);
+  }
+  double jacobian(const Vector& y, Vector& r, Matrix& J) {
+    split(y);
+    const double Jd = eq_.jacobian(D_, rD_, JD_);
+    g_->jacobian(t1_, q1_, g1_, G1_, gt_);
+    if (s_ == 0.0) s_ = std::isfinite(Jd) && Jd > 0.0 && g0max_ > 0.0 ? Jd / g0max_ : 1.0;
+    form(y, r);
+    J.topLeftCorner(n_, n_) = JD_;
+    J.topRightCorner(n_, m_) = -s_ * G0_.transpose();
+    J.bottomLeftCorner(m_, n_) = s_ * G1_;
+    J.bottomRightCorner(m_, m_).setZero();
+    const double m = dynamic_detail::inf_norm(J);
+    return std::isfinite(m) ? m : INFINITY;
+  }
+  double scale(double yn, double Jmax) const { return eq_.scale(yn, Jmax); }
+  double offset() const { return eq_.offset(); }
+
+  // At the solution y: p1~ - p0 = h G - G0^T lambda (the momentum before the right
+  // transform's projection) into dp, and the force's work over the step.
+  double momentum(const Vector& y, Vector& dp) {
+    split(y);
+    eq_.momentum(D_, dp);
+    dp.noalias() -= (s_ * G0_.transpose()) * y.tail(m_);
+    return eq_.work(D_);
+  }
+  double end_time() const { return t1_; }
+
+ private:
+  void split(const Vector& y) {
+    D_ = y.head(n_);
+    q1_ = *q0_ + D_;
+  }
+  void form(const Vector& y, Vector& r) const {
+    r.head(n_) = rD_;
+    r.head(n_).noalias() -= (s_ * G0_.transpose()) * y.tail(m_);
+    r.tail(m_) = s_ * g1_;
+  }
+
+  ThetaEquation<Sys, Eigen::Dynamic, Force> eq_;
+  const Con* g_;
+  double h_, t1_ = 0.0, s_ = 0.0, g0max_ = 0.0;
+  int n_, m_;
+  const Vector* q0_ = nullptr;
+  Vector D_, rD_, q1_, g1_, gt_;
+  Matrix JD_, G0_, G1_;
+};
+
+namespace constrained_detail {
+
+// The right constrained Legendre transform at (t, q) (equation 2 of the header
+// comment): from p~ (the momentum before projection) finds v and mu with
+//   L_v(q, v) + G^T mu = p~,   G v + g_t = 0,
+// and writes p = p~ - G^T mu. v holds the starting guess on entry. `linear`: L_v is
+// linear in v (one solve is exact). Returns an empty string, or what failed.
+template <class Sys, class Con>
+struct Projection {
+  Eigen::VectorXd Lq, Lv, g, gt, r, x;
+  Eigen::MatrixXd Lqq, Lqv, Lvv, G, K;
+  DenseLU lu;
+  Projection(int n, int m) {
+    Lq.resize(n);
+    Lv.resize(n);
+    g.resize(m);
+    gt.resize(m);
+    r.resize(n + m);
+    x.resize(n + m);
+    Lqq.resize(n, n);
+    Lqv.resize(n, n);
+    Lvv.resize(n, n);
+    G.resize(m, n);
+    K.resize(n + m, n + m);
+    lu.resize(n + m);
+  }
+  // p~ in `p` on entry, p on return (mu is left in x.tail(m), G = Dg(t, q) in G).
+  const char* operator()(const Sys& L, const Con& con, double t, const Eigen::VectorXd& q, Eigen::VectorXd& p,
+                         Eigen::VectorXd& v, bool linear) {
+    const Eigen::Index n = q.size(), m = g.size();
+    con.jacobian(t, q, g, G, gt);
+    x.tail(m).setZero();  // mu
+    const double scale = std::fmax(1e-300, dynamic_detail::inf_norm(p));
+    for (int it = 0; it < 30; ++it) {
+      L.hessian(q, v, Lq, Lv, Lqq, Lqv, Lvv);
+      r.head(n) = Lv - p;
+      r.head(n).noalias() += G.transpose() * x.tail(m);
+      r.tail(m) = gt;
+      r.tail(m).noalias() += G * v;
+      if (it > 0 && r.head(n).template lpNorm<Eigen::Infinity>() <= 1e-14 * scale &&
+          r.tail(m).template lpNorm<Eigen::Infinity>() <=
+              1e-14 * (dynamic_detail::inf_norm(G) * dynamic_detail::inf_norm(v) + dynamic_detail::inf_norm(gt) + 1e-300))
+        break;
+      K.topLeftCorner(n, n) = Lvv;
+      K.topRightCorner(n, m) = G.transpose();
+      K.bottomLeftCorner(m, n) = G;
+      K.bottomRightCorner(m, m).setZero();
+      if (!lu.factor(K)) return "the constraint Jacobian is singular where the momentum is projected (redundant constraints, or d2L/dv2 singular on them)";
+      lu.solve(r, r);
+      v -= r.head(n);
+      x.tail(m) -= r.tail(m);
+      if (!std::isfinite(dynamic_detail::inf_norm(r))) return "non-finite momentum projection";
+      if (linear) break;
+      if (it == 29) return "the momentum projection did not converge";
+    }
+    p.noalias() -= G.transpose() * x.tail(m);
+    return "";
+  }
+};
+
+}  // namespace constrained_detail
+
+// The constrained step: equation 1 by the driver, then the projection. Sys: a
+// run-time-sized Lagrangian (mechanics/dynamic_system.h); Con: the constraints
+// (WrittenConstraints: count(), dim(), value(t, q, g), jacobian(t, q, g, G, g_t));
+// Force: a generalized force (solvers/dynamic_step.h), NoForce for none.
+template <class Sys, class Con, class Force = NoForce>
+class ConstrainedThetaStep {
+  static_assert(is_dynamic_system_v<Sys>, "ConstrainedThetaStep needs a run-time-sized system (dynamic_system.h)");
+
+ public:
+  static constexpr int N = Eigen::Dynamic;
+  using V = Eigen::VectorXd;
+  static constexpr bool kForced = is_force_v<Force>;
+
+  // linear_momentum: L_v is linear in v (L quadratic in the velocities), so the
+  // projection is one solve. Each copy of the step evaluates its own copies of the
+  // constraints and the force.
+  ConstrainedThetaStep(Sys L, ThetaMap R, double h, std::shared_ptr<const Con> constraints, StepOptions options = {},
+                       bool linear_momentum = false, std::shared_ptr<const Force> force = nullptr)
+      : L_(std::move(L)),
+        R_(std::move(R)),
+        h_(h),
+        options_(options),
+        linear_(linear_momentum),
+        con_(std::move(constraints)),
+        force_(std::move(force)) {
+    dynamic_detail::require_step(h);
+    dynamic_detail::require_newton(options);
+    if (!con_ || con_->dim() != L_.dim())
+      throw std::invalid_argument("ConstrainedThetaStep: constraints on the system's coordinates are needed");
+    if (con_->count() >= L_.dim())
+      throw std::invalid_argument("ConstrainedThetaStep: " + std::to_string(con_->count()) + " constraints on " +
+                                  std::to_string(L_.dim()) + " coordinates leave no motion");
+    if constexpr (kForced)
+      if (!force_ || force_->dim() != L_.dim())
+        throw std::invalid_argument("ConstrainedThetaStep: a forced step needs a force of the system's dimension");
+    work_ = std::make_shared<Work>(L_, *con_, R_.theta(), h_, force_.get());
+  }
+  ConstrainedThetaStep(const ConstrainedThetaStep& o)
+      : L_(o.L_), R_(o.R_), h_(o.h_), options_(o.options_), linear_(o.linear_), con_(o.con_), force_(o.force_) {
+    work_ = std::make_shared<Work>(L_, *con_, R_.theta(), h_, force_.get());
+  }
+  ConstrainedThetaStep& operator=(const ConstrainedThetaStep&) = delete;
+
+  double step_size() const { return h_; }
+  const Sys& lagrangian() const { return L_; }
+  const ThetaMap& map() const { return R_; }
+  const StepOptions& options() const { return options_; }
+  int dim() const { return L_.dim(); }
+  int constraints() const { return con_->count(); }
+
+  // The constrained step of the adjoint map (1 - theta).
+  ConstrainedThetaStep adjoint() const {
+    return ConstrainedThetaStep(L_, R_.adjoint(), h_, con_, options_, linear_, force_);
+  }
+
+  // Puts p on the hidden constraint at (t, q): p - G^T mu with G v + g_t = 0 for
+  // v = FL^{-1}(q, p - G^T mu) (the projection of step 2; an initial momentum off it).
+  // v: the starting guess on entry, that velocity on return. Returns an empty string,
+  // or what failed.
+  std::string project(double t, const V& q, V& p, V& v) const {
+    Work& w = *work_;
+    try {
+      return w.projection(L_, *w.con, t, q, p, v, linear_);
+    } catch (const std::domain_error& e) {
+      return e.what();
+    }
+  }
+
+  // One step from (q0, p0) at time t; dq holds the starting guess on entry and q1 - q0
+  // on return, dp receives p1 - p0.
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
+    StepSummary s;
+    const int n = L_.dim(), m = con_->count();
+    if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
+    if (dp.size() != n) dp.resize(n);
+    Work& w = *work_;
+    try {
+      w.q0 = q0;
+      w.p0 = p0;
+      w.y.head(n) = dq;
+      w.y.tail(m).setZero();  // (the Jacobian does not depend on the multiplier: its guess is immaterial)
+      w.eq.begin(w.q0, w.p0, t);
+      s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
+      dq = w.y.head(n);
+      if (s.converged) {
+        const double work = w.eq.momentum(w.y, w.dp);
+        if constexpr (kForced) s.work = work;
+        w.q1 = q0 + dq;
+        w.p1 = p0 + w.dp;
+        w.v1 = dq / h_;
+        const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, linear_);
+        if (*failed) {
+          s.converged = false;
+          s.message = failed;
+        } else {
+          // p1 - p0 = (p1~ - p0) - G1^T mu, without the round-off of forming p1 first
+          dp = w.dp;
+          dp.noalias() -= w.projection.G.transpose() * w.projection.x.tail(m);
+          if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+            s.converged = false;
+            s.message = "non-finite momentum";
+          }
+        }
+      }
+    } catch (const std::domain_error& e) {
+      s.converged = false;
+      s.message = e.what();
+    }
+    if (!s.converged && s.iterations == 0) s.iterations = 1;
+    return s;
+  }
+
+ private:
+  struct Work {
+    Work(const Sys& L, const Con& c, double theta, double h, const Force* f)
+        : con(std::make_unique<Con>(c)),
+          force(f ? std::make_unique<Force>(*f) : nullptr),
+          eq(L, *con, theta, h, force.get()),
+          projection(L.dim(), c.count()) {
+      const int n = L.dim(), k = n + c.count();
+      q0.resize(n);
+      p0.resize(n);
+      q1.resize(n);
+      p1.resize(n);
+      v1.resize(n);
+      dp.resize(n);
+      y.resize(k);
+      r.resize(k);
+      dx.resize(k);
+      start.resize(k);
+      J.resize(k, k);
+      lu.resize(k);
+    }
+    std::unique_ptr<Con> con;      // this step's copy of the constraints (their workspace)
+    std::unique_ptr<Force> force;  // and of the force
+    ConstrainedThetaEquation<Sys, Con, Force> eq;
+    constrained_detail::Projection<Sys, Con> projection;
+    V q0, p0, q1, p1, v1, dp, y, r, dx, start;
+    Eigen::MatrixXd J;
+    DenseLU lu;
+    DriverState state;
+  };
+
+  Sys L_;
+  ThetaMap R_;
+  double h_;
+  StepOptions options_;
+  bool linear_;
+  std::shared_ptr<const Con> con_;
+  std::shared_ptr<const Force> force_;
+  std::shared_ptr<Work> work_;
+};
+
+}  // namespace dvm

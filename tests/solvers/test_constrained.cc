@@ -1,0 +1,338 @@
+// Constrained steps (solvers/constrained_step.h, mechanics/written_constraints.h): the
+// pendulum in Cartesian coordinates, x^2 + y^2 = l^2, against the same pendulum in its
+// angle; orders of the constrained theta steps and their compositions; the constraint
+// and its hidden constraint kept to round-off at every step; the energy bounded; a
+// support that moves (a constraint in t); the projection of a momentum onto the hidden
+// constraint; steps that allocate nothing.
+#include <atomic>
+#include <cstdlib>
+#include <new>
+
+namespace {
+std::atomic<long> news{0};
+}
+void* operator new(std::size_t n) {
+  ++news;
+  if (void* p = std::malloc(n ? n : 1)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+
+#define BOOST_TEST_MODULE constrained
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/written_constraints.h"
+#include "mechanics/written_force.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/composition.h"
+#include "solvers/constrained_step.h"
+#include "solvers/dynamic_galerkin_step.h"
+#include "solvers/integrate.h"
+#include "tests/verification/common.h"
+
+using namespace dvm;
+using Eigen::VectorXd;
+
+namespace {
+
+constexpr double kM = 1.3, kL = 0.9, kG = 9.81;
+
+std::shared_ptr<WrittenSystem> system_of(std::vector<std::string> coords, const std::string& L,
+                                         const std::vector<std::string>& constraints = {},
+                                         const std::vector<std::pair<int, std::string>>& forces = {}) {
+  auto s = std::make_shared<WrittenSystem>();
+  s->name = "written";
+  s->coordinates = std::move(coords);
+  s->params = {{"m", kM}, {"l", kL}, {"g", kG}, {"A", 0.2}, {"w", 2.5}, {"c", 0.3}};
+  s->check_names();
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  for (const auto& g : constraints) s->constraints.push_back(Expression::parse(g, s->symbols(WrittenSystem::Kind::constraint)));
+  for (const auto& [i, f] : forces) s->forces.emplace_back(i, Expression::parse(f, s->symbols(WrittenSystem::Kind::force)));
+  return s;
+}
+
+// The pendulum of mass m on a rod of length l, in Cartesian coordinates and in its angle
+// a from the downward vertical (x = l sin a, y = -l cos a).
+const auto cartesian = system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + y^2 - l^2"});
+const auto angle = system_of({"a"}, "m*l^2*a_dot^2/2 + m*g*l*cos(a)");
+
+using Step = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>;
+
+struct State {
+  VectorXd q, p, v;
+};
+// The Cartesian state of the angle state (a, a_dot).
+State cartesian_state(double a, double w) {
+  State s{VectorXd(2), VectorXd(2), VectorXd(2)};
+  s.q << kL * std::sin(a), -kL * std::cos(a);
+  s.v << kL * std::cos(a) * w, kL * std::sin(a) * w;
+  s.p = kM * s.v;
+  return s;
+}
+
+Step step_of(double h, double theta = 0.5, const std::shared_ptr<WrittenSystem>& s = cartesian) {
+  return Step(WrittenDynamic(s), ThetaMap(theta), h, std::make_shared<WrittenConstraints>(s), {}, true);
+}
+template <class S>
+ComposedStep<S> composed(const S& base, const char* scheme) {
+  const double h = base.step_size();
+  return ComposedStep<S>(
+      h, substeps(find_composition(scheme), base.map().symmetric()),
+      [&](double hk) { return S(base.lagrangian(), base.map(), hk, std::make_shared<WrittenConstraints>(cartesian), {}, true); },
+      [&](double hk) {
+        return S(base.lagrangian(), base.map(), hk, std::make_shared<WrittenConstraints>(cartesian), {}, true).adjoint();
+      });
+}
+
+// The angle pendulum at time T from (a0, w0), to about 1e-16: Galerkin Gauss s = 6
+// (order 12) with h = 0.01.
+void reference(double a0, double w0, double T, double& a, double& w) {
+  const WrittenDynamic L(angle);
+  const DynamicGalerkinStep<WrittenDynamic> S(L, QuadratureKind::gauss, 6, 0.01);
+  VectorXd q(1), p(1), v(1);
+  q << a0;
+  v << w0;
+  p << kM * kL * kL * w0;
+  const RunSummary run = integrate(S, 0.0, q, p, v, std::lround(T / 0.01), [](auto&&...) {});
+  BOOST_REQUIRE(!run.failed);
+  a = q[0];
+  w = p[0] / (kM * kL * kL);
+}
+
+template <class S>
+double error_at(const S& step, double T, double a0, double w0, double a, double w) {
+  State s = cartesian_state(a0, w0);
+  const RunSummary run = integrate(step, 0.0, s.q, s.p, s.v, std::lround(T / step.step_size()), [](auto&&...) {});
+  BOOST_TEST(!run.failed, run.failure.message);
+  const State e = cartesian_state(a, w);
+  return std::fmax((s.q - e.q).lpNorm<Eigen::Infinity>(), (s.p - e.p).lpNorm<Eigen::Infinity>());
+}
+
+}  // namespace
+
+// The constrained theta steps converge to the angle pendulum's trajectory at their
+// orders: the midpoint (RATTLE-type) 2, theta = 0.3 composed with its adjoint 2 (the
+// adjoint of the constrained theta step is the constrained (1 - theta) step), the triple
+// jump 4, Kahan and Li's order 8 composition 8; explicit Euler, not symmetric, 1.
+BOOST_AUTO_TEST_CASE(constrained_steps_converge_to_the_angle_pendulum_at_their_orders) {
+  const double a0 = 1.1, w0 = 0.4, T = 1.0;
+  double a, w;
+  reference(a0, w0, T, a, w);
+  std::vector<double> hs, mid, euler, verlet, jump, eight;
+  for (int k = 0; k < 4; ++k) {
+    const double h = 0.05 / std::pow(2.0, k);
+    hs.push_back(h);
+    mid.push_back(error_at(step_of(h), T, a0, w0, a, w));
+    euler.push_back(error_at(step_of(h / 16, 0.0), T, a0, w0, a, w));
+    verlet.push_back(error_at(composed(step_of(h, 0.3), "stormer-verlet"), T, a0, w0, a, w));
+    jump.push_back(error_at(composed(step_of(h), "triple-jump:4"), T, a0, w0, a, w));
+  }
+  std::vector<double> h8, e8;
+  for (int k = 0; k < 3; ++k) {  // (from h = 0.2: at h = 0.4, h omega = 1.3, not yet asymptotic)
+    const double h = 0.2 / std::pow(2.0, k);
+    h8.push_back(h);
+    e8.push_back(error_at(composed(step_of(h), "kahan-li8"), T, a0, w0, a, w));
+  }
+  const double o_mid = verification::fit_order(hs, mid), o_euler = verification::fit_order(hs, euler);
+  const double o_verlet = verification::fit_order(hs, verlet), o_jump = verification::fit_order(hs, jump);
+  const double o_eight = verification::fit_order(h8, e8, 1e-13);  // (the last error 6e-12; the reference's 1e-16)
+  BOOST_TEST_MESSAGE("constrained orders: midpoint " << o_mid << ", explicit Euler " << o_euler
+                                                     << ", theta 0.3 with its adjoint " << o_verlet << ", triple jump "
+                                                     << o_jump << ", kahan-li8 " << o_eight << " (errors at h = "
+                                                     << h8.back() << ": " << e8.back() << ")");
+  BOOST_TEST(std::fabs(o_mid - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_euler - 1.0) <= 0.15);
+  BOOST_TEST(std::fabs(o_verlet - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_jump - 4.0) <= 0.2);
+  BOOST_TEST(std::fabs(o_eight - 8.0) <= 0.4);
+  BOOST_TEST(mid.back() <= 1e-3);  // close to the solution, not only converging
+}
+
+// At t = 10, Kahan and Li's order 8 composition of the constrained midpoint with h =
+// 0.01 gives the angle pendulum's state to 1e-10.
+BOOST_AUTO_TEST_CASE(the_cartesian_pendulum_agrees_with_its_angle_twin_at_t_10) {
+  const double a0 = 2.0, w0 = 0.0, T = 10.0;
+  double a, w;
+  reference(a0, w0, T, a, w);
+  const double e = error_at(composed(step_of(0.01), "kahan-li8"), T, a0, w0, a, w);
+  BOOST_TEST_MESSAGE("Cartesian against angle pendulum at t = 10: " << e);
+  BOOST_TEST(e <= 1e-10);
+}
+
+// Every step keeps |g(q_k)| and the hidden constraint |Dg(q_k) M^{-1} p_k| at round-off
+// relative to the terms (WrittenConstraints::relative_residuals), for the midpoint and a
+// composition with negative substeps; the energy error stays bounded: no larger over
+// the second half of 20000 steps (30 periods) than over the first, and for the midpoint
+// of order 2 (a quarter at half the step).
+BOOST_AUTO_TEST_CASE(every_step_stays_on_the_constraint_and_its_hidden_constraint) {
+  const WrittenConstraints g(cartesian);
+  const WrittenDynamic L(cartesian);
+  auto run = [&](const char* scheme, double h, std::int64_t steps, double& worst_g, double& worst_v, double& worst_E,
+                 double& first_half) {
+    State s = cartesian_state(2.5, 0.3);
+    const double E0 = energy(L, s.q, s.v);
+    worst_g = worst_v = worst_E = first_half = 0.0;
+    auto observe = [&](std::int64_t k, double t, const VectorXd& q, const VectorXd& p, const StepSummary&) {
+      if (k == steps / 2) first_half = worst_E;
+      double a, b;
+      const VectorXd v = p / kM;
+      g.relative_residuals(t, q, v, a, b);
+      worst_g = std::fmax(worst_g, a);
+      worst_v = std::fmax(worst_v, b);
+      worst_E = std::fmax(worst_E, std::fabs(energy(L, q, v) - E0));
+    };
+    const RunSummary r = std::string(scheme) == "none" ? integrate(step_of(h), 0.0, s.q, s.p, s.v, steps, observe)
+                                                       : integrate(composed(step_of(h), scheme), 0.0, s.q, s.p, s.v, steps, observe);
+    BOOST_TEST(!r.failed, r.failure.message);
+  };
+  for (const char* scheme : {"none", "suzuki5"}) {
+    BOOST_TEST_CONTEXT(scheme) {
+      double worst_g, worst_v, worst_E, first_half;
+      run(scheme, 0.01, 20000, worst_g, worst_v, worst_E, first_half);
+      BOOST_TEST_MESSAGE(scheme << ": max relative |g| " << worst_g << ", hidden " << worst_v << ", |E - E0| " << worst_E);
+      BOOST_TEST(worst_g <= 1e-14);
+      BOOST_TEST(worst_v <= 1e-14);
+      BOOST_TEST(worst_E <= 1.01 * first_half);
+      if (std::string(scheme) == "none") {  // the error is O(h^2): a quarter at h / 2
+        double g2, v2, E2, half2;
+        run(scheme, 0.005, 40000, g2, v2, E2, half2);
+        BOOST_TEST_MESSAGE("midpoint energy error at h and h / 2: " << worst_E << ", " << E2);
+        BOOST_TEST(std::fabs(worst_E / E2 - 4.0) <= 0.2);
+      }
+    }
+  }
+}
+
+// A support moved by y_s(t) = A cos(w t): g = x^2 + (y - y_s)^2 - l^2 (rheonomic). The
+// constraint holds at every step, the hidden constraint Dg v + g_t = 0 too, and the
+// midpoint and the triple jump converge at orders 2 and 4 (against the triple jump at
+// a step 16 times smaller).
+BOOST_AUTO_TEST_CASE(a_moving_support_is_a_constraint_in_t) {
+  const auto moving =
+      system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + (y - A*cos(w*t))^2 - l^2"});
+  const WrittenConstraints g(moving);
+  auto make = [&](double h) {
+    return Step(WrittenDynamic(moving), ThetaMap::midpoint(), h, std::make_shared<WrittenConstraints>(moving), {}, true);
+  };
+  auto jump = [&](double h) {
+    const Step b = make(h);
+    return ComposedStep<Step>(
+        h, substeps(find_composition("triple-jump:4"), true), [&](double hk) { return make(hk); },
+        [&](double hk) { return make(hk).adjoint(); });
+  };
+  const double T = 1.0;
+  auto final_state = [&](const auto& S, double& worst) {
+    // at t = 0 the support is at y = A: the bob below it, moving with it (v_y = 0 = dy_s/dt)
+    State s{VectorXd(2), VectorXd(2), VectorXd(2)};
+    s.q << kL * std::sin(0.7), 0.2 - kL * std::cos(0.7);
+    s.v << 0.0, 0.0;
+    s.p = kM * s.v;
+    worst = 0.0;
+    const RunSummary run = integrate(S, 0.0, s.q, s.p, s.v, std::lround(T / S.step_size()),
+                                     [&](std::int64_t, double t, const VectorXd& q, const VectorXd& p, const StepSummary&) {
+                                       double a, b;
+                                       g.relative_residuals(t, q, p / kM, a, b);
+                                       worst = std::fmax(worst, std::fmax(a, b));
+                                     });
+    BOOST_TEST(!run.failed, run.failure.message);
+    return s;
+  };
+  double worst;
+  const State ref = final_state(jump(0.05 / 32), worst);
+  std::vector<double> hs, mid, four;
+  for (int k = 0; k < 3; ++k) {
+    const double h = 0.05 / std::pow(2.0, k);
+    hs.push_back(h);
+    const State a = final_state(make(h), worst);
+    BOOST_TEST(worst <= 1e-13);
+    mid.push_back((a.q - ref.q).lpNorm<Eigen::Infinity>());
+    const State b = final_state(jump(h), worst);
+    BOOST_TEST(worst <= 1e-13);
+    four.push_back((b.q - ref.q).lpNorm<Eigen::Infinity>());
+  }
+  const double o2 = verification::fit_order(hs, mid), o4 = verification::fit_order(hs, four);
+  BOOST_TEST_MESSAGE("moving support: orders " << o2 << ", " << o4);
+  BOOST_TEST(std::fabs(o2 - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o4 - 4.0) <= 0.25);
+}
+
+// project() puts a momentum on the hidden constraint along the constraint normal:
+// p - G^T mu with G M^{-1} (p - G^T mu) = 0, i.e. the radial part of the velocity removed.
+BOOST_AUTO_TEST_CASE(project_removes_the_velocity_across_the_constraint) {
+  const Step S = step_of(0.01);
+  State s = cartesian_state(0.6, 1.2);
+  const VectorXd tangential = s.p;
+  const VectorXd radial = 0.7 * s.q;  // along G^T = 2 q
+  VectorXd p = tangential + radial, v = VectorXd::Zero(2);
+  BOOST_TEST(S.project(0.0, s.q, p, v).empty());
+  BOOST_TEST((p - tangential).lpNorm<Eigen::Infinity>() <= 1e-15);
+  BOOST_TEST((v - tangential / kM).lpNorm<Eigen::Infinity>() <= 1e-15);
+}
+
+// With a damping force -c v on the bob, the constrained steps give the damped angle
+// pendulum (its generalized force -c l^2 a_dot): the triple jump of the constrained
+// midpoint converges to it at order 4, and the forces' work is negative.
+BOOST_AUTO_TEST_CASE(a_damped_constrained_pendulum_is_the_damped_angle_pendulum) {
+  const auto damped = system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + y^2 - l^2"},
+                                {{0, "-c*x_dot"}, {1, "-c*y_dot"}});
+  const auto damped_angle = system_of({"a"}, "m*l^2*a_dot^2/2 + m*g*l*cos(a)", {}, {{0, "-c*l^2*a_dot"}});
+  using Forced = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>;
+  const double a0 = 1.5, T = 1.0;
+  double a, w;
+  {
+    using G = DynamicGalerkinStep<WrittenDynamic, WrittenForce>;
+    const G S(WrittenDynamic(damped_angle), QuadratureKind::gauss, 6, 0.01, {}, std::make_shared<WrittenForce>(damped_angle));
+    VectorXd q(1), p(1), v(1);
+    q << a0;
+    v << 0.0;
+    p << 0.0;
+    BOOST_REQUIRE(!integrate(S, 0.0, q, p, v, 100, [](auto&&...) {}).failed);
+    a = q[0];
+    w = p[0] / (kM * kL * kL);
+  }
+  auto make = [&](double h) {
+    return Forced(WrittenDynamic(damped), ThetaMap::midpoint(), h, std::make_shared<WrittenConstraints>(damped), {},
+                  true, std::make_shared<WrittenForce>(damped));
+  };
+  std::vector<double> hs, errors;
+  double W = 0.0;
+  for (int k = 0; k < 3; ++k) {
+    const double h = 0.05 / std::pow(2.0, k);
+    const ComposedStep<Forced> S(
+        h, substeps(find_composition("triple-jump:4"), true), [&](double hk) { return make(hk); },
+        [&](double hk) { return make(hk).adjoint(); });
+    State s = cartesian_state(a0, 0.0);
+    W = 0.0;
+    const RunSummary run = integrate(S, 0.0, s.q, s.p, s.v, std::lround(T / h),
+                                     [&](std::int64_t, double, const VectorXd&, const VectorXd&,
+                                         const StepSummary& st) { W += st.work; });
+    BOOST_TEST(!run.failed, run.failure.message);
+    const State e = cartesian_state(a, w);
+    hs.push_back(h);
+    errors.push_back(std::fmax((s.q - e.q).lpNorm<Eigen::Infinity>(), (s.p - e.p).lpNorm<Eigen::Infinity>()));
+  }
+  const double order = verification::fit_order(hs, errors);
+  BOOST_TEST_MESSAGE("damped constrained pendulum: order " << order << ", error " << errors.back() << ", W = " << W);
+  BOOST_TEST(std::fabs(order - 4.0) <= 0.25);
+  BOOST_TEST(errors.back() <= 1e-4);  // (the undamped triple jump's error at this step: 1e-5)
+  BOOST_TEST(W < 0.0);
+}
+
+// A step allocates nothing once the step object exists.
+BOOST_AUTO_TEST_CASE(a_constrained_step_allocates_nothing) {
+  const Step S = step_of(0.01);
+  State s = cartesian_state(1.0, 0.5);
+  VectorXd dq = VectorXd::Zero(2), dp(2);
+  S.step(0.0, s.q, s.p, dq, dp);  // (a first step: buffers of the tapes grown)
+  const long before = news.load();
+  for (int k = 0; k < 10; ++k) {
+    const StepSummary r = S.step(0.0, s.q, s.p, dq, dp);
+    BOOST_TEST(r.converged);
+  }
+  BOOST_TEST(news.load() - before == 0);
+}
