@@ -6,8 +6,9 @@
 //
 // Each constraint is parsed with WrittenSystem::Kind::constraint (the coordinates, t,
 // the parameters and the definitions; no velocities). Evaluated in doubles; the rows
-// of Dg and the time derivatives g_t by reverse mode on each constraint's tape
-// (Expression::gradient), one pass per constraint.
+// of Dg and the time derivatives g_t by each constraint's derivative program
+// (mechanics/derivative_program.h, built once per system, in the variables (q, t)),
+// or by reverse mode on its tape where no program is built.
 //
 // The measures of distance to the constraint that the runtime checks and reports are
 // relative (relative_residuals below): |g_i(t, q)| / (|grad g_i| |q|) (for
@@ -24,6 +25,7 @@
 #include <cmath>
 #include <memory>
 #include <stdexcept>
+#include <vector>
 
 #include "mechanics/written_lagrangian.h"
 
@@ -36,6 +38,11 @@ class WrittenConstraints {
       throw std::invalid_argument("WrittenConstraints: constraints are written on R^n");
     if (system_->constraints.empty()) throw std::invalid_argument("WrittenConstraints: the system writes no constraints");
     const int n = dim();
+    for (const Expression& e : system_->constraints) {
+      programs_.push_back(DerivativeProgram::build(e, n + 1, false));
+      if (programs_.back() && programs_.back()->has_blocks()) programs_.back() = nullptr;
+      slots_.push_back(programs_.back() ? programs_.back()->workspace() : std::vector<double>());
+    }
     qt_.setZero(n + 1);
     zero_.setZero(n + 1);
     gq_.resize(n + 1);
@@ -62,9 +69,14 @@ class WrittenConstraints {
     for (int i = 0; i < m; ++i) {
       const Expression& e = system_->constraints[static_cast<std::size_t>(i)];
       g[i] = e(qt_.data(), zero_.data());
-      gq_.setZero();
-      gv_.setZero();
-      e.gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data());
+      const auto k = static_cast<std::size_t>(i);
+      if (programs_[k]) {
+        programs_[k]->gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data(), slots_[k].data());
+      } else {
+        gq_.setZero();
+        gv_.setZero();
+        e.gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data());
+      }
       for (int j = 0; j < n; ++j) G(i, j) = gq_[j];
       gt[i] = gq_[n];
     }
@@ -99,6 +111,8 @@ class WrittenConstraints {
   }
 
   std::shared_ptr<const WrittenSystem> system_;
+  std::vector<std::shared_ptr<const DerivativeProgram>> programs_;  // per constraint, or null
+  mutable std::vector<std::vector<double>> slots_;                  // their workspaces
   mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient
   mutable Eigen::VectorXd g_, gt_;
   mutable Eigen::MatrixXd G_;

@@ -29,11 +29,13 @@
 //   [ F_D               -s G0^T ]
 //   [ s G1(D)            0      ]
 // where F_D is ThetaEquation's Jacobian and the multiplier is carried as lambda / s:
-// s = max|F_D| / max|G0| (at the step's first Jacobian) makes the constraint rows and
+// s = max|F_D| / max|G0| (at the first Jacobian the equation forms, then kept, so that
+// one step's multiplier is the next one's starting guess) makes the constraint rows and
 // the multiplier column of the size of the others, so that the driver's one stopping
-// rule judges them alike. Equation 2 is linear in mu and, for a Lagrangian quadratic in
-// the velocities, in v1: one solve of [L_vv G1^T; G1 0] (Newton's method on it
-// otherwise, from v1 = D / h).
+// rule judges them alike; the Jacobian formed at the first iterate serves the step's
+// later ones while each shrinks the residual fourfold (Refresh::within_step). Equation 2
+// is linear in mu and, for a Lagrangian quadratic in the velocities, in v1: one solve
+// (MomentumMap below; Newton's method on it otherwise, from v1 = D / h).
 //
 // Workspace is allocated at construction; a step allocates nothing. One object must
 // not be used from two threads at once (copies are independent).
@@ -48,6 +50,20 @@
 #include "solvers/dynamic_step.h"
 
 namespace dvm {
+
+namespace constrained_detail {
+
+// out -= c G^T mu (G: m x n), in loops: at the few coordinates and constraints of a
+// linkage a matrix-vector product's call costs more than its arithmetic.
+inline void subtract_normals(const Eigen::MatrixXd& G, double c, const double* mu, double* out) {
+  const Eigen::Index m = G.rows(), n = G.cols();
+  for (Eigen::Index k = 0; k < m; ++k) {
+    const double a = c * mu[k];
+    for (Eigen::Index i = 0; i < n; ++i) out[i] -= G(k, i) * a;
+  }
+}
+
+}  // namespace constrained_detail
 
 // Equation 1 of the header comment, for solvers/newton_driver.h: the unknowns
 // y = (D, lambda / s).
@@ -76,7 +92,6 @@ class ConstrainedThetaEquation {
     eq_.begin(q0, p0, t0);
     g_->jacobian(t0, q0, g1_, G0_, gt_);
     g0max_ = dynamic_detail::inf_norm(G0_);
-    s_ = 0.0;
   }
   void residual(const Vector& y, Vector& r) {
     split(y);
@@ -105,7 +120,7 @@ class ConstrainedThetaEquation {
   double momentum(const Vector& y, Vector& dp) {
     split(y);
     eq_.momentum(D_, dp);
-    dp.noalias() -= (s_ * G0_.transpose()) * y.tail(m_);
+    constrained_detail::subtract_normals(G0_, s_, y.data() + n_, dp.data());
     return eq_.work(D_);
   }
   double end_time() const { return t1_; }
@@ -116,9 +131,9 @@ class ConstrainedThetaEquation {
     q1_ = *q0_ + D_;
   }
   void form(const Vector& y, Vector& r) const {
-    r.head(n_) = rD_;
-    r.head(n_).noalias() -= (s_ * G0_.transpose()) * y.tail(m_);
-    r.tail(m_) = s_ * g1_;
+    for (int i = 0; i < n_; ++i) r[i] = rD_[i];
+    constrained_detail::subtract_normals(G0_, s_, y.data() + n_, r.data());
+    for (int k = 0; k < m_; ++k) r[n_ + k] = s_ * g1_[k];
   }
 
   ThetaEquation<Sys, Eigen::Dynamic, Force> eq_;
@@ -130,18 +145,25 @@ class ConstrainedThetaEquation {
   Matrix JD_, G0_, G1_;
 };
 
+// How the momentum depends on the velocity, which decides how the right transform
+// (equation 2) is solved: `general`, Newton's method on L_v(q, v) + G^T mu = p~;
+// `linear`, L = v^T M(q) v / 2 + U(q) (L_v = M(q) v): one solve with M(q) = L_vv;
+// `constant`, M constant too (a separable L): M^{-1} kept from the first step, and mu
+// from the m x m system G M^{-1} G^T mu = G M^{-1} p~ + g_t.
+enum class MomentumMap { general, linear, constant };
+
 namespace constrained_detail {
 
 // The right constrained Legendre transform at (t, q) (equation 2 of the header
 // comment): from p~ (the momentum before projection) finds v and mu with
 //   L_v(q, v) + G^T mu = p~,   G v + g_t = 0,
-// and writes p = p~ - G^T mu. v holds the starting guess on entry. `linear`: L_v is
-// linear in v (one solve is exact). Returns an empty string, or what failed.
+// and writes p = p~ - G^T mu. v holds the starting guess on entry.
 template <class Sys, class Con>
 struct Projection {
-  Eigen::VectorXd Lq, Lv, g, gt, r, x;
-  Eigen::MatrixXd Lqq, Lqv, Lvv, G, K;
-  DenseLU lu;
+  Eigen::VectorXd Lq, Lv, g, gt, r, x, mu;
+  Eigen::MatrixXd Lqq, Lqv, Lvv, G, K, Minv, MG, S;
+  DenseLU lu, small, mass;
+  bool have_minv = false;
   Projection(int n, int m) {
     Lq.resize(n);
     Lv.resize(n);
@@ -149,18 +171,44 @@ struct Projection {
     gt.resize(m);
     r.resize(n + m);
     x.resize(n + m);
+    mu.resize(m);
     Lqq.resize(n, n);
     Lqv.resize(n, n);
     Lvv.resize(n, n);
     G.resize(m, n);
     K.resize(n + m, n + m);
+    Minv.resize(n, n);
+    MG.resize(n, m);
+    S.resize(m, m);
     lu.resize(n + m);
+    small.resize(m);
+    mass.resize(n);
   }
-  // p~ in `p` on entry, p on return (mu is left in x.tail(m), G = Dg(t, q) in G).
+  // p~ in `p` on entry, p on return (G = Dg(t, q) left in G, mu in mu).
   const char* operator()(const Sys& L, const Con& con, double t, const Eigen::VectorXd& q, Eigen::VectorXd& p,
-                         Eigen::VectorXd& v, bool linear) {
+                         Eigen::VectorXd& v, MomentumMap kind) {
     const Eigen::Index n = q.size(), m = g.size();
     con.jacobian(t, q, g, G, gt);
+    if (kind == MomentumMap::constant) {
+      if (!have_minv) {
+        L.hessian(q, v, Lq, Lv, Lqq, Lqv, Lvv);
+        if (!mass.factor(Lvv)) return "the mass matrix d2L/dv2 is singular";
+        mass.inverse(Minv);
+        have_minv = true;
+      }
+      v.noalias() = Minv * p;
+      MG.noalias() = Minv * G.transpose();
+      S.noalias() = G * MG;
+      mu = gt;
+      for (Eigen::Index k = 0; k < m; ++k)
+        for (Eigen::Index i = 0; i < n; ++i) mu[k] += G(k, i) * v[i];
+      if (!small.factor(S)) return "the constraint Jacobian is singular where the momentum is projected (redundant constraints)";
+      small.solve(mu, mu);
+      for (Eigen::Index k = 0; k < m; ++k)
+        for (Eigen::Index i = 0; i < n; ++i) v[i] -= MG(i, k) * mu[k];
+      subtract_normals(G, 1.0, mu.data(), p.data());
+      return std::isfinite(dynamic_detail::inf_norm(p)) ? "" : "non-finite momentum projection";
+    }
     x.tail(m).setZero();  // mu
     const double scale = std::fmax(1e-300, dynamic_detail::inf_norm(p));
     for (int it = 0; it < 30; ++it) {
@@ -177,15 +225,18 @@ struct Projection {
       K.topRightCorner(n, m) = G.transpose();
       K.bottomLeftCorner(m, n) = G;
       K.bottomRightCorner(m, m).setZero();
-      if (!lu.factor(K)) return "the constraint Jacobian is singular where the momentum is projected (redundant constraints, or d2L/dv2 singular on them)";
+      if (!lu.factor(K))
+        return "the constraint Jacobian is singular where the momentum is projected (redundant constraints, or "
+               "d2L/dv2 singular on them)";
       lu.solve(r, r);
       v -= r.head(n);
       x.tail(m) -= r.tail(m);
       if (!std::isfinite(dynamic_detail::inf_norm(r))) return "non-finite momentum projection";
-      if (linear) break;
+      if (kind == MomentumMap::linear) break;
       if (it == 29) return "the momentum projection did not converge";
     }
-    p.noalias() -= G.transpose() * x.tail(m);
+    mu = x.tail(m);
+    subtract_normals(G, 1.0, mu.data(), p.data());
     return "";
   }
 };
@@ -205,16 +256,16 @@ class ConstrainedThetaStep {
   using V = Eigen::VectorXd;
   static constexpr bool kForced = is_force_v<Force>;
 
-  // linear_momentum: L_v is linear in v (L quadratic in the velocities), so the
-  // projection is one solve. Each copy of the step evaluates its own copies of the
-  // constraints and the force.
+  // momentum: how L_v depends on v (MomentumMap; `general` is right for every L, the
+  // others save work where they hold). Each copy of the step evaluates its own copies
+  // of the constraints and the force.
   ConstrainedThetaStep(Sys L, ThetaMap R, double h, std::shared_ptr<const Con> constraints, StepOptions options = {},
-                       bool linear_momentum = false, std::shared_ptr<const Force> force = nullptr)
+                       MomentumMap momentum = MomentumMap::general, std::shared_ptr<const Force> force = nullptr)
       : L_(std::move(L)),
         R_(std::move(R)),
         h_(h),
         options_(options),
-        linear_(linear_momentum),
+        momentum_(momentum),
         con_(std::move(constraints)),
         force_(std::move(force)) {
     dynamic_detail::require_step(h);
@@ -230,7 +281,7 @@ class ConstrainedThetaStep {
     work_ = std::make_shared<Work>(L_, *con_, R_.theta(), h_, force_.get());
   }
   ConstrainedThetaStep(const ConstrainedThetaStep& o)
-      : L_(o.L_), R_(o.R_), h_(o.h_), options_(o.options_), linear_(o.linear_), con_(o.con_), force_(o.force_) {
+      : L_(o.L_), R_(o.R_), h_(o.h_), options_(o.options_), momentum_(o.momentum_), con_(o.con_), force_(o.force_) {
     work_ = std::make_shared<Work>(L_, *con_, R_.theta(), h_, force_.get());
   }
   ConstrainedThetaStep& operator=(const ConstrainedThetaStep&) = delete;
@@ -244,7 +295,7 @@ class ConstrainedThetaStep {
 
   // The constrained step of the adjoint map (1 - theta).
   ConstrainedThetaStep adjoint() const {
-    return ConstrainedThetaStep(L_, R_.adjoint(), h_, con_, options_, linear_, force_);
+    return ConstrainedThetaStep(L_, R_.adjoint(), h_, con_, options_, momentum_, force_);
   }
 
   // Puts p on the hidden constraint at (t, q): p - G^T mu with G v + g_t = 0 for
@@ -254,7 +305,7 @@ class ConstrainedThetaStep {
   std::string project(double t, const V& q, V& p, V& v) const {
     Work& w = *work_;
     try {
-      return w.projection(L_, *w.con, t, q, p, v, linear_);
+      return w.projection(L_, *w.con, t, q, p, v, momentum_);
     } catch (const std::domain_error& e) {
       return e.what();
     }
@@ -264,7 +315,7 @@ class ConstrainedThetaStep {
   // on return, dp receives p1 - p0.
   StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
-    const int n = L_.dim(), m = con_->count();
+    const int n = L_.dim();
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
     if (dp.size() != n) dp.resize(n);
     Work& w = *work_;
@@ -272,9 +323,10 @@ class ConstrainedThetaStep {
       w.q0 = q0;
       w.p0 = p0;
       w.y.head(n) = dq;
-      w.y.tail(m).setZero();  // (the Jacobian does not depend on the multiplier: its guess is immaterial)
+      // (the multiplier's guess: the last step's, kept in w.y; the Newton iterates after the
+      // first do not depend on it, but a good one lets the first residual meet the tolerance)
       w.eq.begin(w.q0, w.p0, t);
-      s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
+      s = newton_drive(w.eq, w.lu, Refresh::within_step, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
       dq = w.y.head(n);
       if (s.converged) {
         const double work = w.eq.momentum(w.y, w.dp);
@@ -282,14 +334,14 @@ class ConstrainedThetaStep {
         w.q1 = q0 + dq;
         w.p1 = p0 + w.dp;
         w.v1 = dq / h_;
-        const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, linear_);
+        const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, momentum_);
         if (*failed) {
           s.converged = false;
           s.message = failed;
         } else {
           // p1 - p0 = (p1~ - p0) - G1^T mu, without the round-off of forming p1 first
           dp = w.dp;
-          dp.noalias() -= w.projection.G.transpose() * w.projection.x.tail(m);
+          constrained_detail::subtract_normals(w.projection.G, 1.0, w.projection.mu.data(), dp.data());
           if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
             s.converged = false;
             s.message = "non-finite momentum";
@@ -324,6 +376,7 @@ class ConstrainedThetaStep {
       start.resize(k);
       J.resize(k, k);
       lu.resize(k);
+      y.setZero();
     }
     std::unique_ptr<Con> con;      // this step's copy of the constraints (their workspace)
     std::unique_ptr<Force> force;  // and of the force
@@ -339,7 +392,7 @@ class ConstrainedThetaStep {
   ThetaMap R_;
   double h_;
   StepOptions options_;
-  bool linear_;
+  MomentumMap momentum_;
   std::shared_ptr<const Con> con_;
   std::shared_ptr<const Force> force_;
   std::shared_ptr<Work> work_;

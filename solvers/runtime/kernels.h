@@ -177,6 +177,16 @@ class StepDerivatives<Stepper, true> {
   std::unique_ptr<Recorder> out_;
 };
 
+// Whether a view reports constraint residuals (bool constraint_residuals(t, q, p, g,
+// hidden) const: the run-time-sized systems, true where they have constraints).
+template <class View, class = void>
+struct has_constraint_residuals : std::false_type {};
+template <class View>
+struct has_constraint_residuals<
+    View, std::void_t<decltype(std::declval<const View&>().constraint_residuals(
+              0.0, std::declval<const typename View::Point&>(), std::declval<const typename View::Covector&>(),
+              std::declval<double&>(), std::declval<double&>()))>> : std::true_type {};
+
 template <class View, class Stepper>
 class StepperRun final : public Run {
  public:
@@ -224,7 +234,15 @@ class StepperRun final : public Run {
     Covector p = p0_;
     const std::int64_t monitor_every = rec ? std::max<std::int64_t>(1, rec->spec().monitor_every) : 1;
     std::int64_t monitored = 0;  // the last step whose energy and invariants were evaluated
+    double max_g = 0.0, max_hidden = 0.0;  // the constraint residuals (system.constraints)
     auto monitor = [&](std::int64_t k, const Point& qk, const Covector& pk) {
+      if constexpr (has_constraint_residuals<View>::value) {
+        double g, hidden;
+        if (view_.constraint_residuals(static_cast<double>(k) * h, qk, pk, g, hidden)) {
+          max_g = std::fmax(max_g, g);
+          max_hidden = std::fmax(max_hidden, hidden);
+        }
+      }
       E = view_.energy(qk, pk);
       max_energy_error = std::fmax(max_energy_error, std::fabs(E - E0_));
       if (forced) max_balance = std::fmax(max_balance, std::fabs((E - E0_) - W));
@@ -282,6 +300,8 @@ class StepperRun final : public Run {
     r.max_abs_energy_error = max_energy_error;
     r.work = W;
     r.max_abs_energy_balance = max_balance;
+    r.max_constraint_residual = max_g;
+    r.max_hidden_constraint_residual = max_hidden;
     r.solver_iterations = r.loop.solver_iterations;
     r.jacobians = r.loop.jacobians;
     r.max_step_iterations = r.loop.max_step_iterations;

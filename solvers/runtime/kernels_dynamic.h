@@ -22,9 +22,13 @@
 //   composition     ComposedStep of either step, the adjoint stages at 1 - theta
 //   system.forces   the theta, Galerkin and Hamiltonian steps with their Force
 //                   (WrittenForce), never the structured separable paths
+//   system.constraints  ConstrainedThetaStep (solvers/constrained_step.h), forces or
+//                   not, composed or not; the initial state checked against the
+//                   constraints (check_constrained_start)
 // Included only by the kernels_*.cc translation units.
 #pragma once
 
+#include <Eigen/SVD>
 #include <cmath>
 #include <memory>
 #include <sstream>
@@ -34,7 +38,9 @@
 
 #include "mechanics/dynamic_system.h"
 #include "mechanics/hamiltonian.h"
+#include "mechanics/written_constraints.h"
 #include "mechanics/written_force.h"
+#include "solvers/constrained_step.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/dense_separable_step.h"
@@ -60,12 +66,15 @@ inline void dynamic_invariant_values(const NBodyDynamic&, const Eigen::VectorXd&
   const auto m = NBodyDynamic::momenta(q, p);
   for (int i = 0; i < 6; ++i) out[i] = m[static_cast<std::size_t>(i)];
 }
-// A coordinate that L does not depend on and no force acts along: its momentum is
-// conserved (with a force along it, it changes by the force's impulse).
+// A coordinate that L does not depend on, no force acts along and no constraint
+// involves: its momentum is conserved (with a force along it, it changes by the force's
+// impulse; a constraint in it exerts a force along it too).
 inline bool conserved_momentum(const WrittenDynamic& L, int i) {
   if (!L.cyclic(i)) return false;
   for (const auto& f : L.system()->forces)
     if (f.first == i) return false;
+  for (const Expression& g : L.system()->constraints)
+    if (g.uses(0, i)) return false;
   return true;
 }
 // The scene's own invariants ([system] invariants, in its order), then the momentum of
@@ -183,6 +192,21 @@ struct DynamicView {
     return r;
   }
   double point_defect(const Point&) const { return -1.0; }
+  // With constraints (system.constraints): the relative residuals of the constraint and
+  // of its hidden constraint at (t, q, p) (WrittenConstraints::relative_residuals, v =
+  // FL^{-1}(q, p) in the view's workspace); false without.
+  bool constraint_residuals(double t, const Point& q, const Covector& p, double& g, double& hidden) const {
+    if (!constraints) return false;
+    if (velocity_.size() != n()) {
+      velocity_.resize(n());
+      legendre_.resize(n());
+    }
+    velocity_.setZero();
+    dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_);
+    constraints->relative_residuals(t, q, velocity_, g, hidden);
+    return true;
+  }
+  std::shared_ptr<WrittenConstraints> constraints = nullptr;  // the view's own (their workspace), or null
   void finish_report(RunReport& r, const Point& q, const Covector& p) const {
     r.q_final.assign(q.data(), q.data() + q.size());
     r.p_final.assign(p.data(), p.data() + p.size());
@@ -303,6 +327,87 @@ inline ThetaMap dynamic_theta_map(const Method& me) {
   throw InputError("integrator.map: map \"" + e.name + "\" does not live on R^n");
 }
 
+// The force at the initial state (t = 0) is finite, or the run is refused.
+inline void require_finite_force(const WrittenForce& force, const Problem& pr, const Eigen::VectorXd& q,
+                                 const Eigen::VectorXd& v) {
+  Eigen::VectorXd F(q.size());
+  force.value(0.0, q, v, F);
+  if (F.allFinite()) return;
+  std::ostringstream m;
+  m.precision(17);
+  m << pr.forces_where << ": the force is not finite at the initial state (t = 0): F = [";
+  for (Eigen::Index i = 0; i < F.size(); ++i) m << (i ? ", " : "") << F[i];
+  throw InputError(m.str() + "]");
+}
+
+// The largest relative residual of the initial state the constrained runs accept
+// (WrittenConstraints::relative_residuals), for the position and for the velocity.
+constexpr double kConstraintStartTolerance = 1e-10;
+
+// The initial state of a constrained run (system.constraints): the constraint Jacobian
+// Dg(0, q) of full rank m, q on the constraints and v on their hidden constraint, each
+// to kConstraintStartTolerance relative; an initial velocity (or momentum) off the
+// hidden constraint is refused, or projected onto it where the scene sets
+// initial.project_velocity (p, v0 are then replaced). Throws InputError naming the key.
+inline void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
+                                    Eigen::VectorXd& p, Eigen::VectorXd& v0) {
+  const WrittenSystem& w = *pr.written;
+  const int n = L.dim(), m = static_cast<int>(w.constraints.size());
+  WrittenConstraints con(pr.written);
+  Eigen::VectorXd g(m), gt(m);
+  Eigen::MatrixXd G(m, n);
+  con.jacobian(0.0, q, g, G, gt);
+  auto text = [&](int i) {
+    return "system.constraints[" + std::to_string(i + 1) + "] (\"" + w.constraints[static_cast<std::size_t>(i)].text() + "\")";
+  };
+  std::ostringstream msg;
+  msg.precision(6);
+  if (!G.allFinite() || !g.allFinite() || !gt.allFinite()) {
+    msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
+    throw InputError(msg.str());
+  }
+  // rank of Dg: its singular values against the largest
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(G);
+  const Eigen::VectorXd s = svd.singularValues();
+  int rank = 0;
+  for (Eigen::Index i = 0; i < s.size(); ++i)
+    if (s[i] > 1e-10 * s[0]) ++rank;
+  if (rank < m) {
+    msg << pr.constraints_where << ": the constraint Jacobian Dg has rank " << rank << " at the initial state, "
+        << "expected " << m << " (one per constraint; singular values [";
+    for (Eigen::Index i = 0; i < s.size(); ++i) msg << (i ? ", " : "") << s[i];
+    msg << "]): the constraints are redundant there, or contradict each other";
+    throw InputError(msg.str());
+  }
+  const double qn = q.norm();
+  for (int i = 0; i < m; ++i) {
+    const double gn = G.row(i).norm(), r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
+    if (!(r <= kConstraintStartTolerance)) {
+      msg << "initial.q: the initial position is off " << text(i) << ": g = " << g[i] << " at t = 0, relative "
+          << r << " (|g| / (|grad g| |q|)), beyond " << kConstraintStartTolerance
+          << "; give a position on the constraints";
+      throw InputError(msg.str());
+    }
+  }
+  const double vn = v0.norm();
+  for (int i = 0; i < m; ++i) {
+    const double gn = G.row(i).norm(), b = std::fabs(G.row(i).dot(v0) + gt[i]);
+    const double r = b / (gn * vn > 0.0 ? gn * vn : 1.0);
+    if (r <= kConstraintStartTolerance) continue;
+    if (pr.project_velocity) {
+      constrained_detail::Projection<WrittenDynamic, WrittenConstraints> project(n, m);
+      const char* failed = project(L, con, 0.0, q, p, v0, MomentumMap::general);
+      if (*failed) throw InputError(pr.project_velocity_where + ": " + failed);
+      return;
+    }
+    msg << (pr.momentum_given ? "initial.p" : "initial.v") << ": the initial velocity is off the hidden constraint of "
+        << text(i) << ": grad g . v + dg/dt = " << G.row(i).dot(v0) + gt[i] << ", relative " << r << ", beyond "
+        << kConstraintStartTolerance << "; give a velocity along the constraints, or set "
+        << "initial.project_velocity = true to project it";
+    throw InputError(msg.str());
+  }
+}
+
 // `hamiltonian`: the written H, when the scene gives one (null: H from L).
 template <class Sys>
 std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Method& me,
@@ -363,9 +468,45 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       }
     }
   }
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+    if (pr.constrained()) {
+      check_constrained_start(L, pr, q, p, v0);
+      view.constraints = std::make_shared<WrittenConstraints>(pr.written);
+      base.constrained = true;
+      base.constraints = static_cast<int>(pr.written->constraints.size());
+    }
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
+
+  // system.constraints: the constrained theta step, with the force where the system has
+  // one (the lagrangian form of the theta-family maps, composed or not: the registry's
+  // "lagrangian with constraints")
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+    if (pr.constrained()) {
+      if (me.form != Form::lagrangian || me.galerkin)  // (validate refuses it first)
+        throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps only");
+      dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.constraints");
+      const ThetaMap R = dynamic_theta_map(me);
+      const auto con = std::make_shared<const WrittenConstraints>(pr.written);
+      const MomentumMap momentum = L.separable()               ? MomentumMap::constant
+                                   : L.parts().split.quadratic ? MomentumMap::linear
+                                                               : MomentumMap::general;
+      base.step_path = StepPath::generic;
+      if (pr.forced()) {
+        const auto force = std::make_shared<WrittenForce>(pr.written);
+        require_finite_force(*force, pr, q, v0);
+        base.forced = true;
+        auto make = [&](double hk, const ThetaMap& Rk) {
+          return ConstrainedThetaStep<Sys, WrittenConstraints, WrittenForce>(L, Rk, hk, con, opt, momentum, force);
+        };
+        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      }
+      auto make = [&](double hk, const ThetaMap& Rk) {
+        return ConstrainedThetaStep<Sys, WrittenConstraints>(L, Rk, hk, con, opt, momentum);
+      };
+      return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+    }
 
   // system.forces: the forced steps (the forms and methods the registry's "lagrangian
   // with forces" admits: the theta step, composed or not, Galerkin, the Hamiltonian
@@ -374,15 +515,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.forced()) {
       const auto force = std::make_shared<WrittenForce>(pr.written);
-      V F(n);
-      force->value(0.0, q, v0, F);
-      if (!F.allFinite()) {
-        std::ostringstream m;
-        m.precision(17);
-        m << pr.forces_where << ": the force is not finite at the initial state (t = 0): F = [";
-        for (int i = 0; i < n; ++i) m << (i ? ", " : "") << F[i];
-        throw InputError(m.str() + "]");
-      }
+      require_finite_force(*force, pr, q, v0);
       if (me.form != Form::lagrangian && me.form != Form::hamiltonian)  // (validate refuses it first)
         throw InputError(pr.forces_where + ": forces enter the lagrangian and hamiltonian forms only");
       base.forced = true;

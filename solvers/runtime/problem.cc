@@ -100,6 +100,7 @@ std::string form_list(const std::vector<Form>& forms) {
 }  // namespace
 
 bool Problem::forced() const { return written && !written->forces.empty(); }
+bool Problem::constrained() const { return written && !written->constraints.empty(); }
 
 void require_boundary_value(const SystemEntry& sys) {
   if (!sys.caps.boundary_value)
@@ -136,7 +137,8 @@ void validate(const Problem& pr, const Method& me) {
     const Space space = pr.written->space == WrittenSystem::Space::sphere     ? Space::sphere
                         : pr.written->space == WrittenSystem::Space::rotation ? Space::rotation
                                                                               : Space::euclidean;
-    if (&sys != &written_system_entry(space, pr.written->factors, !pr.written->forces.empty()))
+    if (&sys != &written_system_entry(space, pr.written->factors, !pr.written->forces.empty(),
+                                      !pr.written->constraints.empty()))
       throw InputError(std::string("system.space: the written system lives on ") + to_string(space) +
                        " but the problem names the system entry \"" + name + "\" on " + to_string(sys.space));
   }
@@ -246,6 +248,9 @@ void validate(const Problem& pr, const Method& me) {
       if (pr.forced())
         throw InputError(what + "its kicks are the gradient of a potential, and system.forces are not (the forced "
                                 "step takes the other compositions)");
+      if (pr.constrained())
+        throw InputError(what + "its drifts leave system.constraints (the constrained step takes the other "
+                                "compositions)");
       if (me.form != Form::lagrangian && me.form != Form::hamiltonian)
         throw InputError(what + "expected form = \"lagrangian\" or \"hamiltonian\", got \"" +
                          std::string(to_string(me.form)) + "\"");
@@ -325,7 +330,13 @@ void validate(const Problem& pr, const Method& me) {
     if (me.composition != "none")
       throw InputError("integrator.composition: --linearize differentiates one theta step; a composition (\"" +
                        me.composition + "\") gives no derivative");
+    if (pr.constrained())
+      throw InputError(pr.constraints_where + ": --linearize differentiates the unconstrained theta step; the "
+                                              "constrained step gives no derivative");
   }
+  if (pr.project_velocity && !pr.constrained())
+    throw InputError(pr.project_velocity_where + ": projects the initial velocity onto the hidden constraint of "
+                                                 "system.constraints, and the system writes none");
 
   // the time grid
   if (!(pr.step > 0.0) || !std::isfinite(pr.step))

@@ -59,6 +59,13 @@ struct Problem {
   // Where the written system's forces are (system.forces), empty where it writes none.
   std::string forces_where;
   bool forced() const;  // the written system has forces (system.forces)
+  // Where its constraints are (system.constraints), empty where it writes none.
+  std::string constraints_where;
+  bool constrained() const;  // the written system has constraints (system.constraints)
+  // [initial] project_velocity: an initial velocity (or momentum) off the hidden
+  // constraint is projected onto it instead of refused (and where the key was given).
+  bool project_velocity = false;
+  std::string project_velocity_where;
 };
 
 class WrittenRetraction;  // mechanics/written_retraction.h

@@ -357,7 +357,7 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
                    did_you_mean(name, names));
 }
 
-const SystemEntry& written_system_entry(Space space, int factors, bool forced) {
+const SystemEntry& written_system_entry(Space space, int factors, bool forced, bool constrained) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
   // With forces: the lagrangian form (the theta-family maps composed or not, Galerkin) and
@@ -380,6 +380,27 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced) {
        false},
       factories::written,
       "the coordinates"};
+  // With constraints (and forces or not): the constrained theta step (the lagrangian
+  // form of the theta-family maps, composed or not; solvers/constrained_step.h).
+  static const SystemEntry rn_constrained = {
+      "lagrangian with constraints",
+      "written in the scene, with holonomic constraints",
+      Space::euclidean,
+      0,
+      {},
+      {{Form::lagrangian},
+       true,
+       true,
+       false,
+       false,
+       "system.constraints enter the lagrangian form of the theta-family maps and their compositions (the "
+       "constrained discrete Euler-Lagrange equations with multipliers); Galerkin, the hamiltonian, SODE and Newmark "
+       "forms, boundary values, solver = \"tiny\" and written maps take no constraints",
+       false,
+       false},
+      factories::written,
+      "the coordinates"};
+  if (constrained && space == Space::euclidean) return rn_constrained;
   if (forced && space == Space::euclidean) return rn_forced;
   // On S^2 and SO(3) a written Lagrangian runs the steps of the built-in systems there;
   // its Hamiltonian form needs the written H (validate checks that it is given).

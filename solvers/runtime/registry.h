@@ -165,6 +165,9 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
 // factors K = 2..4) or SO(3) (name "lagrangian", not listed as built-in); `forced`: on
 // R^n with forces (system.forces), "lagrangian with forces", which runs what the forced
 // step is built for.
-const SystemEntry& written_system_entry(Space space = Space::euclidean, int factors = 1, bool forced = false);
+// `constrained`: on R^n with constraints (system.constraints, forces or not), "lagrangian
+// with constraints", which runs what the constrained step is built for.
+const SystemEntry& written_system_entry(Space space = Space::euclidean, int factors = 1, bool forced = false,
+                                        bool constrained = false);
 
 }  // namespace dvm

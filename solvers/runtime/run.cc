@@ -182,6 +182,11 @@ std::string report_json(const RunReport& r) {
   j.arr("q_final", r.q_final).arr("p_final", r.p_final);
   j.num("energy_initial", r.energy_initial).num("energy_final", r.energy_final);
   j.num("max_abs_energy_error", r.max_abs_energy_error);
+  if (r.constrained)
+    j.boolean("constrained", true)
+        .num("constraints", r.constraints)
+        .num("max_constraint_residual", r.max_constraint_residual)
+        .num("max_hidden_constraint_residual", r.max_hidden_constraint_residual);
   if (r.forced)
     j.boolean("forced", true)
         .num("work", r.work)
@@ -233,6 +238,9 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
                   r.method_label.c_str(), r.step, static_cast<long long>(r.steps), r.t_final);
       std::fprintf(to, "  %-44s %22s %12s\n", "quantity", "initial", "max |change|");
       std::fprintf(to, "  %-44s %22.15g %12.3e\n", "energy", r.energy_initial, r.max_abs_energy_error);
+      if (r.constrained)
+        std::fprintf(to, "  constraints: %d; relative residual at most %.3e, of the hidden constraint %.3e\n",
+                     r.constraints, r.max_constraint_residual, r.max_hidden_constraint_residual);
       if (r.forced)
         std::fprintf(to, "  forces: work W = %.15g to t = %.6g; energy balance |E - E_0 - W| at most %.3e\n", r.work,
                      r.t_final, r.max_abs_energy_balance);

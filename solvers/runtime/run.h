@@ -125,6 +125,12 @@ struct RunReport {
   // energy's change, not a conservation error.
   bool forced = false;
   double work = 0.0, max_abs_energy_balance = 0.0;
+  // A system with holonomic constraints (system.constraints): how many, and the largest
+  // relative residuals of the constraint and of its hidden constraint at the monitored
+  // steps (WrittenConstraints::relative_residuals, mechanics/written_constraints.h).
+  bool constrained = false;
+  int constraints = 0;
+  double max_constraint_residual = 0.0, max_hidden_constraint_residual = 0.0;
   double max_point_defect = -1.0;  // manifolds only (< 0: not reported)
   std::vector<InvariantReport> invariants;
   double wall_seconds = 0.0;

@@ -297,7 +297,12 @@ std::vector<double> initial_vector(const Reader& r, const std::string& path, con
 void read_vector_initial(const Reader& r, const toml::table& ini, const std::string& path, const SystemEntry& info,
                          int dim, bool boundary_value, Problem& s) {
   const int links = info.space == Space::sphere ? dim / 3 : 1;
-  r.only_keys(ini, "initial", {"q", "p", "v"});
+  r.only_keys(ini, "initial", {"q", "p", "v", "project_velocity"});
+  if (const toml::node* pv = ini.get("project_velocity")) {
+    if (!pv->is_boolean()) throw InputError(r.where(pv, "initial.project_velocity") + ": expected true or false");
+    s.project_velocity = *pv->value<bool>();
+    s.project_velocity_where = r.where(pv, "initial.project_velocity");
+  }
   const toml::node* q = ini.get("q");
   if (!q) throw InputError(path + ": missing key 'initial.q'");
   s.q = initial_vector(r, path, *q, "initial.q", s, info.space);
@@ -952,7 +957,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   const toml::table& sys = r.section(root, "system", true);
   r.only_keys(sys, "system",
               {"builtin", "params", "lagrangian", "coordinates", "energy", "hamiltonian", "name", "masses", "space",
-               "ends", "definitions", "compile", "invariants", "forces"});
+               "ends", "definitions", "compile", "invariants", "forces", "constraints"});
   if (sys.get("lagrangian")) read_written_system(path, sys, pr);
   const toml::node* b = sys.get("builtin");
   if (!b && !pr.written)
@@ -960,7 +965,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   if (!pr.written) {
     for (const char* k :
          {"coordinates", "energy", "hamiltonian", "name", "space", "ends", "definitions", "compile", "invariants",
-          "forces"})
+          "forces", "constraints"})
       if (const toml::node* n = sys.get(k))
         throw InputError(r.where(n, std::string("system.") + k) + ": belongs to a written system (system.lagrangian)");
     pr.system = &find_system_entry(r.string(*b, "system.builtin"), r.where(b, "system.builtin"));

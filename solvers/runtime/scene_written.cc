@@ -363,10 +363,39 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     std::sort(w->forces.begin(), w->forces.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     if (!w->forces.empty()) pr.forces_where = key_where(path, *f, key);
   }
+  // [system] constraints = ["g_1(t, q)", ...]: holonomic constraints g = 0
+  // (mechanics/written_constraints.h)
+  if (const toml::node* cs = sys.get("constraints")) {
+    const std::string key = "system.constraints";
+    const std::string shape = ": expected a list of expressions g(t, q), each constrained to 0 (e.g. [\"x^2 + y^2 - l^2\"])";
+    if (!cs->is_array()) throw InputError(key_where(path, *cs, key) + shape);
+    if (w->space != WrittenSystem::Space::euclidean)
+      throw InputError(key_where(path, *cs, key) + ": constraints are written on R^n; on S^2 and SO(3) the space is "
+                                                  "the constraint (a spherical pendulum in R^3 with x^2 + y^2 + z^2 - "
+                                                  "l^2 is its constrained twin)");
+    const toml::array& a = *cs->as_array();
+    if (a.empty()) throw InputError(key_where(path, *cs, key) + ": an empty list" + shape.substr(1));
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      const toml::node& node = a[i];
+      const std::string k = key + "[" + std::to_string(i + 1) + "]";
+      if (!node.is_string()) throw InputError(key_where(path, node, k) + ": expected a string (an expression in t and q)");
+      try {
+        w->constraints.push_back(Expression::parse(*node.value<std::string>(), w->symbols(WrittenSystem::Kind::constraint)));
+      } catch (const ExpressionError& e) {
+        throw InputError(string_location(path, node, e.offset) + ": in " + k + ": " + e.what() +
+                         " (a constraint is g(t, q): the coordinates, t, the parameters and the definitions)");
+      }
+    }
+    if (a.size() >= w->coordinates.size())
+      throw InputError(key_where(path, *cs, key) + ": " + std::to_string(a.size()) + " constraints on " +
+                       std::to_string(w->coordinates.size()) + " coordinates leave no motion; expected fewer constraints "
+                                                                "than coordinates");
+    pr.constraints_where = key_where(path, *cs, key);
+  }
   const toml::node* L = sys.get("lagrangian");
   pr.written_where = key_where(path, *L, "system.lagrangian");
   if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
-  pr.system = &written_system_entry(space, w->factors, !w->forces.empty());
+  pr.system = &written_system_entry(space, w->factors, !w->forces.empty(), !w->constraints.empty());
   pr.dim = w->dim();
   pr.written = std::move(w);
 }
