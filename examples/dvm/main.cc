@@ -114,7 +114,11 @@ const char* kRunHelp =
     "              interpreted (what the step still evaluates interpreted: \"\",\n"
     "              or the sparse Hessian of U of separable-sparse-newton));\n"
     "              with [system] forces, forced (true), work, energy_balance_final\n"
-    "              and max_abs_energy_balance\n"
+    "              and max_abs_energy_balance; with [system] constraints,\n"
+    "              constrained (true), constraints (their number),\n"
+    "              max_constraint_residual and max_hidden_constraint_residual\n"
+    "              (the largest relative residuals at the monitored steps, as\n"
+    "              [system] constraints defines them)\n"
     "  --npy PATH  also write the rows as a NumPy .npy file (float64, shape\n"
     "              rows x columns, the CSV's columns as --csv states them),\n"
     "              overriding [output] npy; their names go beside it in PATH.json,\n"
@@ -199,6 +203,24 @@ const char* kRunHelp =
     "                               max_abs_energy_balance (E - E_0 - W); the CSV a\n"
     "                               last column, work. A coordinate with a force is not\n"
     "                               reported as cyclic\n"
+    "    constraints = [\"EXPR\"]     strings, optional, on R^n: holonomic constraints\n"
+    "                               g(t, q) = 0 in the time t and x (no velocities),\n"
+    "                               fewer than the coordinates, e.g. [\"x^2 + y^2 - l^2\"].\n"
+    "                               Each step solves the constrained discrete\n"
+    "                               Euler-Lagrange equations with multipliers and puts\n"
+    "                               the momentum on the hidden constraint\n"
+    "                               Dg v + dg/dt = 0 (RATTLE-type): the lagrangian form\n"
+    "                               of the theta-family maps, composed or not (not\n"
+    "                               splittings into kicks and drifts), with or without\n"
+    "                               forces; Galerkin, the other forms, boundary values\n"
+    "                               and --linearize are refused (exit 2). The initial\n"
+    "                               state must satisfy them: Dg of full rank, and\n"
+    "                               |g_i| / (|grad g_i| |q|) and\n"
+    "                               |grad g_i . v + dg_i/dt| / (|grad g_i| |v|) at\n"
+    "                               most 1e-10 (else exit 2, naming the constraint);\n"
+    "                               the report adds these residuals' largest values.\n"
+    "                               A coordinate a constraint involves is not\n"
+    "                               reported as cyclic\n"
     "    name = \"...\"               string, optional; the system's name in reports\n"
     "    compile = false            true: on R^n, the derivative programs of L (and H)\n"
     "                               compiled to machine code by the C compiler ($DVM_CC,\n"
@@ -224,6 +246,10 @@ const char* kRunHelp =
     "                               e.g. [\"sin(0.5*i/n)\", \"0\", \"-cos(0.5*i/n)\"]\n"
     "    p = [...] or v = [...] *   numbers (or expressions in i, as q), the momenta,\n"
     "                               or the velocities (then p = dL/dv); S^2: tangent to q\n"
+    "    project_velocity = false   true: with [system] constraints, an initial\n"
+    "                               velocity (or momentum) off their hidden constraint\n"
+    "                               is projected onto it (p - Dg^T mu, the part along\n"
+    "                               the constraints' normals removed) instead of refused\n"
     "              SO(3):\n"
     "    rotation = [w, x, y, z]    numbers, a unit quaternion, or\n"
     "      or R = [[...], ...] *    a 3 x 3 rotation matrix\n"
@@ -712,6 +738,7 @@ std::string run_help() {
   for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation}) row(dvm::written_system_entry(sp));
   row(dvm::written_system_entry(dvm::Space::sphere, 2), "(S^2)^K");
   row(dvm::written_system_entry(dvm::Space::euclidean, 1, true), nullptr, "lagrangian, forces");
+  row(dvm::written_system_entry(dvm::Space::euclidean, 1, false, true), nullptr, "lagrangian, constraints");
   return h;
 }
 

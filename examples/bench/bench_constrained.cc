@@ -1,0 +1,116 @@
+// Cost per step of a constrained system against the same system in minimal coordinates,
+// both run as `dvm run` runs their shipped scenes (load_scene, make_run, execute; the
+// energy and the constraint residuals monitored at the last step only, so that what is
+// timed is the steps), in this process:
+//
+//   pendulum_cartesian.toml          (x, y), x^2 + y^2 = l^2      against pendulum_written.toml (the angle)
+//   double_pendulum_cartesian.toml   (x1, y1, x2, y2), 2 rods     against double_pendulum_written.toml
+//   four_bar.toml                    (th1, th2), the loop closed  against four_bar_one_coordinate.toml
+//   spherical_pendulum_r3.toml       (x, y, z), |q| = l           against spherical_pendulum_written.toml (S^2)
+//
+// Each pair runs the midpoint map (sphere-exp on S^2) with the same step from the same
+// state; the table gives ns per step (the best of the repeats), the constrained run's
+// Newton iterations per step, and the ratio constrained / minimal. The two columns are
+// different discretisations of one motion, so their states are not compared here
+// (tests/cli/test_cli_constraints.cc compares them to the methods' accuracy).
+//
+// usage: bench_constrained [--steps N] [--repeats R] [--scenes DIR]
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <string>
+#include <vector>
+
+#include "solvers/runtime/recorder.h"
+#include "solvers/runtime/run.h"
+#include "solvers/runtime/scene.h"
+
+#ifndef DVM_SCENES
+#define DVM_SCENES "examples/scenes"
+#endif
+
+using namespace dvm;
+
+namespace {
+
+struct Timing {
+  double ns_per_step = INFINITY;
+  double iterations_per_step = 0.0;
+};
+
+// The best of `repeats` runs of the scene for `steps` steps.
+Timing measure(const std::string& dir, const std::string& file, std::int64_t steps, int repeats) {
+  Scene sc = load_scene(dir + "/" + file, {});
+  sc.problem.steps = steps;
+  Timing best;
+  for (int r = 0; r < repeats; ++r) {
+    OutputSpec out;
+    out.monitor_every = steps;
+    Recorder rec(out);
+    auto run = make_run(sc.problem, sc.method);
+    const auto t0 = std::chrono::steady_clock::now();
+    const RunReport rep = run->execute(&rec);
+    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                      static_cast<double>(steps);
+    if (rep.failed) {
+      std::fprintf(stderr, "%s failed: %s\n", file.c_str(), rep.loop.failure.message.c_str());
+      std::exit(3);
+    }
+    if (ns < best.ns_per_step) {
+      best.ns_per_step = ns;
+      best.iterations_per_step = static_cast<double>(rep.solver_iterations) / static_cast<double>(rep.steps);
+    }
+  }
+  return best;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::int64_t steps = 200000;
+  int repeats = 5;
+  std::string dir = DVM_SCENES;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    if (a == "--steps" && i + 1 < argc) {
+      steps = std::atoll(argv[++i]);
+    } else if (a == "--repeats" && i + 1 < argc) {
+      repeats = std::atoi(argv[++i]);
+    } else if (a == "--scenes" && i + 1 < argc) {
+      dir = argv[++i];
+    } else {
+      std::fprintf(stderr, "usage: bench_constrained [--steps N] [--repeats R] [--scenes DIR]\n");
+      return 2;
+    }
+  }
+  if (steps < 1 || repeats < 1) {
+    std::fprintf(stderr, "bench_constrained: --steps and --repeats must be at least 1\n");
+    return 2;
+  }
+  struct Pair {
+    const char* constrained;
+    const char* minimal;
+  };
+  const std::vector<Pair> pairs = {
+      {"pendulum_cartesian.toml", "pendulum_written.toml"},
+      {"double_pendulum_cartesian.toml", "double_pendulum_written.toml"},
+      {"four_bar.toml", "four_bar_one_coordinate.toml"},
+      {"spherical_pendulum_r3.toml", "spherical_pendulum_written.toml"},
+  };
+  std::printf("%lld steps, best of %d (the energy and residuals monitored at the last step only)\n\n",
+              static_cast<long long>(steps), repeats);
+  std::printf("| constrained scene | ns/step | iterations/step | minimal-coordinate scene | ns/step | ratio |\n");
+  std::printf("|---|---|---|---|---|---|\n");
+  try {
+    for (const Pair& p : pairs) {
+      const Timing c = measure(dir, p.constrained, steps, repeats), m = measure(dir, p.minimal, steps, repeats);
+      std::printf("| %s | %.0f | %.2f | %s | %.0f | %.2f |\n", p.constrained, c.ns_per_step, c.iterations_per_step,
+                  p.minimal, m.ns_per_step, c.ns_per_step / m.ns_per_step);
+    }
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "bench_constrained: %s\n", e.what());
+    return 2;
+  }
+  return 0;
+}

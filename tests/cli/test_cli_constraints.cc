@@ -1,0 +1,233 @@
+// Holonomic constraints end to end ([system] constraints, solvers/constrained_step.h):
+// the Cartesian pendulum and double pendulum against their angle twins, the four-bar
+// linkage against its one-coordinate form and held on its constraint over 10^6 steps,
+// the spherical pendulum in R^3 against the S^2 maps, orders measured by `dvm
+// converge`, a constraint with forces, the projection of an initial velocity; every bad
+// input and every combination the constrained step does not take refused with exit 2,
+// naming the keys, nothing written.
+#define BOOST_TEST_MODULE cli_constraints
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "tests/cli/cli_harness.h"
+
+namespace {
+
+using namespace cli_test;
+
+std::vector<std::string> with_sets(std::vector<std::string> args, const std::vector<std::string>& sets) {
+  for (const auto& s : sets) {
+    args.push_back("--set");
+    args.push_back(s);
+  }
+  return args;
+}
+Json run(const std::string& s, const std::vector<std::string>& sets) {
+  const Output o = dvm(with_sets({"run", scene(s), "--json", "--no-output"}, sets));
+  BOOST_TEST_REQUIRE(o.status == 0, s << ": " << o.err);
+  return parse_json(o.out);
+}
+std::vector<double> vec(const Json& j, const char* key) { return j.at(key).get<std::vector<double>>(); }
+
+}  // namespace
+
+// The pendulum in (x, y) with x^2 + y^2 = l^2 against the built-in pendulum in its angle
+// q: at t = 10, composed to order 8 (kahan-li8) with h = 0.01, x = l sin q and
+// y = -l cos q to 1e-10, and the momenta (p_x, p_y) = m l p_q / (m l^2) (cos q, sin q).
+// The same for the double pendulum, two constraints, against the built-in one.
+BOOST_AUTO_TEST_CASE(cartesian_pendulums_agree_with_their_angle_twins) {
+  const std::vector<std::string> order8 = {"integrator.composition=\"kahan-li8\"", "integrator.t_end=10.0"};
+  const Json c = run("pendulum_cartesian.toml", order8), a = run("pendulum.toml", order8);
+  const double q = vec(a, "q_final")[0], pq = vec(a, "p_final")[0];
+  const auto xy = vec(c, "q_final"), pxy = vec(c, "p_final");
+  BOOST_TEST(std::fabs(xy[0] - std::sin(q)) <= 1e-10);
+  BOOST_TEST(std::fabs(xy[1] + std::cos(q)) <= 1e-10);
+  BOOST_TEST(std::fabs(pxy[0] - pq * std::cos(q)) <= 1e-10);
+  BOOST_TEST(std::fabs(pxy[1] - pq * std::sin(q)) <= 1e-10);
+  BOOST_TEST(c.at("constrained").get<bool>());
+  BOOST_TEST(c.at("constraints").get<int>() == 1);
+  BOOST_TEST(c.at("max_constraint_residual").get<double>() <= 1e-14);
+  BOOST_TEST(c.at("max_hidden_constraint_residual").get<double>() <= 1e-13);
+  // x is not cyclic: the constraint involves it, so p_x is not reported as conserved
+  BOOST_TEST((!c.contains("invariants") || c.at("invariants").empty()));
+
+  const Json d = run("double_pendulum_cartesian.toml", order8), b = run("double_pendulum.toml", order8);
+  const auto ab = vec(b, "q_final"), xy2 = vec(d, "q_final");
+  const double x1 = std::sin(ab[0]), y1 = -std::cos(ab[0]);
+  BOOST_TEST_MESSAGE("double pendulum, Cartesian against angles at t = 10: " << std::fabs(xy2[0] - x1) << " "
+                                                                             << std::fabs(xy2[3] - (y1 - std::cos(ab[1]))));
+  BOOST_TEST(std::fabs(xy2[0] - x1) <= 1e-10);
+  BOOST_TEST(std::fabs(xy2[1] - y1) <= 1e-10);
+  BOOST_TEST(std::fabs(xy2[2] - (x1 + std::sin(ab[1]))) <= 1e-10);
+  BOOST_TEST(std::fabs(xy2[3] - (y1 - std::cos(ab[1]))) <= 1e-10);
+  BOOST_TEST(d.at("constraints").get<int>() == 2);
+  BOOST_TEST(std::fabs(d.at("energy_initial").get<double>() - b.at("energy_initial").get<double>()) <= 1e-15);
+}
+
+// The four-bar linkage: over 10^6 steps (t = 1000 at h = 0.001) the constraint and its hidden constraint hold to 1e-12 relative at every
+// step, and the energy error stays bounded (no larger than over the first 10^5 steps);
+// composed to order 8 it follows its one-coordinate form (the crank angle at t = 2).
+BOOST_AUTO_TEST_CASE(the_four_bar_linkage_stays_closed_and_matches_its_one_coordinate_form) {
+  const Json shortrun = run("four_bar.toml", {"integrator.t_end=100.0"});
+  const Json longrun = run("four_bar.toml", {"integrator.t_end=1000.0"});
+  BOOST_TEST(longrun.at("steps").get<double>() == 1e6);
+  BOOST_TEST(longrun.at("max_constraint_residual").get<double>() <= 1e-12);
+  BOOST_TEST(longrun.at("max_hidden_constraint_residual").get<double>() <= 1e-12);
+  const double e1 = shortrun.at("max_abs_energy_error").get<double>(), e2 = longrun.at("max_abs_energy_error").get<double>();
+  BOOST_TEST_MESSAGE("four-bar energy error over 1e5 and 1e6 steps: " << e1 << ", " << e2);
+  BOOST_TEST(e2 <= 1.05 * e1);
+
+  const std::vector<std::string> order8 = {"integrator.composition=\"kahan-li8\"", "integrator.step=0.01",
+                                           "integrator.t_end=2.0"};
+  const Json two = run("four_bar.toml", order8), one = run("four_bar_one_coordinate.toml", order8);
+  BOOST_TEST(std::fabs(vec(two, "q_final")[0] - vec(one, "q_final")[0]) <= 1e-9);
+  BOOST_TEST(std::fabs(two.at("energy_initial").get<double>() - one.at("energy_initial").get<double>()) <= 1e-12);
+}
+
+// The spherical pendulum in R^3 (x^2 + y^2 + z^2 = l^2) and on S^2 (the sphere's
+// exponential map) are two discretisations of one motion: their difference at t = 2
+// shrinks fourfold as h halves (both of order 2), and each one's energy error is bounded
+// over 10^6 steps (no larger than over the first 10^5); J3 is conserved in both.
+BOOST_AUTO_TEST_CASE(the_spherical_pendulum_in_r3_follows_the_sphere_maps) {
+  std::vector<double> d;
+  for (double h : {0.004, 0.002}) {
+    const std::vector<std::string> sets = {"integrator.step=" + std::to_string(h), "integrator.t_end=2.0"};
+    const Json r3 = run("spherical_pendulum_r3.toml", sets), s2 = run("spherical-pendulum.toml", sets);
+    const auto a = vec(r3, "q_final"), b = vec(s2, "q_final");
+    double m = 0.0;
+    for (int i = 0; i < 3; ++i) m = std::fmax(m, std::fabs(a[static_cast<std::size_t>(i)] - b[static_cast<std::size_t>(i)]));
+    d.push_back(m);
+  }
+  BOOST_TEST_MESSAGE("R^3 against S^2 at t = 2: " << d[0] << ", " << d[1]);
+  BOOST_TEST(d[0] <= 1e-3);
+  BOOST_TEST(std::fabs(d[0] / d[1] - 4.0) <= 0.4);
+  for (const char* s : {"spherical_pendulum_r3.toml", "spherical-pendulum.toml"}) {
+    BOOST_TEST_CONTEXT(s) {
+      const Json a = run(s, {"integrator.t_end=500.0"}), b = run(s, {"integrator.t_end=5000.0"});
+      BOOST_TEST(b.at("steps").get<double>() == 1e6);
+      BOOST_TEST(b.at("max_abs_energy_error").get<double>() <= 1.05 * a.at("max_abs_energy_error").get<double>());
+      BOOST_TEST(b.at("max_abs_energy_error").get<double>() <= 1e-3);
+      for (const auto& inv : b.at("invariants")) BOOST_TEST(inv.at("max_abs_error").get<double>() <= 1e-12);
+    }
+  }
+  const Json r = run("spherical_pendulum_r3.toml", {"integrator.t_end=5.0"});
+  BOOST_TEST(r.at("invariants").size() == 1u);
+}
+
+// `dvm converge` measures the orders of the constrained steps (its reference: the
+// constrained midpoint composed by kahan-li8): 2 for the midpoint, 4 for the triple jump,
+// 8 for kahan-li8; with forces (the slider-crank) 2 and 4.
+BOOST_AUTO_TEST_CASE(converge_measures_the_orders_under_constraints_and_forces) {
+  struct Case {
+    const char* scene;
+    std::string composition, steps;
+    double order;
+  };
+  const std::vector<Case> cases = {
+      {"pendulum_cartesian.toml", "none", "40,80,160,320", 2.0},
+      {"pendulum_cartesian.toml", "triple-jump:4", "20,40,80,160", 4.0},
+      {"pendulum_cartesian.toml", "kahan-li8", "5,10,20", 8.0},
+      {"four_bar.toml", "none", "40,80,160,320", 2.0},
+      {"slider_crank.toml", "none", "40,80,160,320", 2.0},
+      {"slider_crank.toml", "triple-jump:4", "20,40,80,160", 4.0},
+  };
+  for (const Case& c : cases) {
+    BOOST_TEST_CONTEXT(c.scene << ", " << c.composition) {
+      const Output o = dvm({"converge", scene(c.scene), "--t-end", "1", "--steps-list", c.steps, "--json", "--set",
+                            "integrator.composition=\"" + c.composition + "\""});
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      const double order = parse_json(o.out).at("fitted_order").get<double>();
+      BOOST_TEST_MESSAGE(c.scene << " " << c.composition << ": " << order);
+      BOOST_TEST(std::fabs(order - c.order) <= 0.1 * c.order, o.out);
+    }
+  }
+}
+
+// Constraints and forces together (the slider-crank): the constraint holds, the work
+// and the energy balance are reported, and E - E_0 - W stays at the method's O(h^2)
+// (a quarter at half the step), the constraint forces doing no work.
+BOOST_AUTO_TEST_CASE(constraints_and_forces_together) {
+  const Json a = run("slider_crank.toml", {"integrator.t_end=5.0"});
+  const Json b = run("slider_crank.toml", {"integrator.t_end=5.0", "integrator.step=0.0005"});
+  BOOST_TEST(a.at("forced").get<bool>());
+  BOOST_TEST(a.at("constrained").get<bool>());
+  BOOST_TEST(a.at("work").get<double>() > 0.0);  // the torque does more work than the friction takes
+  BOOST_TEST(a.at("max_constraint_residual").get<double>() <= 1e-14);
+  const double b1 = a.at("max_abs_energy_balance").get<double>(), b2 = b.at("max_abs_energy_balance").get<double>();
+  BOOST_TEST_MESSAGE("slider-crank energy balance at h and h/2: " << b1 << ", " << b2);
+  BOOST_TEST(std::fabs(b1 / b2 - 4.0) <= 0.4);
+}
+
+// initial.project_velocity: a velocity with a part across the rod is refused, or with
+// the key the part is removed: the run then starts from the tangential velocity.
+BOOST_AUTO_TEST_CASE(an_initial_velocity_off_the_constraint_is_refused_or_projected) {
+  // at (x, y) = (0.6, -0.8) the tangent is (0.8, 0.6): v = 0.5 (0.8, 0.6) + 0.3 (0.6, -0.8)
+  const std::vector<std::string> state = {"initial.q=[0.6, -0.8]", "integrator.t_end=1.0"};
+  auto sets = state;
+  sets.push_back("initial.v=[0.58, 0.06]");
+  const Output r = dvm(with_sets({"run", scene("pendulum_cartesian.toml"), "--no-output"}, sets));
+  BOOST_TEST(r.status == 2);
+  BOOST_TEST(r.err.find("initial.v") != std::string::npos, r.err);
+  BOOST_TEST(r.err.find("system.constraints[1]") != std::string::npos, r.err);
+  BOOST_TEST(r.err.find("initial.project_velocity") != std::string::npos, r.err);
+  sets.push_back("initial.project_velocity=true");
+  const Json p = run("pendulum_cartesian.toml", sets);
+  auto tangential = state;
+  tangential.push_back("initial.v=[0.4, 0.3]");
+  const Json t = run("pendulum_cartesian.toml", tangential);
+  const auto a = vec(p, "p_initial"), b = vec(t, "p_initial");
+  BOOST_TEST(std::fabs(a[0] - b[0]) <= 1e-15);
+  BOOST_TEST(std::fabs(a[1] - b[1]) <= 1e-15);
+  BOOST_TEST(std::fabs(vec(p, "q_final")[0] - vec(t, "q_final")[0]) <= 1e-14);
+}
+
+// Bad input, and the combinations the constrained step does not take: exit 2, the keys
+// named, nothing on stdout, no file written.
+BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_keys) {
+  const std::string csv = temp_dir() + "/refused.csv";
+  auto refused = [&](const std::string& scene_name, std::vector<std::string> sets, std::vector<std::string> says) {
+    std::filesystem::remove(csv);
+    const Output r = dvm(with_sets({"run", scene(scene_name), "--csv", csv}, sets));
+    BOOST_TEST_CONTEXT(sets.front()) {
+      BOOST_TEST(r.status == 2);
+      BOOST_TEST(r.out.empty());
+      BOOST_TEST(!std::filesystem::exists(csv));
+      for (const std::string& s : says) BOOST_TEST(r.err.find(s) != std::string::npos, r.err);
+    }
+  };
+  const std::string P = "pendulum_cartesian.toml";
+  const std::string S = "spherical_pendulum_r3.toml";
+  // redundant (a multiple of the first): rank 1 of 2
+  refused(S, {"system.constraints=[\"x^2 + y^2 + z^2 - l^2\", \"2*x^2 + 2*y^2 + 2*z^2 - 2*l^2\"]"},
+          {"system.constraints", "rank 1", "expected 2", "redundant"});
+  // a second constraint the initial state violates
+  refused(S, {"system.constraints=[\"x^2 + y^2 + z^2 - l^2\", \"x - 2\"]"},
+          {"initial.q", "system.constraints[2]", "(\"x - 2\")"});
+  refused(P, {"initial.q=[0.6, -0.9]", "initial.v=[0.0, 0.0]"}, {"initial.q", "system.constraints[1]", "beyond 1e-10"});
+  refused(P, {"system.constraints=[\"x^2 + y^2 - \"]"}, {"system.constraints[1]", "after '-'"});
+  refused(P, {"system.constraints=[\"x_dot*x\"]"}, {"system.constraints[1]", "unknown name 'x_dot'"});
+  refused(P, {"system.constraints=\"x^2 + y^2 - l^2\""}, {"system.constraints", "expected a list"});
+  refused(P, {"system.constraints=[]"}, {"system.constraints", "empty"});
+  refused(P, {"system.constraints=[1.0]"}, {"system.constraints[1]", "expected a string"});
+  refused(P, {"system.constraints=[\"x\", \"y\"]"}, {"system.constraints", "leave no motion"});
+  refused(P, {"system.constraints=[\"sqrt(x - 5)\"]"}, {"system.constraints", "not finite"});
+  refused(P, {"initial.project_velocity=1"}, {"initial.project_velocity", "true or false"});
+  refused("pendulum_written.toml", {"initial.project_velocity=true"}, {"initial.project_velocity", "writes none"});
+  refused("pendulum.toml", {"system.constraints=[\"theta\"]"}, {"system.constraints", "belongs to a written system"});
+  refused("spherical_pendulum_written.toml", {"system.constraints=[\"x\"]"}, {"system.constraints", "on R^n"});
+  // what the constrained step does not take
+  refused(P, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with constraints"});
+  refused(P, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian with constraints"});
+  refused(P, {"integrator.form=sode1"}, {"integrator.form"});
+  refused(P, {"integrator.map=explicit-euler", "integrator.composition=blanes-moan4"},
+          {"integrator.composition", "system.constraints"});
+  refused(P, {"integrator.solver=tiny"}, {"integrator.solver"});
+  const Output l = dvm({"run", scene(P), "--no-output", "--linearize", temp_dir() + "/a.npy"});
+  BOOST_TEST(l.status == 2);
+  BOOST_TEST(l.err.find("--linearize") != std::string::npos, l.err);
+  BOOST_TEST(l.err.find("system.constraints") != std::string::npos, l.err);
+}
