@@ -27,6 +27,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "mechanics/dynamic_system.h"
 #include "mechanics/written_lagrangian.h"
 
 namespace dvm {
@@ -82,6 +83,27 @@ class WrittenConstraints {
     }
   }
 
+  // The second derivatives at (t, q), for the derivative of a constrained step: H[i]
+  // (dim() x dim()) receives the Hessian of g_i in q, and row i of Gqt the gradient in
+  // q of dg_i/dt. Allocates (a Hessian program per constraint, built at the first call).
+  void second_derivatives(double t, const Eigen::VectorXd& q, std::vector<Eigen::MatrixXd>& H,
+                          Eigen::MatrixXd& Gqt) const {
+    const int m = count(), n = dim();
+    if (hessians_.empty())
+      for (const Expression& e : system_->constraints)
+        hessians_.emplace_back(std::make_shared<const Expression>(e), n + 1, WrittenDerivatives::automatic);
+    load(t, q);
+    Eigen::VectorXd ga(n + 1), gb(n + 1);
+    Eigen::MatrixXd Haa(n + 1, n + 1), Hab(n + 1, n + 1), Hbb(n + 1, n + 1);
+    H.resize(static_cast<std::size_t>(m));
+    Gqt.resize(m, n);
+    for (int i = 0; i < m; ++i) {
+      hessians_[static_cast<std::size_t>(i)].hessian(qt_.data(), zero_.data(), ga, gb, Haa, Hab, Hbb);
+      H[static_cast<std::size_t>(i)] = Haa.topLeftCorner(n, n);
+      Gqt.row(i) = Haa.block(n, 0, 1, n);
+    }
+  }
+
   // The largest relative residuals of the constraint and of its hidden constraint at
   // (t, q) with velocity v (the measures of the header comment; a term whose
   // denominator is 0 counts its numerator).
@@ -113,6 +135,7 @@ class WrittenConstraints {
   std::shared_ptr<const WrittenSystem> system_;
   std::vector<std::shared_ptr<const DerivativeProgram>> programs_;  // per constraint, or null
   mutable std::vector<std::vector<double>> slots_;                  // their workspaces
+  mutable std::vector<dynamic_detail::TapeDerivatives> hessians_;   // second_derivatives()'s
   mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient
   mutable Eigen::VectorXd g_, gt_;
   mutable Eigen::MatrixXd G_;

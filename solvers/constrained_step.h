@@ -41,8 +41,11 @@
 // not be used from two threads at once (copies are independent).
 #pragma once
 
+#include <Eigen/Cholesky>
 #include <Eigen/Core>
+#include <Eigen/LU>
 #include <cmath>
+#include <vector>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -124,6 +127,8 @@ class ConstrainedThetaEquation {
     return eq_.work(D_);
   }
   double end_time() const { return t1_; }
+  // The unconstrained part (the step's derivative reads its blocks).
+  ThetaEquation<Sys, Eigen::Dynamic, Force>& theta_equation() { return eq_; }
 
  private:
   void split(const Vector& y) {
@@ -309,6 +314,110 @@ class ConstrainedThetaStep {
     } catch (const std::domain_error& e) {
       return e.what();
     }
+  }
+
+  // The derivative of the step (q0, p0) -> (q1, p1) at the increment dq that step()
+  // solved for from (q0, p0) at time t0, by the implicit function theorem on its two
+  // equations (no finite differences); A (2n x 2n) as DynamicThetaStep::derivative
+  // gives it, coordinates before momenta. The multipliers at the solution are found
+  // again from it: lambda from equation 1 by least squares (G0^T lambda = the
+  // unconstrained residual, consistent at the solution), mu and v1 by equation 2.
+  // With F1(D, lambda; q0, p0) the first equation's rows and g(t1, q0 + D) its last,
+  //   [F_D  -G0^T] [dD     ]     [ -H_lambda + h (1 - theta) G_q - L_vq ]        [ I ]
+  //   [G1    0   ] [dlambda] = - [  G1                                  ] dq0 -  [ 0 ] dp0,
+  // H_lambda = sum lambda_i Hess g_i(q0), p1~ = p0 + h G - G0^T lambda, and from
+  // equation 2 at (q1, p1~),
+  //   [L_vv  G1^T] [dv1]     [ L_vq + H_mu                   ]        [ -I ]
+  //   [G1     0  ] [dmu] = - [ v1^T Hess g_i + grad (g_t)_i  ] dq1 -  [  0 ] dp1~,
+  // dp1 = dp1~ - H_mu dq1 - G1^T dmu. Without forces the step is symplectic on the
+  // constraint's cotangent bundle: A^T J A = J on the vectors tangent to it (not on
+  // R^{2n}: A maps every direction onto that bundle). Returns false where a matrix is
+  // singular or a value not finite. Allocates; not from two threads at once (it uses
+  // the step's workspace).
+  bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    const int n = L_.dim(), m = con_->count();
+    if (q0.size() != n || p0.size() != n || dq.size() != n)
+      throw std::invalid_argument("ConstrainedThetaStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates; the system has " + std::to_string(n));
+    using M = Eigen::MatrixXd;
+    const double th = R_.theta(), h = h_;
+    Work& w = *work_;
+    auto& eq = w.eq.theta_equation();
+    w.q0 = q0;
+    w.p0 = p0;
+    V D = dq, r(n);
+    eq.begin(w.q0, w.p0, t0);
+    M FD(n, n);
+    if (!std::isfinite(eq.jacobian(D, r, FD))) return false;
+    M Gq = eq.Lqq(), Gv = eq.Lqv();
+    const M Lvq = eq.Lqv().transpose();
+    if constexpr (kForced) {
+      Gq += eq.Fq();
+      Gv += eq.Fv();
+    }
+    V hG(n);
+    eq.momentum(D, hG);  // h G at the node
+    // the multipliers at the solution
+    const Con& con = *w.con;
+    V g0(m), gt0(m), g1(m), gt1(m);
+    M G0(m, n), G1(m, n);
+    con.jacobian(t0, q0, g0, G0, gt0);
+    const V lambda = (G0 * G0.transpose()).ldlt().solve(G0 * r);
+    V q1 = q0 + D, p1 = p0 + hG - G0.transpose() * lambda, v1 = D / h;
+    const double t1 = t0 + h;
+    constrained_detail::Projection<Sys, Con> proj(n, m);
+    try {
+      if (*proj(L_, con, t1, q1, p1, v1, MomentumMap::general)) return false;
+    } catch (const std::domain_error&) {
+      return false;
+    }
+    G1 = proj.G;
+    const V mu = proj.mu;
+    std::vector<M> H0, H1;
+    M Gqt0, Gqt1;
+    con.second_derivatives(t0, q0, H0, Gqt0);
+    con.second_derivatives(t1, q1, H1, Gqt1);
+    M Hl = M::Zero(n, n), Hm = M::Zero(n, n), Hv(m, n);
+    for (int i = 0; i < m; ++i) {
+      Hl += lambda[i] * H0[static_cast<std::size_t>(i)];
+      Hm += mu[i] * H1[static_cast<std::size_t>(i)];
+      Hv.row(i) = v1.transpose() * H1[static_cast<std::size_t>(i)] + Gqt1.row(i);
+    }
+    // equation 1
+    M J1 = M::Zero(n + m, n + m), R1 = M::Zero(n + m, 2 * n);
+    J1.topLeftCorner(n, n) = FD;
+    J1.topRightCorner(n, m) = -G0.transpose();
+    J1.bottomLeftCorner(m, n) = G1;
+    R1.topLeftCorner(n, n) = -Hl + h * (1.0 - th) * Gq - Lvq;
+    R1.topRightCorner(n, n) = M::Identity(n, n);
+    R1.bottomLeftCorner(m, n) = G1;
+    const Eigen::FullPivLU<M> lu1(J1);
+    if (!lu1.isInvertible()) return false;
+    const M Y1 = -lu1.solve(R1);  // d(D, lambda) / d(q0, p0)
+    const M dD = Y1.topRows(n), dl = Y1.bottomRows(m);
+    M dq1 = dD;
+    dq1.leftCols(n) += M::Identity(n, n);
+    M dpt = -G0.transpose() * dl + h * Gq * (th * dD) + Gv * dD;
+    dpt.leftCols(n) += -Hl + h * Gq;
+    dpt.rightCols(n) += M::Identity(n, n);
+    // equation 2
+    V Lq1(n), Lv1(n);
+    M Lqq1(n, n), Lqv1(n, n), Lvv1(n, n);
+    L_.hessian(q1, v1, Lq1, Lv1, Lqq1, Lqv1, Lvv1);
+    M K2 = M::Zero(n + m, n + m), R2(n + m, 2 * n);
+    K2.topLeftCorner(n, n) = Lvv1;
+    K2.topRightCorner(n, m) = G1.transpose();
+    K2.bottomLeftCorner(m, n) = G1;
+    R2.topRows(n) = (Lqv1.transpose() + Hm) * dq1 - dpt;
+    R2.bottomRows(m) = Hv * dq1;
+    const Eigen::FullPivLU<M> lu2(K2);
+    if (!lu2.isInvertible()) return false;
+    const M Y2 = -lu2.solve(R2);
+    const M dp1 = dpt - Hm * dq1 - G1.transpose() * Y2.bottomRows(m);
+    A.resize(2 * n, 2 * n);
+    A.topRows(n) = dq1;
+    A.bottomRows(n) = dp1;
+    return A.allFinite();
   }
 
   // One step from (q0, p0) at time t; dq holds the starting guess on entry and q1 - q0

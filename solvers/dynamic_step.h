@@ -319,6 +319,10 @@ class DynamicThetaStep {
   // L_qq and L_qv above become G_q = L_qq + F_q and G_v = L_qv + F_v, except in F_q0's
   // L_vq (from L_v alone); t0 is the time the step starts at. A is then not symplectic.
   bool derivative(const V& q0, const V& dq, Eigen::MatrixXd& A) const { return derivative(0.0, q0, dq, A); }
+  // (the signature of the steps whose derivative depends on p0 too, solvers/constrained_step.h)
+  bool derivative(double t0, const V& q0, const V&, const V& dq, Eigen::MatrixXd& A) const {
+    return derivative(t0, q0, dq, A);
+  }
   bool derivative(double t0, const V& q0, const V& dq, Eigen::MatrixXd& A) const {
     const int n = L_.dim();
     if (q0.size() != n || dq.size() != n)

@@ -103,34 +103,36 @@ template <class S>
 struct has_newton_steps<S, std::void_t<decltype(std::declval<const S&>().newton_steps())>> : std::true_type {};
 
 // A step that gives its derivative at a solved increment,
-// derivative(t0, q0, dq, A) (DynamicThetaStep).
+// derivative(t0, q0, p0, dq, A) (DynamicThetaStep, ConstrainedThetaStep).
 template <class S, class = void>
 struct has_step_derivative : std::false_type {};
 template <class S>
 struct has_step_derivative<S, std::void_t<decltype(std::declval<const S&>().derivative(
                                   0.0, std::declval<const Eigen::VectorXd&>(), std::declval<const Eigen::VectorXd&>(),
-                                  std::declval<Eigen::MatrixXd&>()))>> : std::true_type {};
+                                  std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>()))>>
+    : std::true_type {};
 
 // The rows of OutputSpec::linearize: after step k -> k + 1, t_k and the step's Jacobian
-// A_k, row by row, from the step's derivative at (q_k, q_{k+1} - q_k). Steps without a
+// A_k, row by row, from the step's derivative at (q_k, p_k, q_{k+1} - q_k). Steps without a
 // derivative refuse the file (validate refuses the run first: Method::linearize).
 template <class Stepper, bool = has_step_derivative<Stepper>::value>
 class StepDerivatives {
  public:
-  template <class Point>
-  StepDerivatives(const Recorder* rec, const Stepper&, const Point&, std::int64_t) {
+  template <class Point, class Covector>
+  StepDerivatives(const Recorder* rec, const Stepper&, const Point&, const Covector&, std::int64_t) {
     if (rec && !rec->spec().linearize.empty())
       throw InputError(rec->spec().linearize_source + ": this run's step gives no derivative");
   }
-  template <class Point>
-  void record(std::int64_t, double, const Point&) {}
+  template <class Point, class Covector>
+  void record(std::int64_t, double, const Point&, const Covector&) {}
   bool finish(bool, std::string&, std::vector<std::string>&) { return true; }
 };
 template <class Stepper>
 class StepDerivatives<Stepper, true> {
  public:
-  StepDerivatives(const Recorder* rec, const Stepper& stepper, const Eigen::VectorXd& q0, std::int64_t steps)
-      : stepper_(&stepper), q_(q0) {
+  StepDerivatives(const Recorder* rec, const Stepper& stepper, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0,
+                  std::int64_t steps)
+      : stepper_(&stepper), q_(q0), p_(p0) {
     if (!rec || rec->spec().linearize.empty()) return;
     OutputSpec spec;
     spec.npy = rec->spec().linearize;
@@ -145,12 +147,12 @@ class StepDerivatives<Stepper, true> {
     row_.resize(columns.size());
   }
   // After step k - 1 -> k, which started at t: its derivative, at the state before it.
-  template <class Point>
-  void record(std::int64_t, double t, const Point& qk) {
+  template <class Point, class Covector>
+  void record(std::int64_t, double t, const Point& qk, const Covector& pk) {
     if (!out_) return;
     const Eigen::VectorXd dq = Eigen::VectorXd(qk) - q_;
     row_[0] = t;
-    if (stepper_->derivative(t, q_, dq, A_)) {
+    if (stepper_->derivative(t, q_, p_, dq, A_)) {
       const Eigen::Index m = A_.rows();
       for (Eigen::Index i = 0; i < m; ++i)
         for (Eigen::Index j = 0; j < m; ++j) row_[static_cast<std::size_t>(1 + i * m + j)] = A_(i, j);
@@ -159,6 +161,7 @@ class StepDerivatives<Stepper, true> {
     }
     out_->row(row_.data());
     q_ = qk;
+    p_ = pk;
   }
   bool finish(bool complete, std::string& kept, std::vector<std::string>& written) {
     if (!out_) return true;
@@ -171,7 +174,7 @@ class StepDerivatives<Stepper, true> {
 
  private:
   const Stepper* stepper_;
-  Eigen::VectorXd q_;  // the state the next step starts from
+  Eigen::VectorXd q_, p_;  // the state the next step starts from
   Eigen::MatrixXd A_;
   std::vector<double> row_;
   std::unique_ptr<Recorder> out_;
@@ -224,7 +227,7 @@ class StepperRun final : public Run {
       if (forced) row_values[row_size] = 0.0;
       rec->row(row_values.data());
     }
-    StepDerivatives<Stepper> derivatives(rec, stepper_, q0_, steps_);
+    StepDerivatives<Stepper> derivatives(rec, stepper_, q0_, p0_, steps_);
     const int n_inv = view_.invariant_count();
     double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
     view_.invariants(q0_, p0_, I0);
@@ -261,7 +264,7 @@ class StepperRun final : public Run {
     const std::int64_t every = rec ? std::max<std::int64_t>(1, rec->every()) : 1;
     std::int64_t next_row = rows ? every : -1, next_monitor = monitor_every;
     auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary& s) {
-      derivatives.record(k, static_cast<double>(k - 1) * h, qk);
+      derivatives.record(k, static_cast<double>(k - 1) * h, qk, pk);
       if (forced) {  // (Kahan-Babuska, as the state's sums)
         const double y = s.work - W_c, sum = W + y;
         W_c = (sum - W) - y;

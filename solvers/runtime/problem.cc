@@ -318,7 +318,7 @@ void validate(const Problem& pr, const Method& me) {
   // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
-                             "theta-family maps for Lagrangians written on R^n";
+                             "theta-family maps (constrained or not) for Lagrangians written on R^n";
     if (!pr.written || sys.space != Space::euclidean)
       throw InputError(what + " (system.lagrangian), not " +
                        (pr.written ? std::string("on ") + to_string(sys.space) : "the built-in system " + name));
@@ -330,9 +330,6 @@ void validate(const Problem& pr, const Method& me) {
     if (me.composition != "none")
       throw InputError("integrator.composition: --linearize differentiates one theta step; a composition (\"" +
                        me.composition + "\") gives no derivative");
-    if (pr.constrained())
-      throw InputError(pr.constraints_where + ": --linearize differentiates the unconstrained theta step; the "
-                                              "constrained step gives no derivative");
   }
   if (pr.project_velocity && !pr.constrained())
     throw InputError(pr.project_velocity_where + ": projects the initial velocity onto the hidden constraint of "
