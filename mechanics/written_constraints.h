@@ -65,11 +65,16 @@ class WrittenConstraints {
   // g_t(i) = dg_i/dt.
   template <class Q, class Out, class Mat, class Out2>
   void jacobian(double t, const Q& q, Out& g, Mat& G, Out2& gt) const {
+    gradients(t, q, G, gt);
+    for (int i = 0; i < count(); ++i) g[i] = system_->constraints[static_cast<std::size_t>(i)](qt_.data(), zero_.data());
+  }
+  // G and g_t alone (the value is the tape's, the gradients the programs').
+  template <class Q, class Mat, class Out2>
+  void gradients(double t, const Q& q, Mat& G, Out2& gt) const {
     load(t, q);
     const int m = count(), n = dim();
     for (int i = 0; i < m; ++i) {
       const Expression& e = system_->constraints[static_cast<std::size_t>(i)];
-      g[i] = e(qt_.data(), zero_.data());
       const auto k = static_cast<std::size_t>(i);
       if (programs_[k]) {
         programs_[k]->gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data(), slots_[k].data());

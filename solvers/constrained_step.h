@@ -58,7 +58,8 @@ namespace constrained_detail {
 
 // out -= c G^T mu (G: m x n), in loops: at the few coordinates and constraints of a
 // linkage a matrix-vector product's call costs more than its arithmetic.
-inline void subtract_normals(const Eigen::MatrixXd& G, double c, const double* mu, double* out) {
+template <class Mat>
+inline void subtract_normals(const Mat& G, double c, const double* mu, double* out) {
   const Eigen::Index m = G.rows(), n = G.cols();
   for (Eigen::Index k = 0; k < m; ++k) {
     const double a = c * mu[k];
@@ -66,18 +67,30 @@ inline void subtract_normals(const Eigen::MatrixXd& G, double c, const double* m
   }
 }
 
+// The size of the unknowns (D, lambda) where the numbers of coordinates N and of
+// constraints M are known when compiled, else Dynamic.
+constexpr int augmented(int N, int M) { return N == Eigen::Dynamic || M == Eigen::Dynamic ? Eigen::Dynamic : N + M; }
+
 }  // namespace constrained_detail
 
 // Equation 1 of the header comment, for solvers/newton_driver.h: the unknowns
-// y = (D, lambda / s).
-template <class Sys, class Con, class Force = NoForce>
+// y = (D, lambda / s). N, M: the numbers of coordinates and of constraints where they are
+// known when compiled (the runtime makes them so for the few of a pendulum or a
+// linkage: bench_constrained), else Dynamic.
+template <class Sys, class Con, class Force = NoForce, int N = Eigen::Dynamic, int M = Eigen::Dynamic>
 class ConstrainedThetaEquation {
  public:
-  using Vector = Eigen::VectorXd;
-  using Matrix = Eigen::MatrixXd;
+  static constexpr int K = constrained_detail::augmented(N, M);
+  using Vector = Eigen::Matrix<double, K, 1>;
+  using Matrix = Eigen::Matrix<double, K, K>;
+  using Theta = ThetaEquation<Sys, N, Force>;
 
   ConstrainedThetaEquation(const Sys& L, const Con& g, double theta, double h, const Force* force = nullptr)
       : eq_(L, theta, h, force), g_(&g), h_(h), n_(L.dim()), m_(g.count()) {
+    if ((N != Eigen::Dynamic && n_ != N) || (M != Eigen::Dynamic && m_ != M))
+      throw std::invalid_argument("ConstrainedThetaEquation<" + std::to_string(N) + ", " + std::to_string(M) +
+                                  ">: a system of " + std::to_string(n_) + " coordinates and " + std::to_string(m_) +
+                                  " constraints");
     D_.resize(n_);
     rD_.resize(n_);
     q1_.resize(n_);
@@ -89,11 +102,11 @@ class ConstrainedThetaEquation {
   }
 
   // The start of the step at time t0; G0 = Dg(t0, q0).
-  void begin(const Vector& q0, const Vector& p0, double t0) {
+  void begin(const typename Theta::Vector& q0, const typename Theta::Vector& p0, double t0) {
     q0_ = &q0;
     t1_ = t0 + h_;
     eq_.begin(q0, p0, t0);
-    g_->jacobian(t0, q0, g1_, G0_, gt_);
+    g_->gradients(t0, q0, G0_, gt_);
     g0max_ = dynamic_detail::inf_norm(G0_);
   }
   void residual(const Vector& y, Vector& r) {
@@ -120,7 +133,7 @@ class ConstrainedThetaEquation {
 
   // At the solution y: p1~ - p0 = h G - G0^T lambda (the momentum before the right
   // transform's projection) into dp, and the force's work over the step.
-  double momentum(const Vector& y, Vector& dp) {
+  double momentum(const Vector& y, typename Theta::Vector& dp) {
     split(y);
     eq_.momentum(D_, dp);
     constrained_detail::subtract_normals(G0_, s_, y.data() + n_, dp.data());
@@ -128,12 +141,14 @@ class ConstrainedThetaEquation {
   }
   double end_time() const { return t1_; }
   // The unconstrained part (the step's derivative reads its blocks).
-  ThetaEquation<Sys, Eigen::Dynamic, Force>& theta_equation() { return eq_; }
+  Theta& theta_equation() { return eq_; }
 
  private:
   void split(const Vector& y) {
-    D_ = y.head(n_);
-    q1_ = *q0_ + D_;
+    for (int i = 0; i < n_; ++i) {
+      D_[i] = y[i];
+      q1_[i] = (*q0_)[i] + y[i];
+    }
   }
   void form(const Vector& y, Vector& r) const {
     for (int i = 0; i < n_; ++i) r[i] = rD_[i];
@@ -141,13 +156,15 @@ class ConstrainedThetaEquation {
     for (int k = 0; k < m_; ++k) r[n_ + k] = s_ * g1_[k];
   }
 
-  ThetaEquation<Sys, Eigen::Dynamic, Force> eq_;
+  Theta eq_;
   const Con* g_;
   double h_, t1_ = 0.0, s_ = 0.0, g0max_ = 0.0;
   int n_, m_;
-  const Vector* q0_ = nullptr;
-  Vector D_, rD_, q1_, g1_, gt_;
-  Matrix JD_, G0_, G1_;
+  const typename Theta::Vector* q0_ = nullptr;
+  typename Theta::Vector D_, rD_, q1_;
+  Eigen::Matrix<double, M, 1> g1_, gt_;
+  typename Theta::Matrix JD_;
+  Eigen::Matrix<double, M, N> G0_, G1_;
 };
 
 // How the momentum depends on the velocity, which decides how the right transform
@@ -193,7 +210,7 @@ struct Projection {
   const char* operator()(const Sys& L, const Con& con, double t, const Eigen::VectorXd& q, Eigen::VectorXd& p,
                          Eigen::VectorXd& v, MomentumMap kind) {
     const Eigen::Index n = q.size(), m = g.size();
-    con.jacobian(t, q, g, G, gt);
+    con.gradients(t, q, G, gt);
     if (kind == MomentumMap::constant) {
       if (!have_minv) {
         L.hessian(q, v, Lq, Lv, Lqq, Lqv, Lvv);
@@ -201,14 +218,36 @@ struct Projection {
         mass.inverse(Minv);
         have_minv = true;
       }
-      v.noalias() = Minv * p;
-      MG.noalias() = Minv * G.transpose();
-      S.noalias() = G * MG;
-      mu = gt;
-      for (Eigen::Index k = 0; k < m; ++k)
-        for (Eigen::Index i = 0; i < n; ++i) mu[k] += G(k, i) * v[i];
-      if (!small.factor(S)) return "the constraint Jacobian is singular where the momentum is projected (redundant constraints)";
-      small.solve(mu, mu);
+      // (loops: at these sizes a product's call costs more than its arithmetic)
+      for (Eigen::Index i = 0; i < n; ++i) {
+        double a = 0.0;
+        for (Eigen::Index j = 0; j < n; ++j) a += Minv(i, j) * p[j];
+        v[i] = a;
+        for (Eigen::Index k = 0; k < m; ++k) {
+          double b = 0.0;
+          for (Eigen::Index j = 0; j < n; ++j) b += Minv(i, j) * G(k, j);
+          MG(i, k) = b;
+        }
+      }
+      for (Eigen::Index k = 0; k < m; ++k) {
+        double c = gt[k];
+        for (Eigen::Index i = 0; i < n; ++i) c += G(k, i) * v[i];
+        mu[k] = c;
+        for (Eigen::Index l = 0; l < m; ++l) {
+          double d = 0.0;
+          for (Eigen::Index i = 0; i < n; ++i) d += G(k, i) * MG(i, l);
+          S(k, l) = d;
+        }
+      }
+      if (m == 1) {
+        if (!(std::fabs(S(0, 0)) > 0.0))
+          return "the constraint Jacobian is singular where the momentum is projected (redundant constraints)";
+        mu[0] /= S(0, 0);
+      } else {
+        if (!small.factor(S))
+          return "the constraint Jacobian is singular where the momentum is projected (redundant constraints)";
+        small.solve(mu, mu);
+      }
       for (Eigen::Index k = 0; k < m; ++k)
         for (Eigen::Index i = 0; i < n; ++i) v[i] -= MG(i, k) * mu[k];
       subtract_normals(G, 1.0, mu.data(), p.data());
@@ -251,8 +290,10 @@ struct Projection {
 // The constrained step: equation 1 by the driver, then the projection. Sys: a
 // run-time-sized Lagrangian (mechanics/dynamic_system.h); Con: the constraints
 // (WrittenConstraints: count(), dim(), value(t, q, g), jacobian(t, q, g, G, g_t));
-// Force: a generalized force (solvers/dynamic_step.h), NoForce for none.
-template <class Sys, class Con, class Force = NoForce>
+// Force: a generalized force (solvers/dynamic_step.h), NoForce for none; NC, MC: the
+// numbers of coordinates and constraints where known when compiled (the equation's
+// workspace, its Jacobian and LU then of fixed size; the state stays run-time sized).
+template <class Sys, class Con, class Force = NoForce, int NC = Eigen::Dynamic, int MC = Eigen::Dynamic>
 class ConstrainedThetaStep {
   static_assert(is_dynamic_system_v<Sys>, "ConstrainedThetaStep needs a run-time-sized system (dynamic_system.h)");
 
@@ -280,6 +321,10 @@ class ConstrainedThetaStep {
     if (con_->count() >= L_.dim())
       throw std::invalid_argument("ConstrainedThetaStep: " + std::to_string(con_->count()) + " constraints on " +
                                   std::to_string(L_.dim()) + " coordinates leave no motion");
+    if ((NC != Eigen::Dynamic && L_.dim() != NC) || (MC != Eigen::Dynamic && con_->count() != MC))
+      throw std::invalid_argument("ConstrainedThetaStep<" + std::to_string(NC) + ", " + std::to_string(MC) +
+                                  ">: a system of " + std::to_string(L_.dim()) + " coordinates and " +
+                                  std::to_string(con_->count()) + " constraints");
     if constexpr (kForced)
       if (!force_ || force_->dim() != L_.dim())
         throw std::invalid_argument("ConstrainedThetaStep: a forced step needs a force of the system's dimension");
@@ -340,23 +385,26 @@ class ConstrainedThetaStep {
       throw std::invalid_argument("ConstrainedThetaStep::derivative: a state of " + std::to_string(q0.size()) +
                                   " coordinates; the system has " + std::to_string(n));
     using M = Eigen::MatrixXd;
+    using TV = typename Eq::Theta::Vector;
     const double th = R_.theta(), h = h_;
     Work& w = *work_;
     auto& eq = w.eq.theta_equation();
     w.q0 = q0;
     w.p0 = p0;
-    V D = dq, r(n);
+    TV Dt = dq, rt(n), hGt(n);
+    typename Eq::Theta::Matrix FDt(n, n);
     eq.begin(w.q0, w.p0, t0);
-    M FD(n, n);
-    if (!std::isfinite(eq.jacobian(D, r, FD))) return false;
+    if (!std::isfinite(eq.jacobian(Dt, rt, FDt))) return false;
+    const V D = Dt, r = rt;
+    const M FD = FDt;
     M Gq = eq.Lqq(), Gv = eq.Lqv();
     const M Lvq = eq.Lqv().transpose();
     if constexpr (kForced) {
       Gq += eq.Fq();
       Gv += eq.Fv();
     }
-    V hG(n);
-    eq.momentum(D, hG);  // h G at the node
+    eq.momentum(Dt, hGt);  // h G at the node
+    const V hG = hGt;
     // the multipliers at the solution
     const Con& con = *w.con;
     V g0(m), gt0(m), g1(m), gt1(m);
@@ -431,25 +479,28 @@ class ConstrainedThetaStep {
     try {
       w.q0 = q0;
       w.p0 = p0;
-      w.y.head(n) = dq;
+      for (int i = 0; i < n; ++i) w.y[i] = dq[i];
       // (the multiplier's guess: the last step's, kept in w.y; the Newton iterates after the
       // first do not depend on it, but a good one lets the first residual meet the tolerance)
       w.eq.begin(w.q0, w.p0, t);
       s = newton_drive(w.eq, w.lu, Refresh::within_step, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
-      dq = w.y.head(n);
+      for (int i = 0; i < n; ++i) dq[i] = w.y[i];
       if (s.converged) {
         const double work = w.eq.momentum(w.y, w.dp);
         if constexpr (kForced) s.work = work;
-        w.q1 = q0 + dq;
-        w.p1 = p0 + w.dp;
-        w.v1 = dq / h_;
+        const double inv_h = 1.0 / h_;
+        for (int i = 0; i < n; ++i) {
+          w.q1[i] = q0[i] + dq[i];
+          w.p1[i] = p0[i] + w.dp[i];
+          w.v1[i] = dq[i] * inv_h;
+        }
         const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, momentum_);
         if (*failed) {
           s.converged = false;
           s.message = failed;
         } else {
           // p1 - p0 = (p1~ - p0) - G1^T mu, without the round-off of forming p1 first
-          dp = w.dp;
+          for (int i = 0; i < n; ++i) dp[i] = w.dp[i];
           constrained_detail::subtract_normals(w.projection.G, 1.0, w.projection.mu.data(), dp.data());
           if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
             s.converged = false;
@@ -466,6 +517,7 @@ class ConstrainedThetaStep {
   }
 
  private:
+  using Eq = ConstrainedThetaEquation<Sys, Con, Force, NC, MC>;
   struct Work {
     Work(const Sys& L, const Con& c, double theta, double h, const Force* f)
         : con(std::make_unique<Con>(c)),
@@ -489,11 +541,13 @@ class ConstrainedThetaStep {
     }
     std::unique_ptr<Con> con;      // this step's copy of the constraints (their workspace)
     std::unique_ptr<Force> force;  // and of the force
-    ConstrainedThetaEquation<Sys, Con, Force> eq;
+    Eq eq;
     constrained_detail::Projection<Sys, Con> projection;
-    V q0, p0, q1, p1, v1, dp, y, r, dx, start;
-    Eigen::MatrixXd J;
-    DenseLU lu;
+    typename Eq::Theta::Vector q0, p0, dp;
+    V q1, p1, v1;
+    typename Eq::Vector y, r, dx, start;
+    typename Eq::Matrix J;
+    DenseLUOf<Eq::K> lu;
     DriverState state;
   };
 

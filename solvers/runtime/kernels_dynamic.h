@@ -297,6 +297,13 @@ constexpr int kKeptJacobianMinDim = 8;
 // measures both choices.
 constexpr int kFixedWrittenMaxDim = 2;
 
+// Up to this many coordinates a system with one constraint steps by the constrained
+// step compiled for its size (ConstrainedThetaStep<..., N, 1>: the saddle-point
+// Jacobian and its LU of fixed size; solvers/constrained_step.h): the Cartesian
+// pendulum, a planar linkage closed by one constraint, a point on a surface in R^3.
+// bench_constrained measures the constrained scenes.
+constexpr int kFixedConstrainedMaxDim = 3;
+
 // A written system's derivatives: compiled where the scene asks (system.compile), the
 // compiler's failure an input error naming the key. make(mode) builds the system.
 template <class Make>
@@ -493,19 +500,30 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
                                    : L.parts().split.quadratic ? MomentumMap::linear
                                                                : MomentumMap::general;
       base.step_path = StepPath::generic;
+      const int m = con->count();
+      // the step of fixed size for the few coordinates of a pendulum, a planar linkage
+      // or a point on a surface in R^3 with one constraint (kFixedConstrainedMaxDim)
+      const bool fixed = me.use_structure && m == 1 && n <= kFixedConstrainedMaxDim;
+      auto run_with = [&](auto force, auto nc) {
+        using Force = std::remove_const_t<typename decltype(force)::element_type>;
+        constexpr int NC = decltype(nc)::value, MC = NC == Eigen::Dynamic ? Eigen::Dynamic : 1;
+        auto make = [&](double hk, const ThetaMap& Rk) {
+          return ConstrainedThetaStep<Sys, WrittenConstraints, Force, NC, MC>(L, Rk, hk, con, opt, momentum, force);
+        };
+        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      };
+      auto sized = [&](auto force) {
+        if (fixed && n == 2) return run_with(force, std::integral_constant<int, 2>());
+        if (fixed && n == 3) return run_with(force, std::integral_constant<int, 3>());
+        return run_with(force, std::integral_constant<int, Eigen::Dynamic>());
+      };
       if (pr.forced()) {
         const auto force = std::make_shared<WrittenForce>(pr.written);
         require_finite_force(*force, pr, q, v0);
         base.forced = true;
-        auto make = [&](double hk, const ThetaMap& Rk) {
-          return ConstrainedThetaStep<Sys, WrittenConstraints, WrittenForce>(L, Rk, hk, con, opt, momentum, force);
-        };
-        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+        return sized(std::shared_ptr<const WrittenForce>(force));
       }
-      auto make = [&](double hk, const ThetaMap& Rk) {
-        return ConstrainedThetaStep<Sys, WrittenConstraints>(L, Rk, hk, con, opt, momentum);
-      };
-      return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      return sized(std::shared_ptr<const NoForce>());
     }
 
   // system.forces: the forced steps (the forms and methods the registry's "lagrangian

@@ -456,3 +456,34 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_the_constrained_step_is_its_linearisation
     BOOST_TEST_CONTEXT("moving support with damping") { check(S, t0, q, p, false); }
   }
 }
+
+// The step compiled for its size (ConstrainedThetaStep<..., 2, 1>, what the runtime takes
+// for a pendulum or a planar linkage) gives the run-time-sized step's trajectory (the same
+// operations in the same order) and its derivative; with a force too.
+BOOST_AUTO_TEST_CASE(the_fixed_size_step_is_the_run_time_sized_one) {
+  const auto damped = system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + y^2 - l^2"},
+                                {{0, "-c*x_dot"}, {1, "-c*y_dot"}});
+  const auto con = std::make_shared<WrittenConstraints>(damped);
+  const auto force = std::make_shared<WrittenForce>(damped);
+  const WrittenDynamic L(damped);
+  using Dyn = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>;
+  using Fix = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce, 2, 1>;
+  const Dyn a(L, ThetaMap(0.3), 0.01, con, {}, MomentumMap::constant, force);
+  const Fix b(L, ThetaMap(0.3), 0.01, con, {}, MomentumMap::constant, force);
+  State sa = cartesian_state(1.3, 0.2), sb = sa;
+  BOOST_TEST(!integrate(a, 0.0, sa.q, sa.p, sa.v, 300, [](auto&&...) {}).failed);
+  BOOST_TEST(!integrate(b, 0.0, sb.q, sb.p, sb.v, 300, [](auto&&...) {}).failed);
+  BOOST_TEST((sa.q - sb.q).lpNorm<Eigen::Infinity>() <= 1e-15);
+  BOOST_TEST((sa.p - sb.p).lpNorm<Eigen::Infinity>() <= 1e-15);
+  VectorXd dq = VectorXd::Zero(2), dp(2);
+  BOOST_TEST(b.step(3.0, sb.q, sb.p, dq, dp).converged);
+  Eigen::MatrixXd Aa, Ab;
+  BOOST_TEST(a.derivative(3.0, sb.q, sb.p, dq, Aa));
+  BOOST_TEST(b.derivative(3.0, sb.q, sb.p, dq, Ab));
+  BOOST_TEST((Aa - Ab).lpNorm<Eigen::Infinity>() <= 1e-13 * Aa.lpNorm<Eigen::Infinity>());
+  BOOST_CHECK_THROW(Fix(WrittenDynamic(cartesian), ThetaMap(0.5), 0.01,
+                        std::make_shared<WrittenConstraints>(system_of({"x", "y", "z"}, "x_dot^2 + y_dot^2 + z_dot^2",
+                                                                       {"x^2 + y^2 + z^2 - 1"})),
+                        {}, MomentumMap::general, force),
+                    std::invalid_argument);
+}

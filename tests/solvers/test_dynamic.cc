@@ -1024,7 +1024,6 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
     const auto written_h = osc.text();
     written_h->hamiltonian =
         Expression::parse("p_x^2/(2*m) + k*x^2/2", written_h->symbols(WrittenSystem::Kind::hamiltonian));
-    using HL = LegendreDynamicHamiltonian<WrittenDynamic>;
     same_as_midpoint(
         run200(DynamicHamiltonianThetaStep<HL, WrittenForce>(HL(L), ThetaMap::midpoint(), 0.05, {}, false, force)));
     same_as_midpoint(run200(DynamicHamiltonianThetaStep<WrittenDynamicHamiltonian, WrittenForce>(
