@@ -74,6 +74,17 @@ struct WrittenSystem {
   // order (mechanics/written_constraints.h). An expression of Kind::constraint: q
   // (block 0, entries 0 .. dim() - 1) and the time t (block 0, entry dim()).
   std::vector<Expression> constraints;
+  // Control inputs ([system] controls, R^n), in the scene's order
+  // (mechanics/written_force.h, ControlSignal): each an expression in t or a table of
+  // one value per step. A force reads control j at block 0, entry dim() + 1 + j (after t).
+  struct Control {
+    std::string name;
+    Expression expression;      // in t (block 0, entry 0) and the parameters, where written
+    std::vector<double> table;  // else its values, one per step
+    std::string source;         // where the table came from (a file), for messages
+    std::string where;          // the scene key that gave it, for messages
+  };
+  std::vector<Control> controls;
   // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
   int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
 
@@ -125,6 +136,9 @@ struct WrittenSystem {
       if (momenta) s.arrays.push_back({"p_" + a.name, 2, a.offset, a.size, a.boundary});
     }
     if (kind == Kind::force || kind == Kind::constraint) s.variables.push_back({"t", 0, dim()});
+    if (kind == Kind::force)
+      for (std::size_t j = 0; j < controls.size(); ++j)
+        s.variables.push_back({controls[j].name, 0, dim() + 1 + static_cast<int>(j)});
     s.constants = params;
     s.constant_arrays = param_arrays;
     s.definitions = definitions;
@@ -201,6 +215,7 @@ struct WrittenSystem {
       if (p.values.empty()) throw std::invalid_argument("the parameter list '" + p.name + "' is empty");
     }
     for (const auto& d : definitions) claim(d.first, "definition");
+    for (const auto& c : controls) claim(c.name, "control");
     if (static_cast<int>(definitions.size()) > Expression::kMaxDefinitions)
       throw std::invalid_argument("at most " + std::to_string(Expression::kMaxDefinitions) + " definitions");
   }

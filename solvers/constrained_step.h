@@ -342,6 +342,11 @@ class ConstrainedThetaStep {
   const StepOptions& options() const { return options_; }
   int dim() const { return L_.dim(); }
   int constraints() const { return con_->count(); }
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const {
+    if constexpr (kForced) return force_->controls();
+    return 0;
+  }
 
   // The constrained step of the adjoint map (1 - theta).
   ConstrainedThetaStep adjoint() const {
@@ -380,6 +385,20 @@ class ConstrainedThetaStep {
   // singular or a value not finite. Allocates; not from two threads at once (it uses
   // the step's workspace).
   bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return differentiate(t0, q0, p0, dq, A, nullptr);
+  }
+  // The derivative B = d(q1, p1)/du (2n x c) in the force's control inputs u
+  // (WrittenForce::controls(), held constant over the step): the columns of the same
+  // two solves for the input u, which enters only through F at the node,
+  // dF1/du = h (1 - theta) F_u and dp1~/du = h F_u + (the terms in d(D, lambda)/du).
+  template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
+  bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    Eigen::MatrixXd A;
+    return differentiate(t0, q0, p0, dq, A, &B);
+  }
+
+ private:
+  bool differentiate(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
     const int n = L_.dim(), m = con_->count();
     if (q0.size() != n || p0.size() != n || dq.size() != n)
       throw std::invalid_argument("ConstrainedThetaStep::derivative: a state of " + std::to_string(q0.size()) +
@@ -399,10 +418,17 @@ class ConstrainedThetaStep {
     const M FD = FDt;
     M Gq = eq.Lqq(), Gv = eq.Lqv();
     const M Lvq = eq.Lqv().transpose();
+    M Fu(n, 0);  // dF/du at the node (the columns of B)
     if constexpr (kForced) {
       Gq += eq.Fq();
       Gv += eq.Fv();
+      if (B) {
+        V F(n);
+        M Fq(n, n), Fv(n, n);
+        w.force->jacobian(t0 + th * h, V(q0 + th * dq), V(dq / h), F, Fq, Fv, &Fu);
+      }
     }
+    const int c = static_cast<int>(Fu.cols()), in = 2 * n + c;
     eq.momentum(Dt, hGt);  // h G at the node
     const V hG = hGt;
     // the multipliers at the solution
@@ -432,13 +458,14 @@ class ConstrainedThetaStep {
       Hv.row(i) = v1.transpose() * H1[static_cast<std::size_t>(i)] + Gqt1.row(i);
     }
     // equation 1
-    M J1 = M::Zero(n + m, n + m), R1 = M::Zero(n + m, 2 * n);
+    M J1 = M::Zero(n + m, n + m), R1 = M::Zero(n + m, in);
     J1.topLeftCorner(n, n) = FD;
     J1.topRightCorner(n, m) = -G0.transpose();
     J1.bottomLeftCorner(m, n) = G1;
     R1.topLeftCorner(n, n) = -Hl + h * (1.0 - th) * Gq - Lvq;
-    R1.topRightCorner(n, n) = M::Identity(n, n);
+    R1.block(0, n, n, n) = M::Identity(n, n);
     R1.bottomLeftCorner(m, n) = G1;
+    if (c > 0) R1.topRightCorner(n, c) = h * (1.0 - th) * Fu;
     const Eigen::FullPivLU<M> lu1(J1);
     if (!lu1.isInvertible()) return false;
     const M Y1 = -lu1.solve(R1);  // d(D, lambda) / d(q0, p0)
@@ -447,12 +474,13 @@ class ConstrainedThetaStep {
     dq1.leftCols(n) += M::Identity(n, n);
     M dpt = -G0.transpose() * dl + h * Gq * (th * dD) + Gv * dD;
     dpt.leftCols(n) += -Hl + h * Gq;
-    dpt.rightCols(n) += M::Identity(n, n);
+    dpt.block(0, n, n, n) += M::Identity(n, n);
+    if (c > 0) dpt.rightCols(c) += h * Fu;
     // equation 2
     V Lq1(n), Lv1(n);
     M Lqq1(n, n), Lqv1(n, n), Lvv1(n, n);
     L_.hessian(q1, v1, Lq1, Lv1, Lqq1, Lqv1, Lvv1);
-    M K2 = M::Zero(n + m, n + m), R2(n + m, 2 * n);
+    M K2 = M::Zero(n + m, n + m), R2(n + m, in);
     K2.topLeftCorner(n, n) = Lvv1;
     K2.topRightCorner(n, m) = G1.transpose();
     K2.bottomLeftCorner(m, n) = G1;
@@ -463,10 +491,18 @@ class ConstrainedThetaStep {
     const M Y2 = -lu2.solve(R2);
     const M dp1 = dpt - Hm * dq1 - G1.transpose() * Y2.bottomRows(m);
     A.resize(2 * n, 2 * n);
-    A.topRows(n) = dq1;
-    A.bottomRows(n) = dp1;
+    A.topRows(n) = dq1.leftCols(2 * n);
+    A.bottomRows(n) = dp1.leftCols(2 * n);
+    if (B) {
+      B->resize(2 * n, c);
+      B->topRows(n) = dq1.rightCols(c);
+      B->bottomRows(n) = dp1.rightCols(c);
+      return A.allFinite() && B->allFinite();
+    }
     return A.allFinite();
   }
+
+ public:
 
   // One step from (q0, p0) at time t; dq holds the starting guess on entry and q1 - q0
   // on return, dp receives p1 - p0.

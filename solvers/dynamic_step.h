@@ -295,6 +295,11 @@ class DynamicThetaStep {
   const ThetaMap& map() const { return R_; }
   const StepOptions& options() const { return options_; }
   int dim() const { return L_.dim(); }
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const {
+    if constexpr (kForced) return force_->controls();
+    return 0;
+  }
 
   // The step of the adjoint map (1 - theta), of the same size (with a force: the forced
   // step of the adjoint map, ThetaEquation).
@@ -354,6 +359,36 @@ class DynamicThetaStep {
     A.bottomLeftCorner(n, n) = h * Gq * (I + th * Dq) + Gv * Dq;
     A.bottomRightCorner(n, n) = I + (h * th) * Gq * Dp + Gv * Dp;
     return A.allFinite();
+  }
+
+  // The derivative B = d(q1, p1)/du (2n x c) of the step in the force's control inputs
+  // u (WrittenForce::controls(), held constant over the step), at the dq that step()
+  // solved for: u enters only through F at the node, so with F_u = dF/du there
+  //   d dq = -F_D^{-1} h (1 - theta) F_u du,   dp1 = h theta G_q d dq + G_v d dq + h F_u du.
+  // Returns false where F_D is singular. Allocates.
+  template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
+  bool control_derivative(double t0, const V& q0, const V&, const V& dq, Eigen::MatrixXd& B) const {
+    using M = Eigen::MatrixXd;
+    const int n = L_.dim();
+    const double th = R_.theta(), h = h_;
+    Work& w = *work_;
+    w.q0 = q0;
+    w.p0.setZero();
+    w.D = dq;
+    w.eq.begin(w.q0, w.p0, t0);
+    if (!std::isfinite(w.eq.jacobian(w.D, w.r, w.J))) return false;
+    const V x = q0 + th * dq, v = dq / h;
+    V F(n);
+    M Fq(n, n), Fv(n, n), Fu;
+    w.force->jacobian(t0 + th * h, x, v, F, Fq, Fv, &Fu);
+    const M FD = w.J, Gq = w.eq.Lqq() + w.eq.Fq(), Gv = w.eq.Lqv() + w.eq.Fv();
+    const Eigen::FullPivLU<M> lu(FD);
+    if (!lu.isInvertible()) return false;
+    const M dD = -lu.solve(M(h * (1.0 - th) * Fu));
+    B.resize(2 * n, Fu.cols());
+    B.topRows(n) = dD;
+    B.bottomRows(n) = h * th * Gq * dD + Gv * dD + h * Fu;
+    return B.allFinite();
   }
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,

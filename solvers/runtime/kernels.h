@@ -127,6 +127,16 @@ class StepDerivatives {
   void record(std::int64_t, double, const Point&, const Covector&) {}
   bool finish(bool, std::string&, std::vector<std::string>&) { return true; }
 };
+// A step that gives its derivative in the force's control inputs too,
+// control_derivative(t0, q0, p0, dq, B), and how many there are, controls().
+template <class S, class = void>
+struct has_control_derivative : std::false_type {};
+template <class S>
+struct has_control_derivative<S, std::void_t<decltype(std::declval<const S&>().control_derivative(
+                                     0.0, std::declval<const Eigen::VectorXd&>(), std::declval<const Eigen::VectorXd&>(),
+                                     std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>())),
+                                 decltype(std::declval<const S&>().controls())>> : std::true_type {};
+
 template <class Stepper>
 class StepDerivatives<Stepper, true> {
  public:
@@ -143,6 +153,10 @@ class StepDerivatives<Stepper, true> {
     std::vector<std::string> columns{"t"};
     for (int i = 0; i < m; ++i)
       for (int j = 0; j < m; ++j) columns.push_back("A[" + std::to_string(i) + "," + std::to_string(j) + "]");
+    // with control inputs, B_k = d(q_{k+1}, p_{k+1})/du_k after A_k, row by row
+    if constexpr (has_control_derivative<Stepper>::value) controls_ = stepper.controls();
+    for (int i = 0; i < m; ++i)
+      for (int j = 0; j < controls_; ++j) columns.push_back("B[" + std::to_string(i) + "," + std::to_string(j) + "]");
     out_->open(columns, static_cast<double>(steps));
     row_.resize(columns.size());
   }
@@ -156,6 +170,15 @@ class StepDerivatives<Stepper, true> {
       const Eigen::Index m = A_.rows();
       for (Eigen::Index i = 0; i < m; ++i)
         for (Eigen::Index j = 0; j < m; ++j) row_[static_cast<std::size_t>(1 + i * m + j)] = A_(i, j);
+      if constexpr (has_control_derivative<Stepper>::value)
+        if (controls_ > 0) {
+          const std::size_t at = static_cast<std::size_t>(1 + m * m);
+          if (stepper_->control_derivative(t, q_, p_, dq, B_))
+            for (Eigen::Index i = 0; i < m; ++i)
+              for (int j = 0; j < controls_; ++j) row_[at + static_cast<std::size_t>(i * controls_ + j)] = B_(i, j);
+          else
+            std::fill(row_.begin() + static_cast<std::ptrdiff_t>(at), row_.end(), NAN);
+        }
     } else {
       std::fill(row_.begin() + 1, row_.end(), NAN);  // singular at the solution
     }
@@ -175,10 +198,20 @@ class StepDerivatives<Stepper, true> {
  private:
   const Stepper* stepper_;
   Eigen::VectorXd q_, p_;  // the state the next step starts from
-  Eigen::MatrixXd A_;
+  Eigen::MatrixXd A_, B_;
+  int controls_ = 0;
   std::vector<double> row_;
   std::unique_ptr<Recorder> out_;
 };
+
+// Whether a view follows the steps (void after_step(k) const, after step k - 1 -> k and
+// with k = 0 before the first: the run-time-sized systems, whose tabulated controls hold
+// u_k over step k).
+template <class View, class = void>
+struct has_after_step : std::false_type {};
+template <class View>
+struct has_after_step<View, std::void_t<decltype(std::declval<const View&>().after_step(std::int64_t{0}))>>
+    : std::true_type {};
 
 // Whether a view reports constraint residuals (bool constraint_residuals(t, q, p, g,
 // hidden) const: the run-time-sized systems, true where they have constraints).
@@ -228,6 +261,7 @@ class StepperRun final : public Run {
       rec->row(row_values.data());
     }
     StepDerivatives<Stepper> derivatives(rec, stepper_, q0_, p0_, steps_);
+    if constexpr (has_after_step<View>::value) view_.after_step(0);
     const int n_inv = view_.invariant_count();
     double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
     view_.invariants(q0_, p0_, I0);
@@ -265,6 +299,7 @@ class StepperRun final : public Run {
     std::int64_t next_row = rows ? every : -1, next_monitor = monitor_every;
     auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary& s) {
       derivatives.record(k, static_cast<double>(k - 1) * h, qk, pk);
+      if constexpr (has_after_step<View>::value) view_.after_step(k);  // (the next step is k -> k + 1)
       if (forced) {  // (Kahan-Babuska, as the state's sums)
         const double y = s.work - W_c, sum = W + y;
         W_c = (sum - W) - y;

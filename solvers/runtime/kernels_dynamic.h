@@ -207,6 +207,12 @@ struct DynamicView {
     return true;
   }
   std::shared_ptr<WrittenConstraints> constraints = nullptr;  // the view's own (their workspace), or null
+  // The run's control inputs (system.controls), or null: after step k - 1 -> k the
+  // forces read u_k (ControlSignal::set_step).
+  std::shared_ptr<const ControlSignal> controls = nullptr;
+  void after_step(std::int64_t k) const {
+    if (controls) controls->set_step(k);
+  }
   void finish_report(RunReport& r, const Point& q, const Covector& p) const {
     r.q_final.assign(q.data(), q.data() + q.size());
     r.p_final.assign(p.data(), p.data() + p.size());
@@ -475,6 +481,13 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       }
     }
   }
+  // system.controls: one signal for the run, read by every copy of the force
+  std::shared_ptr<const ControlSignal> signal;
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+    if (!pr.written->controls.empty()) {
+      signal = std::make_shared<const ControlSignal>(pr.written->controls);
+      view.controls = signal;
+    }
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.constrained()) {
       check_constrained_start(L, pr, q, p, v0);
@@ -518,7 +531,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         return run_with(force, std::integral_constant<int, Eigen::Dynamic>());
       };
       if (pr.forced()) {
-        const auto force = std::make_shared<WrittenForce>(pr.written);
+        const auto force = std::make_shared<WrittenForce>(pr.written, signal);
         require_finite_force(*force, pr, q, v0);
         base.forced = true;
         return sized(std::shared_ptr<const WrittenForce>(force));
@@ -532,7 +545,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   // and Jacobian refresh as the unforced steps' below
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.forced()) {
-      const auto force = std::make_shared<WrittenForce>(pr.written);
+      const auto force = std::make_shared<WrittenForce>(pr.written, signal);
       require_finite_force(*force, pr, q, v0);
       if (me.form != Form::lagrangian && me.form != Form::hamiltonian)  // (validate refuses it first)
         throw InputError(pr.forces_where + ": forces enter the lagrangian and hamiltonian forms only");

@@ -331,6 +331,13 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError("integrator.composition: --linearize differentiates one theta step; a composition (\"" +
                        me.composition + "\") gives no derivative");
   }
+  // tabulated controls: one value per step
+  if (pr.written && !pr.boundary_value)
+    for (const WrittenSystem::Control& c : pr.written->controls)
+      if (!c.table.empty() && static_cast<std::int64_t>(c.table.size()) != pr.steps)
+        throw InputError(c.where + ": " + c.source + " holds " + std::to_string(c.table.size()) +
+                         " values, expected one per step: " + std::to_string(pr.steps) +
+                         " (integrator.steps, or t_end / step)");
   if (pr.project_velocity && !pr.constrained())
     throw InputError(pr.project_velocity_where + ": projects the initial velocity onto the hidden constraint of "
                                                  "system.constraints, and the system writes none");

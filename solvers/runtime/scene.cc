@@ -957,7 +957,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   const toml::table& sys = r.section(root, "system", true);
   r.only_keys(sys, "system",
               {"builtin", "params", "lagrangian", "coordinates", "energy", "hamiltonian", "name", "masses", "space",
-               "ends", "definitions", "compile", "invariants", "forces", "constraints"});
+               "ends", "definitions", "compile", "invariants", "forces", "constraints", "controls"});
   if (sys.get("lagrangian")) read_written_system(path, sys, pr);
   const toml::node* b = sys.get("builtin");
   if (!b && !pr.written)
@@ -965,7 +965,7 @@ Scene validate_scene(toml::table& root, const std::string& path, const std::vect
   if (!pr.written) {
     for (const char* k :
          {"coordinates", "energy", "hamiltonian", "name", "space", "ends", "definitions", "compile", "invariants",
-          "forces", "constraints"})
+          "forces", "constraints", "controls"})
       if (const toml::node* n = sys.get(k))
         throw InputError(r.where(n, std::string("system.") + k) + ": belongs to a written system (system.lagrangian)");
     pr.system = &find_system_entry(r.string(*b, "system.builtin"), r.where(b, "system.builtin"));

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -239,6 +240,17 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
       w->definitions.emplace_back(name, text->substr(eq + 1));
     }
   }
+  // [system] controls: their names now (checked with the others), their values below
+  const toml::node* controls = sys.get("controls");
+  if (controls) {
+    if (!controls->is_table())
+      throw InputError(key_where(path, *controls, "system.controls") +
+                       ": expected a table of name = \"expression in t\" or name = { csv = \"file\" }");
+    if (w->space != WrittenSystem::Space::euclidean)
+      throw InputError(key_where(path, *controls, "system.controls") +
+                       ": controls enter forces, which are written on R^n");
+    for (const auto& [name, node] : *controls->as_table()) w->controls.push_back({std::string(name.str()), {}, {}, {}, {}});
+  }
   try {
     w->check_names();
   } catch (const WrittenSystem::NameError& e) {
@@ -251,6 +263,9 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     if (e.role.rfind("parameter", 0) == 0 && params && params->is_table() && params->as_table()->get(e.name)) {
       at = params->as_table()->get(e.name);
       key = "system.params." + e.name;
+    } else if (e.role == "control" && controls) {
+      at = controls->as_table()->get(e.name);
+      key = "system.controls." + e.name;
     } else if (e.role == "definition" && defs && defs->is_array()) {
       for (std::size_t i = 0; i < w->definitions.size() && !at; ++i)
         if (w->definitions[i].first == e.name) {
@@ -330,6 +345,63 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
       }
     }
   }
+  // [system] controls = { u = "expression in t", w = { csv = "file" } }: inputs the forces
+  // read (mechanics/written_force.h, ControlSignal); a file holds one number per line,
+  // one line per step (an optional first line naming the control), and is found
+  // beside the scene
+  if (controls) {
+    std::size_t j = 0;
+    for (const auto& [name, node] : *controls->as_table()) {
+      WrittenSystem::Control& ctl = w->controls[j++];
+      const std::string k = "system.controls." + ctl.name;
+      ctl.where = key_where(path, node, k);
+      if (node.is_string()) {
+        ExpressionSymbols sym;
+        sym.variables.push_back({"t", 0, 0});
+        sym.constants = w->params;
+        sym.constant_arrays = w->param_arrays;
+        try {
+          ctl.expression = Expression::parse(*node.value<std::string>(), sym);
+        } catch (const ExpressionError& e) {
+          throw InputError(string_location(path, node, e.offset) + ": in " + k + ": " + e.what() +
+                           " (a control written as an expression is u(t): t and the parameters)");
+        }
+        continue;
+      }
+      const toml::table* tab = node.as_table();
+      const toml::node* csv = tab ? tab->get("csv") : nullptr;
+      if (!csv || !csv->is_string() || tab->size() != 1)
+        throw InputError(key_where(path, node, k) + ": expected \"expression in t\" or { csv = \"file\" } (one value per step)");
+      const std::string file = *csv->value<std::string>();
+      const std::filesystem::path at = std::filesystem::path(file).is_absolute()
+                                           ? std::filesystem::path(file)
+                                           : std::filesystem::path(path).parent_path() / file;
+      ctl.source = at.string();
+      std::ifstream in(at);
+      if (!in) throw InputError(key_where(path, *csv, k + ".csv") + ": cannot read '" + ctl.source + "'");
+      std::string line;
+      for (std::size_t ln = 1; std::getline(in, line); ++ln) {
+        line.erase(0, line.find_first_not_of(" \t\r"));
+        line.erase(line.find_last_not_of(" \t\r") + 1);
+        if (line.empty()) continue;
+        if (ln == 1 && ctl.table.empty() && line == ctl.name) continue;  // the header
+        std::size_t used = 0;
+        double x = NAN;
+        try {
+          x = std::stod(line, &used);
+        } catch (const std::exception&) {
+          used = 0;
+        }
+        if (used != line.size() || !std::isfinite(x))
+          throw InputError(key_where(path, *csv, k + ".csv") + ": " + ctl.source + ":" + std::to_string(ln) + ": '" +
+                           line.substr(0, 40) + "' is not a finite number (one value of " + ctl.name +
+                           " per line, one line per step, an optional first line '" + ctl.name + "')");
+        ctl.table.push_back(x);
+      }
+      if (ctl.table.empty()) throw InputError(key_where(path, *csv, k + ".csv") + ": " + ctl.source + " holds no values");
+    }
+    pr.controls_where = key_where(path, *controls, "system.controls");
+  }
   // [system] forces = { coordinate = "F_i(t, q, v)", ... }: generalized forces, by the
   // discrete Lagrange-d'Alembert principle (mechanics/written_force.h)
   if (const toml::node* f = sys.get("forces")) {
@@ -362,6 +434,13 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     }
     std::sort(w->forces.begin(), w->forces.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
     if (!w->forces.empty()) pr.forces_where = key_where(path, *f, key);
+  }
+  for (std::size_t j = 0; j < w->controls.size(); ++j) {
+    bool read = false;
+    for (const auto& f : w->forces) read = read || f.second.uses(0, w->dim() + 1 + static_cast<int>(j));
+    if (!read)
+      throw InputError(key_where(path, *controls->as_table()->get(w->controls[j].name), "system.controls." + w->controls[j].name) +
+                       ": no force reads the control '" + w->controls[j].name + "' (system.forces)");
   }
   // [system] constraints = ["g_1(t, q)", ...]: holonomic constraints g = 0
   // (mechanics/written_constraints.h)

@@ -818,6 +818,69 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
   refused("spherical_pendulum_written.toml", {"system.forces={ x = \"0\" }"}, {"system.forces", "on R^n"});
 }
 
+// [system] controls: the shipped cart-pole pushed by a tabulated control; a table of
+// constant values gives the run of the same constant written as an expression, alone
+// and composed (every substep of a step reads u_k); --linearize adds the columns of
+// B_k; bad tables and controls are refused with exit 2, naming the key, the file and
+// the line.
+BOOST_AUTO_TEST_CASE(controls_from_a_table_or_an_expression) {
+  const Output o = dvm({"run", scene("cart_pole.toml"), "--json", "--no-output"});
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  BOOST_TEST(parse_json(o.out).at("forced").get<bool>());
+  BOOST_TEST(std::fabs(json_array(o.out, "q_final").at(0)) > 0.05);  // the cart moved
+  // a table of 0.7 against u = "0.7": the same numbers, with and without a composition
+  std::string table = "u\n";
+  for (int k = 0; k < 200; ++k) table += "0.7\n";
+  std::ofstream(temp_dir() + "/const_u.csv") << table;
+  auto head = [](const std::string& control) {
+    return "[system]\ncoordinates = [\"x\", \"th\"]\nparams = { m = 0.2, l = 0.5, g = 9.81 }\n"
+           "lagrangian = \"0.6*x_dot^2 + m*l*cos(th)*x_dot*th_dot + 0.5*m*l^2*th_dot^2 + m*g*l*cos(th)\"\n"
+           "controls = { u = " + control + " }\nforces = { x = \"u - 0.1*x_dot\" }\n"
+           "[initial]\nq = [0.0, 0.3]\nv = [0.0, 0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.01\nsteps = 200\n";
+  };
+  const std::string tab = write_scene("u_table.toml", head("{ csv = \"const_u.csv\" }"));
+  const std::string expr = write_scene("u_expr.toml", head("\"0.7\""));
+  for (const std::string comp : {"none", "triple-jump:4"}) {
+    const Output a = dvm({"run", tab, "--json", "--set", "integrator.composition=\"" + comp + "\""});
+    const Output b = dvm({"run", expr, "--json", "--set", "integrator.composition=\"" + comp + "\""});
+    BOOST_TEST_REQUIRE(a.status == 0, a.err);
+    BOOST_TEST_REQUIRE(b.status == 0, b.err);
+    BOOST_TEST(json_array(a.out, "q_final") == json_array(b.out, "q_final"), comp);
+    BOOST_TEST(json_array(a.out, "p_final") == json_array(b.out, "p_final"), comp);
+  }
+  // --linearize: A_k then B_k (2n x 1), named in PATH.json
+  const std::string npy = temp_dir() + "/cart_pole_A.npy";
+  const Output l = dvm({"run", scene("cart_pole.toml"), "--no-output", "--quiet", "--linearize", npy});
+  BOOST_TEST_REQUIRE(l.status == 0, l.err);
+  const std::string names = slurp(npy + ".json");
+  BOOST_TEST(names.find("\"A[3,3]\", \"B[0,0]\", \"B[1,0]\", \"B[2,0]\", \"B[3,0]\"]") != std::string::npos, names);
+
+  auto refused = [&](const std::string& path, std::vector<std::string> sets, std::vector<std::string> says) {
+    std::vector<std::string> args = {"run", path, "--no-output"};
+    for (const auto& x : sets) {
+      args.push_back("--set");
+      args.push_back(x);
+    }
+    const Output r = dvm(args);
+    BOOST_TEST_CONTEXT((sets.empty() ? path : sets.front())) {
+      BOOST_TEST(r.status == 2);
+      BOOST_TEST(r.out.empty());
+      for (const std::string& x : says) BOOST_TEST(r.err.find(x) != std::string::npos, r.err);
+    }
+  };
+  refused(tab, {"integrator.steps=150"}, {"system.controls.u", "const_u.csv holds 200 values", "one per step: 150"});
+  std::ofstream(temp_dir() + "/bad_u.csv") << "u\n0.1\n0.2\nabc\n";
+  refused(tab, {"system.controls.u={ csv = \"bad_u.csv\" }"}, {"system.controls.u.csv", "bad_u.csv:4", "'abc'"});
+  refused(tab, {"system.controls.u={ csv = \"no_such.csv\" }"}, {"system.controls.u.csv", "cannot read"});
+  refused(tab, {"system.controls.u={ file = \"x.csv\" }"}, {"system.controls.u", "{ csv = \"file\" }"});
+  refused(tab, {"system.controls.u=\"sin(\""}, {"in system.controls.u", "u(t)"});
+  refused(tab, {"system.controls.u=\"x\""}, {"in system.controls.u", "unknown name 'x'"});
+  refused(tab, {"system.forces={ x = \"-0.1*x_dot\" }"}, {"system.controls.u", "no force reads"});
+  refused(tab, {"system.controls.th=\"1\""}, {"system.controls.th", "'th' is used twice"});
+  refused(scene("pendulum.toml"), {"system.controls={ u = \"1\" }"}, {"system.controls", "belongs to a written system"});
+  refused(scene("spherical_pendulum_written.toml"), {"system.controls={ u = \"1\" }"}, {"system.controls", "R^n"});
+}
+
 namespace {
 // The rows of a .npy file dvm wrote (float64, two dimensions): shape and values.
 struct NpyRows {

@@ -1,4 +1,5 @@
-// Constrained steps (solvers/constrained_step.h, mechanics/written_constraints.h): the
+// Constrained steps (solvers/constrained_step.h, mechanics/written_constraints.h), and
+// the derivatives of the forced steps in their control inputs: the
 // pendulum in Cartesian coordinates, x^2 + y^2 = l^2, against the same pendulum in its
 // angle; orders of the constrained theta steps and their compositions; the constraint
 // and its hidden constraint kept to round-off at every step; the energy bounded; a
@@ -486,4 +487,75 @@ BOOST_AUTO_TEST_CASE(the_fixed_size_step_is_the_run_time_sized_one) {
                                                                        {"x^2 + y^2 + z^2 - 1"})),
                         {}, MomentumMap::general, force),
                     std::invalid_argument);
+}
+
+// Control inputs (WrittenForce with a ControlSignal): the derivative B = d(q1, p1)/du of a
+// step in a control held over it, against central differences in the tabulated value
+// u_k (relative 1e-7), for the unconstrained theta step (a cart-pole pushed along x) and
+// the constrained one (the Cartesian pendulum pushed sideways); the signal's step index
+// picks u_k.
+BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
+  auto with_control = [](std::shared_ptr<WrittenSystem> s, std::vector<double> table) {
+    s->controls.push_back({"u", {}, std::move(table), "test", "test"});
+    return s;
+  };
+  auto cartpole = with_control(
+      system_of({"x", "a"}, "(1 + m)/2*x_dot^2 + m*l*cos(a)*x_dot*a_dot + m*l^2/2*a_dot^2 + m*g*l*cos(a)"), {0.3, 1.7});
+  cartpole->forces.emplace_back(0, Expression::parse("u - c*x_dot", cartpole->symbols(WrittenSystem::Kind::force)));
+  auto pushed = with_control(system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + y^2 - l^2"}), {0.3, 1.7});
+  pushed->forces.emplace_back(0, Expression::parse("u*y^2", pushed->symbols(WrittenSystem::Kind::force)));
+  auto check = [](const auto& make, const std::shared_ptr<WrittenSystem>& s, const VectorXd& q0, const VectorXd& p0) {
+    const auto signal = std::make_shared<ControlSignal>(s->controls);
+    signal->set_step(1);  // u_1 = 1.7
+    const auto S = make(std::make_shared<WrittenForce>(s, signal));
+    BOOST_TEST(S.controls() == 1);
+    const Eigen::Index n = q0.size();
+    auto advance = [&](VectorXd& dq, VectorXd& dp) {
+      dq = VectorXd::Zero(n);
+      const StepSummary r = S.step(0.1, q0, p0, dq, dp);
+      BOOST_REQUIRE_MESSAGE(r.converged, r.message);
+    };
+    VectorXd dq(n), dp(n);
+    advance(dq, dp);
+    Eigen::MatrixXd B;
+    BOOST_REQUIRE(S.control_derivative(0.1, q0, p0, dq, B));
+    BOOST_TEST(B.cols() == 1);
+    // the same step with u_1 moved by +-eps (its own signal: the force's copy reads it)
+    auto moved = [&](double du) {
+      auto t = s->controls;
+      t[0].table[1] += du;
+      auto sig = std::make_shared<ControlSignal>(t);
+      sig->set_step(1);
+      const auto Su = make(std::make_shared<WrittenForce>(s, sig));
+      VectorXd d = VectorXd::Zero(n), e(n);
+      BOOST_REQUIRE(Su.step(0.1, q0, p0, d, e).converged);
+      VectorXd z(2 * n);
+      z << q0 + d, p0 + e;
+      return z;
+    };
+    const double eps = 1e-6;
+    const VectorXd fd = (moved(eps) - moved(-eps)) / (2 * eps);
+    const double err = (B.col(0) - fd).lpNorm<Eigen::Infinity>() / fd.lpNorm<Eigen::Infinity>();
+    BOOST_TEST_MESSAGE("B against central differences in u: " << err);
+    BOOST_TEST(err <= 1e-7);
+    BOOST_TEST(fd.lpNorm<Eigen::Infinity>() > 1e-3);  // the control moves the step
+    // the step read u_1, not u_0: with u_0 the step differs
+    signal->set_step(0);
+    VectorXd d0(n), e0(n);
+    advance(d0, e0);
+    BOOST_TEST((d0 - dq).lpNorm<Eigen::Infinity>() > 1e-6);
+  };
+  VectorXd q(2), p(2);
+  q << 0.1, 0.4;
+  p << 0.2, -0.1;
+  check([&](std::shared_ptr<WrittenForce> f) {
+    return DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce>(WrittenDynamic(cartpole), ThetaMap(0.3), 0.01,
+                                                                          {}, false, f);
+  }, cartpole, q, p);
+  const State c = cartesian_state(0.7, 0.4);
+  check([&](std::shared_ptr<WrittenForce> f) {
+    return ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>(
+        WrittenDynamic(pushed), ThetaMap(0.3), 0.01, std::make_shared<WrittenConstraints>(pushed), {},
+        MomentumMap::general, f);
+  }, pushed, c.q, c.p);
 }
