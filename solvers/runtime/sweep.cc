@@ -803,7 +803,8 @@ std::string integer(std::int64_t x) { return std::to_string(x); }
 // failure's step and time).
 constexpr const char* kRunColumns[] = {
     "system", "map", "form", "composition", "method", "step", "steps", "t_final", "wall_seconds", "cpu_seconds",
-    "energy_initial", "energy_final", "max_abs_energy_error", "work", "max_abs_energy_balance", "solver_iterations", "jacobians",
+    "energy_initial", "energy_final", "max_abs_energy_error", "work", "max_abs_energy_balance", "max_constraint_residual",
+    "max_hidden_constraint_residual", "solver_iterations", "jacobians",
     "max_step_iterations", "order", "failed_step", "failed_time"};
 
 }  // namespace
@@ -839,7 +840,10 @@ std::string sweep_csv(const SweepOptions& o, const SweepReport& rep) {
            {r.system, r.map, r.form, r.composition, r.method, num17(r.step), integer(r.steps), num17(r.t_final),
             num17(r.wall_seconds), num17(row.cpu_seconds), num17(r.energy_initial), num17(r.energy_final),
             num17(r.max_abs_energy_error), r.forced ? num17(r.work) : std::string(),
-            r.forced ? num17(r.max_abs_energy_balance) : std::string(), integer(r.solver_iterations), integer(r.jacobians),
+            r.forced ? num17(r.max_abs_energy_balance) : std::string(),
+            r.constrained ? num17(r.max_constraint_residual) : std::string(),
+            r.constrained ? num17(r.max_hidden_constraint_residual) : std::string(), integer(r.solver_iterations),
+            integer(r.jacobians),
             integer(r.max_step_iterations), r.order > 0 ? integer(r.order) : std::string(),
             failed ? integer(r.loop.failed_step) : std::string(), failed ? num17(r.loop.failed_time) : std::string()})
         c.push_back(s);
@@ -1240,6 +1244,12 @@ SweepRow row_from(const SweepOptions& o, const JValue& v, const std::string& tex
       r.forced = true;
       r.work = number_or_nan(*run, "work", at);
       r.max_abs_energy_balance = number_or_nan(*run, "max_abs_energy_balance", at);
+    }
+    if (const JValue* c = run->find("constrained"); c && c->kind == JValue::boolean && c->b) {
+      r.constrained = true;
+      r.constraints = static_cast<int>(number_or_nan(*run, "constraints", at));
+      r.max_constraint_residual = number_or_nan(*run, "max_constraint_residual", at);
+      r.max_hidden_constraint_residual = number_or_nan(*run, "max_hidden_constraint_residual", at);
     }
     r.solver_iterations = static_cast<std::int64_t>(number_or_nan(*run, "solver_iterations", at));
     r.jacobians = static_cast<std::int64_t>(number_or_nan(*run, "jacobians", at));

@@ -609,3 +609,24 @@ BOOST_AUTO_TEST_CASE(a_sweep_of_a_forced_scene_tabulates_the_work_and_the_energy
   }
   BOOST_TEST(j.at("rows").at(0).at("run").at("work").get<double>() == 0.0);
 }
+
+// A sweep of a constrained scene tabulates the constraint residuals (the run's own;
+// the columns are empty for unconstrained rows), here over the step of the Cartesian
+// pendulum.
+BOOST_AUTO_TEST_CASE(a_sweep_of_a_constrained_scene_tabulates_the_constraint_residuals) {
+  const Json j = sweep_json({"sweep", scene("pendulum_cartesian.toml"), "--vary", "integrator.step=[0.01, 0.02]",
+                             "--vary", "integrator.t_end=[5.0]"},
+                            temp_dir() + "/constrained", 0);
+  BOOST_TEST_REQUIRE(j.at("rows").size() == 2u);
+  const auto csv = csv_rows(slurp(temp_dir() + "/constrained.csv"));
+  BOOST_TEST_REQUIRE(csv.size() == 3u);
+  const std::vector<std::string>& head = csv.front();
+  for (std::size_t i = 0; i < 2; ++i) {
+    const Json& run = j.at("rows").at(i).at("run");
+    BOOST_TEST(run.at("constrained").get<bool>());
+    for (const char* k : {"max_constraint_residual", "max_hidden_constraint_residual"}) {
+      BOOST_TEST(std::strtod(csv[i + 1][column(head, k)].c_str(), nullptr) == run.at(k).get<double>());
+      BOOST_TEST(run.at(k).get<double>() <= 1e-13);
+    }
+  }
+}
