@@ -23,8 +23,10 @@
 //   system.forces   the theta, Galerkin and Hamiltonian steps with their Force
 //                   (WrittenForce), never the structured separable paths
 //   system.constraints  ConstrainedThetaStep (solvers/constrained_step.h), forces or
-//                   not, composed or not; the initial state checked against the
-//                   constraints (check_constrained_start)
+//                   not, composed or not (make_constrained_run, kernels_constrained.cc:
+//                   of fixed size for 2 and 3 coordinates and one constraint without a
+//                   force); the initial state checked against the constraints
+//                   (check_constrained_start)
 // Included only by the kernels_*.cc translation units.
 #pragma once
 
@@ -303,13 +305,6 @@ constexpr int kKeptJacobianMinDim = 8;
 // measures both choices.
 constexpr int kFixedWrittenMaxDim = 2;
 
-// Up to this many coordinates a system with one constraint steps by the constrained
-// step compiled for its size (ConstrainedThetaStep<..., N, 1>: the saddle-point
-// Jacobian and its LU of fixed size; solvers/constrained_step.h): the Cartesian
-// pendulum, a planar linkage closed by one constraint, a point on a surface in R^3.
-// bench_constrained measures the constrained scenes.
-constexpr int kFixedConstrainedMaxDim = 3;
-
 // A written system's derivatives: compiled where the scene asks (system.compile), the
 // compiler's failure an input error naming the key. make(mode) builds the system.
 template <class Make>
@@ -421,6 +416,16 @@ inline void check_constrained_start(const WrittenDynamic& L, const Problem& pr, 
   }
 }
 
+// The run of a written system with constraints (system.constraints): the constrained
+// theta step, with the force where the system has one (the lagrangian form of the
+// theta-family maps, composed or not: the registry's "lagrangian with constraints"),
+// from the initial state make_dynamic_run checked. Its own translation unit
+// (kernels_constrained.cc), compiled beside kernels_written.cc.
+std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem& pr, const Method& me,
+                                          const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,
+                                          const Eigen::VectorXd& p, const Eigen::VectorXd& v0, const RunReport& base,
+                                          const std::shared_ptr<const ControlSignal>& signal);
+
 // `hamiltonian`: the written H, when the scene gives one (null: H from L).
 template <class Sys>
 std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Method& me,
@@ -499,45 +504,9 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 
-  // system.constraints: the constrained theta step, with the force where the system has
-  // one (the lagrangian form of the theta-family maps, composed or not: the registry's
-  // "lagrangian with constraints")
+  // system.constraints: the constrained theta step (kernels_constrained.cc)
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
-    if (pr.constrained()) {
-      if (me.form != Form::lagrangian || me.galerkin)  // (validate refuses it first)
-        throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps only");
-      dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.constraints");
-      const ThetaMap R = dynamic_theta_map(me);
-      const auto con = std::make_shared<const WrittenConstraints>(pr.written);
-      const MomentumMap momentum = L.separable()               ? MomentumMap::constant
-                                   : L.parts().split.quadratic ? MomentumMap::linear
-                                                               : MomentumMap::general;
-      base.step_path = StepPath::generic;
-      const int m = con->count();
-      // the step of fixed size for the few coordinates of a pendulum, a planar linkage
-      // or a point on a surface in R^3 with one constraint (kFixedConstrainedMaxDim)
-      const bool fixed = me.use_structure && m == 1 && n <= kFixedConstrainedMaxDim;
-      auto run_with = [&](auto force, auto nc) {
-        using Force = std::remove_const_t<typename decltype(force)::element_type>;
-        constexpr int NC = decltype(nc)::value, MC = NC == Eigen::Dynamic ? Eigen::Dynamic : 1;
-        auto make = [&](double hk, const ThetaMap& Rk) {
-          return ConstrainedThetaStep<Sys, WrittenConstraints, Force, NC, MC>(L, Rk, hk, con, opt, momentum, force);
-        };
-        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
-      };
-      auto sized = [&](auto force) {
-        if (fixed && n == 2) return run_with(force, std::integral_constant<int, 2>());
-        if (fixed && n == 3) return run_with(force, std::integral_constant<int, 3>());
-        return run_with(force, std::integral_constant<int, Eigen::Dynamic>());
-      };
-      if (pr.forced()) {
-        const auto force = std::make_shared<WrittenForce>(pr.written, signal);
-        require_finite_force(*force, pr, q, v0);
-        base.forced = true;
-        return sized(std::shared_ptr<const WrittenForce>(force));
-      }
-      return sized(std::shared_ptr<const NoForce>());
-    }
+    if (pr.constrained()) return make_constrained_run(L, pr, me, view, q, p, v0, base, signal);
 
   // system.forces: the forced steps (the forms and methods the registry's "lagrangian
   // with forces" admits: the theta step, composed or not, Galerkin, the Hamiltonian
