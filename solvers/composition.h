@@ -21,6 +21,7 @@
 #pragma once
 
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -31,6 +32,17 @@
 #include "solvers/position_momentum_step.h"
 
 namespace dvm {
+
+namespace composition_detail {
+// A step with control_derivative(t, q, p, dq, B) (the forced steps with control inputs).
+template <class S, class = void>
+struct has_control_derivative : std::false_type {};
+template <class S>
+struct has_control_derivative<S, std::void_t<decltype(std::declval<const S&>().control_derivative(
+                                     0.0, std::declval<const Eigen::VectorXd&>(), std::declval<const Eigen::VectorXd&>(),
+                                     std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>()))>>
+    : std::true_type {};
+}  // namespace composition_detail
 
 // The substeps of "no composition": the map's own step.
 inline std::vector<Substep> single_substep() { return {{1.0, false}}; }
@@ -119,7 +131,94 @@ class ComposedStep {
     return total;
   }
 
+  // The derivative A = d(q_S, p_S)/d(q0, p0) of the whole step from (q0, p0) at time t,
+  // as the chain rule gives it: the product A_S ... A_1 of the substeps' derivatives
+  // at the substep states, which are found again by solving the substeps from (q0, p0)
+  // with copies of the substep steps (so the run's own steps keep their warm starts).
+  // Where the substeps give a derivative in controls too, B (2n x c; u held over the
+  // whole step) is the sum of A_S ... A_{k+1} B_k. Exists where both substep types give
+  // derivative(t, q, p, dq, A); dq is not read (the substeps are solved again). Returns
+  // false where a substep fails or a derivative is singular. Allocates.
+  template <class P = Plain, class D = Dual,
+            class = decltype(std::declval<const P&>().derivative(0.0, std::declval<const Eigen::VectorXd&>(),
+                                                                  std::declval<const Eigen::VectorXd&>(),
+                                                                  std::declval<const Eigen::VectorXd&>(),
+                                                                  std::declval<Eigen::MatrixXd&>())),
+            class = decltype(std::declval<const D&>().derivative(0.0, std::declval<const Eigen::VectorXd&>(),
+                                                                  std::declval<const Eigen::VectorXd&>(),
+                                                                  std::declval<const Eigen::VectorXd&>(),
+                                                                  std::declval<Eigen::MatrixXd&>()))>
+  bool derivative(double t, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return chain(t, q0, p0, dq, A, nullptr);
+  }
+  template <class P = Plain, class D = Dual,
+            class = decltype(std::declval<const P&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<Eigen::MatrixXd&>())),
+            class = decltype(std::declval<const D&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<Eigen::MatrixXd&>()))>
+  bool control_derivative(double t, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    Eigen::MatrixXd A;
+    return chain(t, q0, p0, dq, A, &B);
+  }
+  // The controls the substeps' force reads (where the substep type says).
+  template <class P = Plain, class = decltype(std::declval<const P&>().controls())>
+  int controls() const {
+    return plain_.empty() ? dual_.front().controls() : plain_.front().controls();
+  }
+
  private:
+  template <class S>
+  static bool substep_derivative(const S& s, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& p,
+                                 const Eigen::VectorXd& d, Eigen::MatrixXd& A, Eigen::MatrixXd* B) {
+    if (!s.derivative(t, q, p, d, A)) return false;
+    if (B) {
+      if constexpr (composition_detail::has_control_derivative<S>::value)
+        return s.control_derivative(t, q, p, d, *B);
+      else
+        return false;
+    }
+    return true;
+  }
+  bool chain(double t, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    std::vector<Plain> plain(plain_);
+    std::vector<Dual> dual(dual_);
+    const Eigen::Index n = q0.size();
+    V q = q0, p = p0, prev = dq, d, e = V::Zero(n);
+    double prev_weight = 1.0, elapsed = 0.0;
+    A = Eigen::MatrixXd::Identity(2 * n, 2 * n);
+    if (B) B->resize(2 * n, 0);
+    Eigen::MatrixXd Ak, Bk;
+    for (std::size_t k = 0; k < substeps_.size(); ++k) {
+      const double w = substeps_[k].weight;
+      d = prev * (w / prev_weight);
+      e *= w / prev_weight;
+      const double tk = t + elapsed * h_;
+      const bool adj = substeps_[k].adjoint;
+      const Eigen::VectorXd qk = q, pk = p;
+      const StepSummary s = adj ? dual[index_[k]].step(tk, q, p, d, e) : plain[index_[k]].step(tk, q, p, d, e);
+      if (!s.converged) return false;
+      const Eigen::VectorXd dk = d;
+      const bool ok = adj ? substep_derivative(dual[index_[k]], tk, qk, pk, dk, Ak, B ? &Bk : nullptr)
+                          : substep_derivative(plain[index_[k]], tk, qk, pk, dk, Ak, B ? &Bk : nullptr);
+      if (!ok) return false;
+      if (B) {
+        if (B->cols() == 0) B->setZero(2 * n, Bk.cols());
+        *B = Ak * *B + Bk;
+      }
+      A = Ak * A;
+      q += d;
+      p += e;
+      prev = d;
+      prev_weight = w;
+      elapsed += w;
+    }
+    return A.allFinite() && (!B || B->allFinite());
+  }
+
   double h_;
   std::vector<Substep> substeps_;
   std::vector<std::size_t> index_;

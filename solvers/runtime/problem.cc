@@ -327,9 +327,9 @@ void validate(const Problem& pr, const Method& me) {
       throw InputError(what + ", not " +
                        (me.galerkin ? std::string("integrator.method = \"galerkin\"")
                                     : "integrator.form = \"" + std::string(to_string(me.form)) + "\""));
-    if (me.composition != "none")
-      throw InputError("integrator.composition: --linearize differentiates one theta step; a composition (\"" +
-                       me.composition + "\") gives no derivative");
+    if (me.composition != "none" && me.scheme().kind == CompositionKind::rkn_splitting)
+      throw InputError("integrator.composition: --linearize differentiates theta steps and their compositions; a "
+                       "splitting into kicks and drifts (\"" + me.composition + "\") gives no derivative");
   }
   // tabulated controls: one value per step
   if (pr.written && !pr.boundary_value)
