@@ -12,7 +12,8 @@
 // state; the table gives ns per step (the best of the repeats), the constrained run's
 // Newton iterations per step, and the ratio constrained / minimal. The two columns are
 // different discretisations of one motion, so their states are not compared here
-// (tests/cli/test_cli_constraints.cc compares them to the methods' accuracy).
+// (tests/cli/test_cli_constraints.cc and test_cli_constraints_long.cc compare them to the
+// methods' accuracy).
 //
 // usage: bench_constrained [--steps N] [--repeats R] [--scenes DIR]
 #include <chrono>
