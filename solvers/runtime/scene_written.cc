@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <map>
@@ -11,6 +12,10 @@
 #include "mechanics/written_lagrangian.h"
 
 namespace dvm {
+
+// The largest control table ([system] controls = { u = { csv = ... } }) read: 1 GiB of
+// text, some 10^8 values (a device or a file of another kind is refused before it).
+constexpr std::uintmax_t kMaxControlTableBytes = std::uintmax_t{1} << 30;
 
 namespace {
 
@@ -377,6 +382,14 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
                                            ? std::filesystem::path(file)
                                            : std::filesystem::path(path).parent_path() / file;
       ctl.source = at.string();
+      std::error_code ec;
+      const bool regular = std::filesystem::is_regular_file(at, ec);
+      const auto bytes = regular ? std::filesystem::file_size(at, ec) : 0;
+      if (!regular || ec)
+        throw InputError(key_where(path, *csv, k + ".csv") + ": cannot read '" + ctl.source + "' (not a regular file)");
+      if (bytes > kMaxControlTableBytes)
+        throw InputError(key_where(path, *csv, k + ".csv") + ": '" + ctl.source + "' holds " + std::to_string(bytes) +
+                         " bytes, beyond the " + std::to_string(kMaxControlTableBytes) + " a control table may hold");
       std::ifstream in(at);
       if (!in) throw InputError(key_where(path, *csv, k + ".csv") + ": cannot read '" + ctl.source + "'");
       std::string line;

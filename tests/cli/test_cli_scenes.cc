@@ -872,6 +872,7 @@ BOOST_AUTO_TEST_CASE(controls_from_a_table_or_an_expression) {
   std::ofstream(temp_dir() + "/bad_u.csv") << "u\n0.1\n0.2\nabc\n";
   refused(tab, {"system.controls.u={ csv = \"bad_u.csv\" }"}, {"system.controls.u.csv", "bad_u.csv:4", "'abc'"});
   refused(tab, {"system.controls.u={ csv = \"no_such.csv\" }"}, {"system.controls.u.csv", "cannot read"});
+  refused(tab, {"system.controls.u={ csv = \"/dev/zero\" }"}, {"system.controls.u.csv", "not a regular file"});
   refused(tab, {"system.controls.u={ file = \"x.csv\" }"}, {"system.controls.u", "{ csv = \"file\" }"});
   refused(tab, {"system.controls.u=\"sin(\""}, {"in system.controls.u", "u(t)"});
   refused(tab, {"system.controls.u=\"x\""}, {"in system.controls.u", "unknown name 'x'"});
