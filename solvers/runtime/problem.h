@@ -59,8 +59,6 @@ struct Problem {
   // Where the written system's forces are (system.forces), empty where it writes none.
   std::string forces_where;
   bool forced() const;  // the written system has forces (system.forces)
-  // Where its controls are (system.controls), empty where it declares none.
-  std::string controls_where;
   // Where its constraints are (system.constraints), empty where it writes none.
   std::string constraints_where;
   bool constrained() const;  // the written system has constraints (system.constraints)

@@ -413,7 +413,6 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
       }
       if (ctl.table.empty()) throw InputError(key_where(path, *csv, k + ".csv") + ": " + ctl.source + " holds no values");
     }
-    pr.controls_where = key_where(path, *controls, "system.controls");
   }
   // [system] forces = { coordinate = "F_i(t, q, v)", ... }: generalized forces, by the
   // discrete Lagrange-d'Alembert principle (mechanics/written_force.h)

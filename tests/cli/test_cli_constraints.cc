@@ -14,27 +14,9 @@
 #include <string>
 #include <vector>
 
-#include "tests/cli/cli_harness.h"
-
-namespace {
+#include "tests/cli/constraint_runs.h"
 
 using namespace cli_test;
-
-std::vector<std::string> with_sets(std::vector<std::string> args, const std::vector<std::string>& sets) {
-  for (const auto& s : sets) {
-    args.push_back("--set");
-    args.push_back(s);
-  }
-  return args;
-}
-Json run(const std::string& s, const std::vector<std::string>& sets) {
-  const Output o = dvm(with_sets({"run", scene(s), "--json", "--no-output"}, sets));
-  BOOST_TEST_REQUIRE(o.status == 0, s << ": " << o.err);
-  return parse_json(o.out);
-}
-std::vector<double> vec(const Json& j, const char* key) { return j.at(key).get<std::vector<double>>(); }
-
-}  // namespace
 
 // The pendulum in (x, y) with x^2 + y^2 = l^2 against the built-in pendulum in its angle
 // q: at t = 10, composed to order 8 (kahan-li8) with h = 0.01, x = l sin q and

@@ -10,27 +10,9 @@
 #include <string>
 #include <vector>
 
-#include "tests/cli/cli_harness.h"
-
-namespace {
+#include "tests/cli/constraint_runs.h"
 
 using namespace cli_test;
-
-std::vector<std::string> with_sets(std::vector<std::string> args, const std::vector<std::string>& sets) {
-  for (const auto& s : sets) {
-    args.push_back("--set");
-    args.push_back(s);
-  }
-  return args;
-}
-Json run(const std::string& s, const std::vector<std::string>& sets) {
-  const Output o = dvm(with_sets({"run", scene(s), "--json", "--no-output"}, sets));
-  BOOST_TEST_REQUIRE(o.status == 0, s << ": " << o.err);
-  return parse_json(o.out);
-}
-std::vector<double> vec(const Json& j, const char* key) { return j.at(key).get<std::vector<double>>(); }
-
-}  // namespace
 
 // The four-bar linkage: over 10^6 steps (t = 1000 at h = 0.001) the constraint and its
 // hidden constraint hold to 1e-12 relative at every step, and the energy error stays bounded (no larger than over the first 10^5 steps);
