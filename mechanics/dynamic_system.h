@@ -133,6 +133,16 @@ struct is_dynamic_system<
 template <class S>
 inline constexpr bool is_dynamic_system_v = is_dynamic_system<S>::value;
 
+// Whether a run-time-sized system may depend on the time: void set_time(double t) const
+// sets the t its next evaluations read (WrittenDynamic of a Lagrangian L(t, q, v)). The
+// step equations set it at each node before they evaluate L (ThetaEquation at t0 +
+// theta h, the Galerkin step at each quadrature node, the constrained step's projection
+// at t0 + h); a run's view sets its own copy's at each monitored state.
+template <class S, class = void>
+struct has_time : std::false_type {};
+template <class S>
+struct has_time<S, std::void_t<decltype(std::declval<const S&>().set_time(0.0))>> : std::true_type {};
+
 // Whether a run-time-sized Lagrangian has a closed-form inverse Legendre map.
 template <class S, class = void>
 struct has_dynamic_velocity : std::false_type {};
@@ -718,8 +728,12 @@ struct WrittenParts {
     const int n = w.dim();
     cyclic.assign(static_cast<std::size_t>(n), true);
     w.lagrangian.for_each_variable([&](int block, int index) {
-      if (block == 0) cyclic[static_cast<std::size_t>(index)] = false;
+      if (block == 0 && index < n) cyclic[static_cast<std::size_t>(index)] = false;  // (index n: the time)
     });
+    // L(t, q, v): no structure is read off the text (its parts would read t, which the
+    // structured steps and closed forms do not pass); the general path, Newton's
+    // method for v = FL^{-1}(t, q, p)
+    if (w.time_dependent()) return;
     split = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), &kinetic,
                                        &potential);
     if (split.quadratic && !split.constant_mass) {
@@ -776,12 +790,14 @@ class WrittenDynamic {
   explicit WrittenDynamic(std::shared_ptr<const WrittenSystem> s,
                           WrittenDerivatives mode = WrittenDerivatives::automatic)
       : system_(std::move(s)),
-        tape_(std::shared_ptr<const Expression>(system_, &dynamic_detail::checked_written(system_).lagrangian),
-              dynamic_detail::checked_written(system_).dim(), mode),
+        timed_(dynamic_detail::checked_written(system_).time_dependent()),
+        tape_(std::shared_ptr<const Expression>(system_, &system_->lagrangian), system_->dim() + (timed_ ? 1 : 0),
+              mode),
         parts_(parts_of(*system_, mode, tape_)),
         Lq_(system_->dim()),
         Lv_(system_->dim()) {
     if (parts_->split.quadratic && !parts_->separable) mass_ = Mass(system_->dim());
+    if (timed_) time_ = Timed(system_->dim());
   }
 
   // The structure read off the text, and for a separable L its parts.
@@ -835,12 +851,41 @@ class WrittenDynamic {
   bool compiled() const { return tape_.compiled(); }
   double compile_seconds() const { return tape_.compile_seconds(); }
 
-  double value(const DynIn& q, const DynIn& v) const { return tape_.value(q.data(), v.data()); }
+  // L(t, q, v): whether the text reads t, and the t the evaluations below read (0 until
+  // set). The tape then runs on n + 1 inputs per block, (q, t) and (v, 0), and the
+  // derivatives in t are dropped.
+  bool time_dependent() const { return timed_; }
+  void set_time(double t) const { time_.t = t; }
+  double time() const { return time_.t; }
+
+  double value(const DynIn& q, const DynIn& v) const {
+    if (timed_) return tape_.value(time_.load(q, v), time_.v.data());
+    return tape_.value(q.data(), v.data());
+  }
   void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
+    if (timed_) {
+      Timed& w = time_;
+      tape_.gradient(w.load(q, v), w.v.data(), w.gq, w.gv);
+      const Eigen::Index n = Lq.size();
+      Lq = w.gq.head(n);
+      Lv = w.gv.head(n);
+      return;
+    }
     tape_.gradient(q.data(), v.data(), Lq, Lv);
   }
   void hessian(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv, DynMatOut Lqq, DynMatOut Lqv,
                DynMatOut Lvv) const {
+    if (timed_) {
+      Timed& w = time_;
+      tape_.hessian(w.load(q, v), w.v.data(), w.gq, w.gv, w.Hqq, w.Hqv, w.Hvv);
+      const Eigen::Index n = Lq.size();
+      Lq = w.gq.head(n);
+      Lv = w.gv.head(n);
+      Lqq = w.Hqq.topLeftCorner(n, n);
+      Lqv = w.Hqv.topLeftCorner(n, n);
+      Lvv = w.Hvv.topLeftCorner(n, n);
+      return;
+    }
     tape_.hessian(q.data(), v.data(), Lq, Lv, Lqq, Lqv, Lvv);
   }
 
@@ -880,11 +925,31 @@ class WrittenDynamic {
     DenseLU lu;
     DenseLUOf<2> lu2;  // used instead when n = 2
   };
+  // The time and the tape's inputs and outputs of n + 1 entries (L(t, q, v) only).
+  struct Timed {
+    Timed() = default;
+    explicit Timed(int n)
+        : q(Eigen::VectorXd::Zero(n + 1)), v(Eigen::VectorXd::Zero(n + 1)), gq(n + 1), gv(n + 1), Hqq(n + 1, n + 1),
+          Hqv(n + 1, n + 1), Hvv(n + 1, n + 1) {}
+    // (q, t) and (v, 0); returns the first
+    const double* load(const DynIn& qi, const DynIn& vi) {
+      const Eigen::Index n = qi.size();
+      q.head(n) = qi;
+      q[n] = t;
+      v.head(n) = vi;
+      return q.data();
+    }
+    double t = 0.0;
+    Eigen::VectorXd q, v, gq, gv;
+    Eigen::MatrixXd Hqq, Hqv, Hvv;
+  };
   std::shared_ptr<const WrittenSystem> system_;
+  bool timed_;
   dynamic_detail::TapeDerivatives tape_;
   std::shared_ptr<const WrittenParts> parts_;
   mutable Eigen::VectorXd Lq_, Lv_;
-  mutable Mass mass_;  // sized only for a text quadratic in the velocities and not separable
+  mutable Mass mass_;    // sized only for a text quadratic in the velocities and not separable
+  mutable Timed time_;   // sized only for L(t, q, v)
 };
 
 // A written Lagrangian whose text is separable (WrittenDynamic::separable()), seen as a

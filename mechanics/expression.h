@@ -974,8 +974,9 @@ class Parser {
         if (name == f.name) fail(i_, "expected '(' after the function name '" + name + "'");
       if (name == "sum") fail(i_, "expected '(' after 'sum': sum(i, first, last, term)");
       if (name == "t")
-        fail(at, "unknown name 't': the time is a variable of the forces (system.forces) only; a written "
-                 "Lagrangian, energy, Hamiltonian or invariant does not depend on it; known names: " +
+        fail(at, "unknown name 't': the time is a variable of a Lagrangian written on R^n, of the forces, the "
+                 "constraints and the controls; an energy, a Hamiltonian, an invariant or a Lagrangian on S^2 or "
+                 "SO(3) does not depend on it; known names: " +
                      sym_.known_names());
       fail(at, "unknown name '" + name + "'; known names: " + sym_.known_names());
     }

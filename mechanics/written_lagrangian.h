@@ -59,7 +59,9 @@ struct WrittenSystem {
   // Named subexpressions {name, text}, usable in every expression (and in the
   // definitions after them); evaluated once per evaluation.
   std::vector<std::pair<std::string, std::string>> definitions;
-  Expression lagrangian;   // in q (block 0) and v (block 1)
+  // In q (block 0) and v (block 1); on R^n it may read the time t (block 0, entry
+  // dim(), after q), time_dependent() then.
+  Expression lagrangian;
   Expression energy;       // optional: q, v, p (blocks 0, 1, 2)
   Expression hamiltonian;  // optional: q (block 0) and p (block 2)
   // Quantities the scene asks to monitor besides the energy ([system] invariants: a
@@ -87,10 +89,12 @@ struct WrittenSystem {
   std::vector<Control> controls;
   // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
   int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
+  // Whether the Lagrangian reads the time t: L(t, q, v), whose energy is not conserved.
+  bool time_dependent() const { return space == Space::euclidean && lagrangian.uses(0, dim()); }
 
-  // Which expression a text is for (decides the names it may use): L in q and v; the
-  // energy and the invariants in q, v and p; H in q and p; a force in t, q and v; a
-  // constraint in t and q.
+  // Which expression a text is for (decides the names it may use): L in q and v (and t
+  // on R^n); the energy and the invariants in q, v and p; H in q and p; a force in t, q
+  // and v; a constraint in t and q.
   enum class Kind { lagrangian, energy, hamiltonian, force, constraint };
 
   // Appends the array `name` of `size` coordinates (q, v, p named name[i],
@@ -135,7 +139,8 @@ struct WrittenSystem {
       if (velocities) s.arrays.push_back({a.name + "_dot", 1, a.offset, a.size, a.boundary});
       if (momenta) s.arrays.push_back({"p_" + a.name, 2, a.offset, a.size, a.boundary});
     }
-    if (kind == Kind::force || kind == Kind::constraint) s.variables.push_back({"t", 0, dim()});
+    if (kind == Kind::force || kind == Kind::constraint || (kind == Kind::lagrangian && space == Space::euclidean))
+      s.variables.push_back({"t", 0, dim()});
     if (kind == Kind::force)
       for (std::size_t j = 0; j < controls.size(); ++j)
         s.variables.push_back({controls[j].name, 0, dim() + 1 + static_cast<int>(j)});
@@ -235,6 +240,8 @@ struct WrittenLagrangian {
     if (!system || system->dim() != N) throw std::invalid_argument("WrittenLagrangian: dimension mismatch");
     if (system->space != WrittenSystem::Space::euclidean)
       throw std::invalid_argument("WrittenLagrangian: the system is written on S^2 or SO(3) (mechanics/written_manifold.h)");
+    if (system->time_dependent())
+      throw std::invalid_argument("WrittenLagrangian: the Lagrangian depends on t (WrittenDynamic takes it)");
     program = DerivativeProgram::build(system->lagrangian, N, false);
     if (program && program->has_blocks()) program = nullptr;  // (gradient_any runs no blocks)
   }

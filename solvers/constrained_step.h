@@ -211,6 +211,7 @@ struct Projection {
                          Eigen::VectorXd& v, MomentumMap kind) {
     const Eigen::Index n = q.size(), m = g.size();
     con.gradients(t, q, G, gt);
+    if constexpr (has_time<Sys>::value) L.set_time(t);  // L(t, q, v): FL^{-1} at t (not kind constant)
     if (kind == MomentumMap::constant) {
       if (!have_minv) {
         L.hessian(q, v, Lq, Lv, Lqq, Lqv, Lvv);

@@ -26,6 +26,8 @@
 // in the equations above (and in dp); in the Jacobian L_qq and L_qv become L_qq + F_q and
 // L_qv + F_v where they differentiate g_i (not in the p_i terms). The step reports the
 // force's work h sum_i b_i <F_i, v_i> (StepSummary::work), like dp at the last evaluation.
+// A Lagrangian L(t, q, v) (mechanics/dynamic_system.h, has_time) is evaluated at the
+// same node times t0 + c_i h.
 //
 // The solve, as GalerkinStep: the one driver (solvers/newton_driver.h) with
 // Refresh::contracting, the Jacobian inverted once and reused across iterations and
@@ -232,6 +234,7 @@ class DynamicGalerkinStep {
         }
       }
       for (int a = 0; a < n; ++a) x[a] += q0[a];
+      if constexpr (has_time<Sys>::value) L_.set_time(node_time(i));
       L_.gradient(xs_.col(i), vs_.col(i), G_.col(i), P_.col(i));
       if constexpr (kForced) {
         force_fn_->value(node_time(i), xs_.col(i), vs_.col(i), Fcol_);
@@ -335,6 +338,7 @@ class DynamicGalerkinStep {
         v_ += t_.B[i][j] * X.segment((j - 1) * n, n);
       }
       v_ *= inv_h;
+      if constexpr (has_time<Sys>::value) L_.set_time(node_time(i));
       L_.hessian(x_, v_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
       if constexpr (kForced) {  // g_i = L_q + F_i: F_q, F_v join the derivatives of g_i only
         force_fn_->jacobian(node_time(i), x_, v_, Fcol_, Fq_, Fv_);

@@ -16,7 +16,9 @@
 //      dF/ddq = h theta (1 - theta) L_qq + (1 - theta) L_qv - theta L_qv^T - L_vv / h,
 //    built from one call of the system's hessian() per Newton iteration. A generalized
 //    force F(t, q, v) enters by the discrete Lagrange-d'Alembert principle as
-//    L_q + F in both equations (ThetaEquation below).
+//    L_q + F in both equations (ThetaEquation below). A Lagrangian L(t, q, v) is
+//    evaluated at the node's time t0 + theta h, as the force is (the quadrature of
+//    L_d), so L_d(t0; q0, q1) = h L(t0 + theta h, x, v).
 //
 // 2. Hamiltonian step (paper Sec. 5.1, Eq. 5.1; solvers/hamiltonian_step.h). The
 //    inverse of the cotangent lift of the theta map sends (q0, p0; q1, p1) to the base
@@ -137,11 +139,13 @@ class ThetaEquation {
       Fv_.resize(n, n);
     }
   }
-  // The start of the step, at time t0 (read by a force only).
+  // The start of the step, at time t0 (read by a force and by L(t, q, v), both at the
+  // node's time t0 + theta h).
   void begin(const Vector& q0, const Vector& p0, double t0 = 0.0) {
     q0_ = &q0;
     p0_ = &p0;
-    if constexpr (kForced) t_ = t0 + th_ * h_;
+    t_ = t0 + th_ * h_;
+    if constexpr (has_time<Sys>::value) L_->set_time(t_);
     pscale_ = dynamic_detail::inf_norm(p0);
     q0size_ = dynamic_detail::inf_norm(q0);
   }

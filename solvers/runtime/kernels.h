@@ -204,13 +204,13 @@ class StepDerivatives<Stepper, true> {
   std::unique_ptr<Recorder> out_;
 };
 
-// Whether a view follows the steps (void after_step(k) const, after step k - 1 -> k and
-// with k = 0 before the first: the run-time-sized systems, whose tabulated controls hold
-// u_k over step k).
+// Whether a view follows the steps (void after_step(k, t_k) const, after step k - 1 -> k
+// and with k = 0 before the first: the run-time-sized systems, whose tabulated controls
+// hold u_k over step k and whose L(t, q, v) is monitored at t_k).
 template <class View, class = void>
 struct has_after_step : std::false_type {};
 template <class View>
-struct has_after_step<View, std::void_t<decltype(std::declval<const View&>().after_step(std::int64_t{0}))>>
+struct has_after_step<View, std::void_t<decltype(std::declval<const View&>().after_step(std::int64_t{0}, 0.0))>>
     : std::true_type {};
 
 // Whether a view reports constraint residuals (bool constraint_residuals(t, q, p, g,
@@ -261,7 +261,7 @@ class StepperRun final : public Run {
       rec->row(row_values.data());
     }
     StepDerivatives<Stepper> derivatives(rec, stepper_, q0_, p0_, steps_);
-    if constexpr (has_after_step<View>::value) view_.after_step(0);
+    if constexpr (has_after_step<View>::value) view_.after_step(0, 0.0);
     const int n_inv = view_.invariant_count();
     double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
     view_.invariants(q0_, p0_, I0);
@@ -299,7 +299,7 @@ class StepperRun final : public Run {
     std::int64_t next_row = rows ? every : -1, next_monitor = monitor_every;
     auto observer = [&](std::int64_t k, double t, const Point& qk, const Covector& pk, const StepSummary& s) {
       derivatives.record(k, static_cast<double>(k - 1) * h, qk, pk);
-      if constexpr (has_after_step<View>::value) view_.after_step(k);  // (the next step is k -> k + 1)
+      if constexpr (has_after_step<View>::value) view_.after_step(k, t);  // (the next step is k -> k + 1)
       if (forced) {  // (Kahan-Babuska, as the state's sums)
         const double y = s.work - W_c, sum = W + y;
         W_c = (sum - W) - y;

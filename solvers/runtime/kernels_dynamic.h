@@ -27,6 +27,10 @@
 //                   of fixed size for 2 and 3 coordinates and one constraint without a
 //                   force); the initial state checked against the constraints
 //                   (check_constrained_start)
+//   L(t, q, v)      (a written Lagrangian that reads t) the generic steps above, which
+//                   evaluate L at their nodes' times (has_time); its text is given no
+//                   separable or mechanical structure (WrittenParts), so no structured
+//                   path is taken; the view evaluates it at t_k (after_step)
 // Included only by the kernels_*.cc translation units.
 #pragma once
 
@@ -209,10 +213,12 @@ struct DynamicView {
   }
   std::shared_ptr<WrittenConstraints> constraints = nullptr;  // the view's own (their workspace), or null
   // The run's control inputs (system.controls), or null: after step k - 1 -> k the
-  // forces read u_k (ControlSignal::set_step).
+  // forces read u_k (ControlSignal::set_step). A Lagrangian L(t, q, v) is evaluated at
+  // t_k by what the view monitors there (the energy, invariants, constraint residuals).
   std::shared_ptr<const ControlSignal> controls = nullptr;
-  void after_step(std::int64_t k) const {
+  void after_step(std::int64_t k, double t) const {
     if (controls) controls->set_step(k);
+    if constexpr (has_time<Sys>::value) L.set_time(t);
   }
   void finish_report(RunReport& r, const Point& q, const Covector& p) const {
     r.q_final.assign(q.data(), q.data() + q.size());
@@ -444,6 +450,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       base.constraints = static_cast<int>(pr.written->constraints.size());
     }
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>) base.time_dependent = L.time_dependent();
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 

@@ -138,7 +138,7 @@ void validate(const Problem& pr, const Method& me) {
                         : pr.written->space == WrittenSystem::Space::rotation ? Space::rotation
                                                                               : Space::euclidean;
     if (&sys != &written_system_entry(space, pr.written->factors, !pr.written->forces.empty(),
-                                      !pr.written->constraints.empty()))
+                                      !pr.written->constraints.empty(), pr.written->time_dependent()))
       throw InputError(std::string("system.space: the written system lives on ") + to_string(space) +
                        " but the problem names the system entry \"" + name + "\" on " + to_string(sys.space));
   }

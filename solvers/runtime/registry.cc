@@ -357,7 +357,7 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
                    did_you_mean(name, names));
 }
 
-const SystemEntry& written_system_entry(Space space, int factors, bool forced, bool constrained) {
+const SystemEntry& written_system_entry(Space space, int factors, bool forced, bool constrained, bool time_dependent) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
   // With forces: the lagrangian form (the theta-family maps composed or not, Galerkin) and
@@ -400,7 +400,29 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
        false},
       factories::written,
       "the coordinates"};
+  // A Lagrangian L(t, q, v) (forces or not): the steps that evaluate L at their nodes'
+  // times (the theta step, composed or not, and Galerkin); with constraints, the
+  // constrained step above, which does too.
+  static const SystemEntry rn_timed = {
+      "lagrangian depending on time",
+      "written in the scene, L(t, q, v)",
+      Space::euclidean,
+      0,
+      {},
+      {{Form::lagrangian},
+       true,
+       true,
+       true,
+       false,
+       "a Lagrangian that reads t runs in the lagrangian form (the theta-family maps, their compositions, "
+       "Galerkin); the hamiltonian, SODE and Newmark forms, boundary values, solver = \"tiny\" and written maps "
+       "take none",
+       false,
+       false},
+      factories::written,
+      "the coordinates"};
   if (constrained && space == Space::euclidean) return rn_constrained;
+  if (time_dependent && space == Space::euclidean) return rn_timed;
   if (forced && space == Space::euclidean) return rn_forced;
   // On S^2 and SO(3) a written Lagrangian runs the steps of the built-in systems there;
   // its Hamiltonian form needs the written H (validate checks that it is given).

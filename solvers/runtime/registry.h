@@ -167,7 +167,9 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
 // step is built for.
 // `constrained`: on R^n with constraints (system.constraints, forces or not), "lagrangian
 // with constraints", which runs what the constrained step is built for.
+// `time_dependent`: on R^n a Lagrangian that reads t (WrittenSystem::time_dependent;
+// without constraints), "lagrangian depending on time".
 const SystemEntry& written_system_entry(Space space = Space::euclidean, int factors = 1, bool forced = false,
-                                        bool constrained = false);
+                                        bool constrained = false, bool time_dependent = false);
 
 }  // namespace dvm

@@ -187,6 +187,7 @@ std::string report_json(const RunReport& r) {
         .num("constraints", r.constraints)
         .num("max_constraint_residual", r.max_constraint_residual)
         .num("max_hidden_constraint_residual", r.max_hidden_constraint_residual);
+  if (r.time_dependent) j.boolean("time_dependent", true);
   if (r.forced)
     j.boolean("forced", true)
         .num("work", r.work)
@@ -241,6 +242,8 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
       if (r.constrained)
         std::fprintf(to, "  constraints: %d; relative residual at most %.3e, of the hidden constraint %.3e\n",
                      r.constraints, r.max_constraint_residual, r.max_hidden_constraint_residual);
+      if (r.time_dependent)
+        std::fprintf(to, "  the Lagrangian depends on t: the energy is not conserved (its change above)\n");
       if (r.forced)
         std::fprintf(to, "  forces: work W = %.15g to t = %.6g; energy balance |E - E_0 - W| at most %.3e\n", r.work,
                      r.t_final, r.max_abs_energy_balance);

@@ -125,6 +125,10 @@ struct RunReport {
   // energy's change, not a conservation error.
   bool forced = false;
   double work = 0.0, max_abs_energy_balance = 0.0;
+  // A Lagrangian L(t, q, v) (system.lagrangian reads t): its energy <p, v> - L is not
+  // conserved (it changes by minus the integral of dL/dt); max_abs_energy_error is then
+  // its largest change, not a conservation error.
+  bool time_dependent = false;
   // A system with holonomic constraints (system.constraints): how many, and the largest
   // relative residuals of the constraint and of its hidden constraint at the monitored
   // steps (WrittenConstraints::relative_residuals, mechanics/written_constraints.h).

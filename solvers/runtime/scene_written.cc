@@ -317,6 +317,10 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   parse("lagrangian", WrittenSystem::Kind::lagrangian, w->lagrangian, true);
   parse("energy", WrittenSystem::Kind::energy, w->energy, false);
   parse("hamiltonian", WrittenSystem::Kind::hamiltonian, w->hamiltonian, false);
+  if (w->time_dependent() && !w->hamiltonian.empty())
+    throw InputError(key_where(path, *sys.get("hamiltonian"), "system.hamiltonian") +
+                     ": the Lagrangian depends on t (system.lagrangian reads it), so a Hamiltonian H(q, p) is not its "
+                     "Legendre transform; a Lagrangian L(t, q, v) runs in the lagrangian form, without one");
   // [system] invariants = { name = "expression in q, v and p", ... }: monitored and
   // reported like the energy (Lagrangians written on R^n)
   if (const toml::node* inv = sys.get("invariants")) {
@@ -486,7 +490,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   const toml::node* L = sys.get("lagrangian");
   pr.written_where = key_where(path, *L, "system.lagrangian");
   if (const toml::node* H = sys.get("hamiltonian")) pr.hamiltonian_where = key_where(path, *H, "system.hamiltonian");
-  pr.system = &written_system_entry(space, w->factors, !w->forces.empty(), !w->constraints.empty());
+  pr.system = &written_system_entry(space, w->factors, !w->forces.empty(), !w->constraints.empty(), w->time_dependent());
   pr.dim = w->dim();
   pr.written = std::move(w);
 }

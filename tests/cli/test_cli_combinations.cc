@@ -1,5 +1,5 @@
 // Every combination the registries can name, run as `dvm run` runs a scene: for each system of
-// `dvm systems` (and the written ones on R^n, with and without forces or constraints, S^2 and SO(3)), each map of its space
+// `dvm systems` (and the written ones on R^n, with and without forces or constraints or t, S^2 and SO(3)), each map of its space
 // (and none), each form, compositions of each kind, each Galerkin method, and boundary
 // values, a run of three steps must either
 //   - exit 0 with the method it asked for (the JSON's map, form, composition, method and
@@ -85,6 +85,9 @@ const std::map<std::string, std::string>& heads() {
       {"lagrangian with constraints",
        "[system]\ncoordinates = [\"x\", \"y\"]\nlagrangian = \"(x_dot^2 + y_dot^2)/2 - y\"\n"
        "constraints = [\"x^2 + y^2 - 1\"]\n[initial]\nq = [0.6, -0.8]\nv = [0.4, 0.3]\n"},
+      {"lagrangian depending on time",
+       "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"exp(0.2*t)*(a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + "
+       "2*cos(a) + cos(b)) + 0.3*sin(3*t)*a\"\n[initial]\nq = [0.5, 0.3]\nv = [0.3, -0.2]\n"},
       {"lagrangian on S^2",
        "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
        "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
@@ -160,6 +163,11 @@ std::vector<SystemCaps> registry_systems() {
   k.forms = {"lagrangian"};
   k.galerkin = false;
   out.push_back(k);
+  // written on R^n in t: the lagrangian form (the theta step, its compositions, Galerkin)
+  SystemCaps td = w;
+  td.name = "lagrangian depending on time";
+  td.forms = {"lagrangian"};
+  out.push_back(td);
   // written on S^2 and SO(3): the capabilities of the spherical pendulum and the top
   for (const char* space : {"S^2", "SO(3)"}) {
     SystemCaps c = w;
@@ -554,9 +562,10 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
 // hamiltonian form, with an Euler map; every other case is refused naming a key.
 BOOST_AUTO_TEST_CASE(every_splitting_runs_or_is_refused) {
   // (with forces: kicks are the gradient of a potential, which a force is not)
-  // (with constraints: the drifts leave them)
+  // (with constraints: the drifts leave them; in t: no structure is read off the text)
   const std::set<std::string> not_separable = {"double-pendulum", "charged-particle", "lagrangian",
-                                               "lagrangian with forces", "lagrangian with constraints"};
+                                               "lagrangian with forces", "lagrangian with constraints",
+                                               "lagrangian depending on time"};
   for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
     const Reference ref = reference_of(head, sys.space);

@@ -2,8 +2,9 @@
 // the Cartesian pendulum and double pendulum against their angle twins, orders measured
 // by `dvm converge`, a constraint with forces, the projection of an initial velocity,
 // the constrained steps' Jacobians; every bad input and every combination the
-// constrained step does not take refused with exit 2, naming the keys, nothing written.
-// The long runs (10^6 steps) are in test_cli_constraints_long.cc.
+// constrained step does not take refused with exit 2, naming the keys, nothing written;
+// Lagrangians that depend on time (Kapitza's pendulum, a damping Lagrangian against a
+// damping force). The long runs (10^6 steps) are in test_cli_constraints_long.cc.
 #define BOOST_TEST_MODULE cli_constraints
 #include <boost/test/unit_test.hpp>
 
@@ -11,6 +12,8 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -118,6 +121,126 @@ BOOST_AUTO_TEST_CASE(an_initial_velocity_off_the_constraint_is_refused_or_projec
   BOOST_TEST(std::fabs(vec(p, "q_final")[0] - vec(t, "q_final")[0]) <= 1e-14);
 }
 
+// A Lagrangian L(t, q, v) (t read in system.lagrangian). Kapitza's pendulum
+// (kapitza_pendulum.toml): started 0.3 from upright on a pivot shaken fast enough, it
+// stays within 0.3 of upright to t = 20; unshaken (a = 0) it falls. Its twin in
+// Cartesian coordinates on the moving pivot (a constraint in t, L free of t) gives the
+// same trajectory to 1e-10 at t = 10 with kahan-li8. The report says the energy is not
+// conserved.
+BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_keeps_kapitzas_pendulum_upright) {
+  auto digits17 = [](double x) {
+    std::ostringstream s;
+    s.precision(17);
+    s << x;
+    return s.str();
+  };
+  const std::string csv = temp_dir() + "/kapitza.csv";
+  // the largest |th - pi| of the rows of a run to t = 20
+  auto swing = [&](const std::vector<std::string>& sets) {
+    std::vector<std::string> all = {"integrator.t_end=20.0"};
+    all.insert(all.end(), sets.begin(), sets.end());
+    const Output o = dvm(with_sets({"run", scene("kapitza_pendulum.toml"), "--csv", csv, "--quiet"}, all));
+    BOOST_TEST_REQUIRE(o.status == 0, o.err);
+    std::ifstream in(csv);
+    std::string line;
+    std::getline(in, line);
+    BOOST_TEST_REQUIRE(line.rfind("t,th,p_th,energy", 0) == 0, line);
+    double worst = 0.0;
+    int rows = 0;
+    while (std::getline(in, line)) {
+      const double th = std::stod(line.substr(line.find(',') + 1));
+      worst = std::fmax(worst, std::fabs(th - M_PI));
+      ++rows;
+    }
+    BOOST_TEST(rows == 2001);  // t = 0, 0.01, ..., 20
+    return worst;
+  };
+  const double shaken = swing({}), still = swing({"system.params.a=0.0"});
+  BOOST_TEST_MESSAGE("Kapitza pendulum: largest |th - pi| to t = 20 shaken " << shaken << ", still " << still);
+  BOOST_TEST(shaken <= 0.3 + 1e-9);
+  BOOST_TEST(still > 2.0);
+
+  const std::vector<std::string> order8 = {"integrator.composition=\"kahan-li8\"", "integrator.t_end=10.0"};
+  const Json a = run("kapitza_pendulum.toml", order8);
+  BOOST_TEST(a.at("time_dependent").get<bool>());
+  BOOST_TEST(a.at("max_abs_energy_error").get<double>() > 0.1);  // not conserved
+  const double th0 = M_PI - 0.3, A = 0.05, w = 40.0;
+  auto cartesian = order8;
+  for (const std::string& k :
+       {std::string("system.params={ m = 1.0, l = 1.0, g = 1.0, a = 0.05, w = 40.0 }"),
+        std::string("system.constraints=[\"x^2 + (y - a*cos(w*t))^2 - l^2\"]"),
+        "initial.q=[" + digits17(std::sin(th0)) + ", " + digits17(A - std::cos(th0)) + "]",
+        std::string("integrator.step=0.001")})
+    cartesian.push_back(k);
+  const Json c = run("pendulum_cartesian.toml", cartesian);
+  BOOST_TEST(!c.contains("time_dependent"));  // (its L does not read t; its constraint does)
+  const double th = vec(a, "q_final")[0], T = 10.0;
+  const auto xy = vec(c, "q_final");
+  BOOST_TEST_MESSAGE("Kapitza pendulum, Cartesian against angle at t = 10: " << std::fabs(xy[0] - std::sin(th)) << " "
+                                                                            << std::fabs(xy[1] - (A * std::cos(w * T) - std::cos(th))));
+  BOOST_TEST(std::fabs(xy[0] - std::sin(th)) <= 1e-10);
+  BOOST_TEST(std::fabs(xy[1] - (A * std::cos(w * T) - std::cos(th))) <= 1e-10);
+
+  const Output text = dvm({"run", scene("kapitza_pendulum.toml"), "--no-output", "--set", "integrator.t_end=0.1"});
+  BOOST_TEST(text.status == 0);
+  BOOST_TEST(text.out.find("the Lagrangian depends on t: the energy is not conserved") != std::string::npos, text.out);
+}
+
+// The damped oscillator as the Caldirola-Kanai Lagrangian exp(c t / m) (m x_dot^2 - k
+// x^2) / 2, its L in t, against the same oscillator damped by a force
+// (damped_oscillator.toml): at t = 10, composed to order 8, the same x to 1e-10 (the
+// momenta differ by the factor exp(c t / m)); `dvm converge` measures 2 for the
+// midpoint, 4 for the triple jump and for Galerkin with 2 stages, 6 with 3. And the
+// Cartesian pendulum with exp(c t) L, constrained to its circle, is the angle pendulum
+// damped by the force -c th_dot (the constrained step, and its projection, at the
+// times of L).
+BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_damps_as_a_force_does) {
+  const std::string ck = write_scene("caldirola_kanai.toml",
+                                     "[system]\ncoordinates = [\"x\"]\nparams = { m = 1.0, k = 1.0, c = 0.1 }\n"
+                                     "lagrangian = \"exp(c*t/m)*(0.5*m*x_dot^2 - 0.5*k*x^2)\"\n"
+                                     "[initial]\nq = [1.0]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\n"
+                                     "step = 0.05\nt_end = 10.0\n");
+  const std::vector<std::string> order8 = {"integrator.composition=\"kahan-li8\"", "integrator.t_end=10.0"};
+  const Output o = dvm(with_sets({"run", ck, "--json"}, order8));
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  const Json k = parse_json(o.out), f = run("damped_oscillator.toml", order8);
+  BOOST_TEST(std::fabs(vec(k, "q_final")[0] - vec(f, "q_final")[0]) <= 1e-10);
+  BOOST_TEST(std::fabs(vec(k, "p_final")[0] - std::exp(0.1 * 10.0) * vec(f, "p_final")[0]) <= 1e-10);
+  struct Case {
+    std::vector<std::string> sets;
+    std::string steps;
+    double order;
+  };
+  const std::vector<Case> cases = {
+      {{"integrator.composition=\"none\""}, "40,80,160,320", 2.0},
+      {{"integrator.composition=\"triple-jump:4\""}, "20,40,80,160", 4.0},
+      {{"integrator.method=\"galerkin\"", "integrator.stages=2"}, "20,40,80,160", 4.0},
+      {{"integrator.method=\"galerkin\"", "integrator.stages=3"}, "25,50,100,200", 6.0},
+  };
+  for (const Case& c : cases) {
+    BOOST_TEST_CONTEXT(c.sets.back()) {
+      const Output r = dvm(with_sets({"converge", ck, "--steps-list", c.steps, "--json"}, c.sets));
+      BOOST_TEST_REQUIRE(r.status == 0, r.err);
+      const double order = parse_json(r.out).at("fitted_order").get<double>();
+      BOOST_TEST_MESSAGE("Caldirola-Kanai " << c.sets.back() << ": " << order);
+      BOOST_TEST(std::fabs(order - c.order) <= 0.05 * c.order, r.out);
+    }
+  }
+  // the damped pendulum from th = 2 at rest: exp(c t) ((x_dot^2 + y_dot^2) / 2 - y) on the
+  // unit circle, and th_dot^2 / 2 + cos th with the force -c th_dot
+  const Json x = run("pendulum_cartesian.toml", {"system.params={ c = 0.3 }",
+                                                 "system.lagrangian=\"exp(c*t)*((x_dot^2 + y_dot^2)/2 - y)\"",
+                                                 "system.constraints=[\"x^2 + y^2 - 1\"]", order8[0], order8[1]});
+  const Json t = run("damped_oscillator.toml", {"system.coordinates=[\"th\"]", "system.params={ c = 0.3 }",
+                                                "system.lagrangian=\"th_dot^2/2 + cos(th)\"",
+                                                "system.forces={ th = \"-c*th_dot\" }", "initial.q=[2.0]", order8[0],
+                                                order8[1]});
+  const double th = vec(t, "q_final")[0];
+  BOOST_TEST(std::fabs(vec(x, "q_final")[0] - std::sin(th)) <= 1e-10);
+  BOOST_TEST(std::fabs(vec(x, "q_final")[1] + std::cos(th)) <= 1e-10);
+  BOOST_TEST(x.at("max_constraint_residual").get<double>() <= 1e-14);
+}
+
 // Bad input, and the combinations the constrained step does not take: exit 2, the keys
 // named, nothing on stdout, no file written.
 BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_keys) {
@@ -159,6 +282,18 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(P, {"integrator.map=explicit-euler", "integrator.composition=blanes-moan4"},
           {"integrator.composition", "system.constraints"});
   refused(P, {"integrator.solver=tiny"}, {"integrator.solver"});
+  // a Lagrangian in t: the lagrangian form only, no written H, t in no energy, invariant
+  // or Lagrangian on S^2
+  const std::string K = "kapitza_pendulum.toml";
+  refused(K, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian depending on time"});
+  refused(K, {"integrator.form=sode1"}, {"integrator.form", "lagrangian depending on time"});
+  refused(K, {"integrator.solver=tiny"}, {"integrator.solver"});
+  refused(K, {"problem.kind=\"boundary-value\"", "problem.q_final=[3.0]", "problem.steps=10"}, {"problem.kind"});
+  refused(K, {"system.hamiltonian=\"p_th^2/2\""}, {"system.hamiltonian", "depends on t", "not its Legendre transform"});
+  refused(K, {"system.energy=\"t*th\""}, {"system.energy", "unknown name 't'", "an energy"});
+  refused(K, {"system.invariants={ I = \"t\" }"}, {"system.invariants.I", "unknown name 't'"});
+  refused("spherical_pendulum_written.toml", {"system.lagrangian=\"t*(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\""},
+          {"system.lagrangian", "unknown name 't'", "a Lagrangian on S^2 or SO(3)"});
 }
 
 // dvm run --linearize on a constrained scene: each step's Jacobian A_k of the

@@ -206,7 +206,7 @@ BOOST_AUTO_TEST_CASE(expression_errors_point_at_line_and_column) {
   const std::vector<Case> cases = {
       // line 3: lagrangian = "x_dot^2/2 - k*y^2": 'y' at column 29
       {"coordinates = [\"x\"]\nlagrangian = \"x_dot^2/2 - k*y^2\"\nparams = { k = 1.0 }\n",
-       ":3:29: in system.lagrangian: unknown name 'y'; known names: x, x_dot, k, pi"},
+       ":3:29: in system.lagrangian: unknown name 'y'; known names: x, x_dot, t, k, pi"},
       // multi-line string: the error is on line 5, column 9
       {"coordinates = [\"x\"]\nlagrangian = \"\"\"\n  x_dot^2\n  - 2 * * x\"\"\"\n",
        ":5:9: in system.lagrangian: expected a number, name or '(' after '*', got '*'"},
@@ -598,7 +598,7 @@ BOOST_AUTO_TEST_CASE(written_arrays_are_refused_with_the_key_and_the_place) {
   refused({"system.ends={ x = \"fixed\" }"}, "'x' is not an array of coordinates");
   refused({"system.lagrangian=\"q_dot[5]^2\""}, "index 5 of 'q_dot' is outside 1 to 4");
   refused({"system.lagrangian=\"q_dot^2\""}, "'q_dot' is an array of 4 entries");
-  refused({"system.lagrangian=\"q_dot[1]^2 + t\""}, "the time is a variable of the forces (system.forces) only");
+  refused({"system.invariants={ I = \"q[1]*t\" }"}, "an energy, a Hamiltonian, an invariant or a Lagrangian on S^2 or SO(3) does not depend on it");
   refused({"system.params={ n = 4, k = [] }"}, "expected a non-empty list of numbers");
   refused({"initial.q=\"1/(i - 2)\""}, "the expression is not finite at i = 2");
   refused({"initial.q=\"x*i\""}, "in initial.q (an expression in i = 1 ... 4 and the parameters): unknown name 'x'");

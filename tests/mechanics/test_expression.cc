@@ -600,7 +600,7 @@ BOOST_AUTO_TEST_CASE(array_errors_say_where_and_what) {
   fails("sum(i, 1, n, q[i]", 17, "expected ')' to close sum(i, ...)");
   fails("sum(i, 1, n, q[i + 1])", 15, "index 6 of 'q'");  // reached at i = 5
   fails("sum + 1", 4, "expected '(' after 'sum'");
-  fails("x*t", 2, "the time is a variable of the forces (system.forces) only");
+  fails("x*t", 2, "an energy, a Hamiltonian, an invariant or a Lagrangian on S^2 or SO(3) does not depend on it");
   fails("sum(i, 1, 5000000, q[1])", std::string::npos, "more than 1048576 operations");
   // a name declared twice as array and scalar, or a reserved name
   auto bad_names = [](auto setup, const std::string& says) {

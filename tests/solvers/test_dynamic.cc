@@ -1033,6 +1033,112 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
   same_as_midpoint(run200(Galerkin(L, QuadratureKind::gauss, 1, 0.05, {}, force)));
 }
 
+namespace {
+// A midpoint step S handed t0 - h / 2 for t0: L evaluated at the step's start t0 instead
+// of its node's time t0 + h / 2.
+template <class S>
+struct AtStart {
+  static constexpr int N = Eigen::Dynamic;
+  S step_of;
+  double step_size() const { return step_of.step_size(); }
+  StepSummary step(double t, const VectorXd& q0, const VectorXd& p0, VectorXd& dq, VectorXd& dp) const {
+    return step_of.step(t - 0.5 * step_of.step_size(), q0, p0, dq, dp);
+  }
+};
+}  // namespace
+
+// A Lagrangian that depends on time: the Caldirola-Kanai Lagrangian
+//   L(t, x, v) = exp(c t / m) (m v^2 / 2 - k x^2 / 2)
+// has the Euler-Lagrange equation m x'' + c x' + k x = 0, the damped oscillator, with
+// the momentum p = exp(c t / m) m v. The steps that evaluate L at their nodes' times
+// converge to its exact solution at their orders: the midpoint 2, the theta = 0.3 step
+// with its adjoint 2, the triple jump 4, Galerkin Gauss and Lobatto with s = 2 stages
+// 4. L evaluated at the start of each step (t0 for every node, as a step that ignored
+// the time would) leaves the midpoint first order. The step of a time-dependent L is
+// still symplectic (L_d(t_k; q0, q1) generates it), and its derivative is checked
+// against central differences at t0 = 0.7.
+BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_converges_to_the_damped_oscillator_at_its_orders) {
+  DrivenOscillator osc;
+  osc.A = 0.0;  // the free damped oscillation
+  const auto text = written({"x"}, {{"m", osc.m}, {"k", osc.k}, {"c", osc.c}}, "exp(c*t/m)*(m*x_dot^2/2 - k*x^2/2)");
+  BOOST_TEST(text->time_dependent());
+  const WrittenDynamic L(text);
+  BOOST_TEST(L.time_dependent());
+  BOOST_TEST(!L.separable());  // (no structure is read off a text in t)
+  // the time is read: L and its derivatives at t = 1 are exp(c / m) times those at t = 0
+  {
+    VectorXd q(1), v(1), Lq0(1), Lv0(1), Lq1(1), Lv1(1);
+    q << 0.4;
+    v << -0.3;
+    MatrixXd A(1, 1), B(1, 1), C(1, 1), A1(1, 1), B1(1, 1), C1(1, 1);
+    L.set_time(0.0);
+    const double L0 = L.value(q, v);
+    L.hessian(q, v, Lq0, Lv0, A, B, C);
+    L.set_time(1.0);
+    const double e = std::exp(osc.c / osc.m);
+    BOOST_TEST(L.value(q, v) == e * L0, boost::test_tools::tolerance(1e-14));
+    L.hessian(q, v, Lq1, Lv1, A1, B1, C1);
+    BOOST_TEST(Lq1[0] == e * Lq0[0], boost::test_tools::tolerance(1e-14));
+    BOOST_TEST(Lv1[0] == e * Lv0[0], boost::test_tools::tolerance(1e-14));
+    BOOST_TEST(C1(0, 0) == e * C(0, 0), boost::test_tools::tolerance(1e-14));
+    L.gradient(q, v, Lq1, Lv1);
+    BOOST_TEST(Lv1[0] == e * Lv0[0], boost::test_tools::tolerance(1e-14));
+    L.set_time(0.0);
+  }
+  const double T = 2.0, x0 = 1.0, v0 = 0.3;
+  double xe, pe;
+  osc.exact(T, x0, v0, xe, pe);
+  pe *= std::exp(osc.c * T / osc.m);  // the canonical momentum
+  using Step = DynamicThetaStep<WrittenDynamic>;
+  auto error_of = [&](const auto& S, double h) {
+    VectorXd q(1), p(1), v(1);
+    q << x0;
+    p << osc.m * v0;  // at t = 0
+    v << v0;
+    const RunSummary run = integrate(S, 0.0, q, p, v, std::lround(T / h), [](auto&&...) {});
+    BOOST_TEST(!run.failed, run.failure.message);
+    return std::fmax(std::fabs(q[0] - xe), std::fabs(p[0] - pe));
+  };
+  auto composed = [&](double theta, const char* scheme, double h) {
+    const ThetaMap R(theta);
+    return ComposedStep<Step>(
+        h, substeps(find_composition(scheme), R.symmetric()), [&](double hk) { return Step(L, R, hk); },
+        [&](double hk) { return Step(L, R, hk).adjoint(); });
+  };
+  using Galerkin = DynamicGalerkinStep<WrittenDynamic>;
+  std::vector<double> hs, mid, verlet, jump, gauss, lobatto, start;
+  for (int k = 0; k < 5; ++k) {
+    const double h = 0.1 / std::pow(2.0, k);
+    hs.push_back(h);
+    mid.push_back(error_of(Step(L, ThetaMap::midpoint(), h), h));
+    verlet.push_back(error_of(composed(0.3, "stormer-verlet", h), h));
+    jump.push_back(error_of(composed(0.5, "triple-jump:4", h), h));
+    gauss.push_back(error_of(Galerkin(L, QuadratureKind::gauss, 2, h, {}), h));
+    lobatto.push_back(error_of(Galerkin(L, QuadratureKind::lobatto, 2, h, {}), h));
+    start.push_back(error_of(AtStart<Step>{Step(L, ThetaMap::midpoint(), h)}, h));
+  }
+  const double o_mid = verification::fit_order(hs, mid), o_verlet = verification::fit_order(hs, verlet);
+  const double o_jump = verification::fit_order(hs, jump), o_gauss = verification::fit_order(hs, gauss);
+  const double o_lobatto = verification::fit_order(hs, lobatto), o_start = verification::fit_order(hs, start);
+  BOOST_TEST_MESSAGE("L(t, q, v) orders: midpoint " << o_mid << ", theta 0.3 with its adjoint " << o_verlet
+                                                    << ", triple jump " << o_jump << ", Galerkin Gauss s = 2 " << o_gauss
+                                                    << ", Lobatto s = 2 " << o_lobatto << ", L at the step's start "
+                                                    << o_start);
+  BOOST_TEST(std::fabs(o_mid - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_verlet - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_jump - 4.0) <= 0.2);
+  BOOST_TEST(std::fabs(o_gauss - 4.0) <= 0.2);
+  BOOST_TEST(std::fabs(o_lobatto - 4.0) <= 0.2);
+  BOOST_TEST(std::fabs(o_start - 1.0) <= 0.15);
+  BOOST_TEST(mid.back() <= 1e-4);
+  BOOST_TEST(gauss.back() <= 1e-9);
+  // symplectic, and its derivative the linearisation, at a step that starts at t0 = 0.7
+  VectorXd q1(1), p1(1);
+  q1 << 0.8;
+  p1 << -0.5;
+  check_step_derivative<WrittenDynamic, NoForce>(L, q1, p1, 0.05, nullptr, 0.7);
+}
+
 // One forced step of the oscillator, whose equation is linear in D = q1 - q0, against
 // the equation solved by hand: with x = q0 + theta D, v = D / h and the discrete forces
 // F_d^- = h (1 - theta) F, F_d^+ = h theta F at (t0 + theta h, x, v),
