@@ -2,6 +2,7 @@
 #   make        build the dvm program (build/, g++)
 #   make run    build it and run the default scene (examples/scenes/pendulum.toml)
 #   make test   build the test tree (build-test/, clang++-14) and run the whole test suite
+#               (TEST_BENCH=ON: with the benchmark programs and their output test)
 #   make bench  build and run the benchmark programs
 #   make charts build the benchmark suite, regenerate examples/charts (CSV, PNG, SVG)
 #               and the numbers at the end of examples/charts/README.md, and the
@@ -38,6 +39,10 @@ LAUNCHER := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPIL
 TEST_BUILD ?= build-test
 TEST_CXX   ?= clang++-14
 TEST_FLAGS ?= -O1 -DNDEBUG
+# ON: the test tree builds the benchmark programs too (DVM_BUILD_BENCH), and
+# test_bench_output runs the chart and ratio programs of `make charts` on a tiny size;
+# OFF (the default, and CI) leaves them out, a fifth of the tree's compile time
+TEST_BENCH ?= OFF
 # nlohmann-json3-dev: the end-to-end suites parse the program's JSON with it;
 # libomp-14-dev: clang's OpenMP runtime, for the threads of dvm sweep (g++ brings its own);
 # libopenmpi-dev and openmpi-bin: dvm sweep under mpirun, which test_cli_sweep_mpi runs
@@ -117,7 +122,7 @@ test-deps: deps
 
 test: test-deps
 	cmake -S . -B $(TEST_BUILD) -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=$(TEST_CXX) \
-	  -DCMAKE_CXX_FLAGS_RELEASE="$(TEST_FLAGS)" $(LAUNCHER) -DDVM_BUILD_BENCH=OFF
+	  -DCMAKE_CXX_FLAGS_RELEASE="$(TEST_FLAGS)" $(LAUNCHER) -DDVM_BUILD_BENCH=$(TEST_BENCH)
 	cmake --build $(TEST_BUILD) -j $(JOBS)
 	cd $(TEST_BUILD) && ctest --output-on-failure -j $(JOBS)
 
