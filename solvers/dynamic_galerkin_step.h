@@ -52,12 +52,14 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/LU>
 #include <array>
 #include <cmath>
 #include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 #include "mechanics/dynamic_system.h"
 #include "mechanics/quadrature.h"
@@ -147,6 +149,32 @@ class DynamicGalerkinStep {
     kept_.valid = false;
     guess_.forget();
     guess_measured_ = false;
+  }
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const {
+    if constexpr (kForced) return force_fn_->controls();
+    return 0;
+  }
+
+  // The derivative A = d(q1, p1)/d(q0, p0) (2n x 2n) of the step from (q0, p0) at time t0
+  // whose increment was dq, by the implicit function theorem on the stage equations
+  // R(X; q0, p0) = 0: with J = dR/dX (the Newton Jacobian) and, at the nodes,
+  // G_q = dg_i/dx, G_v = dg_i/dv (g_i = L_q + F_i), L_vq = dp_i/dx,
+  //   dR_j/dq0 = sum_i (h WA_ij G_q + WB_ij L_vq),   dR_j/dp0 = I for j = 0 (else 0),
+  //   dX = -J^{-1} (dR/dq0 dq0 + dR/dp0 dp0),   dq1 = dq0 + dX_s,
+  //   dp1 = dp0 + h sum_i b_i (G_q (dq0 + sum_k A_ik dX_k) + G_v sum_k (B_ik / h) dX_k).
+  // The stage increments X are found again by a copy of the step (one step's solve, the
+  // carried state of this one untouched). Without a force A is symplectic (the method
+  // is variational). Returns false where the solve fails or J is singular. Allocates.
+  bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return linearise(t0, q0, p0, dq, &A, nullptr);
+  }
+  // The derivative B = d(q1, p1)/du (2n x c) in the force's control inputs u (held over
+  // the step): u enters through F_i, dR_j/du = sum_i h WA_ij F_u,i and
+  // dp1 = h sum_i b_i (F_u,i du + G_q sum_k A_ik dX_k + G_v sum_k (B_ik / h) dX_k).
+  template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
+  bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    return linearise(t0, q0, p0, dq, nullptr, &B);
   }
 
   // One step from (q0, p0); dq carries a guess of q1 - q0 on entry (used unless the
@@ -356,6 +384,87 @@ class DynamicGalerkinStep {
     }
     return max_abs(J);
   }
+
+  // derivative() and control_derivative(): A and/or B at the step from (q0, p0).
+  bool linearise(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd* A, Eigen::MatrixXd* B) const {
+    using Mat = Eigen::MatrixXd;
+    const int s = s_, m = quad_.points, n = L_.dim(), K = s * n;
+    if (q0.size() != n || p0.size() != n || dq.size() != n)
+      throw std::invalid_argument("DynamicGalerkinStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates; the system has " + std::to_string(n));
+    DynamicGalerkinStep solve = *this;  // the stage increments X of this step, found again
+    solve.reset();
+    V d = dq, e(n);
+    if (!solve.step(t0, q0, p0, d, e).converged) return false;
+    const V X = solve.X_;
+    const int c = controls();
+    Mat J(K, K), Rq = Mat::Zero(K, n), Rp = Mat::Zero(K, n), Ru = Mat::Zero(K, c);
+    solve.form_jacobian(q0, X, J);
+    Rp.topRows(n).setIdentity();
+    // per node: G_q, G_v, and with a force F_u
+    std::vector<Mat> Gq(static_cast<std::size_t>(m)), Gv(static_cast<std::size_t>(m)), Fu(static_cast<std::size_t>(m));
+    V x(n), v(n), Lq(n), Lv(n), F(n);
+    Mat Lqq(n, n), Lqv(n, n), Lvv(n, n), Fq(n, n), Fv(n, n);
+    for (int i = 0; i < m; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      x = q0;
+      v.setZero();
+      for (int j = 1; j <= s; ++j) {
+        x += t_.A[i][j] * X.segment((j - 1) * n, n);
+        v += (t_.B[i][j] / h_) * X.segment((j - 1) * n, n);
+      }
+      if constexpr (has_time<Sys>::value) solve.L_.set_time(node_time_at(t0, i));
+      solve.L_.hessian(x, v, Lq, Lv, Lqq, Lqv, Lvv);
+      Gq[k] = Lqq;
+      Gv[k] = Lqv;
+      if constexpr (kForced) {
+        solve.force_fn_->jacobian(node_time_at(t0, i), x, v, F, Fq, Fv, c > 0 ? &Fu[k] : nullptr);
+        Gq[k] += Fq;
+        Gv[k] += Fv;
+      }
+      for (int j = 0; j < s; ++j) {
+        Rq.middleRows(j * n, n) += (h_ * t_.WA[i][j]) * Gq[k] + t_.WB[i][j] * Lqv.transpose();
+        if (c > 0) Ru.middleRows(j * n, n) += (h_ * t_.WA[i][j]) * Fu[k];
+      }
+    }
+    const Eigen::FullPivLU<Mat> lu(J);
+    if (!lu.isInvertible()) return false;
+    // dp1 from the stage derivatives dX (K x cols) and the direct terms
+    auto momentum = [&](const Mat& dX, Mat direct) {
+      for (int i = 0; i < m; ++i) {
+        const auto k = static_cast<std::size_t>(i);
+        Mat dx = Mat::Zero(n, dX.cols()), dv = Mat::Zero(n, dX.cols());
+        for (int j = 1; j <= s; ++j) {
+          dx += t_.A[i][j] * dX.middleRows((j - 1) * n, n);
+          dv += (t_.B[i][j] / h_) * dX.middleRows((j - 1) * n, n);
+        }
+        direct += bh_[i] * (Gq[k] * dx + Gv[k] * dv);
+      }
+      return direct;
+    };
+    if (A) {
+      const Mat dXq = -lu.solve(Rq), dXp = -lu.solve(Rp);
+      Mat direct_q = Mat::Zero(n, n);
+      for (int i = 0; i < m; ++i) direct_q += bh_[i] * Gq[static_cast<std::size_t>(i)];
+      A->resize(2 * n, 2 * n);
+      A->topLeftCorner(n, n) = Mat::Identity(n, n) + dXq.bottomRows(n);
+      A->topRightCorner(n, n) = dXp.bottomRows(n);
+      A->bottomLeftCorner(n, n) = momentum(dXq, direct_q);
+      A->bottomRightCorner(n, n) = momentum(dXp, Mat::Identity(n, n));
+      if (!A->allFinite()) return false;
+    }
+    if (B) {
+      const Mat dXu = -lu.solve(Ru);
+      Mat direct_u = Mat::Zero(n, c);
+      for (int i = 0; i < m && c > 0; ++i) direct_u += bh_[i] * Fu[static_cast<std::size_t>(i)];
+      B->resize(2 * n, c);
+      B->topRows(n) = dXu.bottomRows(n);
+      B->bottomRows(n) = momentum(dXu, direct_u);
+      if (!B->allFinite()) return false;
+    }
+    return true;
+  }
+  double node_time_at(double t0, int i) const { return t0 + static_cast<double>(quad_.c[static_cast<std::size_t>(i)]) * h_; }
 
   Sys L_;
   Quadrature quad_;

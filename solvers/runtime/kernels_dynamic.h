@@ -540,7 +540,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       }
     }
   }
-  if (collocation_applies(me)) {
+  if (collocation_applies(me) && !me.linearize) {  // (--linearize: the Newton step, which gives its derivative)
     // any size: the Newton iteration a step may be handed to is dense (at most the limit)
     if constexpr (is_separable_v<Sys>)
       return collocation_run(view, SeparableGaussStep<Sys>(L, me.stages, h, opt, q, kMaxDenseDynamicDim), q, p, v0,

@@ -315,18 +315,17 @@ void validate(const Problem& pr, const Method& me) {
     throw InputError("integrator.tolerance: got " + fmt(me.tolerance) +
                      ", expected a number in (0, 1) (relative residual tolerance)");
 
-  // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative)
+  // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative,
+  // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
-                             "theta-family maps (constrained or not) for Lagrangians written on R^n";
+                             "theta-family maps (constrained or not) and by Galerkin, for Lagrangians written on R^n";
     if (!pr.written || sys.space != Space::euclidean)
       throw InputError(what + " (system.lagrangian), not " +
                        (pr.written ? std::string("on ") + to_string(sys.space) : "the built-in system " + name));
     if (pr.boundary_value) throw InputError(what + "; problem.kind = \"boundary-value\" takes no steps");
-    if (me.form != Form::lagrangian || me.galerkin)
-      throw InputError(what + ", not " +
-                       (me.galerkin ? std::string("integrator.method = \"galerkin\"")
-                                    : "integrator.form = \"" + std::string(to_string(me.form)) + "\""));
+    if (me.form != Form::lagrangian)
+      throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"");
     if (me.composition != "none" && me.scheme().kind == CompositionKind::rkn_splitting)
       throw InputError("integrator.composition: --linearize differentiates theta steps and their compositions; a "
                        "splitting into kicks and drifts (\"" + me.composition + "\") gives no derivative");

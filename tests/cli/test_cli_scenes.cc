@@ -907,8 +907,9 @@ NpyRows read_npy(const std::string& path) {
 // dvm run --linearize: the Jacobian of every step in a .npy file, row k = (t_k, A_k row
 // by row). A_0 against central differences of one-step runs of dvm itself (relative
 // 1e-7), for the written pendulum (symplectic: det A = 1 at every step) and the damped
-// oscillator (a force: det A < 1); the double pendulum's A_k symplectic, A^T J A = J; the
-// steps that give no derivative refused with exit 2 and nothing written.
+// oscillator (a force: det A < 1); the double pendulum's A_k symplectic, A^T J A = J;
+// compositions and Galerkin the same; the steps that give no derivative refused with
+// exit 2 and nothing written.
 BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
   const std::string dir = temp_dir();
   // (q1, p1) after one step of h from the scene's start moved by (dq, dp); `momentum`:
@@ -1026,7 +1027,27 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
     for (long long k = 0; k < a.rows; ++k)
       BOOST_TEST(std::fabs(a.at(k, 1) * a.at(k, 4) - a.at(k, 2) * a.at(k, 3) - 1.0) <= 1e-12);
   }
-  refused("pendulum_written.toml", {"--set", "integrator.method=galerkin"}, "integrator.method");
+  // Galerkin (DynamicGalerkinStep::derivative), Gauss on a separable text (the Newton
+  // step, not collocation, which gives none) and Lobatto: symplectic, det A_k = 1; with
+  // the damping force, det A_k < 1
+  for (const std::string& quadrature : {"gauss", "lobatto"}) {
+    const std::string path = dir + "/galerkin.npy";
+    const Output o = dvm({"run", scene("pendulum_written.toml"), "--no-output", "--quiet", "--linearize", path, "--set",
+                          "integrator.method=\"galerkin\"", "--set", "integrator.quadrature=\"" + quadrature + "\"",
+                          "--set", "integrator.stages=3", "--set", "integrator.t_end=0.1"});
+    BOOST_TEST_REQUIRE(o.status == 0, o.err);
+    const NpyRows a = read_npy(path);
+    BOOST_TEST(a.rows == 10);
+    for (long long k = 0; k < a.rows; ++k)
+      BOOST_TEST(std::fabs(a.at(k, 1) * a.at(k, 4) - a.at(k, 2) * a.at(k, 3) - 1.0) <= 1e-12, quadrature);
+    const Output f = dvm({"run", scene("damped_oscillator.toml"), "--no-output", "--quiet", "--linearize", path,
+                          "--set", "integrator.method=\"galerkin\"", "--set",
+                          "integrator.quadrature=\"" + quadrature + "\"", "--set", "integrator.t_end=0.1"});
+    BOOST_TEST_REQUIRE(f.status == 0, f.err);
+    const NpyRows b = read_npy(path);
+    for (long long k = 0; k < b.rows; ++k)
+      BOOST_TEST(b.at(k, 1) * b.at(k, 4) - b.at(k, 2) * b.at(k, 3) < 1.0 - 1e-4, quadrature);
+  }
   refused("pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
   refused("spherical_pendulum_written.toml", {}, "on S^2");
   refused("pendulum_written.toml", {"--npy", dir + "/refused.npy"}, "the same file as the run's rows");

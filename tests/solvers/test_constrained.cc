@@ -674,3 +674,105 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_a_composition_is_the_product_of_its_subst
     BOOST_TEST((A - central(S, q, p)).lpNorm<Eigen::Infinity>() <= 1e-7 * A.lpNorm<Eigen::Infinity>());
   }
 }
+
+// The Galerkin step's derivative (DynamicGalerkinStep::derivative, control_derivative:
+// the implicit function theorem on the stage equations, the stages solved again)
+// against central differences of the step, relative 1e-7: Gauss s = 2 and Lobatto
+// s = 3 on a double pendulum in its angles, symplectic there (A^T J A = J to 1e-12);
+// Gauss s = 2 on a damped cart-pole pushed by a control (A and B; A^T J A != J); Gauss
+// s = 3 on a Lagrangian in t (exp(c t) L) at t0 = 0.7, symplectic.
+BOOST_AUTO_TEST_CASE(the_galerkin_derivative_is_the_linearisation_of_the_stages) {
+  const double t0 = 0.7;
+  auto fresh_step = [&](const auto& S, const VectorXd& q, const VectorXd& p, VectorXd& d, VectorXd& e) {
+    S.reset();  // (no continuation from the previous call's polynomial)
+    d = VectorXd::Zero(q.size());
+    e = VectorXd::Zero(q.size());
+    const StepSummary r = S.step(t0, q, p, d, e);
+    BOOST_REQUIRE_MESSAGE(r.converged, r.message);
+  };
+  auto central = [&](const auto& S, const VectorXd& q0, const VectorXd& p0) {
+    const Eigen::Index n = q0.size();
+    Eigen::MatrixXd F(2 * n, 2 * n);
+    const double eps = 1e-6;
+    for (Eigen::Index j = 0; j < 2 * n; ++j) {
+      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, da, ea, db, eb;
+      (j < n ? qa[j] : pa[j - n]) += eps;
+      (j < n ? qb[j] : pb[j - n]) -= eps;
+      fresh_step(S, qa, pa, da, ea);
+      fresh_step(S, qb, pb, db, eb);
+      F.col(j) << (da - db + qa - qb) / (2 * eps), (ea - eb + pa - pb) / (2 * eps);
+    }
+    return F;
+  };
+  auto J_of = [](Eigen::Index n) {
+    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+    J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
+    J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
+    return J;
+  };
+  // A at (q, p) against central differences; returns A
+  auto check_A = [&](const auto& S, const VectorXd& q, const VectorXd& p) {
+    VectorXd dq, dp;
+    fresh_step(S, q, p, dq, dp);
+    Eigen::MatrixXd A;
+    BOOST_REQUIRE(S.derivative(t0, q, p, dq, A));
+    const Eigen::MatrixXd C = central(S, q, p);
+    const double err = (A - C).lpNorm<Eigen::Infinity>() / A.lpNorm<Eigen::Infinity>();
+    BOOST_TEST_MESSAGE("Galerkin s = " << S.stages() << ": A against central differences " << err);
+    BOOST_TEST(err <= 1e-7);
+    BOOST_TEST((A - Eigen::MatrixXd::Identity(A.rows(), A.cols())).lpNorm<Eigen::Infinity>() > 1e-3);
+    return A;
+  };
+  VectorXd q(2), p(2);
+  q << 0.5, -0.3;
+  p << 0.2, 0.4;
+  {
+    const auto dp = system_of({"a", "b"}, "a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*g*cos(a) + g*cos(b)");
+    for (const auto& [kind, s] : {std::pair{QuadratureKind::gauss, 2}, std::pair{QuadratureKind::lobatto, 3}}) {
+      const DynamicGalerkinStep<WrittenDynamic> S(WrittenDynamic(dp), kind, s, 0.05);
+      const Eigen::MatrixXd A = check_A(S, q, p), J = J_of(2);
+      BOOST_TEST((A.transpose() * J * A - J).lpNorm<Eigen::Infinity>() <= 1e-12 * A.squaredNorm());
+    }
+  }
+  {
+    auto cartpole = system_of({"x", "a"}, "(1 + m)/2*x_dot^2 + m*l*cos(a)*x_dot*a_dot + m*l^2/2*a_dot^2 + m*g*l*cos(a)");
+    cartpole->controls.push_back({"u", {}, {0.3, 1.7}, "test", "test"});
+    cartpole->forces.emplace_back(0, Expression::parse("u - c*x_dot", cartpole->symbols(WrittenSystem::Kind::force)));
+    auto make = [&](const std::vector<WrittenSystem::Control>& controls) {
+      auto signal = std::make_shared<ControlSignal>(controls);
+      signal->set_step(1);
+      return DynamicGalerkinStep<WrittenDynamic, WrittenForce>(WrittenDynamic(cartpole), QuadratureKind::gauss, 2, 0.05,
+                                                               {}, std::make_shared<WrittenForce>(cartpole, signal));
+    };
+    const auto S = make(cartpole->controls);
+    BOOST_TEST(S.controls() == 1);
+    const Eigen::MatrixXd A = check_A(S, q, p), J = J_of(2);
+    BOOST_TEST((A.transpose() * J * A - J).lpNorm<Eigen::Infinity>() > 1e-6);  // damped
+    VectorXd dq, dpk;
+    fresh_step(S, q, p, dq, dpk);
+    Eigen::MatrixXd B;
+    BOOST_REQUIRE(S.control_derivative(t0, q, p, dq, B));
+    auto moved = [&](double du) {
+      auto c = cartpole->controls;
+      c[0].table[1] += du;
+      const auto Su = make(c);
+      VectorXd d, e;
+      fresh_step(Su, q, p, d, e);
+      VectorXd z(4);
+      z << q + d, p + e;
+      return z;
+    };
+    const double eps = 1e-6;
+    const VectorXd fd = (moved(eps) - moved(-eps)) / (2 * eps);
+    const double err = (B.col(0) - fd).lpNorm<Eigen::Infinity>() / fd.lpNorm<Eigen::Infinity>();
+    BOOST_TEST_MESSAGE("Galerkin B against central differences in u: " << err);
+    BOOST_TEST(err <= 1e-7);
+    BOOST_TEST(fd.lpNorm<Eigen::Infinity>() > 1e-3);
+  }
+  {
+    const auto timed = system_of({"a", "b"}, "exp(c*t)*(a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*g*cos(a) + g*cos(b))");
+    const DynamicGalerkinStep<WrittenDynamic> S(WrittenDynamic(timed), QuadratureKind::gauss, 3, 0.05);
+    const Eigen::MatrixXd A = check_A(S, q, p), J = J_of(2);
+    BOOST_TEST((A.transpose() * J * A - J).lpNorm<Eigen::Infinity>() <= 1e-12 * A.squaredNorm());
+  }
+}
