@@ -785,10 +785,35 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
                         "--json"});
   BOOST_TEST_REQUIRE(v.status == 0, v.err);
   BOOST_TEST(std::fabs(parse_json(v.out).at("fitted_order").get<double>() - 2.0) <= 0.05, v.out);
-  // a drive in t: the driven Duffing oscillator runs
+  // a drive in t: the driven Duffing oscillator runs, and `dvm converge` (its reference
+  // Galerkin Gauss s = 6 with the force) measures the orders with a nonlinear force in
+  // t: Galerkin Gauss s = 2 4, Lobatto s = 2 4, Gauss s = 3 6, kahan-li8 8
   const Output d = dvm({"run", scene("driven_duffing.toml"), "--json", "--no-output", "--set", "integrator.t_end=20"});
   BOOST_TEST(d.status == 0, d.err);
   BOOST_TEST(parse_json(d.out).at("forced").get<bool>());
+  struct Order {
+    std::vector<std::string> sets;
+    std::string steps;
+    double order;
+  };
+  for (const Order& o : {Order{{"integrator.method=\"galerkin\"", "integrator.stages=2"}, "50,100,200,400", 4.0},
+                         Order{{"integrator.method=\"galerkin\"", "integrator.quadrature=\"lobatto\"",
+                                "integrator.stages=2"},
+                               "50,100,200,400", 4.0},
+                         Order{{"integrator.method=\"galerkin\"", "integrator.stages=3"}, "25,50,100,200", 6.0},
+                         Order{{"integrator.composition=\"kahan-li8\""}, "10,20,40", 8.0}}) {
+    std::vector<std::string> args = {"converge", scene("driven_duffing.toml"), "--t-end", "5", "--steps-list", o.steps,
+                                     "--json"};
+    for (const std::string& k : o.sets) {
+      args.push_back("--set");
+      args.push_back(k);
+    }
+    const Output c = dvm(args);
+    BOOST_TEST_REQUIRE(c.status == 0, c.err);
+    const double fitted = parse_json(c.out).at("fitted_order").get<double>();
+    BOOST_TEST_MESSAGE("driven Duffing " << o.sets.back() << ": order " << fitted);
+    BOOST_TEST(std::fabs(fitted - o.order) <= 0.05 * o.order, c.out);
+  }
 
   auto refused = [&](const std::string& scene_name, std::vector<std::string> sets, std::vector<std::string> says) {
     std::vector<std::string> args = {"run", scene(scene_name), "--no-output"};
