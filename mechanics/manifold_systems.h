@@ -239,7 +239,71 @@ class ManifoldDiscreteLagrangian {
     for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
     return evaluate_relative(a, r).v;
   }
+
+  // Forces (discrete Lagrange-d'Alembert, Marsden and West 2001, Sec. 3.2): a force F
+  // (mechanics/written_manifold.h, ManifoldForce) evaluated at the map's node (x, v) =
+  // R_d^{-1}(q0, q1) with v divided by h, at time t, and held there; the discrete forces
+  // are the derivatives of the virtual work h <F, disp(x, x')> in the chart coordinates
+  // of q0 (F_d^-, force_D1_local) and of q1 (F_d^+, force_D2_local), x' the node of the
+  // moved points. `work` (where given) receives h <F, v>, the work over the step.
+  template <class T, class Rel, class Fo>
+  Vec<T, n> force_D1_local(const P<double>& q0, const P<T>& q1, const Rel& rel, const Fo& force, double t,
+                           T* work = nullptr) const {
+    using D = ceres::Jet<T, n>;
+    const auto F = force_at(q0, rel, force, t, work);
+    Vec<D, n> eta;
+    for (int i = 0; i < n; ++i) eta[i] = seed<T, n>(constant<T>(0.0), i);
+    P<D> b;
+    for (int i = 0; i < q1.size(); ++i) b(i) = D(q1(i));
+    const P<D> a = M::chart(q0, eta);
+    auto r = M::relative(a, b);
+    for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
+    return virtual_work<Fo>(F, R_.inverse_relative(a, r).x).v;
+  }
+  template <class Rel, class Fo>
+  Vec<double, n> force_D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel, const Fo& force,
+                                double t, double* work = nullptr) const {
+    using D = ceres::Jet<double, n>;
+    const auto F = force_at(q0, rel, force, t, work);
+    Vec<D, n> eta;
+    for (int i = 0; i < n; ++i) eta[i] = seed<double, n>(0.0, i);
+    P<D> a;
+    for (int i = 0; i < q0.size(); ++i) a(i) = D(q0(i));
+    auto r = M::relative(a, M::chart(q1, eta));
+    for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
+    return virtual_work<Fo>(F, R_.inverse_relative(a, r).x).v;
+  }
+
  private:
+  // The force at the node of (q0, rel) and the node itself (F frozen: a value of T).
+  template <class T, class Rel, class Fo>
+  auto force_at(const P<double>& q0, const Rel& rel, const Fo& force, double t, T* work) const {
+    P<T> a;
+    for (int i = 0; i < q0.size(); ++i) a(i) = T(q0(i));
+    const ManifoldTangent<M, T> node = R_.inverse_relative(a, rel);
+    typename M::template Tangent<T> u = node.v;
+    for (int i = 0; i < u.size(); ++i) u(i) = node.v(i) * (1.0 / h_);
+    struct Frozen {
+      Vec<T, Fo::size> F;
+      P<T> x;
+    } f{Vec<T, Fo::size>(), node.x};
+    force.value(t, node.x, u, f.F);
+    if (work) {
+      T w = constant<T>(0.0);
+      for (int i = 0; i < Fo::size; ++i) w += f.F[i] * node.v(i);
+      *work = w;
+    }
+    return f;
+  }
+  // h <F, disp(x, y)> in the Jets of y's chart coordinates (Fo::displacement)
+  template <class Fo, class Frozen, class D>
+  D virtual_work(const Frozen& f, const P<D>& y) const {
+    const Vec<D, Fo::size> d = Fo::template displacement<D>(f.x, y);
+    D W = constant<D>(0.0);
+    for (int i = 0; i < Fo::size; ++i) W += D(f.F[i]) * d[i];
+    return W * h_;
+  }
+
   System L_;
   Map R_;
   double h_;

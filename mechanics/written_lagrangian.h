@@ -119,8 +119,9 @@ struct WrittenSystem {
         for (int i = 0; i < 3; ++i) s.variables.push_back({rotation_entry(i, j), 0, 3 * j + i});
       for (int i = 0; i < 3; ++i) {
         if (kind != Kind::hamiltonian) s.variables.push_back({"w" + std::to_string(i + 1), 1, i});
-        if (kind != Kind::lagrangian) s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
+        if (kind != Kind::lagrangian && kind != Kind::force) s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
       }
+      if (kind == Kind::force) s.variables.push_back({"t", 0, 9});  // (a body torque: after R's entries)
       s.constants = params;
       s.definitions = definitions;
       return s;

@@ -210,4 +210,69 @@ WrittenManifoldHamiltonian<M> hamiltonian_of(const WrittenManifoldLagrangian<M>&
   return {L.system};
 }
 
+// A force written on S^2 or SO(3) ([system] forces; Kind::force): on S^2 a force in the
+// embedding, one component per coordinate (x, y, z), whose part normal to the sphere does
+// no virtual work; on SO(3) a body torque, one component per body axis (keyed w1, w2,
+// w3). Each component reads the point, the velocity and the time t (block 0, after the
+// point's entries), in any scalar type (the steps differentiate it in Jets).
+//
+// It enters the step by the discrete Lagrange-d'Alembert principle (ManifoldStep,
+// solvers/manifold_step.h) through the virtual work h <F, disp(x, y)> at the map's node
+// x: disp(x, y) = y on S^2, vee(skew(x^T y)) on SO(3), whose derivative in y at y = x
+// is the virtual displacement (delta x itself; the body rotation vee(x^T delta x)).
+template <class M>
+class ManifoldForce {
+ public:
+  static_assert(std::is_same_v<M, Sphere> || std::is_same_v<M, SO3>, "forces are written on S^2 and SO(3)");
+  static constexpr int size = 3;  // components: the embedding's on S^2, the body axes on SO(3)
+  template <class T>
+  using P = typename M::template Point<T>;
+  template <class T>
+  using V = typename M::template Tangent<T>;
+
+  explicit ManifoldForce(std::shared_ptr<const WrittenSystem> s) : system_(written_manifold_detail::checked<M>(s)) {
+    if (system_->forces.empty()) throw std::invalid_argument("ManifoldForce: the system writes no forces");
+    if (!system_->controls.empty()) throw std::invalid_argument("ManifoldForce: controls enter forces on R^n only");
+  }
+
+  // F(t, x, v) into F.
+  template <class T>
+  void value(double t, const P<T>& x, const V<T>& v, Vec<T, size>& F) const {
+    constexpr int entries = std::is_same_v<M, SO3> ? 9 : 3;
+    std::array<T, entries + 1> a;
+    for (int i = 0; i < entries; ++i) a[static_cast<std::size_t>(i)] = x(i);
+    a[entries] = constant<T>(t);
+    for (int i = 0; i < size; ++i) F[i] = constant<T>(0.0);
+    for (const auto& [i, e] : system_->forces) F[i] = e(a.data(), v.data());
+  }
+
+  // The virtual displacement's functional disp(x, y) (above), x the node as it is (its
+  // derivatives dropped), y the node moved.
+  template <class D, class T>
+  static Vec<D, size> displacement(const P<T>& x, const P<D>& y) {
+    Vec<D, size> d;
+    if constexpr (std::is_same_v<M, SO3>) {
+      Mat<D, 3, 3> W;
+      for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+          D w = constant<D>(0.0);
+          for (int k = 0; k < 3; ++k) w += D(x(k, i)) * y(k, j);
+          W(i, j) = w;
+        }
+      d[0] = 0.5 * (W(2, 1) - W(1, 2));
+      d[1] = 0.5 * (W(0, 2) - W(2, 0));
+      d[2] = 0.5 * (W(1, 0) - W(0, 1));
+    } else {
+      (void)x;
+      for (int i = 0; i < size; ++i) d[i] = y[i];
+    }
+    return d;
+  }
+
+  const WrittenSystem& system() const { return *system_; }
+
+ private:
+  std::shared_ptr<const WrittenSystem> system_;
+};
+
 }  // namespace dvm

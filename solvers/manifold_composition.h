@@ -62,6 +62,7 @@ class ComposedPointStep {
       const StepSummary s = stages_[i].step(t + elapsed * h_, q, p, guess, qn, pn);
       total.iterations += s.iterations;
       total.jacobians += s.jacobians;
+      total.work += s.work;  // (a force's work, summed over the substeps)
       if (!s.converged) {
         total = s;
         total.message = "substep " + std::to_string(i + 1) + " of " + std::to_string(stages_.size()) + ": " + s.message;

@@ -20,10 +20,13 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
+#include <stdexcept>
 
 #include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/manifold_systems.h"
 #include "solvers/integrate.h"
+#include "solvers/newton.h"
 #include "solvers/newton_driver.h"
 
 namespace dvm {
@@ -50,7 +53,13 @@ void leave_chart(const typename M::template Point<double>& q0, const Vec<double,
   }
 }
 
-template <class System, class Map>
+// Force: a force on the manifold (ManifoldForce<M>, mechanics/written_manifold.h) or
+// NoForce; a forced step takes it at run time (null: none), and adds the discrete
+// forces of the Lagrange-d'Alembert principle at the map's node, time t0 + theta h
+// (ManifoldDiscreteLagrangian::force_D1_local, force_D2_local):
+//   p_k + D1 L_d + F_d^- = 0,   p_{k+1} = D2 L_d + F_d^+,
+// and reports the force's work h <F, v> over the step (StepSummary::work).
+template <class System, class Map, class Force = NoForce>
 class ManifoldStep {
  public:
   using M = typename Map::Manifold;
@@ -58,9 +67,12 @@ class ManifoldStep {
   using Point = typename M::template Point<double>;
   using Covector = typename M::template Tangent<double>;
   using DL = ManifoldDiscreteLagrangian<System, Map>;
+  static constexpr bool kForced = is_force_v<Force>;
 
-  ManifoldStep(System L, Map R, double h, StepOptions options = {})
-      : dl_(std::move(L), std::move(R), h), options_(options) {}
+  ManifoldStep(System L, Map R, double h, StepOptions options = {}, std::shared_ptr<const Force> force = nullptr)
+      : dl_(std::move(L), std::move(R), h), options_(options), force_(std::move(force)) {
+    if (kForced && !force_) throw std::invalid_argument("ManifoldStep: a forced step needs its force");
+  }
   const DL& discrete_lagrangian() const { return dl_; }
   double step_size() const { return dl_.step(); }
 
@@ -68,20 +80,29 @@ class ManifoldStep {
     const DL* dl;
     Point q0;
     Vec<double, n> p0;  // momentum in the chart centred at q0
+    const Force* force;
+    double t;  // the node's time
     template <class T>
     bool operator()(const T* xi, T* r) const {
       Vec<T, n> x;
       for (int i = 0; i < n; ++i) x[i] = xi[i];
-      const Vec<T, n> d1 = dl->D1_local(q0, M::chart(q0, x), M::relative_chart(q0, x));
+      const auto q1 = M::chart(q0, x);
+      const auto rel = M::relative_chart(q0, x);
+      const Vec<T, n> d1 = dl->D1_local(q0, q1, rel);
       for (int i = 0; i < n; ++i) r[i] = p0[i] + d1[i];
+      if constexpr (kForced) {
+        const Vec<T, n> f = dl->force_D1_local(q0, q1, rel, *force, t);
+        for (int i = 0; i < n; ++i) r[i] += f[i];
+      }
       return true;
     }
   };
 
   // One step: xi holds the guess on entry and the chart coordinates of q1 on return.
-  StepSummary step(double /*t*/, const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
+  StepSummary step(double t, const Point& q0, const Covector& p0, Vec<double, n>& xi, Point& q1, Covector& p1) const {
     const Vec<double, n> p0l = M::covector_to_local(q0, p0);
-    Residual f{&dl_, q0, p0l};
+    const double t_node = t + dl_.map().theta() * dl_.step();
+    Residual f{&dl_, q0, p0l, force_.get(), t_node};
     const double pscale = max_abs(p0l);
     StepSummary s;
     try {
@@ -94,7 +115,10 @@ class ManifoldStep {
           s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
           return s;
         }
-        p1 = M::covector_from_local(raw, dl_.D2_local(q0, raw, M::relative_chart(q0, xi)));
+        const auto rel = M::relative_chart(q0, xi);
+        Vec<double, n> pi1 = dl_.D2_local(q0, raw, rel);
+        if constexpr (kForced) pi1 += dl_.force_D2_local(q0, raw, rel, *force_, t_node, &s.work);
+        p1 = M::covector_from_local(raw, pi1);
         q1 = M::clean(raw);
         if (!std::isfinite(max_abs(p1))) {
           s.converged = false;
@@ -111,6 +135,7 @@ class ManifoldStep {
  private:
   DL dl_;
   StepOptions options_;
+  std::shared_ptr<const Force> force_;
 };
 
 }  // namespace dvm

@@ -253,6 +253,9 @@ struct ManifoldView {
   using Covector = typename Mf::template Tangent<double>;
   static constexpr int C = Covector::RowsAtCompileTime;
   S L;
+  // With forces (system.forces) the momentum maps of L's symmetries are not conserved:
+  // their columns are written, but they are not reported as invariants.
+  bool forced = false;
 
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
@@ -272,12 +275,15 @@ struct ManifoldView {
     for (double x : momentum_map(L, q, p)) row[k++] = x;
   }
   double energy(const Point& q, const Covector& p) const { return monitored_energy(L, q, p); }
-  int invariant_count() const { return static_cast<int>(momentum_columns(L).size()); }
+  int invariant_count() const { return forced ? 0 : static_cast<int>(momentum_columns(L).size()); }
   void invariants(const Point& q, const Covector& p, double* out) const {
+    if (forced) return;
     int k = 0;
     for (double x : momentum_map(L, q, p)) out[k++] = x;
   }
-  std::vector<InvariantReport> invariant_reports(const double* I0) const { return momentum_reports(L, I0); }
+  std::vector<InvariantReport> invariant_reports(const double* I0) const {
+    return forced ? std::vector<InvariantReport>() : momentum_reports(L, I0);
+  }
   double point_defect(const Point& q) const { return Mf::point_defect(q); }
   void finish_report(RunReport& r, const Point& q, const Covector& p) const {
     r.q_final = stored(q);
@@ -361,7 +367,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   using Mf = typename Map::Manifold;
   using Point = typename View::Point;
   using Covector = typename View::Covector;
-  const View view{shown};
+  const View view{shown, pr.forced()};
   RunReport base = base_report(pr, me, shown.name());
   base.manifold = Mf::name;
   const StepOptions opt = me.step_options();
@@ -381,6 +387,9 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   manifold_initial_state<Shown, Map>(pr, shown, q, p, v0);
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
+  const bool forced = pr.forced();  // (a written Lagrangian on S^2 or SO(3) with system.forces)
+  if (forced && (me.galerkin || me.form != Form::lagrangian))  // (validate refuses it first)
+    throw InputError(pr.forces_where + ": forces on S^2 and SO(3) enter the lagrangian form of the maps");
   if (me.galerkin) {
     if constexpr (Galerkin)
       return stepper_run(view, ManifoldGalerkinStep<S>(L, me.quadrature, me.stages, h, opt), q, p, v0, base,
@@ -407,6 +416,20 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
     }
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
+  // system.forces: the forced step (the discrete Lagrange-d'Alembert principle at the
+  // map's node), composed or not
+  if constexpr (std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>)
+    if (forced) {
+      const auto force = std::make_shared<const ManifoldForce<Mf>>(pr.written);
+      Vec<double, ManifoldForce<Mf>::size> F0;
+      force->value(0.0, q, v0, F0);
+      if (!F0.allFinite())
+        throw InputError(pr.forces_where + ": the force is not finite at the initial state (t = 0)");
+      base.forced = true;
+      return composed(
+          [&](double hk, const Map& Rk) { return ManifoldStep<S, Map, ManifoldForce<Mf>>(L, Rk, hk, opt, force); });
+    }
+  if (forced) throw InputError(pr.forces_where + ": forces are written on R^n, S^2 and SO(3)");
   return composed([&](double hk, const Map& Rk) { return ManifoldStep<S, Map>(L, Rk, hk, opt); });
 }
 

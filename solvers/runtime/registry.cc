@@ -442,6 +442,29 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
                     "on (S^2)^K the written Lagrangian runs the spherical chain's steps: the lagrangian form with every S^2 map "
        "and composition; no hamiltonian form, Galerkin method or boundary values"),
       factories::written_sphere_power, "3 per factor"};
+  // With forces (S^2 and SO(3)): the lagrangian form of the space's maps, composed or
+  // not (ManifoldStep with its force, solvers/manifold_step.h)
+  auto forced_caps = [](const char* note) {
+    SystemCapabilities c;
+    c.forms = {Form::lagrangian};
+    c.galerkin = false;
+    c.boundary_value = false;
+    c.note = note;
+    return c;
+  };
+  static const SystemEntry sphere_forced = {
+      "lagrangian with forces on S^2", "written in the scene in x, x_dot, with a force in the embedding",
+      Space::sphere, 3, {},
+      forced_caps("system.forces on S^2 enter the lagrangian form of the S^2 maps, composed or not; Galerkin, the "
+                  "hamiltonian form and boundary values take none"),
+      factories::written_sphere, ""};
+  static const SystemEntry rotation_forced = {
+      "lagrangian with forces on SO(3)", "written in the scene in R, w, with a body torque", Space::rotation, 3, {},
+      forced_caps("system.forces on SO(3) (a body torque) enter the lagrangian form of the SO(3) maps, composed or "
+                  "not; Galerkin and the hamiltonian form take none"),
+      factories::written_rotation, ""};
+  if (forced && space == Space::sphere && factors == 1) return sphere_forced;
+  if (forced && space == Space::rotation) return rotation_forced;
   switch (space) {
     case Space::euclidean: return rn;
     case Space::sphere: return factors > 1 ? sphere_power : sphere;

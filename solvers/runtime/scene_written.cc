@@ -253,7 +253,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
                        ": expected a table of name = \"expression in t\" or name = { csv = \"file\" }");
     if (w->space != WrittenSystem::Space::euclidean)
       throw InputError(key_where(path, *controls, "system.controls") +
-                       ": controls enter forces, which are written on R^n");
+                       ": controls enter forces on R^n only");
     for (const auto& [name, node] : *controls->as_table()) w->controls.push_back({std::string(name.str()), {}, {}, {}, {}});
   }
   try {
@@ -425,21 +425,27 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     if (!f->is_table())
       throw InputError(key_where(path, *f, key) + ": expected a table of coordinate = \"expression\" (the generalized "
                                                   "force along that coordinate, in t, the coordinates and velocities)");
-    if (w->space != WrittenSystem::Space::euclidean)
-      throw InputError(key_where(path, *f, key) + ": forces are written on R^n; on S^2 and SO(3) a written system "
-                                                  "is conservative");
+    if (w->space == WrittenSystem::Space::sphere && w->factors > 1)
+      throw InputError(key_where(path, *f, key) + ": forces are written on R^n, S^2 and SO(3); on (S^2)^" +
+                       std::to_string(w->factors) + " a written system is conservative");
+    const bool rotation = w->space == WrittenSystem::Space::rotation;
+    // the keys: the coordinates (R^n; S^2: the embedding's x, y, z), on SO(3) the body
+    // axes named by the angular velocity's components
+    const std::vector<std::string> axes = rotation ? std::vector<std::string>{"w1", "w2", "w3"} : w->coordinates;
     for (const auto& [name, node] : *f->as_table()) {
       const std::string k = key + "." + std::string(name.str());
       int index = -1;
-      for (std::size_t i = 0; i < w->coordinates.size(); ++i)
-        if (w->coordinates[i] == name.str()) index = static_cast<int>(i);
+      for (std::size_t i = 0; i < axes.size(); ++i)
+        if (axes[i] == name.str()) index = static_cast<int>(i);
       if (index < 0) {
         std::string known;
-        for (std::size_t i = 0; i < w->coordinates.size() && i < 12; ++i)
-          known += (i ? ", " : "") + w->coordinates[i];
-        if (w->coordinates.size() > 12) known += ", ...";
-        throw InputError(key_where(path, node, k) + ": '" + std::string(name.str()) +
-                         "' is not a coordinate; a force is keyed by the coordinate it acts along (" + known + ")");
+        for (std::size_t i = 0; i < axes.size() && i < 12; ++i) known += (i ? ", " : "") + axes[i];
+        if (axes.size() > 12) known += ", ...";
+        throw InputError(key_where(path, node, k) + ": '" + std::string(name.str()) + "' is not " +
+                         (rotation ? "a body axis; on SO(3) a force is a body torque keyed by the axis it turns "
+                                     "about ("
+                                   : "a coordinate; a force is keyed by the coordinate it acts along (") +
+                         known + ")");
       }
       if (!node.is_string()) throw InputError(key_where(path, node, k) + ": expected a string (an expression)");
       try {

@@ -1,5 +1,6 @@
 // Every combination the registries can name, run as `dvm run` runs a scene: for each system of
-// `dvm systems` (and the written ones on R^n, with and without forces or constraints or t, S^2 and SO(3)), each map of its space
+// `dvm systems` (and the written ones on R^n, with and without forces or constraints or t, S^2 and SO(3), with and
+// without forces), each map of its space
 // (and none), each form, compositions of each kind, each Galerkin method, and boundary
 // values, a run of three steps must either
 //   - exit 0 with the method it asked for (the JSON's map, form, composition, method and
@@ -91,6 +92,14 @@ const std::map<std::string, std::string>& heads() {
       {"lagrangian on S^2",
        "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
        "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
+      {"lagrangian with forces on S^2",
+       "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
+       "forces = { x = \"-0.3*x_dot + 0.5*cos(2*t)\", z = \"-0.2*z_dot\" }\n"
+       "[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
+      {"lagrangian with forces on SO(3)",
+       "[system]\nspace = \"SO(3)\"\nlagrangian = \"(w1^2 + w2^2 + w3^2/2)/2 - R33\"\n"
+       "forces = { w1 = \"-0.3*w1 + 0.5*cos(2*t)\", w3 = \"-0.2*w3*R33\" }\n[initial]\n"
+       "rotation = [0.9689124217106447, 0.24740395925452294, 0.0, 0.0]\nomega = [0.0, 0.3, 5.0]\n"},
       {"lagrangian on (S^2)^2",
        "[system]\nspace = \"(S^2)^2\"\nlagrangian = \"(x1_dot^2 + y1_dot^2 + z1_dot^2) + (x1_dot*x2_dot + y1_dot*y2_dot + "
        "z1_dot*z2_dot) + (x2_dot^2 + y2_dot^2 + z2_dot^2)/2 - 2*z1 - z2\"\n[initial]\n"
@@ -175,6 +184,17 @@ std::vector<SystemCaps> registry_systems() {
     c.name = "lagrangian on " + c.space;
     c.boundary_value = c.space == "S^2";
     c.written_maps = true;  // sphere-written, so3-written
+    out.push_back(c);
+  }
+  // written on S^2 and SO(3) with forces: the lagrangian form of the space's maps,
+  // composed or not (the forced ManifoldStep)
+  for (const char* space : {"S^2", "SO(3)"}) {
+    SystemCaps c = w;
+    c.space = space;
+    c.name = "lagrangian with forces on " + c.space;
+    c.forms = {"lagrangian"};
+    c.galerkin = false;
+    c.written_maps = true;
     out.push_back(c);
   }
   // written on (S^2)^K: the spherical chain's capabilities

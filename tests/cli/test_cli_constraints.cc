@@ -4,7 +4,7 @@
 // the constrained steps' Jacobians; every bad input and every combination the
 // constrained step does not take refused with exit 2, naming the keys, nothing written;
 // Lagrangians that depend on time (Kapitza's pendulum, a damping Lagrangian against a
-// damping force). The long runs (10^6 steps) are in test_cli_constraints_long.cc.
+// damping force); forces on S^2 and SO(3). The long runs (10^6 steps) are in test_cli_constraints_long.cc.
 #define BOOST_TEST_MODULE cli_constraints
 #include <boost/test/unit_test.hpp>
 
@@ -241,6 +241,88 @@ BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_damps_as_a_force_does) {
   BOOST_TEST(x.at("max_constraint_residual").get<double>() <= 1e-14);
 }
 
+// Forces on S^2 and SO(3) (the discrete Lagrange-d'Alembert principle at the map's node,
+// solvers/manifold_step.h). A constant body torque about the symmetry axis
+// (satellite_torque.toml): the body angular momentum and the rotation angle exact to
+// round-off, the work T3 times the angle, the energy balance at round-off. A damped,
+// driven heavy top: `dvm converge` measures 2 for so3-exp and so3-cayley, 4 for the
+// triple jump. A spherical body damped by -c w: w(t) = w(0) exp(-c t / I), the midpoint
+// error of order 2. On S^2 a force in the embedding gives the trajectory and the work of
+// the same force on the pendulum constrained in R^3, composed to order 8 (1e-12); the
+// momentum maps of the symmetries are then not reported as invariants.
+BOOST_AUTO_TEST_CASE(forces_on_the_sphere_and_the_rotation_group) {
+  {
+    const Json r = run("satellite_torque.toml", {});
+    const double T = 10.0, I3 = 1.0, T3 = 0.5, w0 = 1.0, angle = w0 * T + T3 * T * T / (2.0 * I3);
+    BOOST_TEST(r.at("forced").get<bool>());
+    const auto q = vec(r, "q_final"), p = vec(r, "p_final");  // the quaternion [w, x, y, z], pi
+    BOOST_TEST(std::fabs(p[2] - (I3 * w0 + T3 * T)) <= 1e-12);
+    BOOST_TEST(std::fabs(p[0]) + std::fabs(p[1]) <= 1e-14);
+    const double sign = q[0] * std::cos(angle / 2) >= 0.0 ? 1.0 : -1.0;  // (q and -q: one rotation)
+    BOOST_TEST(std::fabs(sign * q[0] - std::cos(angle / 2)) <= 1e-12);
+    BOOST_TEST(std::fabs(sign * q[3] - std::sin(angle / 2)) <= 1e-12);
+    BOOST_TEST(std::fabs(r.at("work").get<double>() - T3 * (angle - 0.0)) <= 1e-11);
+    BOOST_TEST(r.at("max_abs_energy_balance").get<double>() <= 1e-11);
+    BOOST_TEST((!r.contains("invariants") || r.at("invariants").empty()));  // (no J reported as conserved)
+  }
+  const std::string top = "[system]\nspace = \"SO(3)\"\n"
+                          "params = { I1 = 1.0, I2 = 1.0, I3 = 0.5, m = 1.0, g = 1.0, c = 0.2 }\n"
+                          "lagrangian = \"0.5*(I1*w1^2 + I2*w2^2 + I3*w3^2) - m*g*R33\"\n"
+                          "forces = { w1 = \"-c*w1 + 0.3*sin(2*t)\", w2 = \"-c*w2\", w3 = \"-c*w3*R33\" }\n"
+                          "[initial]\nrotation = [0.9689124217106447, 0.24740395925452294, 0.0, 0.0]\n"
+                          "omega = [0.0, 0.3, 5.0]\n[integrator]\nmap = \"so3-exp\"\nstep = 0.01\nt_end = 2.0\n";
+  const std::string top_path = write_scene("damped_top.toml", top);
+  struct Case {
+    std::string set;
+    double order;
+  };
+  for (const Case& c : {Case{"integrator.composition=\"none\"", 2.0}, Case{"integrator.map=\"so3-cayley\"", 2.0},
+                        Case{"integrator.composition=\"triple-jump:4\"", 4.0}}) {
+    const Output o = dvm({"converge", top_path, "--steps-list", "50,100,200,400", "--json", "--set", c.set});
+    BOOST_TEST_REQUIRE(o.status == 0, o.err);
+    const double order = parse_json(o.out).at("fitted_order").get<double>();
+    BOOST_TEST_MESSAGE("damped heavy top, " << c.set << ": order " << order);
+    BOOST_TEST(std::fabs(order - c.order) <= 0.05 * c.order, o.out);
+  }
+  {  // a spherical body, I = 2, damped by -c w: pi(t) = pi(0) exp(-c t / I)
+    const std::string ball = "[system]\nspace = \"SO(3)\"\nparams = { I = 2.0, c = 0.5 }\n"
+                             "lagrangian = \"0.5*I*(w1^2 + w2^2 + w3^2)\"\n"
+                             "forces = { w1 = \"-c*w1\", w2 = \"-c*w2\", w3 = \"-c*w3\" }\n"
+                             "[initial]\nrotation = [1.0, 0.0, 0.0, 0.0]\nomega = [0.3, -0.4, 1.2]\n"
+                             "[integrator]\nmap = \"so3-exp\"\nstep = 0.02\nt_end = 4.0\n";
+    const std::string path = write_scene("damped_ball.toml", ball);
+    auto error = [&](const std::string& h) {
+      const Output o = dvm({"run", path, "--json", "--no-output", "--set", "integrator.step=" + h});
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      const auto p = vec(parse_json(o.out), "p_final");
+      const double e = std::exp(-0.5 * 4.0 / 2.0);
+      return std::fmax(std::fabs(p[0] - 0.6 * e), std::fmax(std::fabs(p[1] + 0.8 * e), std::fabs(p[2] - 2.4 * e)));
+    };
+    const double e1 = error("0.02"), e2 = error("0.01");
+    BOOST_TEST_MESSAGE("damped ball: error at h and h/2 " << e1 << ", " << e2);
+    BOOST_TEST(e1 <= 1e-4);
+    BOOST_TEST(std::fabs(e1 / e2 - 4.0) <= 0.1);
+  }
+  {  // S^2 against R^3 with a constraint, the same force
+    const std::vector<std::string> sets = {
+        "system.forces={ x = \"-0.3*x_dot + 0.5*sin(3*t)\", y = \"-0.3*y_dot\", z = \"-0.3*z_dot*x\" }",
+        "integrator.composition=\"kahan-li8\"", "integrator.t_end=5.0", "integrator.step=0.01"};
+    const Json s = run("spherical_pendulum_written.toml", sets);
+    auto r3 = sets;
+    r3.push_back("system.invariants={}");
+    const Json r = run("spherical_pendulum_r3.toml", r3);
+    const auto a = vec(s, "q_final"), b = vec(r, "q_final");
+    double d = 0.0;
+    for (int i = 0; i < 3; ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+    BOOST_TEST_MESSAGE("forced spherical pendulum, S^2 against R^3 at t = 5: " << d);
+    BOOST_TEST(d <= 1e-12);
+    BOOST_TEST(std::fabs(s.at("work").get<double>() - r.at("work").get<double>()) <= 1e-12);
+    BOOST_TEST(std::fabs(s.at("work").get<double>()) > 1.0);
+    BOOST_TEST(s.at("max_abs_energy_balance").get<double>() <= 1e-12);
+    BOOST_TEST((!s.contains("invariants") || s.at("invariants").empty()));  // J3 is not conserved
+  }
+}
+
 // Bad input, and the combinations the constrained step does not take: exit 2, the keys
 // named, nothing on stdout, no file written.
 BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_keys) {
@@ -294,6 +376,20 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(K, {"system.invariants={ I = \"t\" }"}, {"system.invariants.I", "unknown name 't'"});
   refused("spherical_pendulum_written.toml", {"system.lagrangian=\"t*(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\""},
           {"system.lagrangian", "unknown name 't'", "a Lagrangian on S^2 or SO(3)"});
+  // forces on S^2 and SO(3): the lagrangian form of the maps only, keyed by a coordinate
+  // (S^2) or a body axis (SO(3)); none on (S^2)^K, no controls
+  const std::string T = "satellite_torque.toml", W = "spherical_pendulum_written.toml";
+  refused(T, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with forces on SO(3)"});
+  refused(T, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian with forces on SO(3)"});
+  refused(T, {"system.forces={ x = \"1\" }"}, {"system.forces.x", "not a body axis", "w1, w2, w3"});
+  refused(T, {"system.forces={ w3 = \"pi3\" }"}, {"system.forces.w3", "unknown name 'pi3'"});
+  refused(W, {"system.forces={ x = \"-x_dot\" }", "integrator.method=galerkin"},
+          {"integrator.method", "lagrangian with forces on S^2"});
+  refused(W, {"system.forces={ q = \"1\" }"}, {"system.forces.q", "not a coordinate"});
+  refused(W, {"system.forces={ x = \"u\" }", "system.controls={ u = \"t\" }"},
+          {"system.controls", "forces on R^n only"});
+  refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"1\" }"},
+          {"system.forces", "on (S^2)^2 a written system is conservative"});
 }
 
 // dvm run --linearize on a constrained scene: each step's Jacobian A_k of the

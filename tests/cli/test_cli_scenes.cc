@@ -840,7 +840,10 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
   refused("damped_oscillator.toml", {"system.forces={ x = \"log(x - 1)\" }"},
           {"system.forces", "not finite at the initial state"});
   refused("pendulum.toml", {"system.forces={ theta = \"0\" }"}, {"system.forces", "belongs to a written system"});
-  refused("spherical_pendulum_written.toml", {"system.forces={ x = \"0\" }"}, {"system.forces", "on R^n"});
+  refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"0\" }"},
+          {"system.forces", "on R^n, S^2 and SO(3)"});
+  refused("spherical_pendulum_written.toml", {"system.forces={ x = \"log(x - 1)\" }"},
+          {"system.forces", "not finite at the initial state"});
 }
 
 // [system] controls: the shipped cart-pole pushed by a tabulated control; a table of
