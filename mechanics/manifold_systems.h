@@ -21,6 +21,7 @@
 
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 #include "core/manifold_maps.h"
 #include "mechanics/lagrangian.h"
@@ -217,27 +218,14 @@ class ManifoldDiscreteLagrangian {
   // of the relative position, whose derivatives come from the points.
   template <class T, class Rel>
   Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1, const Rel& rel) const {
-    using D = ceres::Jet<T, n>;
-    Vec<D, n> eta;
-    for (int i = 0; i < n; ++i) eta[i] = seed<T, n>(constant<T>(0.0), i);
-    P<D> b;
-    for (int i = 0; i < q1.size(); ++i) b(i) = D(q1(i));
-    const P<D> a = M::chart(q0, eta);
-    auto r = M::relative(a, b);
-    for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
-    return evaluate_relative(a, r).v;
+    const auto m = moved_first(q0, q1, rel);
+    return evaluate_relative(m.first, m.second).v;
   }
   // D2 L_d(q0, q1) in the chart centred at q1, with the relative position rel.
   template <class Rel>
   Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel) const {
-    using D = ceres::Jet<double, n>;
-    Vec<D, n> eta;
-    for (int i = 0; i < n; ++i) eta[i] = seed<double, n>(0.0, i);
-    P<D> a;
-    for (int i = 0; i < q0.size(); ++i) a(i) = D(q0(i));
-    auto r = M::relative(a, M::chart(q1, eta));
-    for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
-    return evaluate_relative(a, r).v;
+    const auto m = moved_second(q0, q1, rel);
+    return evaluate_relative(m.first, m.second).v;
   }
 
   // Forces (discrete Lagrange-d'Alembert, Marsden and West 2001, Sec. 3.2): a force F
@@ -249,8 +237,24 @@ class ManifoldDiscreteLagrangian {
   template <class T, class Rel, class Fo>
   Vec<T, n> force_D1_local(const P<double>& q0, const P<T>& q1, const Rel& rel, const Fo& force, double t,
                            T* work = nullptr) const {
-    using D = ceres::Jet<T, n>;
     const auto F = force_at(q0, rel, force, t, work);
+    const auto m = moved_first(q0, q1, rel);
+    return virtual_work<Fo>(F, R_.inverse_relative(m.first, m.second).x).v;
+  }
+  template <class Rel, class Fo>
+  Vec<double, n> force_D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel, const Fo& force,
+                                double t, double* work = nullptr) const {
+    const auto F = force_at(q0, rel, force, t, work);
+    const auto m = moved_second(q0, q1, rel);
+    return virtual_work<Fo>(F, R_.inverse_relative(m.first, m.second).x).v;
+  }
+
+ private:
+  // (a, r) for the derivatives in the chart of q0: a = chart(q0, eta) with Jets seeded in
+  // eta, r the relative position of q1 from a with its value replaced by rel.
+  template <class T, class Rel>
+  auto moved_first(const P<double>& q0, const P<T>& q1, const Rel& rel) const {
+    using D = ceres::Jet<T, n>;
     Vec<D, n> eta;
     for (int i = 0; i < n; ++i) eta[i] = seed<T, n>(constant<T>(0.0), i);
     P<D> b;
@@ -258,23 +262,21 @@ class ManifoldDiscreteLagrangian {
     const P<D> a = M::chart(q0, eta);
     auto r = M::relative(a, b);
     for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
-    return virtual_work<Fo>(F, R_.inverse_relative(a, r).x).v;
+    return std::make_pair(a, r);
   }
-  template <class Rel, class Fo>
-  Vec<double, n> force_D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel, const Fo& force,
-                                double t, double* work = nullptr) const {
+  // (a, r) for the derivatives in the chart of q1: a = q0 (constant Jets), r the relative
+  // position of chart(q1, eta) from it with its value replaced by rel.
+  template <class Rel>
+  auto moved_second(const P<double>& q0, const P<double>& q1, const Rel& rel) const {
     using D = ceres::Jet<double, n>;
-    const auto F = force_at(q0, rel, force, t, work);
     Vec<D, n> eta;
     for (int i = 0; i < n; ++i) eta[i] = seed<double, n>(0.0, i);
     P<D> a;
     for (int i = 0; i < q0.size(); ++i) a(i) = D(q0(i));
     auto r = M::relative(a, M::chart(q1, eta));
     for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
-    return virtual_work<Fo>(F, R_.inverse_relative(a, r).x).v;
+    return std::make_pair(a, r);
   }
-
- private:
   // The force at the node of (q0, rel) and the node itself (F frozen: a value of T).
   template <class T, class Rel, class Fo>
   auto force_at(const P<double>& q0, const Rel& rel, const Fo& force, double t, T* work) const {

@@ -567,26 +567,42 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
 // adjoint on a cart-pole with a control (A and B). The unforced composition is
 // symplectic: A^T J A = J to 1e-12 for the theta step's, and on the constraint's
 // cotangent bundle for the constrained one's.
+namespace {
+// Central differences (eps 1e-6) of the map (q0, p0) -> (q1, p1) that `advance(q, p, dq,
+// dp)` takes one step of (dq, dp: the increments).
+template <class Advance>
+Eigen::MatrixXd central_differences(const Advance& advance, const VectorXd& q0, const VectorXd& p0) {
+  const Eigen::Index n = q0.size();
+  Eigen::MatrixXd F(2 * n, 2 * n);
+  const double eps = 1e-6;
+  for (Eigen::Index j = 0; j < 2 * n; ++j) {
+    VectorXd qa = q0, pa = p0, qb = q0, pb = p0, da, ea, db, eb;
+    (j < n ? qa[j] : pa[j - n]) += eps;
+    (j < n ? qb[j] : pb[j - n]) -= eps;
+    advance(qa, pa, da, ea);
+    advance(qb, pb, db, eb);
+    F.col(j) << (da - db + qa - qb) / (2 * eps), (ea - eb + pa - pb) / (2 * eps);
+  }
+  return F;
+}
+// J = [0 I; -I 0] of 2n x 2n
+Eigen::MatrixXd J_of(Eigen::Index n) {
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
+  J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
+  return J;
+}
+}  // namespace
+
 BOOST_AUTO_TEST_CASE(the_derivative_of_a_composition_is_the_product_of_its_substeps) {
   auto central = [](const auto& S, const VectorXd& q0, const VectorXd& p0) {
-    const Eigen::Index n = q0.size();
-    Eigen::MatrixXd F(2 * n, 2 * n);
-    const double eps = 1e-6;
-    for (Eigen::Index j = 0; j < 2 * n; ++j) {
-      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, da = VectorXd::Zero(n), ea(n), db = VectorXd::Zero(n), eb(n);
-      (j < n ? qa[j] : pa[j - n]) += eps;
-      (j < n ? qb[j] : pb[j - n]) -= eps;
-      BOOST_REQUIRE(S.step(0.2, qa, pa, da, ea).converged);
-      BOOST_REQUIRE(S.step(0.2, qb, pb, db, eb).converged);
-      F.col(j) << (da - db + qa - qb) / (2 * eps), (ea - eb + pa - pb) / (2 * eps);
-    }
-    return F;
-  };
-  auto J_of = [](Eigen::Index n) {
-    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
-    J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
-    J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
-    return J;
+    return central_differences(
+        [&](const VectorXd& q, const VectorXd& p, VectorXd& d, VectorXd& e) {
+          d = VectorXd::Zero(q.size());
+          e = VectorXd::Zero(q.size());
+          BOOST_REQUIRE(S.step(0.2, q, p, d, e).converged);
+        },
+        q0, p0);
   };
   {
     const auto pendulum2 = system_of({"x1", "y1", "x2", "y2"},
@@ -691,24 +707,8 @@ BOOST_AUTO_TEST_CASE(the_galerkin_derivative_is_the_linearisation_of_the_stages)
     BOOST_REQUIRE_MESSAGE(r.converged, r.message);
   };
   auto central = [&](const auto& S, const VectorXd& q0, const VectorXd& p0) {
-    const Eigen::Index n = q0.size();
-    Eigen::MatrixXd F(2 * n, 2 * n);
-    const double eps = 1e-6;
-    for (Eigen::Index j = 0; j < 2 * n; ++j) {
-      VectorXd qa = q0, pa = p0, qb = q0, pb = p0, da, ea, db, eb;
-      (j < n ? qa[j] : pa[j - n]) += eps;
-      (j < n ? qb[j] : pb[j - n]) -= eps;
-      fresh_step(S, qa, pa, da, ea);
-      fresh_step(S, qb, pb, db, eb);
-      F.col(j) << (da - db + qa - qb) / (2 * eps), (ea - eb + pa - pb) / (2 * eps);
-    }
-    return F;
-  };
-  auto J_of = [](Eigen::Index n) {
-    Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
-    J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
-    J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
-    return J;
+    return central_differences(
+        [&](const VectorXd& q, const VectorXd& p, VectorXd& d, VectorXd& e) { fresh_step(S, q, p, d, e); }, q0, p0);
   };
   // A at (q, p) against central differences; returns A
   auto check_A = [&](const auto& S, const VectorXd& q, const VectorXd& p) {

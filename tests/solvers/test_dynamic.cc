@@ -912,6 +912,18 @@ struct DrivenOscillator {
     const double v = -a * w * std::sin(w * t) + b * w * std::cos(w * t) + e * (-g * (X * C + Y * S) + wd * (Y * C - X * S));
     p = m * v;
   }
+  // max(|x - xe|, |p - pe|) at T after steps of S of size h from x0 with p = m v0 (v0 the
+  // first guess's velocity)
+  template <class S>
+  double final_error(const S& step, double h, double T, double x0, double v0, double xe, double pe) const {
+    VectorXd q(1), p(1), v(1);
+    q << x0;
+    p << m * v0;
+    v << v0;
+    const RunSummary run = integrate(step, 0.0, q, p, v, std::lround(T / h), [](auto&&...) {});
+    BOOST_TEST(!run.failed, run.failure.message);
+    return std::fmax(std::fabs(q[0] - xe), std::fabs(p[0] - pe));
+  }
 };
 }  // namespace
 
@@ -934,15 +946,7 @@ BOOST_AUTO_TEST_CASE(forced_steps_converge_to_the_driven_damped_oscillator_at_th
   double xe, pe;
   osc.exact(T, x0, v0, xe, pe);
   using Step = DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce>;
-  auto error_of = [&](const auto& S, double h) {
-    VectorXd q(1), p(1), v(1);
-    q << x0;
-    p << osc.m * v0;
-    v << v0;
-    const RunSummary run = integrate(S, 0.0, q, p, v, std::lround(T / h), [](auto&&...) {});
-    BOOST_TEST(!run.failed, run.failure.message);
-    return std::fmax(std::fabs(q[0] - xe), std::fabs(p[0] - pe));
-  };
+  auto error_of = [&](const auto& S, double h) { return osc.final_error(S, h, T, x0, v0, xe, pe); };
   auto composed = [&](double theta, const char* scheme, double h) {
     const ThetaMap R(theta);
     return ComposedStep<Step>(
@@ -1090,15 +1094,7 @@ BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_converges_to_the_damped_oscillator_at_its
   osc.exact(T, x0, v0, xe, pe);
   pe *= std::exp(osc.c * T / osc.m);  // the canonical momentum
   using Step = DynamicThetaStep<WrittenDynamic>;
-  auto error_of = [&](const auto& S, double h) {
-    VectorXd q(1), p(1), v(1);
-    q << x0;
-    p << osc.m * v0;  // at t = 0
-    v << v0;
-    const RunSummary run = integrate(S, 0.0, q, p, v, std::lround(T / h), [](auto&&...) {});
-    BOOST_TEST(!run.failed, run.failure.message);
-    return std::fmax(std::fabs(q[0] - xe), std::fabs(p[0] - pe));
-  };
+  auto error_of = [&](const auto& S, double h) { return osc.final_error(S, h, T, x0, v0, xe, pe); };
   auto composed = [&](double theta, const char* scheme, double h) {
     const ThetaMap R(theta);
     return ComposedStep<Step>(
