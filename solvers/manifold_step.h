@@ -54,7 +54,7 @@ void leave_chart(const typename M::template Point<double>& q0, const Vec<double,
 }
 
 // Force: a force on the manifold (ManifoldForce<M>, mechanics/written_manifold.h) or
-// NoForce; a forced step takes it at run time (null: none), and adds the discrete
+// NoForce; a forced step needs the force object, and adds the discrete
 // forces of the Lagrange-d'Alembert principle at the map's node, time t0 + theta h
 // (ManifoldDiscreteLagrangian::force_D1_local, force_D2_local):
 //   p_k + D1 L_d + F_d^- = 0,   p_{k+1} = D2 L_d + F_d^+,
