@@ -25,6 +25,7 @@ namespace {
 using cli_test::slurp;
 using cli_test::temp_dir;  // removed when the test exits
 
+#ifdef DVM_CHARTS  // (the chart and ratio programs' checks)
 std::vector<std::string> split(const std::string& line, char sep) {
   std::vector<std::string> out;
   std::string cur;
@@ -63,6 +64,7 @@ std::vector<std::vector<std::string>> read_csv(const std::string& path, const st
   BOOST_REQUIRE_MESSAGE(!rows.empty(), path << " has no rows");
   return rows;
 }
+#endif  // DVM_CHARTS
 
 }  // namespace
 

@@ -796,23 +796,23 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
     std::string steps;
     double order;
   };
-  for (const Order& o : {Order{{"integrator.method=\"galerkin\"", "integrator.stages=2"}, "50,100,200,400", 4.0},
+  for (const Order& want : {Order{{"integrator.method=\"galerkin\"", "integrator.stages=2"}, "50,100,200,400", 4.0},
                          Order{{"integrator.method=\"galerkin\"", "integrator.quadrature=\"lobatto\"",
                                 "integrator.stages=2"},
                                "50,100,200,400", 4.0},
                          Order{{"integrator.method=\"galerkin\"", "integrator.stages=3"}, "25,50,100,200", 6.0},
                          Order{{"integrator.composition=\"kahan-li8\""}, "10,20,40", 8.0}}) {
-    std::vector<std::string> args = {"converge", scene("driven_duffing.toml"), "--t-end", "5", "--steps-list", o.steps,
+    std::vector<std::string> args = {"converge", scene("driven_duffing.toml"), "--t-end", "5", "--steps-list", want.steps,
                                      "--json"};
-    for (const std::string& k : o.sets) {
+    for (const std::string& k : want.sets) {
       args.push_back("--set");
       args.push_back(k);
     }
-    const Output c = dvm(args);
-    BOOST_TEST_REQUIRE(c.status == 0, c.err);
-    const double fitted = parse_json(c.out).at("fitted_order").get<double>();
-    BOOST_TEST_MESSAGE("driven Duffing " << o.sets.back() << ": order " << fitted);
-    BOOST_TEST(std::fabs(fitted - o.order) <= 0.05 * o.order, c.out);
+    const Output conv = dvm(args);
+    BOOST_TEST_REQUIRE(conv.status == 0, conv.err);
+    const double fitted = parse_json(conv.out).at("fitted_order").get<double>();
+    BOOST_TEST_MESSAGE("driven Duffing " << want.sets.back() << ": order " << fitted);
+    BOOST_TEST(std::fabs(fitted - want.order) <= 0.05 * want.order, conv.out);
   }
 
   auto refused = [&](const std::string& scene_name, std::vector<std::string> sets, std::vector<std::string> says) {

@@ -221,7 +221,7 @@ BOOST_AUTO_TEST_CASE(residual_and_jacobian_against_the_compiled_step) {
     using Compiled = ManifoldStep<SphericalChain<K>, SpherePowerMap<K>>;
     const Compiled T(C, SpherePowerMap<K>(f), h);
     const Vec<double, 3 * K> xs = x, ps = p;
-    const Compiled::Residual res{&T.discrete_lagrangian(), xs, SpherePower<K>::covector_to_local(xs, ps)};
+    const Compiled::Residual res{&T.discrete_lagrangian(), xs, SpherePower<K>::covector_to_local(xs, ps), nullptr, 0.0};
     using Jt = ceres::Jet<double, 2 * K>;
     Vec<Jt, 2 * K> xj, rj;
     for (int i = 0; i < 2 * K; ++i) xj[i] = Jt(xi[i], i);
