@@ -856,7 +856,6 @@ class WrittenDynamic {
   // derivatives in t are dropped.
   bool time_dependent() const { return timed_; }
   void set_time(double t) const { time_.t = t; }
-  double time() const { return time_.t; }
 
   double value(const DynIn& q, const DynIn& v) const {
     if (timed_) return tape_.value(time_.load(q, v), time_.v.data());

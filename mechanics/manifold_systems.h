@@ -206,10 +206,7 @@ class ManifoldDiscreteLagrangian {
   // L_d from q0 and the relative position rel of q1 (see Sphere::relative, SO3::relative).
   template <class T, class Rel>
   T evaluate_relative(const P<T>& q0, const Rel& rel) const {
-    const ManifoldTangent<M, T> t = R_.inverse_relative(q0, rel);
-    typename M::template Tangent<T> u = t.v;
-    for (int i = 0; i < u.size(); ++i) u(i) = t.v(i) * (1.0 / h_);
-    return h_ * L_(t.x, u);
+    return at_node(R_.inverse_relative(q0, rel));
   }
 
   // D1 L_d(q0, q1) in the chart centred at q0 (q0 a double point, q1 any scalar).
@@ -228,25 +225,25 @@ class ManifoldDiscreteLagrangian {
     return evaluate_relative(m.first, m.second).v;
   }
 
-  // Forces (discrete Lagrange-d'Alembert, Marsden and West 2001, Sec. 3.2): a force F
-  // (mechanics/written_manifold.h, ManifoldForce) evaluated at the map's node (x, v) =
-  // R_d^{-1}(q0, q1) with v divided by h, at time t, and held there; the discrete forces
-  // are the derivatives of the virtual work h <F, disp(x, x')> in the chart coordinates
-  // of q0 (F_d^-, force_D1_local) and of q1 (F_d^+, force_D2_local), x' the node of the
-  // moved points. `work` (where given) receives h <F, v>, the work over the step.
+  // With a force (discrete Lagrange-d'Alembert, Marsden and West 2001, Sec. 3.2): D1 L_d
+  // + F_d^- in the chart of q0 and D2 L_d + F_d^+ in the chart of q1. The force F
+  // (mechanics/written_manifold.h, ManifoldForce) is evaluated at the map's node (x, v) =
+  // R_d^{-1}(q0, q1), v divided by h, at time t, and held there; the discrete forces are
+  // the derivatives of the virtual work h <F, disp(x, x')>, x' the node of the moved
+  // points. The moved points and their node are formed once for both terms, and the
+  // held node is their value. `work` (where given) receives h <F, v>, the work over the
+  // step.
   template <class T, class Rel, class Fo>
-  Vec<T, n> force_D1_local(const P<double>& q0, const P<T>& q1, const Rel& rel, const Fo& force, double t,
-                           T* work = nullptr) const {
-    const auto F = force_at(q0, rel, force, t, work);
+  Vec<T, n> D1_local(const P<double>& q0, const P<T>& q1, const Rel& rel, const Fo& force, double t,
+                     T* work = nullptr) const {
     const auto m = moved_first(q0, q1, rel);
-    return virtual_work<Fo>(F, R_.inverse_relative(m.first, m.second).x).v;
+    return with_force(R_.inverse_relative(m.first, m.second), force, t, work).v;
   }
   template <class Rel, class Fo>
-  Vec<double, n> force_D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel, const Fo& force,
-                                double t, double* work = nullptr) const {
-    const auto F = force_at(q0, rel, force, t, work);
+  Vec<double, n> D2_local(const P<double>& q0, const P<double>& q1, const Rel& rel, const Fo& force, double t,
+                          double* work = nullptr) const {
     const auto m = moved_second(q0, q1, rel);
-    return virtual_work<Fo>(F, R_.inverse_relative(m.first, m.second).x).v;
+    return with_force(R_.inverse_relative(m.first, m.second), force, t, work).v;
   }
 
  private:
@@ -277,33 +274,32 @@ class ManifoldDiscreteLagrangian {
     for (int i = 0; i < r.size(); ++i) r(i).a = rel(i);
     return std::make_pair(a, r);
   }
-  // The force at the node of (q0, rel) and the node itself (F frozen: a value of T).
-  template <class T, class Rel, class Fo>
-  auto force_at(const P<double>& q0, const Rel& rel, const Fo& force, double t, T* work) const {
-    P<T> a;
-    for (int i = 0; i < q0.size(); ++i) a(i) = T(q0(i));
-    const ManifoldTangent<M, T> node = R_.inverse_relative(a, rel);
+  // h L(x, v / h) at a node (x, v) of the map's inverse
+  template <class T>
+  T at_node(const ManifoldTangent<M, T>& node) const {
     typename M::template Tangent<T> u = node.v;
     for (int i = 0; i < u.size(); ++i) u(i) = node.v(i) * (1.0 / h_);
-    struct Frozen {
-      Vec<T, Fo::size> F;
-      P<T> x;
-    } f{Vec<T, Fo::size>(), node.x};
-    force.value(t, node.x, u, f.F);
+    return h_ * L_(node.x, u);
+  }
+  // h L + h <F, disp(x, x')> at the node of the moved points (Jets D over scalars T), F
+  // evaluated at the held node x (the value parts) and time t.
+  template <class D, class Fo, class T>
+  D with_force(const ManifoldTangent<M, D>& node, const Fo& force, double t, T* work) const {
+    P<T> x;
+    typename M::template Tangent<T> u;
+    for (int i = 0; i < x.size(); ++i) x(i) = node.x(i).a;
+    for (int i = 0; i < u.size(); ++i) u(i) = node.v(i).a * (1.0 / h_);
+    Vec<T, Fo::size> F;
+    force.value(t, x, u, F);
     if (work) {
       T w = constant<T>(0.0);
-      for (int i = 0; i < Fo::size; ++i) w += f.F[i] * node.v(i);
+      for (int i = 0; i < Fo::size; ++i) w += F[i] * node.v(i).a;
       *work = w;
     }
-    return f;
-  }
-  // h <F, disp(x, y)> in the Jets of y's chart coordinates (Fo::displacement)
-  template <class Fo, class Frozen, class D>
-  D virtual_work(const Frozen& f, const P<D>& y) const {
-    const Vec<D, Fo::size> d = Fo::template displacement<D>(f.x, y);
+    const Vec<D, Fo::size> d = Fo::template displacement<D>(x, node.x);
     D W = constant<D>(0.0);
-    for (int i = 0; i < Fo::size; ++i) W += D(f.F[i]) * d[i];
-    return W * h_;
+    for (int i = 0; i < Fo::size; ++i) W += D(F[i]) * d[i];
+    return at_node(node) + W * h_;
   }
 
   System L_;

@@ -237,7 +237,7 @@ class DynamicGalerkinStep {
  private:
   static int check_stages(int s) { return check_galerkin_stages(s, 0); }
   // the time of quadrature node i in the step that started at t0_
-  double node_time(int i) const { return t0_ + static_cast<double>(quad_.c[static_cast<std::size_t>(i)]) * h_; }
+  double node_time(int i) const { return node_time_at(t0_, i); }
 
   // R_ and force_ at X_, as GalerkinStep::residual_fast:
   //   x = q0 + X A, v = X B / h (n x m), R = h G WA + P WB (n x s), force = h G b,

@@ -56,7 +56,7 @@ void leave_chart(const typename M::template Point<double>& q0, const Vec<double,
 // Force: a force on the manifold (ManifoldForce<M>, mechanics/written_manifold.h) or
 // NoForce; a forced step needs the force object, and adds the discrete
 // forces of the Lagrange-d'Alembert principle at the map's node, time t0 + theta h
-// (ManifoldDiscreteLagrangian::force_D1_local, force_D2_local):
+// (ManifoldDiscreteLagrangian::D1_local, D2_local with the force):
 //   p_k + D1 L_d + F_d^- = 0,   p_{k+1} = D2 L_d + F_d^+,
 // and reports the force's work h <F, v> over the step (StepSummary::work).
 template <class System, class Map, class Force = NoForce>
@@ -86,14 +86,12 @@ class ManifoldStep {
     bool operator()(const T* xi, T* r) const {
       Vec<T, n> x;
       for (int i = 0; i < n; ++i) x[i] = xi[i];
-      const auto q1 = M::chart(q0, x);
-      const auto rel = M::relative_chart(q0, x);
-      const Vec<T, n> d1 = dl->D1_local(q0, q1, rel);
+      Vec<T, n> d1;
+      if constexpr (kForced)
+        d1 = dl->D1_local(q0, M::chart(q0, x), M::relative_chart(q0, x), *force, t);
+      else
+        d1 = dl->D1_local(q0, M::chart(q0, x), M::relative_chart(q0, x));
       for (int i = 0; i < n; ++i) r[i] = p0[i] + d1[i];
-      if constexpr (kForced) {
-        const Vec<T, n> f = dl->force_D1_local(q0, q1, rel, *force, t);
-        for (int i = 0; i < n; ++i) r[i] += f[i];
-      }
       return true;
     }
   };
@@ -116,8 +114,11 @@ class ManifoldStep {
           return s;
         }
         const auto rel = M::relative_chart(q0, xi);
-        Vec<double, n> pi1 = dl_.D2_local(q0, raw, rel);
-        if constexpr (kForced) pi1 += dl_.force_D2_local(q0, raw, rel, *force_, t_node, &s.work);
+        Vec<double, n> pi1;
+        if constexpr (kForced)
+          pi1 = dl_.D2_local(q0, raw, rel, *force_, t_node, &s.work);
+        else
+          pi1 = dl_.D2_local(q0, raw, rel);
         p1 = M::covector_from_local(raw, pi1);
         q1 = M::clean(raw);
         if (!std::isfinite(max_abs(p1))) {
