@@ -1419,6 +1419,11 @@ inline int emit_blocked(NodePtr& root, std::vector<Expression::Instr>& tape, std
       key += static_cast<char>(in.op);
       key += static_cast<char>(in.block);
       if (in.op == O::PowI) key += std::to_string(in.index) + ",";
+      // A term that reads a definition (block 3) stays on the tape, in a group of its
+      // own: a block's derivative program reads only q and v (DerivativeProgramBuilder::
+      // block_program), so one such block would leave the whole text without a program
+      // (16 squared velocities written as definitions, scissor_lift.toml).
+      if (in.op == O::Var && in.block == 3) key += "#" + std::to_string(t);
     }
     auto& g = groups[key];
     if (g.empty()) order.push_back(key);

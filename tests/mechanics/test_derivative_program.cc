@@ -326,6 +326,39 @@ BOOST_AUTO_TEST_CASE(blocks_are_differentiated_once_for_their_shape) {
   }
 }
 
+BOOST_AUTO_TEST_CASE(terms_that_read_definitions_stay_out_of_blocks) {
+  // Sixteen squared velocities written as definitions (the middles of scissor_lift.toml's
+  // links): a sum of one shape long enough for a block, whose terms read definitions. A
+  // block's program reads only q and v, so they stay on the tape as plain terms, and the
+  // text keeps its Hessian program; beside a block of terms in q alone, the gradient
+  // program. Both against the tape's reverse mode.
+  std::vector<std::string> coords;
+  std::vector<std::pair<std::string, std::string>> defs;
+  std::string squares, springs;
+  for (int i = 0; i < 16; ++i) {
+    coords.push_back("y" + std::to_string(i));
+    const std::string y = coords.back(), prev = i ? coords[static_cast<std::size_t>(i - 1)] : "y15";
+    defs.emplace_back("u" + std::to_string(i), "cos(" + y + ")*" + y + "_dot + sin(" + prev + ")*" + prev + "_dot");
+    squares += (i ? " + " : "") + ("u" + std::to_string(i)) + "^2/2";
+    springs += " - (" + y + " - " + prev + ")^2/2";
+  }
+  for (const bool with_block : {false, true}) {
+    const auto s = written(coords, squares + (with_block ? springs : " - y0^2/2"), defs);
+    BOOST_TEST_CONTEXT((with_block ? "beside a block" : "alone")) {
+      BOOST_TEST(s->lagrangian.blocks().size() == (with_block ? 1u : 0u));
+      const WrittenDynamic P(s), R(s, WrittenDerivatives::forward_over_reverse);
+      BOOST_TEST_REQUIRE(P.derivative_program() != nullptr);
+      BOOST_TEST(P.derivative_program()->has_hessian() == !with_block);
+      for (int point = 0; point < 2; ++point) {
+        const VectorXd q = random_vector(16, 0.6, 300 + point), v = random_vector(16, 0.8, 310 + point);
+        const Derivatives p = derivatives(P, q, v), r = derivatives(R, q, v);
+        BOOST_TEST(largest(r) > 0.1);
+        BOOST_TEST(difference(p, r) <= 1e-14);
+      }
+    }
+  }
+}
+
 BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
   // more than 32 coordinates (64 inputs): a gradient program, no Hessian program
   std::string L33;
@@ -346,7 +379,9 @@ BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
   BOOST_TEST(DerivativeProgram::build(large->lagrangian, 1) == nullptr);
   BOOST_TEST(DerivativeProgram::build(large->lagrangian, 1, false) == nullptr);
   BOOST_TEST(WrittenDynamic(large).derivative_program() == nullptr);
-  // a definition read inside a block (its value one for all the terms): the tape
+  // a definition read by a sum's terms (its value one for all of them): those terms stay
+  // on the tape, out of the block the velocities' terms make, so the text keeps its
+  // gradient program (the block leaves it without a Hessian program)
   auto s = std::make_shared<WrittenSystem>();
   s->add_array("q", 30, ExpressionSymbols::Boundary::fixed);
   s->params = {{"n", 30}};
@@ -354,8 +389,14 @@ BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
   s->check_names();
   s->lagrangian = Expression::parse("sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, (q[i] - c)^2/2)",
                                     s->symbols(WrittenSystem::Kind::lagrangian));
-  BOOST_TEST(!s->lagrangian.blocks().empty());
-  BOOST_TEST(WrittenDynamic(s).derivative_program() == nullptr);
+  BOOST_TEST(s->lagrangian.blocks().size() == 1u);
+  {
+    const WrittenDynamic Ps(s), Rs(s, WrittenDerivatives::forward_over_reverse);
+    BOOST_TEST_REQUIRE(Ps.derivative_program() != nullptr);
+    BOOST_TEST(!Ps.derivative_program()->has_hessian());
+    const VectorXd qs = random_vector(30, 0.6, 21), vs = random_vector(30, 0.8, 22);
+    BOOST_TEST(difference(derivatives(Ps, qs, vs), derivatives(Rs, qs, vs)) <= 1e-14);
+  }
   // a power whose exponent varies from term to term inside a block: the tape, whose
   // pow(x, c) and c pow(x, c - 1) are finite at x = 0
   auto p = std::make_shared<WrittenSystem>();
