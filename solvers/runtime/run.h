@@ -89,8 +89,8 @@ struct RunReport {
   // differentiated symbolically once, mechanics/derivative_program.h),
   // "gradient-program" (the gradient so, the Hessian by forward over reverse mode on the
   // tape: texts with blocks of terms, or of more than 32 coordinates) or "tape" (both on
-  // the tape: a definition, or a power varying from term to term, read inside a block,
-  // or a graph beyond the program's size).
+  // the tape: a power varying from term to term inside a block, or a graph beyond the
+  // program's size).
   // Empty: not a written Lagrangian on R^n.
   std::string derivatives;
   // system.compile: whether those derivatives run compiled code, and the seconds the
