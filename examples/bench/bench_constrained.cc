@@ -114,7 +114,8 @@ int main(int argc, char** argv) {
   try {
     for (const Pair& p : pairs) {
       const int r = p.bounded ? 100 * repeats : repeats;
-      const Timing c = measure(dir, p.constrained, steps, r, p.bounded), m = measure(dir, p.minimal, steps, r, p.bounded);
+      const Timing c = measure(dir, p.constrained, steps, r, p.bounded);
+      const Timing m = measure(dir, p.minimal, steps, r, p.bounded);
       std::printf("| %s | %.0f | %.2f | %s | %.0f | %.2f |\n", p.constrained, c.ns_per_step, c.iterations_per_step,
                   p.minimal, m.ns_per_step, c.ns_per_step / m.ns_per_step);
     }

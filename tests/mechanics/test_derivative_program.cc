@@ -357,6 +357,24 @@ BOOST_AUTO_TEST_CASE(terms_that_read_definitions_stay_out_of_blocks) {
       }
     }
   }
+  // A definition read by a sum's terms (its value one for all of them): those terms stay
+  // on the tape, out of the block the velocities' terms make, so the text keeps its
+  // gradient program (the block leaves it without a Hessian program).
+  auto s = std::make_shared<WrittenSystem>();
+  s->add_array("q", 30, ExpressionSymbols::Boundary::fixed);
+  s->params = {{"n", 30}};
+  s->definitions = {{"c", "q[3]/2 + sin(q[7])"}};
+  s->check_names();
+  s->lagrangian = Expression::parse("sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, (q[i] - c)^2/2)",
+                                    s->symbols(WrittenSystem::Kind::lagrangian));
+  BOOST_TEST(s->lagrangian.blocks().size() == 1u);
+  {
+    const WrittenDynamic Ps(s), Rs(s, WrittenDerivatives::forward_over_reverse);
+    BOOST_TEST_REQUIRE(Ps.derivative_program() != nullptr);
+    BOOST_TEST(!Ps.derivative_program()->has_hessian());
+    const VectorXd qs = random_vector(30, 0.6, 21), vs = random_vector(30, 0.8, 22);
+    BOOST_TEST(difference(derivatives(Ps, qs, vs), derivatives(Rs, qs, vs)) <= 1e-14);
+  }
 }
 
 BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
@@ -379,24 +397,6 @@ BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
   BOOST_TEST(DerivativeProgram::build(large->lagrangian, 1) == nullptr);
   BOOST_TEST(DerivativeProgram::build(large->lagrangian, 1, false) == nullptr);
   BOOST_TEST(WrittenDynamic(large).derivative_program() == nullptr);
-  // a definition read by a sum's terms (its value one for all of them): those terms stay
-  // on the tape, out of the block the velocities' terms make, so the text keeps its
-  // gradient program (the block leaves it without a Hessian program)
-  auto s = std::make_shared<WrittenSystem>();
-  s->add_array("q", 30, ExpressionSymbols::Boundary::fixed);
-  s->params = {{"n", 30}};
-  s->definitions = {{"c", "q[3]/2 + sin(q[7])"}};
-  s->check_names();
-  s->lagrangian = Expression::parse("sum(i, 1, n, q_dot[i]^2/2) - sum(i, 1, n, (q[i] - c)^2/2)",
-                                    s->symbols(WrittenSystem::Kind::lagrangian));
-  BOOST_TEST(s->lagrangian.blocks().size() == 1u);
-  {
-    const WrittenDynamic Ps(s), Rs(s, WrittenDerivatives::forward_over_reverse);
-    BOOST_TEST_REQUIRE(Ps.derivative_program() != nullptr);
-    BOOST_TEST(!Ps.derivative_program()->has_hessian());
-    const VectorXd qs = random_vector(30, 0.6, 21), vs = random_vector(30, 0.8, 22);
-    BOOST_TEST(difference(derivatives(Ps, qs, vs), derivatives(Rs, qs, vs)) <= 1e-14);
-  }
   // a power whose exponent varies from term to term inside a block: the tape, whose
   // pow(x, c) and c pow(x, c - 1) are finite at x = 0
   auto p = std::make_shared<WrittenSystem>();
