@@ -10,7 +10,6 @@
 #define BOOST_TEST_NO_MAIN
 #include <boost/test/unit_test.hpp>
 
-#include "tests/address_sanitizer.h"
 #include "tests/cli/cli_harness.h"
 #include "tests/cli/sweep_tables.h"
 
@@ -21,6 +20,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <sstream>
@@ -128,13 +128,24 @@ BOOST_AUTO_TEST_CASE(errors_against_a_reference_run_are_the_same_on_ranks) {
 
 // Stopped by SIGTERM to mpirun (a scheduler's end of a job) once rows are written,
 // then resumed on another number of ranks: the table of the uninterrupted sweep. The
-// runs are long enough (3 x 10^6 steps, a tenth under AddressSanitizer, whose steps are
-// slower by more than that) for the signal to reach the ranks before the last row.
+// ranks have been seen to go on for about a second after mpirun receives the signal,
+// so each long run is sized to last about a second on the machine (and build) running
+// the test, measured first: with 8 of them on 2 ranks, the sweep is still running when
+// the ranks stop. A fixed step count was not enough: on a fast machine the 3 x 10^6
+// steps it had took a quarter of a second a run, and every row was written before the
+// ranks stopped.
 BOOST_AUTO_TEST_CASE(a_sweep_stopped_on_ranks_resumes) {
-  const std::string s = write_scene("long.toml",
-                                    "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
-                                    "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = " +
-                                        std::to_string(dvm_tests::kAddressSanitizer ? 300000 : 3000000) + "\n");
+  const std::string scene_head =
+      "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
+      "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = ";
+  const long probe_steps = 200000;
+  const std::string probe = write_scene("probe.toml", scene_head + std::to_string(probe_steps) + "\n");
+  const Output timed = dvm({"run", probe, "--json", "--no-output"});
+  BOOST_TEST_REQUIRE(timed.status == 0, timed.err);
+  const double probe_seconds = std::max(parse_json(timed.out).at("wall_seconds").get<double>(), 1e-3);
+  const long steps = std::max(probe_steps, static_cast<long>(static_cast<double>(probe_steps) / probe_seconds));
+  BOOST_TEST_MESSAGE("long runs of " << steps << " steps");
+  const std::string s = write_scene("long.toml", scene_head + std::to_string(steps) + "\n");
   const std::vector<std::string> args = {"sweep", s, "--vary", "integrator.step=log:0.0005:0.002:8", "--vary",
                                          "integrator.max_iterations=[25, 1]"};
   std::vector<std::string> whole = args, cut = args;
