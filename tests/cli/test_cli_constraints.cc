@@ -24,7 +24,8 @@ using namespace cli_test;
 // The pendulum in (x, y) with x^2 + y^2 = l^2 against the built-in pendulum in its angle
 // q: at t = 10, composed to order 8 (kahan-li8) with h = 0.01, x = l sin q and
 // y = -l cos q to 1e-10, and the momenta (p_x, p_y) = m l p_q / (m l^2) (cos q, sin q).
-// The same for the double pendulum, two constraints, against the built-in one.
+// The same for the double pendulum, two constraints, against the built-in one: the
+// positions, and the momenta pulled back to the angles.
 BOOST_AUTO_TEST_CASE(cartesian_pendulums_agree_with_their_angle_twins) {
   const std::vector<std::string> order8 = {"integrator.composition=\"kahan-li8\"", "integrator.t_end=10.0"};
   const Json c = run("pendulum_cartesian.toml", order8), a = run("pendulum.toml", order8);
@@ -50,6 +51,14 @@ BOOST_AUTO_TEST_CASE(cartesian_pendulums_agree_with_their_angle_twins) {
   BOOST_TEST(std::fabs(xy2[1] - y1) <= 1e-10);
   BOOST_TEST(std::fabs(xy2[2] - (x1 + std::sin(ab[1]))) <= 1e-10);
   BOOST_TEST(std::fabs(xy2[3] - (y1 - std::cos(ab[1]))) <= 1e-10);
+  // the momenta pulled back along (a, b) -> (x1, y1, x2, y2) (unit rods) are the angles'
+  const auto p4 = vec(d, "p_final"), pab = vec(b, "p_final");
+  const double pa = (p4[0] + p4[2]) * std::cos(ab[0]) + (p4[1] + p4[3]) * std::sin(ab[0]);
+  const double pb = p4[2] * std::cos(ab[1]) + p4[3] * std::sin(ab[1]);
+  BOOST_TEST_MESSAGE("double pendulum, pulled-back momenta against the angles': " << std::fabs(pa - pab[0]) << " "
+                                                                                  << std::fabs(pb - pab[1]));
+  BOOST_TEST(std::fabs(pa - pab[0]) <= 1e-10 * std::fmax(1.0, std::fabs(pab[0])));
+  BOOST_TEST(std::fabs(pb - pab[1]) <= 1e-10 * std::fmax(1.0, std::fabs(pab[1])));
   BOOST_TEST(d.at("constraints").get<int>() == 2);
   BOOST_TEST(std::fabs(d.at("energy_initial").get<double>() - b.at("energy_initial").get<double>()) <= 1e-15);
 }

@@ -815,8 +815,11 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
     BOOST_TEST(std::fabs(fitted - want.order) <= 0.05 * want.order, conv.out);
   }
 
+  // refused: exit 2, the keys named, nothing on stdout and no file written
+  const std::string refused_csv = temp_dir() + "/refused_force.csv";
   auto refused = [&](const std::string& scene_name, std::vector<std::string> sets, std::vector<std::string> says) {
-    std::vector<std::string> args = {"run", scene(scene_name), "--no-output"};
+    std::remove(refused_csv.c_str());
+    std::vector<std::string> args = {"run", scene(scene_name), "--csv", refused_csv};
     for (const auto& s : sets) {
       args.push_back("--set");
       args.push_back(s);
@@ -825,6 +828,7 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
     BOOST_TEST_CONTEXT(sets.front()) {
       BOOST_TEST(r.status == 2);
       BOOST_TEST(r.out.empty());
+      BOOST_TEST(!file_exists(refused_csv));
       for (const std::string& s : says) BOOST_TEST(r.err.find(s) != std::string::npos, r.err);
     }
   };
@@ -850,7 +854,7 @@ BOOST_AUTO_TEST_CASE(forces_enter_by_lagrange_dalembert_or_are_refused_naming_th
 // constant values gives the run of the same constant written as an expression, alone
 // and composed (every substep of a step reads u_k); --linearize adds the columns of
 // B_k; bad tables and controls are refused with exit 2, naming the key, the file and
-// the line.
+// the line, and writing nothing.
 BOOST_AUTO_TEST_CASE(controls_from_a_table_or_an_expression) {
   const Output o = dvm({"run", scene("cart_pole.toml"), "--json", "--no-output"});
   BOOST_TEST_REQUIRE(o.status == 0, o.err);
@@ -883,8 +887,10 @@ BOOST_AUTO_TEST_CASE(controls_from_a_table_or_an_expression) {
   const std::string names = slurp(npy + ".json");
   BOOST_TEST(names.find("\"A[3,3]\", \"B[0,0]\", \"B[1,0]\", \"B[2,0]\", \"B[3,0]\"]") != std::string::npos, names);
 
+  const std::string csv = temp_dir() + "/refused_control.csv";
   auto refused = [&](const std::string& path, std::vector<std::string> sets, std::vector<std::string> says) {
-    std::vector<std::string> args = {"run", path, "--no-output"};
+    std::remove(csv.c_str());
+    std::vector<std::string> args = {"run", path, "--csv", csv};
     for (const auto& x : sets) {
       args.push_back("--set");
       args.push_back(x);
@@ -893,6 +899,7 @@ BOOST_AUTO_TEST_CASE(controls_from_a_table_or_an_expression) {
     BOOST_TEST_CONTEXT((sets.empty() ? path : sets.front())) {
       BOOST_TEST(r.status == 2);
       BOOST_TEST(r.out.empty());
+      BOOST_TEST(!file_exists(csv));
       for (const std::string& x : says) BOOST_TEST(r.err.find(x) != std::string::npos, r.err);
     }
   };
