@@ -69,6 +69,9 @@
 
 namespace dvm {
 
+template <class Sys, class Con, class Force>
+class ConstrainedGalerkinStep;
+
 template <class Sys, class Force = NoForce>
 class DynamicGalerkinStep {
   static_assert(is_dynamic_system_v<Sys>, "DynamicGalerkinStep needs a run-time-sized system (dynamic_system.h)");
@@ -235,6 +238,11 @@ class DynamicGalerkinStep {
   }
 
  private:
+  // the constrained step (solvers/constrained_galerkin_step.h) adds its terms to this
+  // step's equations, at its nodes
+  template <class, class, class>
+  friend class ConstrainedGalerkinStep;
+
   static int check_stages(int s) { return check_galerkin_stages(s, 0); }
   // the time of quadrature node i in the step that started at t0_
   double node_time(int i) const { return node_time_at(t0_, i); }

@@ -1,0 +1,319 @@
+// The Galerkin discrete Lagrangian (solvers/dynamic_galerkin_step.h) under holonomic
+// constraints g(t, q) = 0 (m of them, mechanics/written_constraints.h), with Lobatto
+// quadrature: the constraints hold at every quadrature node.
+//
+// The discrete Lagrangian is extremised over the polynomials of degree s that keep the
+// constraints at the m + 1 = s + 1 Lobatto nodes c_0 = 0 < c_1 < ... < c_s = 1 (Marsden
+// and West, Acta Numerica 2001, Sec. 3.5: the augmented Lagrangian L - lambda . g,
+// discretised by the same quadrature as L). With the notation of
+// dynamic_galerkin_step.h (x_i, v_i the nodes, g_i = L_q + F_i, p_i = L_v, WA_ij =
+// b_i l_j(c_i), WB_ij = b_i l_j'(c_i)), and G_i = Dg(t0 + c_i h, x_i), the unknowns are
+// the increments X_1..X_s and the multipliers lambda_0..lambda_{s-1}, and the
+// s (n + m) equations
+//   R_j = sum_i [h WA_ij (g_i - G_i^T lambda_i) + WB_ij p_i] (+ p0 for j = 0) = 0,  j = 0..s-1,
+//   g(t0 + c_i h, x_i) = 0,                                                   i = 1..s,
+// (lambda_s = 0 in R_j; l_j(c_0) = 0 for j > 0, so lambda_0 enters R_0 only: it is the
+// left constrained Legendre transform's multiplier, p0 - h b_0 G_0^T lambda_0 =
+// -D1 L_d). Then q1 = x_s and
+//   p1~ = p0 + h sum_{i=0..s} b_i g_i - h sum_{i=0..s-1} b_i G_i^T lambda_i,
+// and the right transform puts p1 = p1~ - G_s^T mu on the hidden constraint, as
+// ConstrainedThetaStep's equation 2 (constrained_detail::Projection; the multiplier
+// of the last node is mu). This is the variational form of the Lobatto IIIA-IIIB pair
+// for constrained systems (Jay, SIAM J. Numer. Anal. 33, 1996), which keeps the
+// method's order 2s (s + 1 Lobatto nodes) on the positions and the momenta; the step is
+// symplectic on the constraint's cotangent bundle. Gauss quadrature has no nodes at the
+// ends of the step, where the step's state must lie on the constraint: the runtime
+// refuses it with constraints.
+//
+// The solve: the one driver (solvers/newton_driver.h), a Jacobian formed at each step's
+// first iterate and kept while each iteration shrinks the residual fourfold
+// (Refresh::within_step; kept across steps, as the unconstrained Galerkin steps keep
+// theirs, its constraint rows and the multipliers' curvature age with the state and the
+// iteration slows to the fourfold limit), on the saddle-point Jacobian
+//   [ dR/dX           -sc h WA_ij G_i^T ]
+//   [ sr G_i A_ik      0                ]
+// where dR/dX is the unconstrained stage Jacobian plus the multipliers' curvature
+// -h WA_ij A_ik lambda_i . Hess g(x_i) at the interior nodes (without it the iteration
+// contracts only by a factor of order h^2 lambda / m per iteration). The constraint
+// rows are scaled by sr = max|dR/dX| / max|G_0| and the multipliers carried as
+// lambda / sc, sc = sr / max|h WA_ij|, so that the rows and the columns of the
+// constraints are of the size of the others (the driver's one stopping rule judges
+// all the unknowns and residuals alike); both are set at the first Jacobian and kept
+// (so that the last step's multipliers are the next one's guess). The increments' guess
+// is the previous polynomial extrapolated, as unconstrained.
+//
+// The step gives no derivative (dvm run --linearize refuses it). Workspace is allocated
+// at construction; forming a Jacobian allocates (the constraints' Hessians,
+// WrittenConstraints::second_derivatives), the iterations and steps that keep one do
+// not. One object must not be used from two threads at once.
+#pragma once
+
+#include <Eigen/Core>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "solvers/constrained_step.h"
+#include "solvers/dynamic_galerkin_step.h"
+
+namespace dvm {
+
+namespace constrained_detail {
+// A value on the heap that each copy of its owner copies (the constraints' and the
+// projection's workspaces: one per step object).
+template <class T>
+struct Owned {
+  std::unique_ptr<T> p;
+  Owned() = default;
+  explicit Owned(std::unique_ptr<T> q) : p(std::move(q)) {}
+  Owned(const Owned& o) : p(o.p ? std::make_unique<T>(*o.p) : nullptr) {}
+  Owned(Owned&&) noexcept = default;
+  Owned& operator=(const Owned&) = delete;
+  Owned& operator=(Owned&&) noexcept = default;
+  T& operator*() const { return *p; }
+  T* operator->() const { return p.get(); }
+};
+}  // namespace constrained_detail
+
+template <class Sys, class Con, class Force>
+class ConstrainedGalerkinStep {
+ public:
+  static constexpr int N = Eigen::Dynamic;
+  using V = Eigen::VectorXd;
+  using Inner = DynamicGalerkinStep<Sys, Force>;
+  static constexpr bool kForced = is_force_v<Force>;
+
+  // stages: the polynomial degree s (order 2s); momentum: how L_v depends on v, as for
+  // ConstrainedThetaStep. The step keeps its own copies of the constraints and the force.
+  ConstrainedGalerkinStep(Sys L, int stages, double h, std::shared_ptr<const Con> constraints,
+                          StepOptions options = {}, MomentumMap momentum = MomentumMap::general,
+                          std::shared_ptr<const Force> force = nullptr)
+      : g_(std::move(L), QuadratureKind::lobatto, stages, h, options, force), momentum_(momentum) {
+    const int n = g_.dim();
+    if (!constraints || constraints->dim() != n)
+      throw std::invalid_argument("ConstrainedGalerkinStep: constraints on the system's coordinates are needed");
+    if (constraints->count() >= n)
+      throw std::invalid_argument("ConstrainedGalerkinStep: " + std::to_string(constraints->count()) +
+                                  " constraints on " + std::to_string(n) + " coordinates leave no motion");
+    con_ = constrained_detail::Owned<Con>(std::make_unique<Con>(*constraints));
+    const int s = g_.s_, m = con_->count(), K = s * (n + m);
+    if (g_.quad_.points != s + 1 || g_.quad_.c[0] != 0.0L || g_.quad_.c[static_cast<std::size_t>(s)] != 1.0L)
+      throw std::invalid_argument("ConstrainedGalerkinStep: Lobatto nodes from 0 to 1 expected");
+    for (V* x : {&y_, &r_, &dx_, &start_, &yprev_}) x->setZero(K);
+    X_.setZero(s * n);
+    RX_.setZero(s * n);
+    JX_.setZero(s * n, s * n);
+    J_.setZero(K, K);
+    lu_.inv.setZero(K, K);
+    lu_.lu.resize(K);
+    Gs_.assign(static_cast<std::size_t>(s + 1), Eigen::MatrixXd::Zero(m, n));
+    gval_.setZero(m);
+    gt_.setZero(m);
+    q_end_.setZero(n);
+    xi_.setZero(n);
+    Hl_.setZero(n, n);
+    p1_.setZero(n);
+    v1_.setZero(n);
+    proj_ = constrained_detail::Owned<constrained_detail::Projection<Sys, Con>>(
+        std::make_unique<constrained_detail::Projection<Sys, Con>>(n, m));
+  }
+  ConstrainedGalerkinStep(const ConstrainedGalerkinStep&) = default;
+  ConstrainedGalerkinStep(ConstrainedGalerkinStep&&) noexcept = default;
+  ConstrainedGalerkinStep& operator=(const ConstrainedGalerkinStep&) = delete;
+
+  double step_size() const { return g_.h_; }
+  int stages() const { return g_.s_; }
+  int order() const { return 2 * g_.s_; }
+  int dim() const { return g_.dim(); }
+  int constraints() const { return con_->count(); }
+  const Sys& lagrangian() const { return g_.lagrangian(); }
+  long jacobian_updates() const { return jacobian_updates_; }
+  void reset() const {
+    have_prev_ = false;
+    kept_.valid = false;
+    g_.reset();
+  }
+
+  // Puts p on the hidden constraint at (t, q), as ConstrainedThetaStep::project.
+  std::string project(double t, const V& q, V& p, V& v) const {
+    try {
+      return (*proj_)(g_.L_, *con_, t, q, p, v, momentum_);
+    } catch (const std::domain_error& e) {
+      return e.what();
+    }
+  }
+
+  // One step from (q0, p0) at time t; dq carries a guess of q1 - q0 on entry (used
+  // unless the step continues the previous one), q1 - q0 on return; dp receives p1 - p0.
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
+    const int s = g_.s_, n = g_.dim(), m = con_->count();
+    StepSummary sum;
+    if (!dynamic_detail::sizes_match(n, q0, p0, dq, sum)) return sum;
+    if (dp.size() != n) dp.resize(n);
+    g_.t0_ = t;
+    double gap = 0.0;
+    for (int a = 0; a < n; ++a) gap = std::fmax(gap, std::fabs(q0[a] - q_end_[a]));
+    const bool continues = have_prev_ && gap <= 1e-12 * (max_abs(q0) + max_abs(dq)) + 1e-300;
+    if (continues) {
+      g_.Xprev_ = yprev_.head(s * n);
+      g_.extrapolate();
+      y_.head(s * n) = g_.Xext_;
+      y_.tail(s * m) = yprev_.tail(s * m);
+    } else {
+      for (int j = 1; j <= s; ++j) y_.segment((j - 1) * n, n) = (static_cast<double>(j) / s) * dq;
+      y_.tail(s * m).setZero();
+    }
+    have_prev_ = false;
+    try {
+      con_->gradients(t, q0, Gs_[0], gt_);  // G_0 at the step's start (it depends on no unknown)
+      Equation eq{*this, q0, p0, dynamic_detail::inf_norm(p0), dynamic_detail::inf_norm(q0)};
+      sum = newton_drive(eq, lu_, Refresh::within_step, g_.options_, y_, r_, dx_, J_, kept_, start_);
+    } catch (const std::domain_error& e) {  // L or g undefined at a node
+      sum.converged = false;
+      sum.message = e.what();
+      kept_.valid = false;
+    }
+    jacobian_updates_ += sum.jacobians;
+    if (!sum.converged) return sum;
+    // q1 and p1~ (the node sums of the last evaluation, the multipliers of the solution)
+    for (int a = 0; a < n; ++a) dq[a] = y_[(s - 1) * n + a];
+    p1_ = p0 + g_.force_;
+    for (int i = 0; i < s; ++i)
+      constrained_detail::subtract_normals(Gs_[static_cast<std::size_t>(i)], sc_ * g_.bh_[i], y_.data() + s * n + i * m,
+                                           p1_.data());
+    if constexpr (kForced) {
+      double w = 0.0;
+      for (int i = 0; i < g_.quad_.points; ++i) w += g_.bh_[i] * g_.F_.col(i).dot(g_.vs_.col(i));
+      sum.work = w;
+    }
+    // the right transform at q1: p1 on the hidden constraint (v1's guess: the last node's velocity)
+    q_end_ = q0 + dq;
+    v1_ = g_.vs_.col(s);
+    const char* failed = "";
+    try {
+      failed = (*proj_)(g_.L_, *con_, t + g_.h_, q_end_, p1_, v1_, momentum_);
+    } catch (const std::domain_error& e) {
+      sum.converged = false;
+      sum.message = e.what();
+      return sum;
+    }
+    if (*failed) {
+      sum.converged = false;
+      sum.message = failed;
+      return sum;
+    }
+    dp = p1_ - p0;
+    if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
+      sum.converged = false;
+      sum.message = "non-finite step";
+      kept_.valid = false;
+      return sum;
+    }
+    yprev_ = y_;
+    have_prev_ = true;
+    return sum;
+  }
+
+ private:
+  // R (the first s n rows) and the constraint rows at y, into r; G_1..G_s evaluated at
+  // the nodes it places (G_0 by the step).
+  void evaluate(const V& q0, const V& p0, const V& y, V& r) const {
+    const int s = g_.s_, n = g_.dim(), m = con_->count(), sn = s * n;
+    X_ = y.head(sn);
+    g_.residual(q0, p0, X_, RX_);
+    const double* lam = y.data() + sn;
+    for (int i = 1; i <= s; ++i) con_->gradients(g_.node_time(i), g_.xs_.col(i), Gs_[static_cast<std::size_t>(i)], gt_);
+    for (int i = 0; i < s; ++i) {  // - h WA_ij G_i^T lambda_i in R_j (node 0: R_0 only)
+      for (int j = 0; j < s; ++j) {
+        const double w = sc_ * g_.WAf_[i][j];
+        if (w != 0.0)
+          constrained_detail::subtract_normals(Gs_[static_cast<std::size_t>(i)], w, lam + i * m, RX_.data() + j * n);
+      }
+    }
+    r.head(sn) = RX_;
+    for (int i = 1; i <= s; ++i) {
+      con_->value(g_.node_time(i), g_.xs_.col(i), gval_);
+      for (int k = 0; k < m; ++k) r[sn + (i - 1) * m + k] = sr_ * gval_[k];
+    }
+  }
+
+  // r and the saddle-point Jacobian at y (the header comment); returns max|J_ij|.
+  double form_jacobian(const V& q0, const V& p0, const V& y, V& r, Eigen::MatrixXd& J) const {
+    const int s = g_.s_, n = g_.dim(), m = con_->count(), sn = s * n;
+    X_ = y.head(sn);
+    const double jx = g_.form_jacobian(q0, X_, JX_);
+    if (sc_ == 0.0) {  // the scales of the constraint rows and of the multipliers (header comment)
+      const double g0 = dynamic_detail::inf_norm(Gs_[0]);
+      double w = 0.0;
+      for (int i = 0; i < s; ++i)
+        for (int j = 0; j < s; ++j) w = std::fmax(w, std::fabs(g_.WAf_[i][j]));
+      const bool ok = std::isfinite(jx) && jx > 0.0 && g0 > 0.0;
+      sr_ = ok ? jx / g0 : 1.0;
+      sc_ = ok ? jx / (g0 * w) : 1.0;
+    }
+    evaluate(q0, p0, y, r);  // (places the nodes and evaluates G_1..G_s there)
+    J.setZero();
+    J.topLeftCorner(sn, sn) = JX_;
+    // the multipliers' curvature at the interior nodes: d(-h WA_ij G_i^T lambda_i)/dX_k =
+    // -h WA_ij A_ik sum_l lambda_il Hess g_l(x_i)
+    for (int i = 1; i < s; ++i) {
+      xi_ = g_.xs_.col(i);
+      con_->second_derivatives(g_.node_time(i), xi_, H_, Gqt_);
+      Hl_.setZero();
+      for (int l = 0; l < m; ++l) Hl_ += (sc_ * y[sn + i * m + l]) * H_[static_cast<std::size_t>(l)];
+      for (int j = 0; j < s; ++j)
+        for (int k = 1; k <= s; ++k) {
+          const double w = -g_.WAf_[i][j] * g_.t_.A[i][k];
+          if (w != 0.0) J.block(j * n, (k - 1) * n, n, n) += w * Hl_;
+        }
+    }
+    for (int i = 0; i < s; ++i) {
+      const Eigen::MatrixXd& G = Gs_[static_cast<std::size_t>(i)];
+      for (int j = 0; j < s; ++j) {
+        const double w = -sc_ * g_.WAf_[i][j];
+        if (w != 0.0) J.block(j * n, sn + i * m, n, m) += w * G.transpose();
+      }
+    }
+    for (int i = 1; i <= s; ++i) {
+      const Eigen::MatrixXd& G = Gs_[static_cast<std::size_t>(i)];
+      for (int k = 1; k <= s; ++k) {
+        const double a = g_.t_.A[i][k];
+        if (a != 0.0) J.block(sn + (i - 1) * m, (k - 1) * n, m, n) = (sr_ * a) * G;
+      }
+    }
+    const double Jmax = max_abs(J);
+    return std::isfinite(Jmax) ? Jmax : INFINITY;
+  }
+
+  struct Equation {
+    using Vector = V;
+    using Matrix = Eigen::MatrixXd;
+    const ConstrainedGalerkinStep& step;
+    const V& q0;
+    const V& p0;
+    double pscale, q0size;
+    void residual(const Vector& y, Vector& r) const { step.evaluate(q0, p0, y, r); }
+    double jacobian(const Vector& y, Vector& r, Matrix& J) const { return step.form_jacobian(q0, p0, y, r, J); }
+    double scale(double yn, double Jmax) const { return pscale + Jmax * yn; }
+    double offset() const { return q0size; }
+  };
+
+  mutable Inner g_;  // the unconstrained stage equations, their tables and workspace
+  constrained_detail::Owned<Con> con_;
+  MomentumMap momentum_;
+  mutable double sr_ = 0.0, sc_ = 0.0;  // the constraint rows' scale, the multipliers'
+  mutable V y_, r_, dx_, start_, yprev_, X_, RX_, gval_, gt_, q_end_, p1_, v1_;
+  mutable Eigen::MatrixXd JX_, J_, Hl_, Gqt_;
+  mutable V xi_;
+  mutable std::vector<Eigen::MatrixXd> H_;  // the constraints' Hessians at a node
+  mutable std::vector<Eigen::MatrixXd> Gs_;  // G_0 .. G_s (m x n each)
+  mutable typename Inner::InverseLU lu_;
+  mutable DriverState kept_;
+  mutable bool have_prev_ = false;
+  mutable long jacobian_updates_ = 0;
+  constrained_detail::Owned<constrained_detail::Projection<Sys, Con>> proj_;
+};
+
+}  // namespace dvm
