@@ -46,8 +46,9 @@ bool final_state(const Problem& pr, const Method& me, double T, std::int64_t n, 
   return true;
 }
 
-// The reference method of a problem: Galerkin Gauss s = 6 where the system runs it,
-// else kahan-li8 of the space's midpoint map.
+// The reference method of a problem: Galerkin s = 6 where the system runs it (Gauss;
+// Lobatto under constraints, which Galerkin holds at its nodes), else kahan-li8 of the
+// space's midpoint map.
 Method reference_method(const Problem& pr, const Method& me, int& order, std::string& name) {
   Method ref;
   ref.solver = SolverKind::newton;
@@ -56,9 +57,9 @@ Method reference_method(const Problem& pr, const Method& me, int& order, std::st
   if (pr.system->caps.galerkin) {
     ref.galerkin = true;
     ref.stages = 6;
-    ref.quadrature = QuadratureKind::gauss;
+    ref.quadrature = pr.constrained() ? QuadratureKind::lobatto : QuadratureKind::gauss;
     order = 12;
-    name = "galerkin gauss s=6 (order 12)";
+    name = std::string("galerkin ") + to_string(ref.quadrature) + " s=6 (order 12)";
     return ref;
   }
   const char* map = pr.system->space == Space::sphere ? "sphere-exp" : pr.system->space == Space::rotation ? "so3-exp" : "midpoint";

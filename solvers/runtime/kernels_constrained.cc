@@ -1,10 +1,11 @@
 // Run kernels of Lagrangians written in a scene with holonomic constraints
 // ([system] constraints): the constrained theta step of solvers/constrained_step.h,
-// composed or not, with the force where the system has one, and the check of a
-// constrained run's initial state. Separate from kernels_written.cc so that the two
+// composed or not, and Lobatto Galerkin (solvers/constrained_galerkin_step.h), with the
+// force where the system has one, and the check of a constrained run's initial state. Separate from kernels_written.cc so that the two
 // compile side by side.
 #include <Eigen/SVD>
 
+#include "solvers/constrained_galerkin_step.h"
 #include "solvers/runtime/kernels_dynamic.h"
 
 namespace dvm::kernels {
@@ -72,8 +73,9 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
                                           const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,
                                           const Eigen::VectorXd& p, const Eigen::VectorXd& v0, const RunReport& base_in,
                                           const std::shared_ptr<const ControlSignal>& signal) {
-  if (me.form != Form::lagrangian || me.galerkin)  // (validate refuses it first)
-    throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps only");
+  if (me.form != Form::lagrangian || (me.galerkin && me.quadrature != QuadratureKind::lobatto))  // (validate refuses it first)
+    throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps and "
+                     "Lobatto Galerkin only");
   const int n = L.dim();
   if (n > kMaxDenseDynamicDim)
     throw InputError("integrator.map: map = \"" + me.map->name + "\" with system.constraints needs dense " +
@@ -83,11 +85,25 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
   base.step_path = StepPath::generic;
   const StepOptions opt = me.step_options();
   const double h = pr.step;
-  const ThetaMap R = dynamic_theta_map(me);
   const auto con = std::make_shared<const WrittenConstraints>(pr.written);
   const MomentumMap momentum = L.separable()               ? MomentumMap::constant
                                : L.parts().split.quadratic ? MomentumMap::linear
                                                            : MomentumMap::general;
+  if (me.galerkin) {  // the constraints at the Lobatto nodes (validate refused Gauss)
+    auto galerkin = [&](auto force) {
+      using Force = std::remove_const_t<typename decltype(force)::element_type>;
+      return stepper_run(view,
+                         ConstrainedGalerkinStep<WrittenDynamic, WrittenConstraints, Force>(L, me.stages, h, con, opt,
+                                                                                           momentum, force),
+                         q, p, v0, base, pr.steps);
+    };
+    if (!pr.forced()) return galerkin(std::shared_ptr<const NoForce>());
+    const auto force = std::make_shared<WrittenForce>(pr.written, signal);
+    require_finite_force(*force, pr, q, v0);
+    base.forced = true;
+    return galerkin(std::shared_ptr<const WrittenForce>(force));
+  }
+  const ThetaMap R = dynamic_theta_map(me);
   auto run_with = [&](auto force, auto nc) {
     using Force = std::remove_const_t<typename decltype(force)::element_type>;
     constexpr int NC = decltype(nc)::value, MC = NC == Eigen::Dynamic ? Eigen::Dynamic : 1;

@@ -25,8 +25,9 @@
 //   system.constraints  ConstrainedThetaStep (solvers/constrained_step.h), forces or
 //                   not, composed or not (make_constrained_run, kernels_constrained.cc:
 //                   of fixed size for 2 and 3 coordinates and one constraint without a
-//                   force); the initial state checked against the constraints
-//                   (check_constrained_start)
+//                   force), and ConstrainedGalerkinStep (Lobatto,
+//                   solvers/constrained_galerkin_step.h); the initial state checked
+//                   against the constraints (check_constrained_start)
 //   L(t, q, v)      (a written Lagrangian that reads t) the generic steps above, which
 //                   evaluate L at their nodes' times (has_time); its text is given no
 //                   separable or mechanical structure (WrittenParts), so no structured
@@ -454,7 +455,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 
-  // system.constraints: the constrained theta step (kernels_constrained.cc)
+  // system.constraints: the constrained theta and Galerkin steps (kernels_constrained.cc)
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.constrained()) return make_constrained_run(L, pr, me, view, q, p, v0, base, signal);
 

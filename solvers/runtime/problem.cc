@@ -165,6 +165,10 @@ void validate(const Problem& pr, const Method& me) {
     if (me.stages < 1 || me.stages > kGalerkinStagesMax)
       throw InputError("integrator.stages: got " + std::to_string(me.stages) + ", expected a whole number from 1 to " +
                        std::to_string(kGalerkinStagesMax));
+    if (pr.constrained() && me.quadrature != QuadratureKind::lobatto)
+      throw InputError("integrator.quadrature: method = \"galerkin\" with system.constraints holds them at its "
+                       "quadrature nodes, which must include the ends of the step: quadrature = \"lobatto\", not \"" +
+                       std::string(to_string(me.quadrature)) + "\"");
   }
 
   // [integrator] map
@@ -319,13 +323,16 @@ void validate(const Problem& pr, const Method& me) {
   // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
-                             "theta-family maps (constrained or not) and by Galerkin, for Lagrangians written on R^n";
+                             "theta-family maps (constrained or not) and by Galerkin (unconstrained), for Lagrangians "
+                             "written on R^n";
     if (!pr.written || sys.space != Space::euclidean)
       throw InputError(what + " (system.lagrangian), not " +
                        (pr.written ? std::string("on ") + to_string(sys.space) : "the built-in system " + name));
     if (pr.boundary_value) throw InputError(what + "; problem.kind = \"boundary-value\" takes no steps");
     if (me.form != Form::lagrangian)
       throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"");
+    if (me.galerkin && pr.constrained())
+      throw InputError(what + "; not method = \"galerkin\" with system.constraints");
     if (me.composition != "none" && me.scheme().kind == CompositionKind::rkn_splitting)
       throw InputError("integrator.composition: --linearize differentiates theta steps and their compositions; a "
                        "splitting into kicks and drifts (\"" + me.composition + "\") gives no derivative");

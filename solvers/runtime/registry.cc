@@ -381,7 +381,9 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       factories::written,
       "the coordinates"};
   // With constraints (and forces or not): the constrained theta step (the lagrangian
-  // form of the theta-family maps, composed or not; solvers/constrained_step.h).
+  // form of the theta-family maps, composed or not; solvers/constrained_step.h) and
+  // Galerkin with Lobatto quadrature (solvers/constrained_galerkin_step.h; validate
+  // refuses Gauss).
   static const SystemEntry rn_constrained = {
       "lagrangian with constraints",
       "written in the scene, with holonomic constraints",
@@ -391,11 +393,12 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       {{Form::lagrangian},
        true,
        true,
-       false,
+       true,
        false,
        "system.constraints enter the lagrangian form of the theta-family maps and their compositions (the "
-       "constrained discrete Euler-Lagrange equations with multipliers); Galerkin, the hamiltonian, SODE and Newmark "
-       "forms, boundary values, solver = \"tiny\" and written maps take no constraints",
+       "constrained discrete Euler-Lagrange equations with multipliers) and Galerkin with quadrature = \"lobatto\" "
+       "(the constraints at its nodes); Gauss Galerkin, the hamiltonian, SODE and Newmark forms, boundary values, "
+       "solver = \"tiny\" and written maps take no constraints",
        false,
        false},
       factories::written,

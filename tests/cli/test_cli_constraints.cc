@@ -10,6 +10,7 @@
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -92,30 +93,44 @@ BOOST_AUTO_TEST_CASE(the_scissor_lift_agrees_with_its_one_coordinate_twin) {
   BOOST_TEST(c.at("derivatives").get<std::string>() == "program");
 }
 
-// `dvm converge` measures the orders of the constrained steps (its reference: the
-// constrained midpoint composed by kahan-li8): 2 for the midpoint, 4 for the triple jump,
-// 8 for kahan-li8; with forces (the slider-crank) 2 and 4.
+// `dvm converge` measures the orders of the constrained steps (its reference: Lobatto
+// Galerkin s = 6 under the constraints, order 12): 2 for the midpoint, 4 for the triple
+// jump, 8 for kahan-li8; Lobatto Galerkin 2s for s = 1, 2, 3 (the constraints at its
+// nodes); with forces (the slider-crank) 2 and 4, and Galerkin 4 and 6; the four-bar
+// linkage and the scissor lift (eight constraints) 2 and Galerkin 4.
 BOOST_AUTO_TEST_CASE(converge_measures_the_orders_under_constraints_and_forces) {
   struct Case {
     const char* scene;
-    std::string composition, steps;
+    std::string method, steps;  // a composition, or "lobatto:s"
     double order;
   };
   const std::vector<Case> cases = {
       {"pendulum_cartesian.toml", "none", "40,80,160,320", 2.0},
       {"pendulum_cartesian.toml", "triple-jump:4", "20,40,80,160", 4.0},
       {"pendulum_cartesian.toml", "kahan-li8", "5,10,20", 8.0},
+      {"pendulum_cartesian.toml", "lobatto:1", "10,20,40,80", 2.0},
+      {"pendulum_cartesian.toml", "lobatto:2", "10,20,40,80", 4.0},
+      {"pendulum_cartesian.toml", "lobatto:3", "4,8,16,32", 6.0},
       {"four_bar.toml", "none", "40,80,160,320", 2.0},
+      {"four_bar.toml", "lobatto:2", "20,40,80,160", 4.0},
       {"slider_crank.toml", "none", "40,80,160,320", 2.0},
       {"slider_crank.toml", "triple-jump:4", "20,40,80,160", 4.0},
+      {"slider_crank.toml", "lobatto:2", "20,40,80,160", 4.0},
+      {"slider_crank.toml", "lobatto:3", "10,20,40,80", 6.0},
+      {"scissor_lift.toml", "lobatto:2", "10,20,40,80", 4.0},
   };
   for (const Case& c : cases) {
-    BOOST_TEST_CONTEXT(c.scene << ", " << c.composition) {
-      const Output o = dvm({"converge", scene(c.scene), "--t-end", "1", "--steps-list", c.steps, "--json", "--set",
-                            "integrator.composition=\"" + c.composition + "\""});
+    BOOST_TEST_CONTEXT(c.scene << ", " << c.method) {
+      std::vector<std::string> args = {"converge", scene(c.scene), "--t-end", "1", "--steps-list", c.steps, "--json"};
+      if (c.method.rfind("lobatto:", 0) == 0)
+        args.insert(args.end(), {"--set", "integrator.method=\"galerkin\"", "--set", "integrator.quadrature=\"lobatto\"",
+                                 "--set", "integrator.stages=" + c.method.substr(8)});
+      else
+        args.insert(args.end(), {"--set", "integrator.composition=\"" + c.method + "\""});
+      const Output o = dvm(args);
       BOOST_TEST_REQUIRE(o.status == 0, o.err);
       const double order = parse_json(o.out).at("fitted_order").get<double>();
-      BOOST_TEST_MESSAGE(c.scene << " " << c.composition << ": " << order);
+      BOOST_TEST_MESSAGE(c.scene << " " << c.method << ": " << order);
       BOOST_TEST(std::fabs(order - c.order) <= 0.1 * c.order, o.out);
     }
   }
@@ -396,7 +411,9 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused("pendulum.toml", {"system.constraints=[\"theta\"]"}, {"system.constraints", "belongs to a written system"});
   refused("spherical_pendulum_written.toml", {"system.constraints=[\"x\"]"}, {"system.constraints", "on R^n"});
   // what the constrained step does not take
-  refused(P, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with constraints"});
+  refused(P, {"integrator.method=galerkin"}, {"integrator.quadrature", "system.constraints", "\"lobatto\""});
+  refused(P, {"integrator.method=galerkin", "integrator.quadrature=\"lobatto\"", "integrator.stages=7"},
+          {"integrator.stages"});
   refused(P, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian with constraints"});
   refused(P, {"integrator.form=sode1"}, {"integrator.form"});
   refused(P, {"integrator.map=explicit-euler", "integrator.composition=blanes-moan4"},
@@ -474,4 +491,12 @@ BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
     const Eigen::Matrix4d before = P.transpose() * J * P, after = P.transpose() * Q.transpose() * J * Q * P;
     BOOST_TEST((after - before).cwiseAbs().maxCoeff() <= 1e-12 * before.cwiseAbs().maxCoeff());
   }
+  // the constrained Galerkin step gives no derivative: refused before anything is written
+  std::remove(npy.c_str());
+  const Output g = dvm({"run", scene("pendulum_cartesian.toml"), "--no-output", "--linearize", npy, "--set",
+                        "integrator.method=\"galerkin\"", "--set", "integrator.quadrature=\"lobatto\""});
+  BOOST_TEST(g.status == 2);
+  BOOST_TEST(g.err.find("--linearize") != std::string::npos, g.err);
+  BOOST_TEST(g.err.find("system.constraints") != std::string::npos, g.err);
+  BOOST_TEST(!file_exists(npy));
 }
