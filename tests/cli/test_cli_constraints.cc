@@ -97,7 +97,8 @@ BOOST_AUTO_TEST_CASE(the_scissor_lift_agrees_with_its_one_coordinate_twin) {
 // Galerkin s = 6 under the constraints, order 12): 2 for the midpoint, 4 for the triple
 // jump, 8 for kahan-li8; Lobatto Galerkin 2s for s = 1, 2, 3 (the constraints at its
 // nodes); with forces (the slider-crank) 2 and 4, and Galerkin 4 and 6; the four-bar
-// linkage and the scissor lift (eight constraints) 2 and Galerkin 4.
+// linkage and the scissor lift (eight constraints) 2 and Galerkin 4; a support that
+// moves (a constraint in t), Galerkin 4 and 6.
 BOOST_AUTO_TEST_CASE(converge_measures_the_orders_under_constraints_and_forces) {
   struct Case {
     const char* scene;
@@ -118,10 +119,21 @@ BOOST_AUTO_TEST_CASE(converge_measures_the_orders_under_constraints_and_forces) 
       {"slider_crank.toml", "lobatto:2", "20,40,80,160", 4.0},
       {"slider_crank.toml", "lobatto:3", "10,20,40,80", 6.0},
       {"scissor_lift.toml", "lobatto:2", "10,20,40,80", 4.0},
+      {"moving support", "lobatto:2", "10,20,40,80", 4.0},
+      {"moving support", "lobatto:3", "10,20,40,80", 6.0},
   };
+  // a pendulum whose support moves, y_s = A cos(w t): a constraint in t, held by Galerkin
+  // at the nodes' times
+  const std::string moving = write_scene(
+      "moving_support.toml",
+      "[system]\ncoordinates = [\"x\", \"y\"]\nparams = { m = 1.3, l = 0.9, g = 9.81, A = 0.2, w = 2.5 }\n"
+      "lagrangian = \"m*(x_dot^2 + y_dot^2)/2 - m*g*y\"\nconstraints = [\"x^2 + (y - A*cos(w*t))^2 - l^2\"]\n"
+      "[initial]\nq = [0.579795918513922, -0.4883579685560397]\nv = [0.0, 0.0]\n"
+      "[integrator]\nmap = \"midpoint\"\nstep = 0.01\nt_end = 1.0\n");
   for (const Case& c : cases) {
     BOOST_TEST_CONTEXT(c.scene << ", " << c.method) {
-      std::vector<std::string> args = {"converge", scene(c.scene), "--t-end", "1", "--steps-list", c.steps, "--json"};
+      const std::string path = std::string(c.scene) == "moving support" ? moving : scene(c.scene);
+      std::vector<std::string> args = {"converge", path, "--t-end", "1", "--steps-list", c.steps, "--json"};
       if (c.method.rfind("lobatto:", 0) == 0)
         args.insert(args.end(), {"--set", "integrator.method=\"galerkin\"", "--set", "integrator.quadrature=\"lobatto\"",
                                  "--set", "integrator.stages=" + c.method.substr(8)});
