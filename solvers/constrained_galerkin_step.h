@@ -42,7 +42,8 @@
 // (so that the last step's multipliers are the next one's guess). The increments' guess
 // is the previous polynomial extrapolated, as unconstrained.
 //
-// The step gives no derivative (dvm run --linearize refuses it). Workspace is allocated
+// derivative() and control_derivative() give the step's Jacobians by the implicit
+// function theorem (dvm run --linearize). Workspace is allocated
 // at construction; forming a Jacobian allocates (the constraints' Hessians,
 // WrittenConstraints::second_derivatives), the iterations and steps that keep one do
 // not. One object must not be used from two threads at once.
@@ -136,6 +137,36 @@ class ConstrainedGalerkinStep {
     g_.reset();
   }
 
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const { return g_.controls(); }
+
+  // The derivative A = d(q1, p1)/d(q0, p0) (2n x 2n) of the step from (q0, p0) at time t0
+  // whose increment was dq, by the implicit function theorem (no finite differences):
+  // on the stage equations with their multipliers and constraint rows, F(Y; q0, p0) = 0
+  // for Y = (X, lambda / sc), dY = -J^{-1} dF/d(q0, p0) with J the saddle-point Jacobian
+  // above (exact: the multipliers' curvature included), where at fixed Y
+  //   dR_j/dq0 = sum_i [h WA_ij (G_q,i - lambda_i . Hess g(x_i)) + WB_ij L_vq,i],
+  //   dR_0/dp0 = I,   d(sr g(x_i))/dq0 = sr G_i,
+  // (the curvature at node 0 too, whose G_0 = Dg(q0) moves with q0); then
+  //   dq1 = dq0 + dX_s,
+  //   dp1~ = dp0 + sum_i h b_i [(G_q,i - lambda_i . Hess g(x_i)) dx_i + G_v,i dv_i]
+  //          - sum_{i<s} h b_i G_i^T dlambda_i,
+  // dx_i = dq0 + sum_k A_ik dX_k, dv_i = sum_k (B_ik / h) dX_k, and the right transform's
+  // derivative as ConstrainedThetaStep's (constrained_detail::right_transform_derivative).
+  // The stage increments and multipliers are found again by a copy of the step (this
+  // step's carried state untouched). Without forces A is symplectic on the constraint's
+  // cotangent bundle. False where a solve fails or a matrix is singular. Allocates.
+  bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return linearise(t0, q0, p0, dq, &A, nullptr);
+  }
+  // The derivative B = d(q1, p1)/du (2n x c) in the force's control inputs u (held over
+  // the step): u enters through F_i, dR_j/du = sum_i h WA_ij F_u,i, and dp1~ gains
+  // h sum_i b_i F_u,i du.
+  template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
+  bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    return linearise(t0, q0, p0, dq, nullptr, &B);
+  }
+
   // Puts p on the hidden constraint at (t, q), as ConstrainedThetaStep::project.
   std::string project(double t, const V& q, V& p, V& v) const {
     try {
@@ -217,6 +248,105 @@ class ConstrainedGalerkinStep {
   }
 
  private:
+  bool linearise(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd* A, Eigen::MatrixXd* B) const {
+    using Mat = Eigen::MatrixXd;
+    const int s = g_.s_, n = g_.dim(), m = con_->count(), sn = s * n, K = s * (n + m), nodes = s + 1;
+    const int c = controls(), cols = 2 * n + c;
+    if (q0.size() != n || p0.size() != n || dq.size() != n)
+      throw std::invalid_argument("ConstrainedGalerkinStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates; the system has " + std::to_string(n));
+    ConstrainedGalerkinStep S = *this;  // the solution Y of this step, found again
+    S.reset();
+    V d = dq, e(n);
+    if (!S.step(t0, q0, p0, d, e).converged) return false;
+    const V Y = S.y_;
+    V r(K);
+    Mat J(K, K);
+    S.g_.t0_ = t0;
+    S.con_->gradients(t0, q0, S.Gs_[0], S.gt_);
+    if (!std::isfinite(S.form_jacobian(q0, p0, Y, r, J))) return false;  // (and the nodes at Y)
+    const Eigen::PartialPivLU<Mat> lu(J);
+    if (!constrained_detail::lu_invertible(lu)) return false;
+    // dF/d(q0, p0, u) at fixed Y, and the nodes' blocks for dp1~
+    Mat Fd = Mat::Zero(K, cols);
+    Fd.block(0, n, n, n).setIdentity();
+    std::vector<Mat> Gc(static_cast<std::size_t>(nodes)), Gv(static_cast<std::size_t>(nodes)),
+        Fu(static_cast<std::size_t>(nodes));
+    std::vector<Mat> H;
+    V x(n), v(n), Lq(n), Lv(n), F(n);
+    Mat Lqq(n, n), Lqv(n, n), Lvv(n, n), Fq(n, n), Fv(n, n), Gqt;
+    for (int i = 0; i < nodes; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      x = S.g_.xs_.col(i);
+      v = S.g_.vs_.col(i);
+      const double ti = S.g_.node_time(i);
+      if constexpr (has_time<Sys>::value) S.g_.L_.set_time(ti);
+      S.g_.L_.hessian(x, v, Lq, Lv, Lqq, Lqv, Lvv);
+      Gc[k] = Lqq;  // G_q,i - lambda_i . Hess g(x_i)
+      Gv[k] = Lqv;
+      if constexpr (kForced) {
+        S.g_.force_fn_->jacobian(ti, x, v, F, Fq, Fv, c > 0 ? &Fu[k] : nullptr);
+        Gc[k] += Fq;
+        Gv[k] += Fv;
+      }
+      if (i < s) {  // the multiplier's curvature at the node
+        S.con_->second_derivatives(ti, x, H, Gqt);
+        for (int l = 0; l < m; ++l) Gc[k] -= (S.sc_ * Y[sn + i * m + l]) * H[static_cast<std::size_t>(l)];
+      }
+      for (int j = 0; j < s; ++j) {
+        Fd.block(j * n, 0, n, n) += S.g_.WAf_[i][j] * Gc[k] + S.g_.t_.WB[i][j] * Lqv.transpose();
+        if (c > 0) Fd.block(j * n, 2 * n, n, c) += S.g_.WAf_[i][j] * Fu[k];
+      }
+      if (i >= 1) Fd.block(sn + (i - 1) * m, 0, m, n) = S.sr_ * S.Gs_[k];
+    }
+    const Mat dY = -lu.solve(Fd);
+    Mat dq1 = dY.middleRows((s - 1) * n, n);
+    dq1.leftCols(n) += Mat::Identity(n, n);
+    Mat dpt = Mat::Zero(n, cols), dx(n, cols), dv(n, cols);
+    dpt.block(0, n, n, n).setIdentity();
+    for (int i = 0; i < nodes; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      dx.setZero();
+      dx.leftCols(n).setIdentity();
+      dv.setZero();
+      for (int j = 1; j <= s; ++j) {
+        dx += S.g_.t_.A[i][j] * dY.middleRows((j - 1) * n, n);
+        dv += S.g_.Bf_[j - 1][i] * dY.middleRows((j - 1) * n, n);
+      }
+      dpt += S.g_.bh_[i] * (Gc[k] * dx + Gv[k] * dv);
+      if (c > 0) dpt.rightCols(c) += S.g_.bh_[i] * Fu[k];
+      if (i < s) dpt -= (S.sc_ * S.g_.bh_[i]) * S.Gs_[k].transpose() * dY.middleRows(sn + i * m, m);
+    }
+    // the right transform at the solution: p1~, and its projection (mu, v1, G1)
+    V p1 = p0 + S.g_.force_, q1 = q0 + Y.segment((s - 1) * n, n), v1 = S.g_.vs_.col(s);
+    for (int i = 0; i < s; ++i)
+      constrained_detail::subtract_normals(S.Gs_[static_cast<std::size_t>(i)], S.sc_ * S.g_.bh_[i],
+                                           Y.data() + sn + i * m, p1.data());
+    const double t1 = t0 + g_.h_;
+    try {
+      if (*(*S.proj_)(S.g_.L_, *S.con_, t1, q1, p1, v1, momentum_)) return false;
+    } catch (const std::domain_error&) {
+      return false;
+    }
+    Mat dp1;
+    if (!constrained_detail::right_transform_derivative(S.g_.L_, *S.con_, t1, q1, v1, S.proj_->mu, S.proj_->G, dq1, dpt,
+                                                        dp1))
+      return false;
+    if (A) {
+      A->resize(2 * n, 2 * n);
+      A->topRows(n) = dq1.leftCols(2 * n);
+      A->bottomRows(n) = dp1.leftCols(2 * n);
+      if (!A->allFinite()) return false;
+    }
+    if (B) {
+      B->resize(2 * n, c);
+      B->topRows(n) = dq1.rightCols(c);
+      B->bottomRows(n) = dp1.rightCols(c);
+      if (!B->allFinite()) return false;
+    }
+    return true;
+  }
+
   // R (the first s n rows) and the constraint rows at y, into r; G_1..G_s evaluated at
   // the nodes it places (G_0 by the step).
   void evaluate(const V& q0, const V& p0, const V& y, V& r) const {

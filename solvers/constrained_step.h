@@ -286,6 +286,54 @@ struct Projection {
   }
 };
 
+// Whether a partially pivoted LU's pivots are all above 1e-13 of the largest (the
+// saddle-point matrices of the steps' derivatives are singular exactly where the steps'
+// own are).
+inline bool lu_invertible(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu) {
+  const auto d = lu.matrixLU().diagonal().cwiseAbs();
+  const double top = d.maxCoeff();
+  return std::isfinite(top) && top > 0.0 && d.minCoeff() > 1e-13 * top;
+}
+
+// The derivative of the right transform (equation 2 of the header comment) at its
+// solution (t1, q1; v1, mu, G1 = Dg(t1, q1)): given the derivatives dq1 and dp1~ of q1
+// and of the momentum before projection in some parameters (n x k each), dp1 of
+// p1 = p1~ - G1^T mu. Differentiating L_v(q1, v1) + G1^T mu = p1~, G1 v1 + g_t = 0,
+//   [L_vv  G1^T] [dv1]     [ L_vq + H_mu                   ]        [ -I ]
+//   [G1     0  ] [dmu] = - [ v1^T Hess g_i + grad (g_t)_i  ] dq1 -  [  0 ] dp1~,
+// H_mu = sum mu_i Hess g_i, and dp1 = dp1~ - H_mu dq1 - G1^T dmu. False where the
+// matrix is singular. Allocates.
+template <class Sys, class Con>
+bool right_transform_derivative(const Sys& L, const Con& con, double t1, const Eigen::VectorXd& q1,
+                                const Eigen::VectorXd& v1, const Eigen::VectorXd& mu, const Eigen::MatrixXd& G1,
+                                const Eigen::MatrixXd& dq1, const Eigen::MatrixXd& dpt, Eigen::MatrixXd& dp1) {
+  using M = Eigen::MatrixXd;
+  const Eigen::Index n = q1.size(), m = mu.size();
+  std::vector<M> H1;
+  M Gqt1;
+  con.second_derivatives(t1, q1, H1, Gqt1);
+  M Hm = M::Zero(n, n), Hv(m, n);
+  for (Eigen::Index i = 0; i < m; ++i) {
+    Hm += mu[i] * H1[static_cast<std::size_t>(i)];
+    Hv.row(i) = v1.transpose() * H1[static_cast<std::size_t>(i)] + Gqt1.row(i);
+  }
+  if constexpr (has_time<Sys>::value) L.set_time(t1);
+  Eigen::VectorXd Lq1(n), Lv1(n);
+  M Lqq1(n, n), Lqv1(n, n), Lvv1(n, n);
+  L.hessian(q1, v1, Lq1, Lv1, Lqq1, Lqv1, Lvv1);
+  M K2 = M::Zero(n + m, n + m), R2(n + m, dq1.cols());
+  K2.topLeftCorner(n, n) = Lvv1;
+  K2.topRightCorner(n, m) = G1.transpose();
+  K2.bottomLeftCorner(m, n) = G1;
+  R2.topRows(n) = (Lqv1.transpose() + Hm) * dq1 - dpt;
+  R2.bottomRows(m) = Hv * dq1;
+  const Eigen::PartialPivLU<M> lu2(K2);
+  if (!lu_invertible(lu2)) return false;
+  const M Y2 = -lu2.solve(R2);
+  dp1 = dpt - Hm * dq1 - G1.transpose() * Y2.bottomRows(m);
+  return dp1.allFinite();
+}
+
 }  // namespace constrained_detail
 
 // The constrained step: equation 1 by the driver, then the projection. Sys: a
@@ -440,24 +488,19 @@ class ConstrainedThetaStep {
     const V lambda = (G0 * G0.transpose()).ldlt().solve(G0 * r);
     V q1 = q0 + D, p1 = p0 + hG - G0.transpose() * lambda, v1 = D / h;
     const double t1 = t0 + h;
-    constrained_detail::Projection<Sys, Con> proj(n, m);
+    // (the step's own projection, with its momentum map: M^{-1} kept where M is constant)
     try {
-      if (*proj(L_, con, t1, q1, p1, v1, MomentumMap::general)) return false;
+      if (*w.projection(L_, con, t1, q1, p1, v1, momentum_)) return false;
     } catch (const std::domain_error&) {
       return false;
     }
-    G1 = proj.G;
-    const V mu = proj.mu;
-    std::vector<M> H0, H1;
-    M Gqt0, Gqt1;
+    G1 = w.projection.G;
+    const V mu = w.projection.mu;
+    std::vector<M> H0;
+    M Gqt0;
     con.second_derivatives(t0, q0, H0, Gqt0);
-    con.second_derivatives(t1, q1, H1, Gqt1);
-    M Hl = M::Zero(n, n), Hm = M::Zero(n, n), Hv(m, n);
-    for (int i = 0; i < m; ++i) {
-      Hl += lambda[i] * H0[static_cast<std::size_t>(i)];
-      Hm += mu[i] * H1[static_cast<std::size_t>(i)];
-      Hv.row(i) = v1.transpose() * H1[static_cast<std::size_t>(i)] + Gqt1.row(i);
-    }
+    M Hl = M::Zero(n, n);
+    for (int i = 0; i < m; ++i) Hl += lambda[i] * H0[static_cast<std::size_t>(i)];
     // equation 1
     M J1 = M::Zero(n + m, n + m), R1 = M::Zero(n + m, in);
     J1.topLeftCorner(n, n) = FD;
@@ -467,8 +510,8 @@ class ConstrainedThetaStep {
     R1.block(0, n, n, n) = M::Identity(n, n);
     R1.bottomLeftCorner(m, n) = G1;
     if (c > 0) R1.topRightCorner(n, c) = h * (1.0 - th) * Fu;
-    const Eigen::FullPivLU<M> lu1(J1);
-    if (!lu1.isInvertible()) return false;
+    const Eigen::PartialPivLU<M> lu1(J1);
+    if (!constrained_detail::lu_invertible(lu1)) return false;
     const M Y1 = -lu1.solve(R1);  // d(D, lambda) / d(q0, p0)
     const M dD = Y1.topRows(n), dl = Y1.bottomRows(m);
     M dq1 = dD;
@@ -478,19 +521,8 @@ class ConstrainedThetaStep {
     dpt.block(0, n, n, n) += M::Identity(n, n);
     if (c > 0) dpt.rightCols(c) += h * Fu;
     // equation 2
-    V Lq1(n), Lv1(n);
-    M Lqq1(n, n), Lqv1(n, n), Lvv1(n, n);
-    L_.hessian(q1, v1, Lq1, Lv1, Lqq1, Lqv1, Lvv1);
-    M K2 = M::Zero(n + m, n + m), R2(n + m, in);
-    K2.topLeftCorner(n, n) = Lvv1;
-    K2.topRightCorner(n, m) = G1.transpose();
-    K2.bottomLeftCorner(m, n) = G1;
-    R2.topRows(n) = (Lqv1.transpose() + Hm) * dq1 - dpt;
-    R2.bottomRows(m) = Hv * dq1;
-    const Eigen::FullPivLU<M> lu2(K2);
-    if (!lu2.isInvertible()) return false;
-    const M Y2 = -lu2.solve(R2);
-    const M dp1 = dpt - Hm * dq1 - G1.transpose() * Y2.bottomRows(m);
+    M dp1;
+    if (!constrained_detail::right_transform_derivative(L_, con, t1, q1, v1, mu, G1, dq1, dpt, dp1)) return false;
     A.resize(2 * n, 2 * n);
     A.topRows(n) = dq1.leftCols(2 * n);
     A.bottomRows(n) = dp1.leftCols(2 * n);
