@@ -320,19 +320,17 @@ void validate(const Problem& pr, const Method& me) {
                      ", expected a number in (0, 1) (relative residual tolerance)");
 
   // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative,
-  // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative)
+  // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative,
+  // ConstrainedGalerkinStep::derivative)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
-                             "theta-family maps (constrained or not) and by Galerkin (unconstrained), for Lagrangians "
-                             "written on R^n";
+                             "theta-family maps and by Galerkin (constrained or not), for Lagrangians written on R^n";
     if (!pr.written || sys.space != Space::euclidean)
       throw InputError(what + " (system.lagrangian), not " +
                        (pr.written ? std::string("on ") + to_string(sys.space) : "the built-in system " + name));
     if (pr.boundary_value) throw InputError(what + "; problem.kind = \"boundary-value\" takes no steps");
     if (me.form != Form::lagrangian)
       throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"");
-    if (me.galerkin && pr.constrained())
-      throw InputError(what + "; not method = \"galerkin\" with system.constraints");
     if (me.composition != "none" && me.scheme().kind == CompositionKind::rkn_splitting)
       throw InputError("integrator.composition: --linearize differentiates theta steps and their compositions; a "
                        "splitting into kicks and drifts (\"" + me.composition + "\") gives no derivative");
