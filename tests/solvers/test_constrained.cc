@@ -77,6 +77,62 @@ State cartesian_state(double a, double w) {
   return s;
 }
 
+// Central differences (eps 1e-6) of the map (q0, p0) -> (q1, p1) that `advance(q, p, dq,
+// dp)` takes one step of (dq, dp: the increments).
+template <class Advance>
+Eigen::MatrixXd central_differences(const Advance& advance, const VectorXd& q0, const VectorXd& p0) {
+  const Eigen::Index n = q0.size();
+  Eigen::MatrixXd F(2 * n, 2 * n);
+  const double eps = 1e-6;
+  for (Eigen::Index j = 0; j < 2 * n; ++j) {
+    VectorXd qa = q0, pa = p0, qb = q0, pb = p0, da, ea, db, eb;
+    (j < n ? qa[j] : pa[j - n]) += eps;
+    (j < n ? qb[j] : pb[j - n]) -= eps;
+    advance(qa, pa, da, ea);
+    advance(qb, pb, db, eb);
+    F.col(j) << (da - db + qa - qb) / (2 * eps), (ea - eb + pa - pb) / (2 * eps);
+  }
+  return F;
+}
+// J = [0 I; -I 0] of 2n x 2n
+Eigen::MatrixXd J_of(Eigen::Index n) {
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
+  J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
+  return J;
+}
+
+// The double pendulum in Cartesian coordinates (rods l and 1.1, masses m and 0.7), and a
+// state on its constraints moving along them.
+std::shared_ptr<WrittenSystem> cartesian_double() {
+  return system_of({"x1", "y1", "x2", "y2"},
+                   "m*(x1_dot^2 + y1_dot^2)/2 + 0.7*(x2_dot^2 + y2_dot^2)/2 - g*(m*y1 + 0.7*y2)",
+                   {"x1^2 + y1^2 - l^2", "(x2 - x1)^2 + (y2 - y1)^2 - 1.1^2"});
+}
+void cartesian_double_state(VectorXd& q, VectorXd& p) {
+  const double a = 0.8, b = 1.9, wa = 0.6, wb = -0.4;
+  q.resize(4);
+  p.resize(4);
+  q << kL * std::sin(a), -kL * std::cos(a), kL * std::sin(a) + 1.1 * std::sin(b), -kL * std::cos(a) - 1.1 * std::cos(b);
+  VectorXd v(4);
+  v << kL * std::cos(a) * wa, kL * std::sin(a) * wa, kL * std::cos(a) * wa + 1.1 * std::cos(b) * wb,
+      kL * std::sin(a) * wa + 1.1 * std::sin(b) * wb;
+  p << kM * v[0], kM * v[1], 0.7 * v[2], 0.7 * v[3];
+}
+// A damped pendulum whose support moves as A cos(w t) (a constraint in t), and a state on
+// its circle at t0, moving with the support.
+std::shared_ptr<WrittenSystem> damped_on_moving_support() {
+  return system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + (y - A*cos(w*t))^2 - l^2"},
+                   {{0, "-c*x_dot"}, {1, "-c*(y_dot + A*w*sin(w*t))"}});
+}
+void moving_support_state(double t0, VectorXd& q, VectorXd& p) {
+  const double ys = 0.2 * std::cos(2.5 * t0);
+  q.resize(2);
+  p.resize(2);
+  q << kL * std::sin(0.7), ys - kL * std::cos(0.7);
+  p << kM * 0.3 * std::cos(0.7), kM * (0.3 * std::sin(0.7) - 0.2 * 2.5 * std::sin(2.5 * t0));
+}
+
 Step step_of(double h, double theta = 0.5, const std::shared_ptr<WrittenSystem>& s = cartesian) {
   return Step(WrittenDynamic(s), ThetaMap(theta), h, std::make_shared<WrittenConstraints>(s), {}, MomentumMap::constant);
 }
@@ -202,18 +258,9 @@ BOOST_AUTO_TEST_CASE(constrained_lobatto_galerkin_keeps_its_order_2s) {
 // it by about h^5 or h^7, 3e-4 or 1e-5). With a force, on a damped pendulum on a moving
 // support (a constraint in t), the derivative against central differences too.
 BOOST_AUTO_TEST_CASE(the_derivative_of_constrained_lobatto_galerkin_and_its_symplecticity) {
-  const auto pendulum2 = system_of(
-      {"x1", "y1", "x2", "y2"}, "m*(x1_dot^2 + y1_dot^2)/2 + 0.7*(x2_dot^2 + y2_dot^2)/2 - g*(m*y1 + 0.7*y2)",
-      {"x1^2 + y1^2 - l^2", "(x2 - x1)^2 + (y2 - y1)^2 - 1.1^2"});
-  VectorXd q0(4), p0(4);
-  {
-    const double a = 0.8, b = 1.9, wa = 0.6, wb = -0.4;
-    q0 << kL * std::sin(a), -kL * std::cos(a), kL * std::sin(a) + 1.1 * std::sin(b), -kL * std::cos(a) - 1.1 * std::cos(b);
-    VectorXd v(4);
-    v << kL * std::cos(a) * wa, kL * std::sin(a) * wa, kL * std::cos(a) * wa + 1.1 * std::cos(b) * wb,
-        kL * std::sin(a) * wa + 1.1 * std::sin(b) * wb;
-    p0 << kM * v[0], kM * v[1], 0.7 * v[2], 0.7 * v[3];
-  }
+  const auto pendulum2 = cartesian_double();
+  VectorXd q0, p0;
+  cartesian_double_state(q0, p0);
   // one step from (q, p) at t, solved afresh; its central differences in (q, p)
   auto advance = [](const auto& S, double t, const VectorXd& q, const VectorXd& p, VectorXd& dq, VectorXd& dp) {
     S.reset();
@@ -223,18 +270,8 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_constrained_lobatto_galerkin_and_its_symp
     BOOST_REQUIRE_MESSAGE(r.converged, r.message);
   };
   auto differences = [&](const auto& S, double t, const VectorXd& q, const VectorXd& p) {
-    const Eigen::Index n = q.size();
-    Eigen::MatrixXd F(2 * n, 2 * n);
-    const double eps = 1e-6;
-    for (Eigen::Index j = 0; j < 2 * n; ++j) {
-      VectorXd qa = q, pa = p, qb = q, pb = p, da, ea, db, eb;
-      (j < n ? qa[j] : pa[j - n]) += eps;
-      (j < n ? qb[j] : pb[j - n]) -= eps;
-      advance(S, t, qa, pa, da, ea);
-      advance(S, t, qb, pb, db, eb);
-      F.col(j) << (qa + da - qb - db) / (2 * eps), (pa + ea - pb - eb) / (2 * eps);
-    }
-    return F;
+    return central_differences(
+        [&](const VectorXd& qa, const VectorXd& pa, VectorXd& da, VectorXd& ea) { advance(S, t, qa, pa, da, ea); }, q, p);
   };
   const Eigen::Index n = 4;
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
@@ -267,14 +304,12 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_constrained_lobatto_galerkin_and_its_symp
   // forced, with a constraint in t (B, in a control: the_derivative_in_the_controls_...)
   {
     using Forced = ConstrainedGalerkinStep<WrittenDynamic, WrittenConstraints, WrittenForce>;
-    const auto forced = system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + (y - A*cos(w*t))^2 - l^2"},
-                                  {{0, "-c*x_dot"}, {1, "-c*(y_dot + A*w*sin(w*t))"}});
+    const auto forced = damped_on_moving_support();
     const Forced S(WrittenDynamic(forced), 2, 0.05, std::make_shared<WrittenConstraints>(forced), {}, MomentumMap::constant,
                    std::make_shared<WrittenForce>(forced));
-    VectorXd q(2), p(2), dq, dp;
-    const double t0 = 0.4, ys = 0.2 * std::cos(2.5 * t0);  // on the circle about the support at t0
-    q << kL * std::sin(0.7), ys - kL * std::cos(0.7);
-    p << kM * 0.3 * std::cos(0.7), kM * (0.3 * std::sin(0.7) - 0.2 * 2.5 * std::sin(2.5 * t0));
+    VectorXd q, p, dq, dp;
+    const double t0 = 0.4;
+    moving_support_state(t0, q, p);
     advance(S, t0, q, p, dq, dp);
     Eigen::MatrixXd A;
     BOOST_REQUIRE(S.derivative(t0, q, p, dq, A));
@@ -515,21 +550,10 @@ BOOST_AUTO_TEST_CASE(the_momentum_maps_agree) {
 // step's derivative maps onto it, the next step's A_1 keeps J, A_0^T A_1^T J A_1 A_0 =
 // A_0^T J A_0 to 1e-12 (on all of R^{2n} it does not: A_0^T J A_0 != J).
 BOOST_AUTO_TEST_CASE(the_derivative_of_the_constrained_step_is_its_linearisation) {
-  const auto pendulum2 = system_of(
-      {"x1", "y1", "x2", "y2"}, "m*(x1_dot^2 + y1_dot^2)/2 + 0.7*(x2_dot^2 + y2_dot^2)/2 - g*(m*y1 + 0.7*y2)",
-      {"x1^2 + y1^2 - l^2", "(x2 - x1)^2 + (y2 - y1)^2 - 1.1^2"});
-  const auto moving = system_of({"x", "y"}, "m*(x_dot^2 + y_dot^2)/2 - m*g*y", {"x^2 + (y - A*cos(w*t))^2 - l^2"},
-                                {{0, "-c*x_dot"}, {1, "-c*(y_dot + A*w*sin(w*t))"}});
-  // a state on the double pendulum's constraints, moving along them
-  VectorXd q2(4), p2(4);
-  {
-    const double a = 0.8, b = 1.9, wa = 0.6, wb = -0.4;
-    q2 << kL * std::sin(a), -kL * std::cos(a), kL * std::sin(a) + 1.1 * std::sin(b), -kL * std::cos(a) - 1.1 * std::cos(b);
-    VectorXd v(4);
-    v << kL * std::cos(a) * wa, kL * std::sin(a) * wa, kL * std::cos(a) * wa + 1.1 * std::cos(b) * wb,
-        kL * std::sin(a) * wa + 1.1 * std::sin(b) * wb;
-    p2 << kM * v[0], kM * v[1], 0.7 * v[2], 0.7 * v[3];
-  }
+  const auto pendulum2 = cartesian_double();
+  const auto moving = damped_on_moving_support();
+  VectorXd q2, p2;
+  cartesian_double_state(q2, p2);
   auto check = [](const auto& S, double t0, const VectorXd& q0, const VectorXd& p0, bool symplectic) {
     const Eigen::Index n = q0.size();
     auto advance = [&](const VectorXd& q, const VectorXd& p, VectorXd& dq, VectorXd& dp) {
@@ -580,10 +604,9 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_the_constrained_step_is_its_linearisation
     using Forced = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>;
     const Forced S(WrittenDynamic(moving), ThetaMap(0.3), 0.01, std::make_shared<WrittenConstraints>(moving), {},
                    MomentumMap::constant, std::make_shared<WrittenForce>(moving));
-    VectorXd q(2), p(2);
-    const double t0 = 0.4, ys = 0.2 * std::cos(2.5 * t0);  // on the circle about the support at t0
-    q << kL * std::sin(0.7), ys - kL * std::cos(0.7);
-    p << kM * 0.3 * std::cos(0.7), kM * (0.3 * std::sin(0.7) - 0.2 * 2.5 * std::sin(2.5 * t0));
+    VectorXd q, p;
+    const double t0 = 0.4;
+    moving_support_state(t0, q, p);
     BOOST_TEST_CONTEXT("moving support with damping") { check(S, t0, q, p, false); }
   }
 }
@@ -701,32 +724,6 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
 // adjoint on a cart-pole with a control (A and B). The unforced composition is
 // symplectic: A^T J A = J to 1e-12 for the theta step's, and on the constraint's
 // cotangent bundle for the constrained one's.
-namespace {
-// Central differences (eps 1e-6) of the map (q0, p0) -> (q1, p1) that `advance(q, p, dq,
-// dp)` takes one step of (dq, dp: the increments).
-template <class Advance>
-Eigen::MatrixXd central_differences(const Advance& advance, const VectorXd& q0, const VectorXd& p0) {
-  const Eigen::Index n = q0.size();
-  Eigen::MatrixXd F(2 * n, 2 * n);
-  const double eps = 1e-6;
-  for (Eigen::Index j = 0; j < 2 * n; ++j) {
-    VectorXd qa = q0, pa = p0, qb = q0, pb = p0, da, ea, db, eb;
-    (j < n ? qa[j] : pa[j - n]) += eps;
-    (j < n ? qb[j] : pb[j - n]) -= eps;
-    advance(qa, pa, da, ea);
-    advance(qb, pb, db, eb);
-    F.col(j) << (da - db + qa - qb) / (2 * eps), (ea - eb + pa - pb) / (2 * eps);
-  }
-  return F;
-}
-// J = [0 I; -I 0] of 2n x 2n
-Eigen::MatrixXd J_of(Eigen::Index n) {
-  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
-  J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
-  J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
-  return J;
-}
-}  // namespace
 
 BOOST_AUTO_TEST_CASE(the_derivative_of_a_composition_is_the_product_of_its_substeps) {
   auto central = [](const auto& S, const VectorXd& q0, const VectorXd& p0) {
@@ -739,20 +736,15 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_a_composition_is_the_product_of_its_subst
         q0, p0);
   };
   {
-    const auto pendulum2 = system_of({"x1", "y1", "x2", "y2"},
-                                     "m*(x1_dot^2 + y1_dot^2)/2 + 0.7*(x2_dot^2 + y2_dot^2)/2 - g*(m*y1 + 0.7*y2)",
-                                     {"x1^2 + y1^2 - l^2", "(x2 - x1)^2 + (y2 - y1)^2 - 1.1^2"});
+    const auto pendulum2 = cartesian_double();
     auto make = [&](double hk) {
       return Step(WrittenDynamic(pendulum2), ThetaMap::midpoint(), hk, std::make_shared<WrittenConstraints>(pendulum2),
                   {}, MomentumMap::constant);
     };
     const ComposedStep<Step> S(0.02, substeps(find_composition("triple-jump:4"), true), make,
                                [&](double hk) { return make(hk).adjoint(); });
-    VectorXd q(4), p(4);
-    const double a = 0.8, b = 1.9, wa = 0.6, wb = -0.4;
-    q << kL * std::sin(a), -kL * std::cos(a), kL * std::sin(a) + 1.1 * std::sin(b), -kL * std::cos(a) - 1.1 * std::cos(b);
-    p << kM * kL * std::cos(a) * wa, kM * kL * std::sin(a) * wa, 0.7 * (kL * std::cos(a) * wa + 1.1 * std::cos(b) * wb),
-        0.7 * (kL * std::sin(a) * wa + 1.1 * std::sin(b) * wb);
+    VectorXd q, p;
+    cartesian_double_state(q, p);
     VectorXd dq = VectorXd::Zero(4), dp(4);
     BOOST_REQUIRE(S.step(0.2, q, p, dq, dp).converged);
     Eigen::MatrixXd A, A1;
