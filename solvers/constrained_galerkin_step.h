@@ -128,9 +128,7 @@ class ConstrainedGalerkinStep {
   int stages() const { return g_.s_; }
   int order() const { return 2 * g_.s_; }
   int dim() const { return g_.dim(); }
-  int constraints() const { return con_->count(); }
   const Sys& lagrangian() const { return g_.lagrangian(); }
-  long jacobian_updates() const { return jacobian_updates_; }
   void reset() const {
     have_prev_ = false;
     kept_.valid = false;
@@ -167,15 +165,6 @@ class ConstrainedGalerkinStep {
     return linearise(t0, q0, p0, dq, nullptr, &B);
   }
 
-  // Puts p on the hidden constraint at (t, q), as ConstrainedThetaStep::project.
-  std::string project(double t, const V& q, V& p, V& v) const {
-    try {
-      return (*proj_)(g_.L_, *con_, t, q, p, v, momentum_);
-    } catch (const std::domain_error& e) {
-      return e.what();
-    }
-  }
-
   // One step from (q0, p0) at time t; dq carries a guess of q1 - q0 on entry (used
   // unless the step continues the previous one), q1 - q0 on return; dp receives p1 - p0.
   StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
@@ -206,14 +195,10 @@ class ConstrainedGalerkinStep {
       sum.message = e.what();
       kept_.valid = false;
     }
-    jacobian_updates_ += sum.jacobians;
     if (!sum.converged) return sum;
     // q1 and p1~ (the node sums of the last evaluation, the multipliers of the solution)
     for (int a = 0; a < n; ++a) dq[a] = y_[(s - 1) * n + a];
-    p1_ = p0 + g_.force_;
-    for (int i = 0; i < s; ++i)
-      constrained_detail::subtract_normals(Gs_[static_cast<std::size_t>(i)], sc_ * g_.bh_[i], y_.data() + s * n + i * m,
-                                           p1_.data());
+    momentum_before_projection(p0, y_, p1_);
     if constexpr (kForced) {
       double w = 0.0;
       for (int i = 0; i < g_.quad_.points; ++i) w += g_.bh_[i] * g_.F_.col(i).dot(g_.vs_.col(i));
@@ -248,6 +233,16 @@ class ConstrainedGalerkinStep {
   }
 
  private:
+  // p1~ = p0 + h sum_i b_i g_i - h sum_{i<s} b_i G_i^T lambda_i (header comment): the node
+  // sums and G_i of the last evaluation, the multipliers of y.
+  void momentum_before_projection(const V& p0, const V& y, V& p1) const {
+    const int s = g_.s_, n = g_.dim(), m = con_->count();
+    p1 = p0 + g_.force_;
+    for (int i = 0; i < s; ++i)
+      constrained_detail::subtract_normals(Gs_[static_cast<std::size_t>(i)], sc_ * g_.bh_[i], y.data() + s * n + i * m,
+                                           p1.data());
+  }
+
   bool linearise(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd* A, Eigen::MatrixXd* B) const {
     using Mat = Eigen::MatrixXd;
     const int s = g_.s_, n = g_.dim(), m = con_->count(), sn = s * n, K = s * (n + m), nodes = s + 1;
@@ -262,9 +257,8 @@ class ConstrainedGalerkinStep {
     const V Y = S.y_;
     V r(K);
     Mat J(K, K);
-    S.g_.t0_ = t0;
-    S.con_->gradients(t0, q0, S.Gs_[0], S.gt_);
-    if (!std::isfinite(S.form_jacobian(q0, p0, Y, r, J))) return false;  // (and the nodes at Y)
+    // (the step set the start time and G_0 at q0; this places the nodes at Y)
+    if (!std::isfinite(S.form_jacobian(q0, p0, Y, r, J))) return false;
     const Eigen::PartialPivLU<Mat> lu(J);
     if (!constrained_detail::lu_invertible(lu)) return false;
     // dF/d(q0, p0, u) at fixed Y, and the nodes' blocks for dp1~
@@ -318,10 +312,8 @@ class ConstrainedGalerkinStep {
       if (i < s) dpt -= (S.sc_ * S.g_.bh_[i]) * S.Gs_[k].transpose() * dY.middleRows(sn + i * m, m);
     }
     // the right transform at the solution: p1~, and its projection (mu, v1, G1)
-    V p1 = p0 + S.g_.force_, q1 = q0 + Y.segment((s - 1) * n, n), v1 = S.g_.vs_.col(s);
-    for (int i = 0; i < s; ++i)
-      constrained_detail::subtract_normals(S.Gs_[static_cast<std::size_t>(i)], S.sc_ * S.g_.bh_[i],
-                                           Y.data() + sn + i * m, p1.data());
+    V p1(n), q1 = q0 + Y.segment((s - 1) * n, n), v1 = S.g_.vs_.col(s);
+    S.momentum_before_projection(p0, Y, p1);
     const double t1 = t0 + g_.h_;
     try {
       if (*(*S.proj_)(S.g_.L_, *S.con_, t1, q1, p1, v1, momentum_)) return false;
@@ -347,14 +339,22 @@ class ConstrainedGalerkinStep {
     return true;
   }
 
-  // R (the first s n rows) and the constraint rows at y, into r; G_1..G_s evaluated at
-  // the nodes it places (G_0 by the step).
-  void evaluate(const V& q0, const V& p0, const V& y, V& r) const {
+  // R (the first s n rows) and the constraint rows at y, into r. G_1..G_{s-1}, which R
+  // reads, are evaluated at the nodes it places (G_0 by the step); G_s, which only the
+  // Jacobian's last constraint rows read, where `jacobian`.
+  void evaluate(const V& q0, const V& p0, const V& y, V& r, bool jacobian) const {
     const int s = g_.s_, n = g_.dim(), m = con_->count(), sn = s * n;
     X_ = y.head(sn);
     g_.residual(q0, p0, X_, RX_);
+    for (int i = 1; i <= s; ++i) {  // the constraint rows (and the gradients there)
+      const auto k = static_cast<std::size_t>(i);
+      if (i < s || jacobian)
+        con_->jacobian(g_.node_time(i), g_.xs_.col(i), gval_, Gs_[k], gt_);
+      else
+        con_->value(g_.node_time(i), g_.xs_.col(i), gval_);
+      for (int l = 0; l < m; ++l) r[sn + (i - 1) * m + l] = sr_ * gval_[l];
+    }
     const double* lam = y.data() + sn;
-    for (int i = 1; i <= s; ++i) con_->gradients(g_.node_time(i), g_.xs_.col(i), Gs_[static_cast<std::size_t>(i)], gt_);
     for (int i = 0; i < s; ++i) {  // - h WA_ij G_i^T lambda_i in R_j (node 0: R_0 only)
       for (int j = 0; j < s; ++j) {
         const double w = sc_ * g_.WAf_[i][j];
@@ -363,10 +363,6 @@ class ConstrainedGalerkinStep {
       }
     }
     r.head(sn) = RX_;
-    for (int i = 1; i <= s; ++i) {
-      con_->value(g_.node_time(i), g_.xs_.col(i), gval_);
-      for (int k = 0; k < m; ++k) r[sn + (i - 1) * m + k] = sr_ * gval_[k];
-    }
   }
 
   // r and the saddle-point Jacobian at y (the header comment); returns max|J_ij|.
@@ -383,7 +379,7 @@ class ConstrainedGalerkinStep {
       sr_ = ok ? jx / g0 : 1.0;
       sc_ = ok ? jx / (g0 * w) : 1.0;
     }
-    evaluate(q0, p0, y, r);  // (places the nodes and evaluates G_1..G_s there)
+    evaluate(q0, p0, y, r, true);  // (places the nodes and evaluates G_1..G_s there)
     J.setZero();
     J.topLeftCorner(sn, sn) = JX_;
     // the multipliers' curvature at the interior nodes: d(-h WA_ij G_i^T lambda_i)/dX_k =
@@ -424,7 +420,7 @@ class ConstrainedGalerkinStep {
     const V& q0;
     const V& p0;
     double pscale, q0size;
-    void residual(const Vector& y, Vector& r) const { step.evaluate(q0, p0, y, r); }
+    void residual(const Vector& y, Vector& r) const { step.evaluate(q0, p0, y, r, false); }
     double jacobian(const Vector& y, Vector& r, Matrix& J) const { return step.form_jacobian(q0, p0, y, r, J); }
     double scale(double yn, double Jmax) const { return pscale + Jmax * yn; }
     double offset() const { return q0size; }
@@ -442,7 +438,6 @@ class ConstrainedGalerkinStep {
   mutable typename Inner::InverseLU lu_;
   mutable DriverState kept_;
   mutable bool have_prev_ = false;
-  mutable long jacobian_updates_ = 0;
   constrained_detail::Owned<constrained_detail::Projection<Sys, Con>> proj_;
 };
 

@@ -424,13 +424,11 @@ class ConstrainedThetaStep {
   // With F1(D, lambda; q0, p0) the first equation's rows and g(t1, q0 + D) its last,
   //   [F_D  -G0^T] [dD     ]     [ -H_lambda + h (1 - theta) G_q - L_vq ]        [ I ]
   //   [G1    0   ] [dlambda] = - [  G1                                  ] dq0 -  [ 0 ] dp0,
-  // H_lambda = sum lambda_i Hess g_i(q0), p1~ = p0 + h G - G0^T lambda, and from
-  // equation 2 at (q1, p1~),
-  //   [L_vv  G1^T] [dv1]     [ L_vq + H_mu                   ]        [ -I ]
-  //   [G1     0  ] [dmu] = - [ v1^T Hess g_i + grad (g_t)_i  ] dq1 -  [  0 ] dp1~,
-  // dp1 = dp1~ - H_mu dq1 - G1^T dmu. Without forces the step is symplectic on the
-  // constraint's cotangent bundle: A^T J A = J on the vectors tangent to it (not on
-  // R^{2n}: A maps every direction onto that bundle). Returns false where a matrix is
+  // H_lambda = sum lambda_i Hess g_i(q0), p1~ = p0 + h G - G0^T lambda, then equation 2
+  // at (q1, p1~) as constrained_detail::right_transform_derivative differentiates it.
+  // Without forces the step is symplectic on the constraint's cotangent bundle: A^T J A
+  // = J on the vectors tangent to it (not on R^{2n}: A maps every direction onto that
+  // bundle). Returns false where a matrix is
   // singular or a value not finite. Allocates; not from two threads at once (it uses
   // the step's workspace).
   bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {

@@ -1,8 +1,8 @@
 // Run kernels of Lagrangians written in a scene with holonomic constraints
 // ([system] constraints): the constrained theta step of solvers/constrained_step.h,
 // composed or not, and Lobatto Galerkin (solvers/constrained_galerkin_step.h), with the
-// force where the system has one, and the check of a constrained run's initial state. Separate from kernels_written.cc so that the two
-// compile side by side.
+// force where the system has one, and the check of a constrained run's initial state.
+// Separate from kernels_written.cc so that the two compile side by side.
 #include <Eigen/SVD>
 
 #include "solvers/constrained_galerkin_step.h"
@@ -73,14 +73,17 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
                                           const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,
                                           const Eigen::VectorXd& p, const Eigen::VectorXd& v0, const RunReport& base_in,
                                           const std::shared_ptr<const ControlSignal>& signal) {
-  if (me.form != Form::lagrangian || (me.galerkin && me.quadrature != QuadratureKind::lobatto))  // (validate refuses it first)
+  // (validate refuses these first)
+  if (me.form != Form::lagrangian || (me.galerkin && me.quadrature != QuadratureKind::lobatto))
     throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps and "
                      "Lobatto Galerkin only");
   const int n = L.dim();
   if (n > kMaxDenseDynamicDim)
-    throw InputError("integrator.map: map = \"" + me.map->name + "\" with system.constraints needs dense " +
-                     std::to_string(n) + " x " + std::to_string(n) + " matrices, beyond the " +
-                     std::to_string(kMaxDenseDynamicDim) + " coordinates the run-time-sized dense steps take");
+    throw InputError((me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
+                                  : "integrator.map: map = \"" + me.map->name + "\"") +
+                     " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
+                     " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
+                     " coordinates the run-time-sized dense steps take");
   RunReport base = base_in;
   base.step_path = StepPath::generic;
   const StepOptions opt = me.step_options();
@@ -89,36 +92,33 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
   const MomentumMap momentum = L.separable()               ? MomentumMap::constant
                                : L.parts().split.quadratic ? MomentumMap::linear
                                                            : MomentumMap::general;
+  std::shared_ptr<const WrittenForce> force;
+  if (pr.forced()) {
+    auto f = std::make_shared<WrittenForce>(pr.written, signal);
+    require_finite_force(*f, pr, q, v0);
+    base.forced = true;
+    force = std::move(f);
+  }
   if (me.galerkin) {  // the constraints at the Lobatto nodes (validate refused Gauss)
-    auto galerkin = [&](auto force) {
-      using Force = std::remove_const_t<typename decltype(force)::element_type>;
+    auto galerkin = [&](auto fo) {
+      using Force = std::remove_const_t<typename decltype(fo)::element_type>;
       return stepper_run(view,
                          ConstrainedGalerkinStep<WrittenDynamic, WrittenConstraints, Force>(L, me.stages, h, con, opt,
-                                                                                           momentum, force),
+                                                                                           momentum, fo),
                          q, p, v0, base, pr.steps);
     };
-    if (!pr.forced()) return galerkin(std::shared_ptr<const NoForce>());
-    const auto force = std::make_shared<WrittenForce>(pr.written, signal);
-    require_finite_force(*force, pr, q, v0);
-    base.forced = true;
-    return galerkin(std::shared_ptr<const WrittenForce>(force));
+    return force ? galerkin(force) : galerkin(std::shared_ptr<const NoForce>());
   }
   const ThetaMap R = dynamic_theta_map(me);
-  auto run_with = [&](auto force, auto nc) {
-    using Force = std::remove_const_t<typename decltype(force)::element_type>;
+  auto run_with = [&](auto fo, auto nc) {
+    using Force = std::remove_const_t<typename decltype(fo)::element_type>;
     constexpr int NC = decltype(nc)::value, MC = NC == Eigen::Dynamic ? Eigen::Dynamic : 1;
     auto make = [&](double hk, const ThetaMap& Rk) {
-      return ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, Force, NC, MC>(L, Rk, hk, con, opt, momentum,
-                                                                                    force);
+      return ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, Force, NC, MC>(L, Rk, hk, con, opt, momentum, fo);
     };
     return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
   };
-  if (pr.forced()) {
-    const auto force = std::make_shared<WrittenForce>(pr.written, signal);
-    require_finite_force(*force, pr, q, v0);
-    base.forced = true;
-    return run_with(std::shared_ptr<const WrittenForce>(force), std::integral_constant<int, Eigen::Dynamic>());
-  }
+  if (force) return run_with(force, std::integral_constant<int, Eigen::Dynamic>());
   // the step of fixed size for the few coordinates of a pendulum, a planar linkage or
   // a point on a surface in R^3 with one constraint: the saddle-point Jacobian and its LU
   // of fixed size (bench_constrained measures the constrained scenes)
