@@ -8,7 +8,9 @@
 // the parameters and the definitions; no velocities). Evaluated in doubles; the rows
 // of Dg and the time derivatives g_t by each constraint's derivative program
 // (mechanics/derivative_program.h, built once per system, in the variables (q, t)),
-// or by reverse mode on its tape where no program is built.
+// or by reverse mode on its tape where no program is built (kMaxProgramEntries); Dg as a sparse matrix
+// (sparse_gradients, the pattern read off the tapes) by reverse mode on the tapes, at a
+// cost that does not grow with the number of coordinates a constraint does not read.
 //
 // The measures of distance to the constraint that the runtime checks and reports are
 // relative (relative_residuals below): |g_i(t, q)| / (|grad g_i| |q|) (for
@@ -25,6 +27,7 @@
 #include <cmath>
 #include <memory>
 #include <stdexcept>
+#include <string>
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
@@ -39,8 +42,11 @@ class WrittenConstraints {
       throw std::invalid_argument("WrittenConstraints: constraints are written on R^n");
     if (system_->constraints.empty()) throw std::invalid_argument("WrittenConstraints: the system writes no constraints");
     const int n = dim();
+    // (a program's gradient has all n + 1 entries: beyond kMaxProgramEntries in all, as
+    // in a long chain of links, the tapes alone, whose sparse gradients cost O(their length))
+    const bool programs = static_cast<double>(count()) * (n + 1) <= kMaxProgramEntries;
     for (const Expression& e : system_->constraints) {
-      programs_.push_back(DerivativeProgram::build(e, n + 1, false));
+      programs_.push_back(programs ? DerivativeProgram::build(e, n + 1, false) : nullptr);
       if (programs_.back() && programs_.back()->has_blocks()) programs_.back() = nullptr;
       slots_.push_back(programs_.back() ? programs_.back()->workspace() : std::vector<double>());
     }
@@ -48,7 +54,31 @@ class WrittenConstraints {
     zero_.setZero(n + 1);
     gq_.resize(n + 1);
     gv_.resize(n + 1);
+    sq_.setZero(n + 1);
+    sv_.setZero(n + 1);
+    // the coordinates each constraint reads, off its tape: a definition (a named
+    // subexpression on the main tape) may read any, so a constraint reading one (or any
+    // variable but a coordinate or t) is taken to depend on all of them
+    for (const Expression& e : system_->constraints) {
+      std::vector<char> reads(static_cast<std::size_t>(n), 0);
+      bool all = false;
+      e.for_each_variable([&](int block, int index) {
+        if (block == 0 && index >= 0 && index < n)
+          reads[static_cast<std::size_t>(index)] = 1;
+        else if (!(block == 0 && index == n))
+          all = true;
+      });
+      std::vector<int> row;
+      for (int j = 0; j < n; ++j)
+        if (all || reads[static_cast<std::size_t>(j)]) row.push_back(j);
+      entries_ += row.size();
+      pattern_.push_back(std::move(row));
+    }
   }
+
+  // The most gradient entries, count() x (dim() + 1), that the constraints' derivative
+  // programs are built for (each holds its n + 1 outputs).
+  static constexpr double kMaxProgramEntries = 1 << 20;
 
   int dim() const { return system_->dim(); }
   int count() const { return static_cast<int>(system_->constraints.size()); }
@@ -74,17 +104,52 @@ class WrittenConstraints {
     load(t, q);
     const int m = count(), n = dim();
     for (int i = 0; i < m; ++i) {
-      const Expression& e = system_->constraints[static_cast<std::size_t>(i)];
-      const auto k = static_cast<std::size_t>(i);
-      if (programs_[k]) {
-        programs_[k]->gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data(), slots_[k].data());
-      } else {
-        gq_.setZero();
-        gv_.setZero();
-        e.gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data());
-      }
+      row_gradient(static_cast<std::size_t>(i));
       for (int j = 0; j < n; ++j) G(i, j) = gq_[j];
       gt[i] = gq_[n];
+    }
+  }
+
+  // Where Dg may be nonzero: row i lists, ascending, the coordinates constraint i reads
+  // (all of them where it reads a definition); entries() in all.
+  const std::vector<std::vector<int>>& pattern() const { return pattern_; }
+  std::size_t entries() const { return entries_; }
+
+  // Dg's entries in the order of pattern() (row by row) into G (entries() numbers) and
+  // g_t into gt (count()), by reverse mode on each constraint's tape: O(the tapes'
+  // length), nothing of size dim() per constraint, where gradients() fills dense rows.
+  template <class Q>
+  void sparse_gradients(double t, const Q& q, double* G, double* gt) const {
+    load(t, q);
+    const int m = count(), n = dim();
+    std::size_t e = 0;
+    for (int i = 0; i < m; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      // sq_ is zero outside a call: the tape adds to it, the entries read are cleared
+      system_->constraints[k].gradient(qt_.data(), zero_.data(), sq_.data(), sv_.data());
+      for (int j : pattern_[k]) {
+        G[e++] = sq_[j];
+        sq_[j] = 0.0;
+      }
+      gt[i] = sq_[n];
+      sq_[n] = 0.0;
+    }
+  }
+
+  // Throws std::logic_error where Dg at (t, q) has a nonzero entry outside pattern() (the
+  // reading of the tapes missed a dependence; the sparse steps would drop it). Row by
+  // row, as gradients() forms them: O(count() dim()) time, O(dim()) memory.
+  void check_pattern(double t, const Eigen::VectorXd& q) const {
+    const int m = count(), n = dim();
+    load(t, q);
+    for (int i = 0; i < m; ++i) {
+      const auto k = static_cast<std::size_t>(i);
+      row_gradient(k);
+      const auto& r = pattern_[k];
+      for (int j = 0; j < n; ++j)
+        if (gq_[j] != 0.0 && !std::binary_search(r.begin(), r.end(), j))
+          throw std::logic_error("constraint " + std::to_string(i + 1) + " depends on coordinate " + std::to_string(j + 1) +
+                                 ", which its tape does not read");
     }
   }
 
@@ -114,22 +179,40 @@ class WrittenConstraints {
   // denominator is 0 counts its numerator).
   void relative_residuals(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, double& position,
                           double& velocity) const {
-    const int m = count(), n = dim();
+    const int m = count();
     g_.resize(m);
     gt_.resize(m);
-    G_.resize(m, n);
-    jacobian(t, q, g_, G_, gt_);
+    sparse_.resize(static_cast<Eigen::Index>(entries_));
+    sparse_gradients(t, q, sparse_.data(), gt_.data());
+    value(t, q, g_);
     const double qn = q.norm(), vn = v.norm();
     position = velocity = 0.0;
+    std::size_t e = 0;
     for (int i = 0; i < m; ++i) {
-      const double gn = G_.row(i).norm();
-      const double a = std::fabs(g_[i]), b = std::fabs(G_.row(i).dot(v) + gt_[i]);
+      double gn = 0.0, dot = gt_[i];
+      for (int j : pattern_[static_cast<std::size_t>(i)]) {
+        const double a = sparse_[static_cast<Eigen::Index>(e++)];
+        gn += a * a;
+        dot += a * v[j];
+      }
+      gn = std::sqrt(gn);
+      const double a = std::fabs(g_[i]), b = std::fabs(dot);
       position = std::fmax(position, gn * qn > 0.0 ? a / (gn * qn) : a);
       velocity = std::fmax(velocity, gn * vn > 0.0 ? b / (gn * vn) : b);
     }
   }
 
  private:
+  // constraint k's gradient in (q, t) at the loaded point into gq_ (n + 1 entries)
+  void row_gradient(std::size_t k) const {
+    if (programs_[k]) {
+      programs_[k]->gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data(), slots_[k].data());
+    } else {
+      gq_.setZero();
+      gv_.setZero();
+      system_->constraints[k].gradient(qt_.data(), zero_.data(), gq_.data(), gv_.data());
+    }
+  }
   template <class Q>
   void load(double t, const Q& q) const {
     const int n = dim();
@@ -142,8 +225,10 @@ class WrittenConstraints {
   mutable std::vector<std::vector<double>> slots_;                  // their workspaces
   mutable std::vector<dynamic_detail::TapeDerivatives> hessians_;   // second_derivatives()'s
   mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient
-  mutable Eigen::VectorXd g_, gt_;
-  mutable Eigen::MatrixXd G_;
+  mutable Eigen::VectorXd sq_, sv_;  // sparse_gradients()'s, zero between calls
+  mutable Eigen::VectorXd g_, gt_, sparse_;
+  std::vector<std::vector<int>> pattern_;  // the coordinates each constraint reads
+  std::size_t entries_ = 0;
 };
 
 }  // namespace dvm
