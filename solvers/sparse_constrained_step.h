@@ -1,0 +1,396 @@
+// The constrained position-momentum step of a theta map (solvers/constrained_step.h)
+// on a separable Lagrangian written in a scene, of any size, with sparse matrices
+// throughout: a chain of rigid links in Cartesian coordinates, a mesh of bars.
+//
+// For L(q, v) = v^T M v / 2 + U(q), M constant (mechanics/dynamic_system.h, WrittenParts),
+// holonomic constraints g(t, q) = 0 (mechanics/written_constraints.h), the theta map
+// R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), D = q1 - q0,
+// q_theta = q0 + theta D, F = grad U and G = Dg, the equations of ConstrainedThetaStep
+// (Marsden and West, Acta Numerica 2001, Sec. 3.5) read
+//   1. M D / h - h (1 - theta) F(q_theta) - p0 + G0^T lambda = 0,   g(t1, q0 + D) = 0,
+//   2. p1~ = p0 + h F(q_theta) - G0^T lambda,
+//      M v1 + G1^T mu = p1~,   G1 v1 + g_t(t1, q1) = 0,   p1 = p1~ - G1^T mu,
+// the first solved for (D, lambda) by newton_drive (solvers/newton_driver.h) with the
+// saddle-point Jacobian
+//   [ M / h - h theta (1 - theta) Hess U    s G0^T ]
+//   [ s G1(q0 + D)                          0      ]
+// (the multiplier carried as lambda / s, s = max|J_DD| / max|G0| fixed at the step's
+// first Jacobian, as the dense step scales it), the second by one linear solve with
+//   [ M    G1^T ]
+//   [ G1   0    ].
+// Both matrices are sparse: Hess U's pattern and colouring come from
+// SparsePotentialHessian (mechanics/sparse_hessian.h), Dg's pattern from the
+// constraints' tapes (WrittenConstraints::pattern), and each is factored by Eigen's
+// SparseLU (partial pivoting; the zero block rules out a Cholesky factorisation), its
+// fill-reducing ordering (COLAMD) analysed once at construction. A chain of k links
+// costs O(k) a step where the dense ConstrainedThetaStep costs O(k^3)
+// (bench_constrained measures both). The equations are the dense step's, so the two
+// agree to round-off (tests/solvers/test_constrained.cc).
+//
+// No force and no step derivative: the runtime takes the dense step for those
+// (solvers/runtime/kernels_constrained.cc). The Jacobian is formed at each step's first
+// iterate and serves its later ones while each shrinks the residual fourfold
+// (Refresh::within_step). Workspace is allocated at construction; a step allocates only
+// in SparseLU's solves. Copies of a step share the potential's Hessian pattern and the
+// constraints but not their workspace; one object must not be used from two threads at
+// once.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/OrderingMethods>
+#include <Eigen/SparseCore>
+#include <Eigen/SparseLU>
+#include <Eigen/SparseCholesky>
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/sparse_hessian.h"
+#include "mechanics/written_constraints.h"
+#include "solvers/dynamic_step.h"
+#include "solvers/newton_driver.h"
+#include "solvers/separable_newton.h"
+
+namespace dvm {
+
+class SparseConstrainedThetaStep {
+ public:
+  static constexpr int N = Eigen::Dynamic;
+  using V = Eigen::VectorXd;
+  using Sparse = Eigen::SparseMatrix<double>;
+
+  // hessian: the pattern of Hess U (SparseSeparableThetaStep::hessian_of), shared by the
+  // steps of a composition.
+  SparseConstrainedThetaStep(const WrittenDynamic& L, std::shared_ptr<SparsePotentialHessian> hessian,
+                             std::shared_ptr<const WrittenConstraints> constraints, double theta, double h,
+                             StepOptions options = {})
+      : L_(L), hessian_(std::move(hessian)), con_(std::move(constraints)), theta_(theta), h_(h), options_(options) {
+    if (!L_.separable()) throw std::invalid_argument("SparseConstrainedThetaStep: the Lagrangian is not separable");
+    if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1]");
+    dynamic_detail::require_step(h);
+    dynamic_detail::require_newton(options);
+    const int n = L_.dim();
+    if (!hessian_ || hessian_->dim() != n) throw std::invalid_argument("the sparse Hessian is not the system's");
+    if (!con_ || con_->dim() != n)
+      throw std::invalid_argument("SparseConstrainedThetaStep: constraints on the system's coordinates are needed");
+    if (con_->count() >= n)
+      throw std::invalid_argument("SparseConstrainedThetaStep: " + std::to_string(con_->count()) +
+                                  " constraints on " + std::to_string(n) + " coordinates leave no motion");
+    work_ = std::make_shared<Work>(*this);
+  }
+  SparseConstrainedThetaStep(const SparseConstrainedThetaStep& o)
+      : L_(o.L_), hessian_(o.hessian_), con_(o.con_), theta_(o.theta_), h_(o.h_), options_(o.options_) {
+    work_ = std::make_shared<Work>(*this);
+  }
+  SparseConstrainedThetaStep& operator=(const SparseConstrainedThetaStep&) = delete;
+
+  double step_size() const { return h_; }
+  double theta() const { return theta_; }
+  int dim() const { return L_.dim(); }
+  int constraints() const { return con_->count(); }
+  const WrittenDynamic& lagrangian() const { return L_; }
+
+  // Puts p on the hidden constraint at (t, q) (equation 2 with p~ = p): p - G^T mu with
+  // G v + g_t = 0, v = M^{-1} (p - G^T mu), which v receives. Returns an empty string,
+  // or what failed.
+  std::string project(double t, const V& q, V& p, V& v) const {
+    Work& w = *work_;
+    const char* failed = w.project(t, q, p, v);
+    if (*failed) return failed;
+    constrained_subtract(w, p);
+    return "";
+  }
+
+  // One step from (q0, p0) at time t (the contract of ConstrainedThetaStep::step).
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
+    StepSummary s;
+    const int n = dim();
+    if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
+    if (dp.size() != n) dp.resize(n);
+    Work& w = *work_;
+    try {
+      w.begin(q0, p0, t);
+      w.y.head(n) = dq;  // the multipliers' guess: the last step's, kept in w.y
+      Equation eq{w};
+      Factor la{w};
+      s = newton_drive(eq, la, Refresh::within_step, options_, w.y, w.r, w.dx, w.unused, w.state, w.start);
+      dq = w.y.head(n);
+      if (s.converged) {
+        // p1~ - p0 = h F(q_theta) - G0^T lambda, at the last residual's q_theta
+        w.x = q0 + theta_ * dq;
+        w.separable.force(w.x, w.F);
+        dp = h_ * w.F;
+        w.subtract_normals(w.G0, w.s, w.y.data() + n, dp.data());
+        w.q1 = q0 + dq;
+        w.p1 = p0 + dp;
+        const char* failed = w.project(w.t1, w.q1, w.p1, w.v1);
+        if (*failed) {
+          s.converged = false;
+          s.message = failed;
+        } else {
+          constrained_subtract(w, dp);  // p1 - p0 = (p1~ - p0) - G1^T mu
+          if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
+            s.converged = false;
+            s.message = "non-finite momentum";
+          }
+        }
+      }
+    } catch (const std::domain_error& e) {
+      s.converged = false;
+      s.message = e.what();
+    }
+    if (!s.converged && s.iterations == 0) s.iterations = 1;
+    return s;
+  }
+
+  // The numerical rank of Dg at (t, q), where a dense SVD of Dg would cost O(m^2 n): the
+  // pivots of the sparse LDL^T factorisation of Dg Dg^T (fill-reducing ordering) above
+  // 1e-12 of the largest, i.e. Dg taken as rank-deficient where its condition number is
+  // beyond about 1e6 (an exactly repeated constraint gives a pivot at round-off); -1
+  // where a pivot is exactly zero (the factorisation stops there: rank below count()).
+  static int rank(const WrittenConstraints& con, double t, const V& q) {
+    const int n = con.dim(), m = con.count();
+    std::vector<double> G(con.entries());
+    V gt(m);
+    con.sparse_gradients(t, q, G.data(), gt.data());
+    std::vector<Eigen::Triplet<double>> e;
+    e.reserve(G.size());
+    std::size_t k = 0;
+    for (int i = 0; i < m; ++i)
+      for (int j : con.pattern()[static_cast<std::size_t>(i)]) e.emplace_back(i, j, G[k++]);
+    Sparse D(m, n);
+    D.setFromTriplets(e.begin(), e.end());
+    const Sparse S = D * D.transpose();
+    const Eigen::SimplicialLDLT<Sparse> ldlt(S);
+    if (ldlt.info() != Eigen::Success) return -1;
+    const V d = ldlt.vectorD();
+    const double top = d.cwiseAbs().maxCoeff();
+    int rank = 0;
+    for (Eigen::Index i = 0; i < d.size(); ++i)
+      if (d[i] > 1e-12 * top) ++rank;
+    return rank;
+  }
+
+
+ private:
+  struct Work;
+  // out -= c G^T mu for G held as pattern-ordered entries
+  static void constrained_subtract(Work& w, V& p) { w.subtract_normals(w.G1, 1.0, w.mu.data(), p.data()); }
+
+  // Equation 1 for the driver: the step forms its sparse Jacobian itself (the driver's
+  // matrix is unused).
+  struct Equation {
+    using Vector = V;
+    using Matrix = Eigen::MatrixXd;
+    Work& w;
+    void residual(const V& y, V& r) const { w.residual(y, r); }
+    double jacobian(const V& y, V& r, Matrix&) const {
+      const bool first = w.s == 0.0;
+      w.residual(y, r);
+      const double big = w.jacobian();
+      if (first) w.residual(y, r);  // (its multiplier and constraint rows, now with s)
+      return big;
+    }
+    double scale(double yn, double Jmax) const { return w.pscale + Jmax * yn; }
+    double offset() const { return w.x0; }
+  };
+  struct Factor {
+    Work& w;
+    bool factor(const Eigen::MatrixXd&, double) const { return w.factor(); }
+    void solve(const V& r, V& dx) const { dx = w.lu.solve(r); }
+    const char* name() const { return "sparse LU factorisation"; }
+  };
+
+  struct Work {
+    explicit Work(const SparseConstrainedThetaStep& step)
+        : L(step.L_), separable(L), mass(constant_mass(L)), hessian(step.hessian_), con(*step.con_),
+          theta(step.theta_), h(step.h_) {
+      n = L.dim();
+      m = con.count();
+      const int k = n + m;
+      const WrittenParts& parts = L.parts();
+      zero = V::Zero(n);
+      x.resize(n);
+      F.resize(n);
+      MD.resize(n);
+      q1.resize(n);
+      p1.resize(n);
+      v1.resize(n);
+      g1.resize(m);
+      gt.resize(m);
+      mu.resize(m);
+      y = V::Zero(k);
+      r.resize(k);
+      dx.resize(k);
+      start.resize(k);
+      b.resize(k);
+      G0.resize(con.entries());
+      G1.resize(con.entries());
+      hess.resize(hessian->entries());
+      // the patterns: M's entries, Hess U's, and Dg's in both off-diagonal blocks
+      std::vector<Eigen::Triplet<double>> t, tp;
+      auto mass_at = [&](int i, int j) { return parts.split.diagonal ? (i == j ? parts.mass_diagonal[j] : 0.0) : parts.mass(i, j); };
+      const auto& cols = hessian->columns();
+      for (int j = 0; j < n; ++j)
+        for (int i : cols[static_cast<std::size_t>(j)]) t.emplace_back(i, j, 0.0);
+      // M's entries (its diagonal alone where it is diagonal)
+      std::vector<std::pair<int, int>> masses;
+      for (int j = 0; j < n; ++j)
+        for (int i = parts.split.diagonal ? j : 0; i < (parts.split.diagonal ? j + 1 : n); ++i)
+          if (mass_at(i, j) != 0.0) masses.emplace_back(i, j);
+      for (const auto& e : masses) {
+        t.emplace_back(e.first, e.second, 0.0);
+        tp.emplace_back(e.first, e.second, 0.0);
+      }
+      const auto& pattern = con.pattern();
+      for (int c = 0; c < m; ++c)
+        for (int j : pattern[static_cast<std::size_t>(c)]) {
+          t.emplace_back(j, n + c, 0.0);
+          t.emplace_back(n + c, j, 0.0);
+          tp.emplace_back(j, n + c, 0.0);
+          tp.emplace_back(n + c, j, 0.0);
+        }
+      J.resize(k, k);
+      J.setFromTriplets(t.begin(), t.end());  // duplicates summed: zeros
+      J.makeCompressed();
+      P.resize(k, k);
+      P.setFromTriplets(tp.begin(), tp.end());
+      P.makeCompressed();
+      // where each value goes among the matrices' values
+      auto at = [](Sparse& A, int i, int j) {
+        Sparse::InnerIterator it(A, j);
+        while (it && it.row() < i) ++it;
+        if (!it || it.row() != i) throw std::logic_error("SparseConstrainedThetaStep: an entry outside the pattern");
+        return static_cast<std::size_t>(&it.valueRef() - A.valuePtr());
+      };
+      for (int j = 0; j < n; ++j)
+        for (int i : cols[static_cast<std::size_t>(j)]) hess_at.push_back(at(J, i, j));
+      for (const auto& e : masses) {
+        mass_J.emplace_back(at(J, e.first, e.second), mass_at(e.first, e.second) / h);
+        mass_P.emplace_back(at(P, e.first, e.second), mass_at(e.first, e.second));
+      }
+      for (int c = 0; c < m; ++c)
+        for (int j : pattern[static_cast<std::size_t>(c)]) {
+          G0_at.push_back(at(J, j, n + c));
+          G1_at.push_back(at(J, n + c, j));
+          GT_P.push_back(at(P, j, n + c));
+          G_P.push_back(at(P, n + c, j));
+        }
+      lu.analyzePattern(J);
+      plu.analyzePattern(P);
+    }
+
+    void begin(const V& q0_, const V& p0_, double t0) {
+      q0 = &q0_;
+      p0 = &p0_;
+      t1 = t0 + h;
+      pscale = dynamic_detail::inf_norm(p0_);
+      x0 = dynamic_detail::inf_norm(q0_);
+      con.sparse_gradients(t0, q0_, G0.data(), gt.data());
+      g0max = 0.0;
+      for (double a : G0) g0max = std::fmax(g0max, std::fabs(a));
+    }
+    // r = (M D / h - h (1 - theta) F(q_theta) - p0 + s G0^T y_lambda, s g(t1, q0 + D))
+    void residual(const V& y_, V& r_) {
+      const auto D = y_.head(n);
+      x = *q0 + theta * D;
+      separable.force(x, F);
+      mass.times(D, MD);
+      r_.head(n) = MD / h - (h * (1.0 - theta)) * F - *p0;
+      add_normals(G0, s, y_.data() + n, r_.data());
+      q1 = *q0 + D;
+      con.value(t1, q1, g1);
+      r_.tail(m) = s * g1;
+    }
+    // J's values at the point of the last residual; its largest entry (INFINITY where
+    // one is not finite)
+    double jacobian() {
+      hessian->evaluate(x.data(), hess.data());
+      con.sparse_gradients(t1, q1, G1.data(), gt.data());
+      double* v = J.valuePtr();
+      const auto size = static_cast<std::size_t>(J.nonZeros());
+      std::fill_n(v, size, 0.0);
+      for (const auto& e : mass_J) v[e.first] = e.second;
+      const double c = h * theta * (1.0 - theta);
+      for (std::size_t e = 0; e < hess_at.size(); ++e) v[hess_at[e]] -= c * hess[e];
+      if (s == 0.0) {
+        double jd = 0.0;
+        for (std::size_t e = 0; e < size; ++e) jd = std::fmax(jd, std::fabs(v[e]));
+        s = std::isfinite(jd) && jd > 0.0 && g0max > 0.0 ? jd / g0max : 1.0;
+      }
+      for (std::size_t e = 0; e < G0.size(); ++e) {
+        v[G0_at[e]] = s * G0[e];
+        v[G1_at[e]] = s * G1[e];
+      }
+      double big = 0.0;
+      for (std::size_t e = 0; e < size; ++e) big = std::fmax(big, std::fabs(v[e]));
+      return std::isfinite(big) ? big : INFINITY;
+    }
+    bool factor() {
+      lu.factorize(J);
+      return lu.info() == Eigen::Success;
+    }
+    // Equation 2 at (t, q) with p~ in p: v and mu (p itself is not changed here)
+    const char* project(double t, const V& q, const V& p, V& v) {
+      con.sparse_gradients(t, q, G1.data(), gt.data());
+      double* a = P.valuePtr();
+      for (const auto& e : mass_P) a[e.first] = e.second;
+      for (std::size_t e = 0; e < G1.size(); ++e) a[GT_P[e]] = a[G_P[e]] = G1[e];
+      plu.factorize(P);
+      if (plu.info() != Eigen::Success)
+        return "the constraint Jacobian is singular where the momentum is projected (redundant constraints)";
+      b.head(n) = p;
+      b.tail(m) = -gt;
+      dx = plu.solve(b);
+      if (!std::isfinite(dynamic_detail::inf_norm(dx))) return "non-finite momentum projection";
+      v = dx.head(n);
+      mu = dx.tail(m);
+      return "";
+    }
+    // out += c G^T y and out -= c G^T y for G's pattern-ordered entries
+    void add_normals(const std::vector<double>& G, double c, const double* y_, double* out) const {
+      const auto& pattern = con.pattern();
+      std::size_t e = 0;
+      for (int k = 0; k < m; ++k) {
+        const double a = c * y_[k];
+        for (int j : pattern[static_cast<std::size_t>(k)]) out[j] += G[e++] * a;
+      }
+    }
+    void subtract_normals(const std::vector<double>& G, double c, const double* y_, double* out) const {
+      add_normals(G, -c, y_, out);
+    }
+
+    WrittenDynamic L;
+    WrittenSeparable separable;  // F = grad U
+    ConstantMass mass;
+    std::shared_ptr<SparsePotentialHessian> hessian;
+    WrittenConstraints con;  // this step's copy (its workspace)
+    double theta, h;
+    int n = 0, m = 0;
+    const V* q0 = nullptr;
+    const V* p0 = nullptr;
+    double t1 = 0.0, pscale = 0.0, x0 = 0.0, s = 0.0, g0max = 0.0;
+    V zero, x, F, MD, q1, p1, v1, g1, gt, mu, y, r, dx, start, b;
+    std::vector<double> G0, G1, hess;  // Dg at q0 and at q1 (pattern order), Hess U's entries
+    Sparse J, P;                       // equation 1's Jacobian, equation 2's matrix
+    std::vector<std::size_t> hess_at, G0_at, G1_at, GT_P, G_P;
+    std::vector<std::pair<std::size_t, double>> mass_J, mass_P;  // where M / h (M) goes, and its value
+    Eigen::SparseLU<Sparse, Eigen::COLAMDOrdering<int>> lu, plu;
+    Eigen::MatrixXd unused;  // (the driver's matrix: J is the sparse one above)
+    DriverState state;
+  };
+
+  WrittenDynamic L_;
+  std::shared_ptr<SparsePotentialHessian> hessian_;
+  std::shared_ptr<const WrittenConstraints> con_;
+  double theta_, h_;
+  StepOptions options_;
+  std::shared_ptr<Work> work_;
+};
+
+}  // namespace dvm

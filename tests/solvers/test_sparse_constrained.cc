@@ -1,0 +1,226 @@
+// The sparse constrained theta step (solvers/sparse_constrained_step.h) on chains of
+// rigid links in Cartesian coordinates: the same equations as the dense
+// ConstrainedThetaStep, so the same steps to round-off; the constraint and its hidden
+// constraint kept at every step of a long chain; Dg's pattern read off the tapes; the
+// rank of Dg by the sparse QR.
+#define BOOST_TEST_MODULE sparse_constrained
+#include <boost/test/unit_test.hpp>
+
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include "mechanics/dynamic_system.h"
+#include "mechanics/written_constraints.h"
+#include "mechanics/written_lagrangian.h"
+#include "solvers/constrained_step.h"
+#include "solvers/sparse_constrained_step.h"
+#include "solvers/sparse_separable_step.h"
+
+using namespace dvm;
+using Eigen::VectorXd;
+
+namespace {
+
+constexpr double kM = 0.7, kL = 0.5, kG = 9.81, kK = 3.0;
+
+// The chain hanging at angles a_i = 0.4 sin(i) from the downward vertical, its joints
+// moving with angular rates w_i = 0.3 cos(2 i): a state on the constraints and on their
+// hidden constraint, p = m v.
+void chain_state(int k, VectorXd& q, VectorXd& p) {
+  q.resize(2 * k);
+  p.resize(2 * k);
+  double x = 0, y = 0, vx = 0, vy = 0;
+  for (int i = 0; i < k; ++i) {
+    const double a = 0.4 * std::sin(i + 1.0), w = 0.3 * std::cos(2.0 * (i + 1));
+    x += kL * std::sin(a);
+    y -= kL * std::cos(a);
+    vx += kL * std::cos(a) * w;
+    vy += kL * std::sin(a) * w;
+    q[2 * i] = x;
+    q[2 * i + 1] = y;
+    p[2 * i] = kM * vx;
+    p[2 * i + 1] = kM * vy;
+  }
+}
+
+// A chain of k point masses m joined by rods of length l, the first hung from the
+// origin, in the plane (coordinates x1, y1, ..., xk, yk; y up), under gravity, its last
+// mass tied by a spring of stiffness c to where chain_state puts it, (a, b): k
+// constraints on 2k coordinates.
+// `twice`: the first rod's constraint written a second time (redundant).
+std::shared_ptr<WrittenSystem> chain(int k, bool twice = false) {
+  auto s = std::make_shared<WrittenSystem>();
+  s->name = "chain";
+  for (int i = 1; i <= k; ++i) {
+    s->coordinates.push_back("x" + std::to_string(i));
+    s->coordinates.push_back("y" + std::to_string(i));
+  }
+  VectorXd q, p;
+  chain_state(k, q, p);
+  s->params = {{"m", kM}, {"l", kL}, {"g", kG}, {"c", kK}, {"a", q[2 * k - 2]}, {"b", q[2 * k - 1]}};
+  s->check_names();
+  std::string L;
+  for (int i = 1; i <= k; ++i) {
+    const std::string x = "x" + std::to_string(i), y = "y" + std::to_string(i);
+    L += (i > 1 ? " + " : "") + ("m/2*(" + x + "_dot^2 + " + y + "_dot^2) - m*g*" + y);
+  }
+  const std::string xe = "x" + std::to_string(k), ye = "y" + std::to_string(k);
+  L += " - c/2*((" + xe + " - a)^2 + (" + ye + " - b)^2)";
+  s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
+  auto rod = [&](int i) {
+    if (i == 1) return std::string("x1^2 + y1^2 - l^2");
+    const std::string a = std::to_string(i - 1), b = std::to_string(i);
+    return "(x" + b + " - x" + a + ")^2 + (y" + b + " - y" + a + ")^2 - l^2";
+  };
+  for (int i = 1; i <= k; ++i)
+    s->constraints.push_back(Expression::parse(rod(i), s->symbols(WrittenSystem::Kind::constraint)));
+  if (twice) s->constraints.push_back(Expression::parse(rod(1), s->symbols(WrittenSystem::Kind::constraint)));
+  return s;
+}
+
+using Dense = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>;
+
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_sparse_step_is_the_dense_step) {
+  // the same equations: the same trajectory to round-off, for the midpoint and an
+  // asymmetric theta, over 200 steps of a chain of 6 links (12 coordinates)
+  const int k = 6;
+  const auto sys = chain(k);
+  const WrittenDynamic L(sys);
+  BOOST_REQUIRE(L.separable());
+  const auto con = std::make_shared<const WrittenConstraints>(sys);
+  VectorXd q0, p0;
+  chain_state(k, q0, p0);
+  const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+  for (double theta : {0.5, 0.3}) {
+    const double h = 0.01;
+    const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {});
+    const Dense dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant);
+    VectorXd qs = q0, ps = p0, qd = q0, pd = p0, dqs = VectorXd::Zero(2 * k), dps(2 * k), dqd = dqs, dpd(2 * k);
+    double worst = 0.0;
+    for (int j = 0; j < 200; ++j) {
+      const double t = j * h;
+      const StepSummary a = sparse.step(t, qs, ps, dqs, dps);
+      const StepSummary b = dense.step(t, qd, pd, dqd, dpd);
+      BOOST_REQUIRE_MESSAGE(a.converged && b.converged, a.message << " / " << b.message);
+      qs += dqs;
+      ps += dps;
+      qd += dqd;
+      pd += dpd;
+      worst = std::fmax(worst, std::fmax((qs - qd).lpNorm<Eigen::Infinity>() / qd.lpNorm<Eigen::Infinity>(),
+                                         (ps - pd).lpNorm<Eigen::Infinity>() / pd.lpNorm<Eigen::Infinity>()));
+    }
+    BOOST_TEST_MESSAGE("theta " << theta << ": largest relative difference " << worst);
+    BOOST_TEST(worst < 1e-11);
+    // and the motion is not trivial
+    BOOST_TEST((qs - q0).norm() > 0.1);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(a_long_chain_stays_on_its_constraints) {
+  // 200 links (400 coordinates, 200 constraints), midpoint steps to t = 1: |g| and the
+  // hidden constraint's residual at round-off at every step, and the energy error of a
+  // method of order 2, a quarter as large at half the step
+  const int k = 200;
+  const auto sys = chain(k);
+  const WrittenDynamic L(sys);
+  const auto con = std::make_shared<const WrittenConstraints>(sys);
+  VectorXd q0, p0;
+  chain_state(k, q0, p0);
+  const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+  const VectorXd minv = L.parts().mass_diagonal.cwiseInverse();
+  auto energy = [&](const VectorXd& x, const VectorXd& y) {
+    return 0.5 * y.dot(minv.cwiseProduct(y)) - L.value(x, VectorXd::Zero(2 * k));
+  };
+  const double E0 = energy(q0, p0);
+  auto run = [&](int steps) {
+    const double h = 1.0 / steps;
+    const SparseConstrainedThetaStep step(L, H, con, 0.5, h);
+    VectorXd q = q0, p = p0, dq = VectorXd::Zero(2 * k), dp(2 * k);
+    double worst_g = 0.0, worst_hidden = 0.0, worst_E = 0.0;
+    for (int j = 0; j < steps; ++j) {
+      const StepSummary s = step.step(j * h, q, p, dq, dp);
+      BOOST_REQUIRE_MESSAGE(s.converged, s.message);
+      q += dq;
+      p += dp;
+      double g, hidden;
+      con->relative_residuals((j + 1) * h, q, VectorXd(minv.cwiseProduct(p)), g, hidden);
+      worst_g = std::fmax(worst_g, g);
+      worst_hidden = std::fmax(worst_hidden, hidden);
+      worst_E = std::fmax(worst_E, std::fabs(energy(q, p) - E0));
+    }
+    BOOST_TEST_MESSAGE(steps << " steps: relative residuals " << worst_g << ", " << worst_hidden
+                             << "; energy error " << worst_E << " of " << E0);
+    BOOST_TEST(worst_g < 1e-12);
+    BOOST_TEST(worst_hidden < 1e-12);
+    return worst_E;
+  };
+  const double ratio = run(250) / run(500);
+  BOOST_TEST_MESSAGE("energy error ratio " << ratio);
+  BOOST_TEST(ratio > 3.5);
+  BOOST_TEST(ratio < 4.5);
+}
+
+BOOST_AUTO_TEST_CASE(dg_pattern_is_read_off_the_tapes) {
+  const auto sys = chain(4);
+  const WrittenConstraints con(sys);
+  const std::vector<std::vector<int>> expected = {{0, 1}, {0, 1, 2, 3}, {2, 3, 4, 5}, {4, 5, 6, 7}};
+  BOOST_REQUIRE_EQUAL(con.pattern().size(), expected.size());
+  for (std::size_t i = 0; i < expected.size(); ++i)
+    BOOST_TEST(con.pattern()[i] == expected[i], boost::test_tools::per_element());
+  BOOST_TEST(con.entries() == 14u);
+  VectorXd q, p;
+  chain_state(4, q, p);
+  BOOST_CHECK_NO_THROW(con.check_pattern(0.0, q));
+  // the sparse entries are the dense rows' nonzero ones, and g_t = 0
+  Eigen::MatrixXd G(4, 8);
+  VectorXd gt(4), sgt(4);
+  con.gradients(0.0, q, G, gt);
+  std::vector<double> S(con.entries());
+  con.sparse_gradients(0.0, q, S.data(), sgt.data());
+  std::size_t e = 0;
+  for (int i = 0; i < 4; ++i)
+    for (int j : expected[static_cast<std::size_t>(i)]) BOOST_TEST(S[e++] == G(i, j), boost::test_tools::tolerance(1e-15));
+  BOOST_TEST(sgt.lpNorm<Eigen::Infinity>() == 0.0);
+}
+
+BOOST_AUTO_TEST_CASE(the_rank_of_dg_by_the_sparse_ldlt) {
+  VectorXd q, p;
+  chain_state(30, q, p);
+  BOOST_TEST(SparseConstrainedThetaStep::rank(WrittenConstraints(chain(30)), 0.0, q) == 30);
+  const int twice = SparseConstrainedThetaStep::rank(WrittenConstraints(chain(30, true)), 0.0, q);  // of 31
+  BOOST_TEST((twice == 30 || twice == -1));
+  // a chain pulled straight (every rod along x): full rank still, each rod's gradient
+  // along its own rod
+  VectorXd straight = VectorXd::Zero(60);
+  for (int i = 0; i < 30; ++i) straight[2 * i] = kL * (i + 1);
+  BOOST_TEST(SparseConstrainedThetaStep::rank(WrittenConstraints(chain(30)), 0.0, straight) == 30);
+}
+
+BOOST_AUTO_TEST_CASE(project_puts_the_momentum_on_the_hidden_constraint) {
+  const int k = 10;
+  const auto sys = chain(k);
+  const WrittenDynamic L(sys);
+  const auto con = std::make_shared<const WrittenConstraints>(sys);
+  VectorXd q, p;
+  chain_state(k, q, p);
+  const VectorXd on = p;
+  VectorXd off = p, v(2 * k);
+  for (int i = 0; i < 2 * k; ++i) off[i] += 0.1 * std::cos(3.0 * i);  // across the rods too
+  const SparseConstrainedThetaStep step(L, SparseSeparableThetaStep::hessian_of(L, q), con, 0.5, 0.01);
+  const Dense dense(L, ThetaMap(0.5), 0.01, con, {}, MomentumMap::constant);
+  VectorXd pd = off, vd(2 * k);
+  BOOST_REQUIRE(step.project(0.0, q, off, v).empty());
+  BOOST_REQUIRE(dense.project(0.0, q, pd, vd).empty());
+  double g, hidden;
+  con->relative_residuals(0.0, q, v, g, hidden);
+  BOOST_TEST(hidden < 1e-14);
+  BOOST_TEST((off - pd).lpNorm<Eigen::Infinity>() < 1e-13);
+  BOOST_TEST((v - vd).lpNorm<Eigen::Infinity>() < 1e-13);
+  // a momentum already on it stays
+  VectorXd same = on;
+  BOOST_REQUIRE(step.project(0.0, q, same, v).empty());
+  BOOST_TEST((same - on).lpNorm<Eigen::Infinity>() < 1e-13);
+}
