@@ -5,44 +5,86 @@
 // Separate from kernels_written.cc so that the two compile side by side.
 #include <Eigen/SVD>
 
+#include <algorithm>
+
 #include "solvers/constrained_galerkin_step.h"
 #include "solvers/runtime/kernels_dynamic.h"
+#include "solvers/sparse_constrained_step.h"
 
 namespace dvm::kernels {
+
+// From this many coordinates a constrained theta step on a separable Lagrangian without
+// a force is the sparse one (solvers/sparse_constrained_step.h); below, the dense one
+// costs less (bench_constrained's table of chains compares them).
+constexpr int kSparseConstrainedMinDim = 20;
 
 void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
                                     Eigen::VectorXd& p, Eigen::VectorXd& v0) {
   const WrittenSystem& w = *pr.written;
   const int n = L.dim(), m = static_cast<int>(w.constraints.size());
-  WrittenConstraints con(pr.written);
+  const auto con = std::make_shared<const WrittenConstraints>(pr.written);
+  // Dg's rows as sparse entries (no m x n matrix: a long chain has m ~ n / 2)
+  std::vector<double> G(con->entries());
   Eigen::VectorXd g(m), gt(m);
-  Eigen::MatrixXd G(m, n);
-  con.jacobian(0.0, q, g, G, gt);
+  con->sparse_gradients(0.0, q, G.data(), gt.data());
+  con->value(0.0, q, g);
   auto text = [&](int i) {
     return "system.constraints[" + std::to_string(i + 1) + "] (\"" + w.constraints[static_cast<std::size_t>(i)].text() + "\")";
   };
   std::ostringstream msg;
   msg.precision(6);
-  if (!G.allFinite() || !g.allFinite() || !gt.allFinite()) {
+  const bool finite = g.allFinite() && gt.allFinite() &&
+                      std::all_of(G.begin(), G.end(), [](double a) { return std::isfinite(a); });
+  if (!finite) {
     msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
     throw InputError(msg.str());
   }
-  // rank of Dg: its singular values against the largest
-  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(G);
-  const Eigen::VectorXd s = svd.singularValues();
-  int rank = 0;
-  for (Eigen::Index i = 0; i < s.size(); ++i)
-    if (s[i] > 1e-10 * s[0]) ++rank;
-  if (rank < m) {
-    msg << pr.constraints_where << ": the constraint Jacobian Dg has rank " << rank << " at the initial state, "
-        << "expected " << m << " (one per constraint; singular values [";
-    for (Eigen::Index i = 0; i < s.size(); ++i) msg << (i ? ", " : "") << s[i];
-    msg << "]): the constraints are redundant there, or contradict each other";
-    throw InputError(msg.str());
+  // rank of Dg: by its singular values against the largest where Dg is small, as the
+  // sparse step finds it where it is not
+  const bool sparse = L.separable() && n >= kSparseConstrainedMinDim;
+  if (!sparse) {
+    Eigen::MatrixXd D = Eigen::MatrixXd::Zero(m, n);
+    std::size_t e = 0;
+    for (int i = 0; i < m; ++i)
+      for (int j : con->pattern()[static_cast<std::size_t>(i)]) D(i, j) = G[e++];
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(D);
+    const Eigen::VectorXd s = svd.singularValues();
+    int rank = 0;
+    for (Eigen::Index i = 0; i < s.size(); ++i)
+      if (s[i] > 1e-10 * s[0]) ++rank;
+    if (rank < m) {
+      msg << pr.constraints_where << ": the constraint Jacobian Dg has rank " << rank << " at the initial state, "
+          << "expected " << m << " (one per constraint; singular values [";
+      for (Eigen::Index i = 0; i < s.size(); ++i) msg << (i ? ", " : "") << s[i];
+      msg << "]): the constraints are redundant there, or contradict each other";
+      throw InputError(msg.str());
+    }
+  } else {
+    const int rank = SparseConstrainedThetaStep::rank(*con, 0.0, q);
+    if (rank < m) {
+      msg << pr.constraints_where << ": the constraint Jacobian Dg has "
+          << (rank < 0 ? std::string("rank below ") + std::to_string(m) : "rank " + std::to_string(rank))
+          << " at the initial state, expected " << m << " (one per constraint; by the pivots of the sparse LDL^T "
+          << "factorisation of Dg Dg^T, those below 1e-12 of the largest taken as zero): the constraints are "
+          << "redundant there, or contradict each other";
+      throw InputError(msg.str());
+    }
   }
-  const double qn = q.norm();
+  // each constraint's relative residuals (WrittenConstraints::relative_residuals)
+  const double qn = q.norm(), vn = v0.norm();
+  std::vector<double> norms(static_cast<std::size_t>(m)), across(static_cast<std::size_t>(m));
+  std::size_t e = 0;
   for (int i = 0; i < m; ++i) {
-    const double gn = G.row(i).norm(), r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
+    double gn = 0.0, dot = gt[i];
+    for (int j : con->pattern()[static_cast<std::size_t>(i)]) {
+      gn += G[e] * G[e];
+      dot += G[e++] * v0[j];
+    }
+    norms[static_cast<std::size_t>(i)] = std::sqrt(gn);
+    across[static_cast<std::size_t>(i)] = dot;
+  }
+  for (int i = 0; i < m; ++i) {
+    const double gn = norms[static_cast<std::size_t>(i)], r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
     if (!(r <= kConstraintStartTolerance)) {
       msg << "initial.q: the initial position is off " << text(i) << ": g = " << g[i] << " at t = 0, relative "
           << r << " (|g| / (|grad g| |q|)), beyond " << kConstraintStartTolerance
@@ -50,20 +92,29 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
       throw InputError(msg.str());
     }
   }
-  const double vn = v0.norm();
   for (int i = 0; i < m; ++i) {
-    const double gn = G.row(i).norm(), b = std::fabs(G.row(i).dot(v0) + gt[i]);
+    const double gn = norms[static_cast<std::size_t>(i)], b = std::fabs(across[static_cast<std::size_t>(i)]);
     const double r = b / (gn * vn > 0.0 ? gn * vn : 1.0);
     if (r <= kConstraintStartTolerance) continue;
     if (pr.project_velocity) {
-      constrained_detail::Projection<WrittenDynamic, WrittenConstraints> project(n, m);
-      const char* failed = project(L, con, 0.0, q, p, v0, MomentumMap::general);
-      if (*failed) throw InputError(pr.project_velocity_where + ": " + failed);
+      std::string failed;
+      std::shared_ptr<SparsePotentialHessian> H;
+      if (sparse) try {
+          H = SparseSeparableThetaStep::hessian_of(L, q);
+        } catch (const SparsePotentialHessian::TooDense&) {
+        }
+      if (H) {  // (the sparse step's projection; its theta and step do not enter it)
+        failed = SparseConstrainedThetaStep(L, H, con, 0.5, 1.0).project(0.0, q, p, v0);
+      } else {
+        constrained_detail::Projection<WrittenDynamic, WrittenConstraints> project(n, m);
+        failed = project(L, *con, 0.0, q, p, v0, MomentumMap::general);
+      }
+      if (!failed.empty()) throw InputError(pr.project_velocity_where + ": " + failed);
       return;
     }
     msg << (pr.momentum_given ? "initial.p" : "initial.v") << ": the initial velocity is off the hidden constraint of "
-        << text(i) << ": grad g . v + dg/dt = " << G.row(i).dot(v0) + gt[i] << ", relative " << r << ", beyond "
-        << kConstraintStartTolerance << "; give a velocity along the constraints, or set "
+        << text(i) << ": grad g . v + dg/dt = " << across[static_cast<std::size_t>(i)] << ", relative " << r
+        << ", beyond " << kConstraintStartTolerance << "; give a velocity along the constraints, or set "
         << "initial.project_velocity = true to project it";
     throw InputError(msg.str());
   }
@@ -78,17 +129,36 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
     throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps and "
                      "Lobatto Galerkin only");
   const int n = L.dim();
+  RunReport base = base_in;
+  const StepOptions opt = me.step_options();
+  const double h = pr.step;
+  const auto con = std::make_shared<const WrittenConstraints>(pr.written);
+  // a separable Lagrangian of many coordinates without a force: the sparse step (no
+  // derivative: --linearize takes the dense one below)
+  if (!pr.forced() && !me.galerkin && !me.linearize && me.use_structure && L.separable() &&
+      n >= kSparseConstrainedMinDim) {
+    std::shared_ptr<SparsePotentialHessian> H;
+    try {
+      H = SparseSeparableThetaStep::hessian_of(L, q);
+    } catch (const SparsePotentialHessian::TooDense&) {
+      // terms coupling most coordinates: the dense step below, within its limit
+    }
+    if (H) {
+      con->check_pattern(0.0, q);
+      auto make = [&](double hk, const ThetaMap& Rk) { return SparseConstrainedThetaStep(L, H, con, Rk.theta(), hk, opt); };
+      base.step_path = StepPath::constrained_sparse_newton;
+      base.hessian_colours = H->colours();
+      return composable_run(view, me, h, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
+    }
+  }
   if (n > kMaxDenseDynamicDim)
     throw InputError((me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                                   : "integrator.map: map = \"" + me.map->name + "\"") +
                      " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
                      " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
-                     " coordinates the run-time-sized dense steps take");
-  RunReport base = base_in;
+                     " coordinates the run-time-sized dense steps take (the sparse constrained step takes a "
+                     "separable Lagrangian of any size: a theta map, without system.forces or --linearize)");
   base.step_path = StepPath::generic;
-  const StepOptions opt = me.step_options();
-  const double h = pr.step;
-  const auto con = std::make_shared<const WrittenConstraints>(pr.written);
   const MomentumMap momentum = L.separable()               ? MomentumMap::constant
                                : L.parts().split.quadratic ? MomentumMap::linear
                                                            : MomentumMap::general;

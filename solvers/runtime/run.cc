@@ -23,6 +23,7 @@ const char* to_string(StepPath p) {
     case StepPath::separable_newton: return "separable-newton";
     case StepPath::separable_sparse_newton: return "separable-sparse-newton";
     case StepPath::separable_dense_newton: return "separable-dense-newton";
+    case StepPath::constrained_sparse_newton: return "constrained-sparse-newton";
     case StepPath::kept_jacobian_newton: return "kept-jacobian-newton";
     case StepPath::sphere_chain_banded_newton: return "sphere-chain-banded-newton";
   }
@@ -265,6 +266,10 @@ void print_report(const RunReport& r, bool json, bool quiet, std::FILE* to) {
             break;
           case StepPath::separable_dense_newton:
             how = "by Newton on the structured equation, dense Jacobian kept across steps";
+            break;
+          case StepPath::constrained_sparse_newton:
+            how = "by Newton on the constrained equation, sparse saddle-point Jacobian (Hess V in " +
+                  std::to_string(r.hessian_colours) + " colours)";
             break;
           case StepPath::kept_jacobian_newton: how = "by Newton, the Jacobian (L's Hessian) kept across steps"; break;
           case StepPath::gauss_collocation:

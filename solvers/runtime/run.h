@@ -39,6 +39,9 @@ namespace dvm {
 //                               (solvers/sparse_separable_step.h)
 //   separable-dense-newton      the same with a dense Hessian of U kept across steps, n
 //                               bodies (solvers/dense_separable_step.h)
+//   constrained-sparse-newton   a theta map on a separable Lagrangian with constraints,
+//                               the sparse saddle-point Jacobian formed once a step
+//                               (solvers/sparse_constrained_step.h)
 //   kept-jacobian-newton        a Lagrangian of run-time size that is not separable,
 //                               its Jacobian kept across steps (Refresh::across_steps,
 //                               solvers/newton_driver.h)
@@ -53,6 +56,7 @@ enum class StepPath {
   separable_newton,
   separable_sparse_newton,
   separable_dense_newton,
+  constrained_sparse_newton,
   kept_jacobian_newton,
   sphere_chain_banded_newton,
 };

@@ -518,3 +518,84 @@ BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
     BOOST_TEST((after - before).cwiseAbs().maxCoeff() <= 1e-12 * before.cwiseAbs().maxCoeff());
   }
 }
+
+// A chain of rods in Cartesian coordinates (chain_cartesian.toml: 32 coordinates, 16
+// constraints) steps by the sparse constrained step: the dense step's trajectory
+// (integrator.use_structure = false) to round-off, plain and composed to order 4; the
+// combinations the sparse step does not take (a force, --linearize) run the dense one;
+// a redundant constraint is refused by the sparse rank test; and a chain beyond the
+// dense steps' 4096 coordinates runs.
+BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
+  const std::string C = "chain_cartesian.toml";
+  auto agree = [&](const std::vector<std::string>& sets) {
+    std::vector<std::string> dense_sets = sets;
+    dense_sets.push_back("integrator.use_structure=false");
+    const Json s = run(C, sets), d = run(C, dense_sets);
+    BOOST_TEST(s.at("step_path").get<std::string>() == "constrained-sparse-newton");
+    BOOST_TEST(d.at("step_path").get<std::string>() == "generic");
+    for (const char* key : {"q_final", "p_final"}) {
+      const Eigen::VectorXd a = Eigen::Map<const Eigen::VectorXd>(vec(s, key).data(), 32);
+      const Eigen::VectorXd b = Eigen::Map<const Eigen::VectorXd>(vec(d, key).data(), 32);
+      BOOST_TEST_MESSAGE(sets.front() << ": " << key << " sparse against dense "
+                                      << (a - b).lpNorm<Eigen::Infinity>() / b.lpNorm<Eigen::Infinity>());
+      BOOST_TEST((a - b).lpNorm<Eigen::Infinity>() <= 1e-11 * b.lpNorm<Eigen::Infinity>());
+    }
+    BOOST_TEST(s.at("max_constraint_residual").get<double>() <= 1e-14);
+    BOOST_TEST(s.at("max_hidden_constraint_residual").get<double>() <= 1e-12);
+    return s;
+  };
+  const Json plain = agree({"integrator.t_end=0.5"});
+  // the chain has fallen and folded: not the state it started from
+  BOOST_TEST(vec(plain, "q_final")[0] < 0.03);
+  agree({"integrator.t_end=0.5", "integrator.composition=\"triple-jump:4\""});
+  agree({"integrator.t_end=0.5", "integrator.map=\"theta\"", "integrator.theta=0.3"});
+  // with a force, and with --linearize: the dense step
+  const Json forced = run(C, {"integrator.t_end=0.05", "system.forces={ \"x[3]\" = \"-0.1*x_dot[3]\" }"});
+  BOOST_TEST(forced.at("step_path").get<std::string>() == "generic");
+  const std::string npy = temp_dir() + "/chain_A.npy";
+  const Output lin = dvm({"run", scene(C), "--no-output", "--quiet", "--linearize", npy, "--set", "integrator.t_end=0.003"});
+  BOOST_TEST(lin.status == 0, lin.err);
+  // the first rod written twice: Dg rank-deficient
+  std::string constraints = "system.constraints=[\"x[1]^2 + y[1]^2 - l^2\"";
+  for (int i = 1; i <= 16; ++i)
+    constraints += i == 1 ? ", \"x[1]^2 + y[1]^2 - l^2\""
+                          : ", \"(x[" + std::to_string(i) + "] - x[" + std::to_string(i - 1) + "])^2 + (y[" +
+                                std::to_string(i) + "] - y[" + std::to_string(i - 1) + "])^2 - l^2\"";
+  const Output r = dvm(with_sets({"run", scene(C), "--no-output"}, {constraints + "]"}));
+  BOOST_TEST(r.status == 2);
+  BOOST_TEST(r.err.find("system.constraints") != std::string::npos, r.err);
+  BOOST_TEST(r.err.find("expected 17") != std::string::npos, r.err);
+  BOOST_TEST(r.err.find("sparse LDL^T") != std::string::npos, r.err);
+  // 2100 rods, 4200 coordinates: beyond what the dense steps take, two steps
+  const int k = 2100;
+  std::string list = "\"x[1]^2 + y[1]^2 - l^2\"";
+  for (int i = 2; i <= k; ++i)
+    list += ", \"(x[" + std::to_string(i) + "] - x[" + std::to_string(i - 1) + "])^2 + (y[" + std::to_string(i) +
+            "] - y[" + std::to_string(i - 1) + "])^2 - l^2\"";
+  std::string q0 = "", x0 = "";
+  auto num = [](double a) {
+    std::ostringstream o;
+    o.precision(17);
+    o << a;
+    return o.str();
+  };
+  for (int i = 1; i <= k; ++i) {  // x[1..k], then y[1..k]: every rod at 0.5 rad from the vertical
+    q0 += (i > 1 ? ", " : "") + num(i * 0.1 * std::sin(0.5));
+    x0 += ", " + num(-i * 0.1 * std::cos(0.5));
+  }
+  const std::string big = write_scene(
+      "chain_2100.toml", "[system]\ncoordinates = [\"x[n]\", \"y[n]\"]\nparams = { n = " + std::to_string(k) +
+                             ", m = 0.1, l = 0.1, g = 9.81 }\nlagrangian = \"sum(i, 1, n, m/2*(x_dot[i]^2 + y_dot[i]^2) "
+                             "- m*g*y[i])\"\nconstraints = [" + list +
+                             "]\n[initial]\nq = [" + q0 + x0 + "]\nv = \"0\"\n"
+                             "[integrator]\nmap = \"midpoint\"\nstep = 1e-3\nt_end = 2e-3\n");
+  const Output b = dvm({"run", big, "--json", "--no-output"});
+  BOOST_TEST_REQUIRE(b.status == 0, b.err);
+  const Json bj = parse_json(b.out);
+  BOOST_TEST(bj.at("step_path").get<std::string>() == "constrained-sparse-newton");
+  BOOST_TEST(bj.at("max_constraint_residual").get<double>() <= 1e-14);
+  // and the dense step refuses it, naming the sparse one
+  const Output bd = dvm({"run", big, "--no-output", "--set", "integrator.use_structure=false"});
+  BOOST_TEST(bd.status == 2);
+  BOOST_TEST(bd.err.find("sparse constrained step") != std::string::npos, bd.err);
+}
