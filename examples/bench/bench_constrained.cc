@@ -9,6 +9,11 @@
 //   spherical_pendulum_r3.toml       (x, y, z), |q| = l           against spherical_pendulum_written.toml (S^2)
 //   scissor_lift.toml                9 coordinates, 8 constraints against scissor_lift_one_coordinate.toml
 //
+// Then chains of k rods in Cartesian coordinates (2k coordinates, k constraints; the
+// scene written here), k = 1 .. 128: the dense ConstrainedThetaStep against the sparse
+// SparseConstrainedThetaStep from the same state, ns a step and their ratio (where the
+// runtime's line between them belongs).
+//
 // Each pair runs the midpoint map (sphere-exp on S^2) with the same step from the same
 // state; the table gives ns per step (the best of the repeats), the constrained run's
 // Newton iterations per step, and the ratio constrained / minimal. The constrained scene
@@ -27,13 +32,19 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
+#include <algorithm>
 #include <filesystem>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "mechanics/written_constraints.h"
+#include "solvers/constrained_step.h"
 #include "solvers/runtime/recorder.h"
 #include "solvers/runtime/run.h"
 #include "solvers/runtime/scene.h"
+#include "solvers/sparse_constrained_step.h"
+#include "solvers/sparse_separable_step.h"
 
 #include <unistd.h>
 
@@ -83,6 +94,72 @@ Timing measure(const std::string& dir, const std::string& file, std::int64_t ste
     }
   }
   return best;
+}
+
+// A chain of k rods of length l with point masses m at their joints, hung from the
+// origin in the plane, as a scene: 2k Cartesian coordinates (x1, y1, ..., xk, yk), k
+// distance constraints, gravity; the joints at angles 0.4 sin(i) from the vertical,
+// turning at rates 0.3 cos(2 i) (a state on the constraints and their hidden constraint).
+std::string chain_scene(int k) {
+  std::string coords, lagrangian, constraints, q, v;
+  double x = 0, y = 0, vx = 0, vy = 0;
+  const double l = 0.5;
+  char buf[160];
+  for (int i = 1; i <= k; ++i) {
+    const std::string a = std::to_string(i - 1), b = std::to_string(i);
+    const double angle = 0.4 * std::sin(i), w = 0.3 * std::cos(2.0 * i);
+    x += l * std::sin(angle);
+    y -= l * std::cos(angle);
+    vx += l * std::cos(angle) * w;
+    vy += l * std::sin(angle) * w;
+    const char* sep = i > 1 ? ", " : "";
+    coords += std::string(sep) + "\"x" + b + "\", \"y" + b + "\"";
+    lagrangian += std::string(i > 1 ? " + " : "") + "m/2*(x" + b + "_dot^2 + y" + b + "_dot^2) - m*g*y" + b;
+    constraints += std::string(sep) + (i == 1 ? "\"x1^2 + y1^2 - l^2\""
+                                              : "\"(x" + b + " - x" + a + ")^2 + (y" + b + " - y" + a + ")^2 - l^2\"");
+    std::snprintf(buf, sizeof buf, "%s%.17g, %.17g", sep, x, y);
+    q += buf;
+    std::snprintf(buf, sizeof buf, "%s%.17g, %.17g", sep, vx, vy);
+    v += buf;
+  }
+  return "[system]\ncoordinates = [" + coords + "]\nparams = { m = 0.7, l = 0.5, g = 9.81 }\nlagrangian = \"" +
+         lagrangian + "\"\nconstraints = [" + constraints + "]\n[initial]\nq = [" + q + "]\nv = [" + v +
+         "]\n[integrator]\nmap = \"midpoint\"\nstep = 1e-3\nt_end = 1.0\n";
+}
+
+// The cost of a step of the chain of k rods by the dense constrained step (an LU of
+// the (3k) x (3k) saddle-point matrix) and by the sparse one, from the same state, in
+// this process: ns per step, the best of `repeats` runs of `steps` steps each.
+void chain_row(int k, std::int64_t steps, int repeats) {
+  const Scene sc = load_scene_text(chain_scene(k), "chain", {});
+  const Problem& pr = sc.problem;
+  const WrittenDynamic L(pr.written);
+  const auto con = std::make_shared<const WrittenConstraints>(pr.written);
+  const int n = L.dim();
+  const Eigen::VectorXd q0 = Eigen::Map<const Eigen::VectorXd>(pr.q.data(), n);
+  Eigen::VectorXd p0(n), v0 = Eigen::Map<const Eigen::VectorXd>(pr.v.data(), n);
+  p0 = L.parts().mass_diagonal.cwiseProduct(v0);
+  const double h = pr.step;
+  auto time = [&](const auto& step) {
+    double best = INFINITY;
+    for (int r = 0; r < repeats; ++r) {
+      Eigen::VectorXd q = q0, p = p0, dq = Eigen::VectorXd::Zero(n), dp(n);
+      const auto t0 = std::chrono::steady_clock::now();
+      for (std::int64_t j = 0; j < steps; ++j) {
+        const StepSummary s = step.step(static_cast<double>(j) * h, q, p, dq, dp);
+        if (!s.converged) throw std::runtime_error("chain of " + std::to_string(k) + ": " + s.message);
+        q += dq;
+        p += dp;
+      }
+      best = std::fmin(best, std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
+                                 static_cast<double>(steps));
+    }
+    return best;
+  };
+  const double sparse = time(SparseConstrainedThetaStep(L, SparseSeparableThetaStep::hessian_of(L, q0), con, 0.5, h));
+  const double dense = time(ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>(L, ThetaMap(0.5), h, con, {},
+                                                                                      MomentumMap::constant));
+  std::printf("| %d | %d | %.0f | %.0f | %.2f |\n", k, n, dense, sparse, dense / sparse);
 }
 
 }  // namespace
@@ -142,6 +219,14 @@ int main(int argc, char** argv) {
       std::printf("| %s | %.0f | %.2f | %.0f | %.2f | %.0f | %s | %.0f | %.2f |\n", p.constrained, c.ns_per_step,
                   c.iterations_per_step, loose.ns_per_step, loose.iterations_per_step, derivatives.ns_per_step,
                   p.minimal, m.ns_per_step, c.ns_per_step / m.ns_per_step);
+    }
+    // chains of k rods: the dense step against the sparse one, about 2 ms of work a cell
+    std::printf("\nchains of k rods (midpoint, h = 1e-3): the dense constrained step against the sparse one, ns a step"
+                "\n(dvm run takes the sparse one from kSparseConstrainedMinDim coordinates, kernels_constrained.cc)\n\n");
+    std::printf("| links k | coordinates | dense: ns/step | sparse: ns/step | dense / sparse |\n|---|---|---|---|---|\n");
+    for (int k : {1, 2, 4, 6, 8, 10, 12, 16, 32, 64, 128}) {
+      const std::int64_t n = std::max<std::int64_t>(10, std::min<std::int64_t>(steps / 20, 2000000 / (k * k * k)));
+      chain_row(k, n, repeats);
     }
   } catch (const std::exception& e) {
     std::fprintf(stderr, "bench_constrained: %s\n", e.what());
