@@ -155,22 +155,28 @@ class WrittenConstraints {
 
   // The second derivatives at (t, q), for the derivative of a constrained step: H[i]
   // (dim() x dim()) receives the Hessian of g_i in q, and row i of Gqt the gradient in
-  // q of dg_i/dt. Allocates (a Hessian program per constraint, built at the first call).
-  void second_derivatives(double t, const Eigen::VectorXd& q, std::vector<Eigen::MatrixXd>& H,
-                          Eigen::MatrixXd& Gqt) const {
+  // q of dg_i/dt. Mat, Mat2: matrices of doubles (fixed maximum sizes will do). A Hessian
+  // program per constraint is built at the first call, and the workspace; later calls
+  // allocate only where H or Gqt must grow.
+  template <class Q, class Mat, class Mat2>
+  void second_derivatives(double t, const Q& q, std::vector<Mat>& H, Mat2& Gqt) const {
     const int m = count(), n = dim();
-    if (hessians_.empty())
+    if (hessians_.empty()) {
       for (const Expression& e : system_->constraints)
         hessians_.emplace_back(std::make_shared<const Expression>(e), n + 1, WrittenDerivatives::automatic);
+      hga_.resize(n + 1);
+      hgb_.resize(n + 1);
+      Haa_.resize(n + 1, n + 1);
+      Hab_.resize(n + 1, n + 1);
+      Hbb_.resize(n + 1, n + 1);
+    }
     load(t, q);
-    Eigen::VectorXd ga(n + 1), gb(n + 1);
-    Eigen::MatrixXd Haa(n + 1, n + 1), Hab(n + 1, n + 1), Hbb(n + 1, n + 1);
-    H.resize(static_cast<std::size_t>(m));
+    if (H.size() != static_cast<std::size_t>(m)) H.resize(static_cast<std::size_t>(m));
     Gqt.resize(m, n);
     for (int i = 0; i < m; ++i) {
-      hessians_[static_cast<std::size_t>(i)].hessian(qt_.data(), zero_.data(), ga, gb, Haa, Hab, Hbb);
-      H[static_cast<std::size_t>(i)] = Haa.topLeftCorner(n, n);
-      Gqt.row(i) = Haa.block(n, 0, 1, n);
+      hessians_[static_cast<std::size_t>(i)].hessian(qt_.data(), zero_.data(), hga_, hgb_, Haa_, Hab_, Hbb_);
+      H[static_cast<std::size_t>(i)] = Haa_.topLeftCorner(n, n);
+      Gqt.row(i) = Haa_.block(n, 0, 1, n);
     }
   }
 
@@ -224,6 +230,8 @@ class WrittenConstraints {
   std::vector<std::shared_ptr<const DerivativeProgram>> programs_;  // per constraint, or null
   mutable std::vector<std::vector<double>> slots_;                  // their workspaces
   mutable std::vector<dynamic_detail::TapeDerivatives> hessians_;   // second_derivatives()'s
+  mutable Eigen::VectorXd hga_, hgb_;                                // and their workspace
+  mutable Eigen::MatrixXd Haa_, Hab_, Hbb_;
   mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient
   mutable Eigen::VectorXd sq_, sv_;  // sparse_gradients()'s, zero between calls
   mutable Eigen::VectorXd g_, gt_, sparse_;

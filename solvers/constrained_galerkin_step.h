@@ -321,8 +321,8 @@ class ConstrainedGalerkinStep {
       return false;
     }
     Mat dp1;
-    if (!constrained_detail::right_transform_derivative(S.g_.L_, *S.con_, t1, q1, v1, S.proj_->mu, S.proj_->G, dq1, dpt,
-                                                        dp1))
+    if (!constrained_detail::right_transform_derivative<Eigen::Dynamic, Eigen::Dynamic, Eigen::Dynamic>(
+            S.g_.L_, *S.con_, t1, q1, v1, S.proj_->mu, S.proj_->G, dq1, dpt, dp1))
       return false;
     if (A) {
       A->resize(2 * n, 2 * n);

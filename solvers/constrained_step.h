@@ -289,11 +289,21 @@ struct Projection {
 // Whether a partially pivoted LU's pivots are all above 1e-13 of the largest (the
 // saddle-point matrices of the steps' derivatives are singular exactly where the steps'
 // own are).
-inline bool lu_invertible(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu) {
+template <class Mat>
+bool lu_invertible(const Eigen::PartialPivLU<Mat>& lu) {
   const auto d = lu.matrixLU().diagonal().cwiseAbs();
   const double top = d.maxCoeff();
   return std::isfinite(top) && top > 0.0 && d.minCoeff() > 1e-13 * top;
 }
+
+// Matrices of run-time size within fixed maximum sizes R x C (on the stack where both are
+// known when compiled: the derivatives of a pendulum's or a linkage's step allocate
+// nothing; MatrixXd where either is Dynamic).
+template <int R, int C>
+using Bounded = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, R == 1 && C != 1 ? Eigen::RowMajor : Eigen::ColMajor,
+                              R, C>;  // (Eigen's rule: at most one row is row-major)
+template <int R>
+using BoundedVector = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, R, 1>;
 
 // The derivative of the right transform (equation 2 of the header comment) at its
 // solution (t1, q1; v1, mu, G1 = Dg(t1, q1)): given the derivatives dq1 and dp1~ of q1
@@ -302,35 +312,42 @@ inline bool lu_invertible(const Eigen::PartialPivLU<Eigen::MatrixXd>& lu) {
 //   [L_vv  G1^T] [dv1]     [ L_vq + H_mu                   ]        [ -I ]
 //   [G1     0  ] [dmu] = - [ v1^T Hess g_i + grad (g_t)_i  ] dq1 -  [  0 ] dp1~,
 // H_mu = sum mu_i Hess g_i, and dp1 = dp1~ - H_mu dq1 - G1^T dmu. False where the
-// matrix is singular. Allocates.
-template <class Sys, class Con>
-bool right_transform_derivative(const Sys& L, const Con& con, double t1, const Eigen::VectorXd& q1,
-                                const Eigen::VectorXd& v1, const Eigen::VectorXd& mu, const Eigen::MatrixXd& G1,
-                                const Eigen::MatrixXd& dq1, const Eigen::MatrixXd& dpt, Eigen::MatrixXd& dp1) {
-  using M = Eigen::MatrixXd;
+// matrix is singular. NX, MX, KX: the largest n, m and k (Dynamic: any; it then allocates).
+template <int NX, int MX, int KX, class Sys, class Con, class Q, class VM, class GM>
+bool right_transform_derivative(const Sys& L, const Con& con, double t1, const Q& q1, const Q& v1, const VM& mu,
+                                const GM& G1, const Bounded<NX, KX>& dq1, const Bounded<NX, KX>& dpt,
+                                Bounded<NX, KX>& dp1) {
+  constexpr int SX = augmented(NX, MX);
+  using MN = Bounded<NX, NX>;
   const Eigen::Index n = q1.size(), m = mu.size();
-  std::vector<M> H1;
-  M Gqt1;
+  thread_local std::vector<MN> H1;  // (the constraints' Hessians: sized once per thread)
+  Bounded<MX, NX> Gqt1, Hv(m, n);
   con.second_derivatives(t1, q1, H1, Gqt1);
-  M Hm = M::Zero(n, n), Hv(m, n);
+  MN Hm = MN::Zero(n, n);
   for (Eigen::Index i = 0; i < m; ++i) {
     Hm += mu[i] * H1[static_cast<std::size_t>(i)];
-    Hv.row(i) = v1.transpose() * H1[static_cast<std::size_t>(i)] + Gqt1.row(i);
+    Hv.row(i).noalias() = v1.transpose() * H1[static_cast<std::size_t>(i)];
+    Hv.row(i) += Gqt1.row(i);
   }
   if constexpr (has_time<Sys>::value) L.set_time(t1);
-  Eigen::VectorXd Lq1(n), Lv1(n);
-  M Lqq1(n, n), Lqv1(n, n), Lvv1(n, n);
+  BoundedVector<NX> Lq1(n), Lv1(n);
+  MN Lqq1(n, n), Lqv1(n, n), Lvv1(n, n);
   L.hessian(q1, v1, Lq1, Lv1, Lqq1, Lqv1, Lvv1);
-  M K2 = M::Zero(n + m, n + m), R2(n + m, dq1.cols());
+  Bounded<SX, SX> K2 = Bounded<SX, SX>::Zero(n + m, n + m);
+  Bounded<SX, KX> R2(n + m, dq1.cols());
   K2.topLeftCorner(n, n) = Lvv1;
   K2.topRightCorner(n, m) = G1.transpose();
   K2.bottomLeftCorner(m, n) = G1;
-  R2.topRows(n) = (Lqv1.transpose() + Hm) * dq1 - dpt;
-  R2.bottomRows(m) = Hv * dq1;
-  const Eigen::PartialPivLU<M> lu2(K2);
+  const MN Hq = Lqv1.transpose() + Hm;
+  R2.topRows(n).noalias() = Hq * dq1;
+  R2.topRows(n) -= dpt;
+  R2.bottomRows(m).noalias() = Hv * dq1;
+  const Eigen::PartialPivLU<Bounded<SX, SX>> lu2(K2);
   if (!lu_invertible(lu2)) return false;
-  const M Y2 = -lu2.solve(R2);
-  dp1 = dpt - Hm * dq1 - G1.transpose() * Y2.bottomRows(m);
+  const Bounded<SX, KX> Y2 = lu2.solve(R2);  // minus (dv1, dmu)
+  dp1 = dpt;
+  dp1.noalias() -= Hm * dq1;
+  dp1.noalias() += G1.transpose() * Y2.bottomRows(m);
   return dp1.allFinite();
 }
 
@@ -450,41 +467,49 @@ class ConstrainedThetaStep {
     if (q0.size() != n || p0.size() != n || dq.size() != n)
       throw std::invalid_argument("ConstrainedThetaStep::derivative: a state of " + std::to_string(q0.size()) +
                                   " coordinates; the system has " + std::to_string(n));
-    using M = Eigen::MatrixXd;
+    // the largest sizes: the coordinates, the constraints, both, and the inputs (q0, p0
+    // and the controls), where known when compiled
+    constexpr int NX = NC, MX = MC, SX = Eq::K, IX = NC == Eigen::Dynamic || kForced ? Eigen::Dynamic : 2 * NC;
+    using MN = constrained_detail::Bounded<NX, NX>;
+    using MI = constrained_detail::Bounded<NX, IX>;
+    using VM = constrained_detail::BoundedVector<MX>;
     using TV = typename Eq::Theta::Vector;
     const double th = R_.theta(), h = h_;
     Work& w = *work_;
     auto& eq = w.eq.theta_equation();
     w.q0 = q0;
     w.p0 = p0;
-    TV Dt = dq, rt(n), hGt(n);
-    typename Eq::Theta::Matrix FDt(n, n);
+    TV D = dq, r(n), hG(n);
+    typename Eq::Theta::Matrix FD(n, n);
     eq.begin(w.q0, w.p0, t0);
-    if (!std::isfinite(eq.jacobian(Dt, rt, FDt))) return false;
-    const V D = Dt, r = rt;
-    const M FD = FDt;
-    M Gq = eq.Lqq(), Gv = eq.Lqv();
-    const M Lvq = eq.Lqv().transpose();
-    M Fu(n, 0);  // dF/du at the node (the columns of B)
+    if (!std::isfinite(eq.jacobian(D, r, FD))) return false;
+    MN Gq = eq.Lqq(), Gv = eq.Lqv();
+    Eigen::MatrixXd Fu(n, 0);  // dF/du at the node (the columns of B)
     if constexpr (kForced) {
       Gq += eq.Fq();
       Gv += eq.Fv();
       if (B) {
         V F(n);
-        M Fq(n, n), Fv(n, n);
+        Eigen::MatrixXd Fq(n, n), Fv(n, n);
         w.force->jacobian(t0 + th * h, V(q0 + th * dq), V(dq / h), F, Fq, Fv, &Fu);
       }
     }
     const int c = static_cast<int>(Fu.cols()), in = 2 * n + c;
-    eq.momentum(Dt, hGt);  // h G at the node
-    const V hG = hGt;
+    eq.momentum(D, hG);  // h G at the node
     // the multipliers at the solution
     const Con& con = *w.con;
-    V g0(m), gt0(m), g1(m), gt1(m);
-    M G0(m, n), G1(m, n);
+    VM g0(m), gt0(m);
+    constrained_detail::Bounded<MX, NX> G0(m, n), G1(m, n);
     con.jacobian(t0, q0, g0, G0, gt0);
-    const V lambda = (G0 * G0.transpose()).ldlt().solve(G0 * r);
-    V q1 = q0 + D, p1 = p0 + hG - G0.transpose() * lambda, v1 = D / h;
+    const constrained_detail::Bounded<MX, MX> GG = G0 * G0.transpose();
+    const VM lambda = GG.ldlt().solve(G0 * r);
+    V& q1 = w.q1;
+    V& p1 = w.p1;
+    V& v1 = w.v1;
+    q1 = q0 + D;
+    p1 = p0 + hG;
+    p1.noalias() -= G0.transpose() * lambda;
+    v1 = D / h;
     const double t1 = t0 + h;
     // (the step's own projection, with its momentum map: M^{-1} kept where M is constant)
     try {
@@ -493,34 +518,38 @@ class ConstrainedThetaStep {
       return false;
     }
     G1 = w.projection.G;
-    const V mu = w.projection.mu;
-    std::vector<M> H0;
-    M Gqt0;
+    const VM mu = w.projection.mu;
+    thread_local std::vector<MN> H0;  // (the constraints' Hessians: sized once per thread)
+    constrained_detail::Bounded<MX, NX> Gqt0;
     con.second_derivatives(t0, q0, H0, Gqt0);
-    M Hl = M::Zero(n, n);
+    MN Hl = MN::Zero(n, n);
     for (int i = 0; i < m; ++i) Hl += lambda[i] * H0[static_cast<std::size_t>(i)];
     // equation 1
-    M J1 = M::Zero(n + m, n + m), R1 = M::Zero(n + m, in);
+    constrained_detail::Bounded<SX, SX> J1 = constrained_detail::Bounded<SX, SX>::Zero(n + m, n + m);
+    constrained_detail::Bounded<SX, IX> R1 = constrained_detail::Bounded<SX, IX>::Zero(n + m, in);
     J1.topLeftCorner(n, n) = FD;
     J1.topRightCorner(n, m) = -G0.transpose();
     J1.bottomLeftCorner(m, n) = G1;
-    R1.topLeftCorner(n, n) = -Hl + h * (1.0 - th) * Gq - Lvq;
-    R1.block(0, n, n, n) = M::Identity(n, n);
+    R1.topLeftCorner(n, n) = h * (1.0 - th) * Gq - Hl;
+    R1.topLeftCorner(n, n) -= eq.Lqv().transpose();
+    R1.block(0, n, n, n).setIdentity();
     R1.bottomLeftCorner(m, n) = G1;
     if (c > 0) R1.topRightCorner(n, c) = h * (1.0 - th) * Fu;
-    const Eigen::PartialPivLU<M> lu1(J1);
+    const Eigen::PartialPivLU<constrained_detail::Bounded<SX, SX>> lu1(J1);
     if (!constrained_detail::lu_invertible(lu1)) return false;
-    const M Y1 = -lu1.solve(R1);  // d(D, lambda) / d(q0, p0)
-    const M dD = Y1.topRows(n), dl = Y1.bottomRows(m);
-    M dq1 = dD;
-    dq1.leftCols(n) += M::Identity(n, n);
-    M dpt = -G0.transpose() * dl + h * Gq * (th * dD) + Gv * dD;
-    dpt.leftCols(n) += -Hl + h * Gq;
-    dpt.block(0, n, n, n) += M::Identity(n, n);
+    const constrained_detail::Bounded<SX, IX> Y1 = lu1.solve(R1);  // minus d(D, lambda) / d(q0, p0)
+    MI dq1 = -Y1.topRows(n);  // dD, then dq1 = dq0 + dD
+    MI dpt = G0.transpose() * Y1.bottomRows(m);
+    const MN Gt = h * th * Gq + Gv;
+    dpt.noalias() += Gt * dq1;  // (h theta G_q + G_v) dD
+    dq1.leftCols(n) += MN::Identity(n, n);
+    dpt.leftCols(n) += h * Gq - Hl;
+    dpt.block(0, n, n, n) += MN::Identity(n, n);
     if (c > 0) dpt.rightCols(c) += h * Fu;
     // equation 2
-    M dp1;
-    if (!constrained_detail::right_transform_derivative(L_, con, t1, q1, v1, mu, G1, dq1, dpt, dp1)) return false;
+    MI dp1;
+    if (!constrained_detail::right_transform_derivative<NX, MX, IX>(L_, con, t1, q1, v1, mu, G1, dq1, dpt, dp1))
+      return false;
     A.resize(2 * n, 2 * n);
     A.topRows(n) = dq1.leftCols(2 * n);
     A.bottomRows(n) = dp1.leftCols(2 * n);

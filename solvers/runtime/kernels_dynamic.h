@@ -46,7 +46,6 @@
 #include "mechanics/hamiltonian.h"
 #include "mechanics/written_constraints.h"
 #include "mechanics/written_force.h"
-#include "solvers/constrained_step.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/dense_separable_step.h"

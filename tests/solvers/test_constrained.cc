@@ -635,6 +635,24 @@ BOOST_AUTO_TEST_CASE(the_fixed_size_step_is_the_run_time_sized_one) {
   BOOST_TEST(a.derivative(3.0, sb.q, sb.p, dq, Aa));
   BOOST_TEST(b.derivative(3.0, sb.q, sb.p, dq, Ab));
   BOOST_TEST((Aa - Ab).lpNorm<Eigen::Infinity>() <= 1e-13 * Aa.lpNorm<Eigen::Infinity>());
+  // unforced: the derivative of fixed size (its matrices on the stack) is the
+  // run-time-sized one, and allocates nothing once its workspace is sized
+  using DynFree = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>;
+  using FixFree = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, NoForce, 2, 1>;
+  const WrittenDynamic P(cartesian);
+  const auto pc = std::make_shared<WrittenConstraints>(cartesian);
+  const DynFree c(P, ThetaMap(0.5), 0.01, pc, {}, MomentumMap::constant);
+  const FixFree d(P, ThetaMap(0.5), 0.01, pc, {}, MomentumMap::constant);
+  State s = cartesian_state(1.3, 0.2);
+  dq.setZero();
+  BOOST_TEST(d.step(0.0, s.q, s.p, dq, dp).converged);
+  Eigen::MatrixXd Ac, Ad;
+  BOOST_TEST(c.derivative(0.0, s.q, s.p, dq, Ac));
+  BOOST_TEST(d.derivative(0.0, s.q, s.p, dq, Ad));
+  BOOST_TEST((Ac - Ad).lpNorm<Eigen::Infinity>() <= 1e-13 * Ac.lpNorm<Eigen::Infinity>());
+  const long before = news.load();
+  BOOST_TEST(d.derivative(0.0, s.q, s.p, dq, Ad));
+  BOOST_TEST(news.load() - before == 0);
   BOOST_CHECK_THROW(Fix(WrittenDynamic(cartesian), ThetaMap(0.5), 0.01,
                         std::make_shared<WrittenConstraints>(system_of({"x", "y", "z"}, "x_dot^2 + y_dot^2 + z_dot^2",
                                                                        {"x^2 + y^2 + z^2 - 1"})),
