@@ -445,9 +445,10 @@ class ConstrainedThetaStep {
   // at (q1, p1~) as constrained_detail::right_transform_derivative differentiates it.
   // Without forces the step is symplectic on the constraint's cotangent bundle: A^T J A
   // = J on the vectors tangent to it (not on R^{2n}: A maps every direction onto that
-  // bundle). Returns false where a matrix is
-  // singular or a value not finite. Allocates; not from two threads at once (it uses
-  // the step's workspace).
+  // bundle). Returns false where a matrix is singular or a value not finite. Its
+  // matrices are of fixed maximum size where NC and MC are given and there is no force:
+  // after its first call (which sizes A and its workspace) it allocates nothing there;
+  // otherwise it allocates. Not from two threads at once (it uses the step's workspace).
   bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
     return differentiate(t0, q0, p0, dq, A, nullptr);
   }
