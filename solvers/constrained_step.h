@@ -320,7 +320,9 @@ bool right_transform_derivative(const Sys& L, const Con& con, double t1, const Q
   constexpr int SX = augmented(NX, MX);
   using MN = Bounded<NX, NX>;
   const Eigen::Index n = q1.size(), m = mu.size();
-  thread_local std::vector<MN> H1;  // (the constraints' Hessians: sized once per thread)
+  // (the constraints' Hessians, sized once per thread and kept: m n^2 doubles, on the
+  // heap at run-time sizes)
+  thread_local std::vector<MN> H1;
   Bounded<MX, NX> Gqt1, Hv(m, n);
   con.second_derivatives(t1, q1, H1, Gqt1);
   MN Hm = MN::Zero(n, n);
@@ -520,7 +522,7 @@ class ConstrainedThetaStep {
     }
     G1 = w.projection.G;
     const VM mu = w.projection.mu;
-    thread_local std::vector<MN> H0;  // (the constraints' Hessians: sized once per thread)
+    thread_local std::vector<MN> H0;  // (as H1 of right_transform_derivative)
     constrained_detail::Bounded<MX, NX> Gqt0;
     con.second_derivatives(t0, q0, H0, Gqt0);
     MN Hl = MN::Zero(n, n);

@@ -14,26 +14,29 @@
 // saddle-point Jacobian
 //   [ M / h - h theta (1 - theta) Hess U    s G0^T ]
 //   [ s G1(q0 + D)                          0      ]
-// (the multiplier carried as lambda / s, s = max|J_DD| / max|G0| fixed at the step's
-// first Jacobian, as the dense step scales it), the second by one linear solve with
+// (the multiplier carried as lambda / s, s = max|J_DD| / max|G0| fixed at the object's
+// first Jacobian and kept for its later steps, as the dense step scales it), the
+// second by one linear solve with
 //   [ M    G1^T ]
 //   [ G1   0    ].
 // Both matrices are sparse: Hess U's pattern and colouring come from
 // SparsePotentialHessian (mechanics/sparse_hessian.h), Dg's pattern from the
-// constraints' tapes (WrittenConstraints::pattern), and each is factored by Eigen's
-// SparseLU (partial pivoting; the zero block rules out a Cholesky factorisation), its
-// fill-reducing ordering (COLAMD) analysed once at construction. A chain of k links
-// costs O(k) a step where the dense ConstrainedThetaStep costs O(k^3)
+// constraints' tapes (WrittenConstraints::pattern). Each is factored with partial
+// pivoting (the zero block rules out a Cholesky factorisation), its ordering analysed
+// once at construction (SparseOrBanded below): in a band where a Cuthill-McKee
+// ordering makes one narrow (a chain of links), else by Eigen's SparseLU. A chain of k
+// links costs O(k) a step where the dense ConstrainedThetaStep costs O(k^3)
 // (bench_constrained measures both). The equations are the dense step's, so the two
-// agree to round-off (tests/solvers/test_constrained.cc).
+// agree to round-off (tests/solvers/test_sparse_constrained.cc).
 //
 // No force and no step derivative: the runtime takes the dense step for those
 // (solvers/runtime/kernels_constrained.cc). The Jacobian is formed at each step's first
 // iterate and serves its later ones while each shrinks the residual fourfold
-// (Refresh::within_step). Workspace is allocated at construction; a step allocates only
-// in SparseLU's solves. Copies of a step share the potential's Hessian pattern and the
-// constraints but not their workspace; one object must not be used from two threads at
-// once.
+// (Refresh::within_step). Workspace is allocated at construction; a step allocates
+// nothing in the banded case, and in SparseLU's factorisations and solves otherwise.
+// Copies of a step (the stages of a composition) share the potential's
+// SparsePotentialHessian, whose evaluation writes its workspace: neither one step nor
+// its copies may run on two threads at once.
 #pragma once
 
 #include <Eigen/Core>
@@ -49,6 +52,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/banded_solve.h"
 #include "mechanics/dynamic_system.h"
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_constraints.h"
@@ -57,6 +61,114 @@
 #include "solvers/separable_newton.h"
 
 namespace dvm {
+
+namespace constrained_detail {
+
+// A square sparse matrix of fixed pattern (structurally symmetric), factored in a band
+// where a Cuthill-McKee ordering of its graph makes the band narrow (a chain of links:
+// each rod's multiplier couples the two joints it joins), else by Eigen's SparseLU
+// (COLAMD ordering). The band is factored by BandedLU (core/banded_solve.h: partial
+// pivoting, O(N b^2), a pivot below 1e-14 of the largest entry refused), with no
+// indices to follow. analyse() once, then factor() and solve() allocate nothing in
+// the banded case.
+class SparseOrBanded {
+ public:
+  // The widest band factored as a band (the saddle-point matrix of a planar chain of
+  // rods ordered by Cuthill-McKee has b = 3 to 5).
+  static constexpr int kMaxBand = 8;
+
+  void analyse(const Eigen::SparseMatrix<double>& A) {
+    const int N = static_cast<int>(A.rows());
+    // the graph's neighbours, from the column-major pattern (symmetric)
+    std::vector<std::vector<int>> adj(static_cast<std::size_t>(N));
+    for (int j = 0; j < N; ++j)
+      for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it)
+        if (it.row() != j) adj[static_cast<std::size_t>(j)].push_back(static_cast<int>(it.row()));
+    auto degree = [&](int v) { return adj[static_cast<std::size_t>(v)].size(); };
+    // Cuthill-McKee: breadth first from a node of least degree in each component,
+    // neighbours in order of degree
+    order_.assign(static_cast<std::size_t>(N), -1);
+    std::vector<int> queue;
+    queue.reserve(static_cast<std::size_t>(N));
+    std::vector<int> by_degree(static_cast<std::size_t>(N));
+    for (int v = 0; v < N; ++v) by_degree[static_cast<std::size_t>(v)] = v;
+    std::stable_sort(by_degree.begin(), by_degree.end(), [&](int a, int b) { return degree(a) < degree(b); });
+    int next = 0;
+    for (int start : by_degree) {
+      if (order_[static_cast<std::size_t>(start)] >= 0) continue;
+      std::size_t head = queue.size();
+      queue.push_back(start);
+      order_[static_cast<std::size_t>(start)] = next++;
+      while (head < queue.size()) {
+        const int v = queue[head++];
+        std::vector<int> nb;
+        for (int u : adj[static_cast<std::size_t>(v)])
+          if (order_[static_cast<std::size_t>(u)] < 0) nb.push_back(u);
+        std::stable_sort(nb.begin(), nb.end(), [&](int a, int b) { return degree(a) < degree(b); });
+        for (int u : nb) {
+          order_[static_cast<std::size_t>(u)] = next++;
+          queue.push_back(u);
+        }
+      }
+    }
+    int band = 0;
+    for (int j = 0; j < N; ++j)
+      for (int u : adj[static_cast<std::size_t>(j)])
+        band = std::max(band, std::abs(order_[static_cast<std::size_t>(u)] - order_[static_cast<std::size_t>(j)]));
+    band_.reset();
+    if (band <= kMaxBand) {
+      band_ = std::make_unique<BandedLU>(N, band, band);
+      at_.clear();
+      at_.reserve(static_cast<std::size_t>(A.nonZeros()));
+      for (int j = 0; j < N; ++j)
+        for (Eigen::SparseMatrix<double>::InnerIterator it(A, j); it; ++it)
+          at_.push_back(band_->offset(order_[static_cast<std::size_t>(it.row())], order_[static_cast<std::size_t>(j)]));
+      y_.resize(N);
+    } else {
+      lu_.analyzePattern(A);
+    }
+  }
+  bool banded() const { return band_ != nullptr; }
+  // A's values (in the pattern analysed) factored; false where A is singular
+  bool factor(const Eigen::SparseMatrix<double>& A) {
+    if (!band_) {
+      // SparseLU fails only on an exactly zero pivot: a matrix singular to working
+      // precision is caught by solving A x = A 1 and asking for x = 1 to 1e-8
+      lu_.factorize(A);
+      if (lu_.info() != Eigen::Success) return false;
+      ones_.setOnes(A.cols());
+      y_ = A * ones_;
+      y_ = lu_.solve(y_).eval();
+      return std::isfinite(y_.sum()) && (y_ - ones_).template lpNorm<Eigen::Infinity>() <= 1e-8;
+    }
+    band_->set_zero();
+    double* b = band_->storage();
+    const double* v = A.valuePtr();
+    for (std::size_t k = 0; k < at_.size(); ++k) b[at_[k]] = v[k];
+    return band_->factor();
+  }
+  // x = A^{-1} r
+  void solve(const Eigen::VectorXd& r, Eigen::VectorXd& x) {
+    if (!band_) {
+      x = lu_.solve(r);
+      return;
+    }
+    const Eigen::Index N = r.size();
+    for (Eigen::Index i = 0; i < N; ++i) y_[order_[static_cast<std::size_t>(i)]] = r[i];
+    band_->solve(y_.data());
+    x.resize(N);
+    for (Eigen::Index i = 0; i < N; ++i) x[i] = y_[order_[static_cast<std::size_t>(i)]];
+  }
+
+ private:
+  std::vector<int> order_;        // the new index of each row and column
+  std::unique_ptr<BandedLU> band_;
+  std::vector<std::size_t> at_;   // where each stored value of A goes in the band
+  Eigen::VectorXd y_, ones_;
+  Eigen::SparseLU<Eigen::SparseMatrix<double>, Eigen::COLAMDOrdering<int>> lu_;
+};
+
+}  // namespace constrained_detail
 
 class SparseConstrainedThetaStep {
  public:
@@ -94,6 +206,8 @@ class SparseConstrainedThetaStep {
   int dim() const { return L_.dim(); }
   int constraints() const { return con_->count(); }
   const WrittenDynamic& lagrangian() const { return L_; }
+  // Whether Newton's saddle-point Jacobian is factored in a band (else by SparseLU).
+  bool banded() const { return work_->lu.banded(); }
 
   // Puts p on the hidden constraint at (t, q) (equation 2 with p~ = p): p - G^T mu with
   // G v + g_t = 0, v = M^{-1} (p - G^T mu), which v receives. Returns an empty string,
@@ -148,11 +262,13 @@ class SparseConstrainedThetaStep {
     return s;
   }
 
-  // The numerical rank of Dg at (t, q), where a dense SVD of Dg would cost O(m^2 n): the
-  // pivots of the sparse LDL^T factorisation of Dg Dg^T (fill-reducing ordering) above
-  // 1e-12 of the largest, i.e. Dg taken as rank-deficient where its condition number is
-  // beyond about 1e6 (an exactly repeated constraint gives a pivot at round-off); -1
-  // where a pivot is exactly zero (the factorisation stops there: rank below count()).
+  // The rank of Dg at (t, q) as the runtime checks it where a dense SVD of Dg would cost
+  // O(m^2 n): the pivots of the sparse LDL^T factorisation (fill-reducing ordering) of
+  // D D^T, D = Dg with each row scaled to unit length, above 1e-12 of the largest. A
+  // heuristic, not a rank-revealing factorisation: it catches constraints that repeat
+  // or combine others to round-off (a pivot at round-off), but a near dependence may
+  // leave no small pivot. -1 where a pivot is exactly zero (the factorisation stops
+  // there: a rank below count()).
   static int rank(const WrittenConstraints& con, double t, const V& q) {
     const int n = con.dim(), m = con.count();
     std::vector<double> G(con.entries());
@@ -161,8 +277,13 @@ class SparseConstrainedThetaStep {
     std::vector<Eigen::Triplet<double>> e;
     e.reserve(G.size());
     std::size_t k = 0;
-    for (int i = 0; i < m; ++i)
-      for (int j : con.pattern()[static_cast<std::size_t>(i)]) e.emplace_back(i, j, G[k++]);
+    for (int i = 0; i < m; ++i) {
+      const auto& row = con.pattern()[static_cast<std::size_t>(i)];
+      double norm = 0.0;
+      for (std::size_t a = 0; a < row.size(); ++a) norm += G[k + a] * G[k + a];
+      norm = norm > 0.0 ? 1.0 / std::sqrt(norm) : 1.0;
+      for (int j : row) e.emplace_back(i, j, norm * G[k++]);
+    }
     Sparse D(m, n);
     D.setFromTriplets(e.begin(), e.end());
     const Sparse S = D * D.transpose();
@@ -202,8 +323,8 @@ class SparseConstrainedThetaStep {
   struct Factor {
     Work& w;
     bool factor(const Eigen::MatrixXd&, double) const { return w.factor(); }
-    void solve(const V& r, V& dx) const { dx = w.lu.solve(r); }
-    const char* name() const { return "sparse LU factorisation"; }
+    void solve(const V& r, V& dx) const { w.lu.solve(r, dx); }
+    const char* name() const { return w.lu.banded() ? "banded LU factorisation" : "sparse LU factorisation"; }
   };
 
   struct Work {
@@ -262,11 +383,12 @@ class SparseConstrainedThetaStep {
       P.setFromTriplets(tp.begin(), tp.end());
       P.makeCompressed();
       // where each value goes among the matrices' values
-      auto at = [](Sparse& A, int i, int j) {
-        Sparse::InnerIterator it(A, j);
-        while (it && it.row() < i) ++it;
-        if (!it || it.row() != i) throw std::logic_error("SparseConstrainedThetaStep: an entry outside the pattern");
-        return static_cast<std::size_t>(&it.valueRef() - A.valuePtr());
+      auto at = [](Sparse& A, int i, int j) {  // (a column's rows are sorted: a binary search)
+        const int* first = A.innerIndexPtr() + A.outerIndexPtr()[j];
+        const int* last = A.innerIndexPtr() + A.outerIndexPtr()[j + 1];
+        const int* it = std::lower_bound(first, last, i);
+        if (it == last || *it != i) throw std::logic_error("SparseConstrainedThetaStep: an entry outside the pattern");
+        return static_cast<std::size_t>(it - A.innerIndexPtr());
       };
       for (int j = 0; j < n; ++j)
         for (int i : cols[static_cast<std::size_t>(j)]) hess_at.push_back(at(J, i, j));
@@ -281,8 +403,8 @@ class SparseConstrainedThetaStep {
           GT_P.push_back(at(P, j, n + c));
           G_P.push_back(at(P, n + c, j));
         }
-      lu.analyzePattern(J);
-      plu.analyzePattern(P);
+      lu.analyse(J);
+      plu.analyse(P);
     }
 
     void begin(const V& q0_, const V& p0_, double t0) {
@@ -331,22 +453,18 @@ class SparseConstrainedThetaStep {
       for (std::size_t e = 0; e < size; ++e) big = std::fmax(big, std::fabs(v[e]));
       return std::isfinite(big) ? big : INFINITY;
     }
-    bool factor() {
-      lu.factorize(J);
-      return lu.info() == Eigen::Success;
-    }
+    bool factor() { return lu.factor(J); }
     // Equation 2 at (t, q) with p~ in p: v and mu (p itself is not changed here)
     const char* project(double t, const V& q, const V& p, V& v) {
       con.sparse_gradients(t, q, G1.data(), gt.data());
       double* a = P.valuePtr();
       for (const auto& e : mass_P) a[e.first] = e.second;
       for (std::size_t e = 0; e < G1.size(); ++e) a[GT_P[e]] = a[G_P[e]] = G1[e];
-      plu.factorize(P);
-      if (plu.info() != Eigen::Success)
+      if (!plu.factor(P))
         return "the constraint Jacobian is singular where the momentum is projected (redundant constraints)";
       b.head(n) = p;
       b.tail(m) = -gt;
-      dx = plu.solve(b);
+      plu.solve(b, dx);
       if (!std::isfinite(dynamic_detail::inf_norm(dx))) return "non-finite momentum projection";
       v = dx.head(n);
       mu = dx.tail(m);
@@ -380,7 +498,7 @@ class SparseConstrainedThetaStep {
     Sparse J, P;                       // equation 1's Jacobian, equation 2's matrix
     std::vector<std::size_t> hess_at, G0_at, G1_at, GT_P, G_P;
     std::vector<std::pair<std::size_t, double>> mass_J, mass_P;  // where M / h (M) goes, and its value
-    Eigen::SparseLU<Sparse, Eigen::COLAMDOrdering<int>> lu, plu;
+    constrained_detail::SparseOrBanded lu, plu;  // their factorisations
     Eigen::MatrixXd unused;  // (the driver's matrix: J is the sparse one above)
     DriverState state;
   };

@@ -39,10 +39,11 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
     msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
     throw InputError(msg.str());
   }
-  // rank of Dg: by its singular values against the largest where Dg is small, as the
-  // sparse step finds it where it is not
-  const bool sparse = L.separable() && n >= kSparseConstrainedMinDim;
-  if (!sparse) {
+  // rank of Dg: by its singular values against the largest where the SVD is cheap (m^2 n
+  // at most 1e8), else as the sparse step finds it (a heuristic: a repeated constraint
+  // is caught, SparseConstrainedThetaStep::rank)
+  const bool svd = static_cast<double>(m) * m * n <= 1e8;
+  if (svd) {
     Eigen::MatrixXd D = Eigen::MatrixXd::Zero(m, n);
     std::size_t e = 0;
     for (int i = 0; i < m; ++i)
@@ -99,7 +100,7 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
     if (pr.project_velocity) {
       std::string failed;
       std::shared_ptr<SparsePotentialHessian> H;
-      if (sparse) try {
+      if (L.separable() && n >= kSparseConstrainedMinDim) try {
           H = SparseSeparableThetaStep::hessian_of(L, q);
         } catch (const SparsePotentialHessian::TooDense&) {
         }
@@ -157,7 +158,8 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
                      " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
                      " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
                      " coordinates the run-time-sized dense steps take (the sparse constrained step takes a "
-                     "separable Lagrangian of any size: a theta map, without system.forces or --linearize)");
+                     "separable Lagrangian of any size whose potential's Hessian is sparse: a theta map, without "
+                     "system.forces or --linearize)");
   base.step_path = StepPath::generic;
   const MomentumMap momentum = L.separable()               ? MomentumMap::constant
                                : L.parts().split.quadratic ? MomentumMap::linear

@@ -2,7 +2,7 @@
 // rigid links in Cartesian coordinates: the same equations as the dense
 // ConstrainedThetaStep, so the same steps to round-off; the constraint and its hidden
 // constraint kept at every step of a long chain; Dg's pattern read off the tapes; the
-// rank of Dg by the sparse QR.
+// rank of Dg by the sparse LDL^T of Dg Dg^T.
 #define BOOST_TEST_MODULE sparse_constrained
 #include <boost/test/unit_test.hpp>
 
@@ -48,8 +48,10 @@ void chain_state(int k, VectorXd& q, VectorXd& p) {
 // origin, in the plane (coordinates x1, y1, ..., xk, yk; y up), under gravity, its last
 // mass tied by a spring of stiffness c to where chain_state puts it, (a, b): k
 // constraints on 2k coordinates.
-// `twice`: the first rod's constraint written a second time (redundant).
-std::shared_ptr<WrittenSystem> chain(int k, bool twice = false) {
+// `twice`: the first rod's constraint written a second time, times 1.1 (redundant); `centre`: one
+// constraint more, the sum of the x_i held at its initial value (a row of Dg that
+// couples every joint: no narrow band).
+std::shared_ptr<WrittenSystem> chain(int k, bool twice = false, bool centre = false) {
   auto s = std::make_shared<WrittenSystem>();
   s->name = "chain";
   for (int i = 1; i <= k; ++i) {
@@ -58,7 +60,9 @@ std::shared_ptr<WrittenSystem> chain(int k, bool twice = false) {
   }
   VectorXd q, p;
   chain_state(k, q, p);
-  s->params = {{"m", kM}, {"l", kL}, {"g", kG}, {"c", kK}, {"a", q[2 * k - 2]}, {"b", q[2 * k - 1]}};
+  double xc = 0.0;
+  for (int i = 0; i < k; ++i) xc += q[2 * i];
+  s->params = {{"m", kM}, {"l", kL}, {"g", kG}, {"c", kK}, {"a", q[2 * k - 2]}, {"b", q[2 * k - 1]}, {"xc", xc}};
   s->check_names();
   std::string L;
   for (int i = 1; i <= k; ++i) {
@@ -75,7 +79,13 @@ std::shared_ptr<WrittenSystem> chain(int k, bool twice = false) {
   };
   for (int i = 1; i <= k; ++i)
     s->constraints.push_back(Expression::parse(rod(i), s->symbols(WrittenSystem::Kind::constraint)));
-  if (twice) s->constraints.push_back(Expression::parse(rod(1), s->symbols(WrittenSystem::Kind::constraint)));
+  if (twice)  // (scaled: dependent to round-off, not exactly equal rows)
+    s->constraints.push_back(Expression::parse("1.1*(" + rod(1) + ")", s->symbols(WrittenSystem::Kind::constraint)));
+  if (centre) {
+    std::string sum;
+    for (int i = 1; i <= k; ++i) sum += (i > 1 ? " + x" : "x") + std::to_string(i);
+    s->constraints.push_back(Expression::parse(sum + " - xc", s->symbols(WrittenSystem::Kind::constraint)));
+  }
   return s;
 }
 
@@ -85,18 +95,28 @@ using Dense = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>;
 
 BOOST_AUTO_TEST_CASE(the_sparse_step_is_the_dense_step) {
   // the same equations: the same trajectory to round-off, for the midpoint and an
-  // asymmetric theta, over 200 steps of a chain of 6 links (12 coordinates)
-  const int k = 6;
-  const auto sys = chain(k);
+  // asymmetric theta, over 200 steps of a chain of 12 links (24 coordinates), whose
+  // saddle-point matrices are factored in a band, and of the same chain with its
+  // centre held (factored by the sparse LU)
+  const int k = 12;
+  for (bool centre : {false, true}) {
+  const auto sys = chain(k, false, centre);
   const WrittenDynamic L(sys);
   BOOST_REQUIRE(L.separable());
   const auto con = std::make_shared<const WrittenConstraints>(sys);
   VectorXd q0, p0;
   chain_state(k, q0, p0);
+  if (centre) {  // (the momentum along the centre's constraint too)
+    VectorXd v(2 * k);
+    BOOST_REQUIRE(SparseConstrainedThetaStep(L, SparseSeparableThetaStep::hessian_of(L, q0), con, 0.5, 0.01)
+                      .project(0.0, q0, p0, v)
+                      .empty());
+  }
   const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
   for (double theta : {0.5, 0.3}) {
     const double h = 0.01;
     const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {});
+    BOOST_TEST(sparse.banded() == !centre);
     const Dense dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant);
     VectorXd qs = q0, ps = p0, qd = q0, pd = p0, dqs = VectorXd::Zero(2 * k), dps(2 * k), dqd = dqs, dpd(2 * k);
     double worst = 0.0;
@@ -112,10 +132,12 @@ BOOST_AUTO_TEST_CASE(the_sparse_step_is_the_dense_step) {
       worst = std::fmax(worst, std::fmax((qs - qd).lpNorm<Eigen::Infinity>() / qd.lpNorm<Eigen::Infinity>(),
                                          (ps - pd).lpNorm<Eigen::Infinity>() / pd.lpNorm<Eigen::Infinity>()));
     }
-    BOOST_TEST_MESSAGE("theta " << theta << ": largest relative difference " << worst);
+    BOOST_TEST_MESSAGE((centre ? "centre held, " : "") << "theta " << theta << ": largest relative difference "
+                                                         << worst);
     BOOST_TEST(worst < 1e-11);
     // and the motion is not trivial
     BOOST_TEST((qs - q0).norm() > 0.1);
+  }
   }
 }
 
@@ -223,4 +245,27 @@ BOOST_AUTO_TEST_CASE(project_puts_the_momentum_on_the_hidden_constraint) {
   VectorXd same = on;
   BOOST_REQUIRE(step.project(0.0, q, same, v).empty());
   BOOST_TEST((same - on).lpNorm<Eigen::Infinity>() < 1e-13);
+}
+
+BOOST_AUTO_TEST_CASE(a_singular_saddle_point_fails_the_step) {
+  // the first rod written twice: the saddle-point matrix is singular to working
+  // precision (two proportional rows), whether factored in a band or by the sparse LU (the
+  // centre held too: no narrow band); the step fails there and says so
+  const int k = 12;
+  for (bool centre : {false, true}) {
+    const auto sys = chain(k, true, centre);
+    const WrittenDynamic L(sys);
+    const auto con = std::make_shared<const WrittenConstraints>(sys);
+    VectorXd q, p;
+    chain_state(k, q, p);
+    const SparseConstrainedThetaStep step(L, SparseSeparableThetaStep::hessian_of(L, q), con, 0.5, 0.01);
+    BOOST_TEST(step.banded() == !centre);
+    VectorXd dq = VectorXd::Zero(2 * k), dp(2 * k);
+    const StepSummary s = step.step(0.0, q, p, dq, dp);
+    BOOST_TEST(!s.converged);
+    BOOST_TEST_MESSAGE((centre ? "sparse LU: " : "banded: ") << s.message);
+    // (Newton's factorisation refuses it: SparseLU alone would pass its pivots at
+    // round-off, and the step would fail later, if at all)
+    BOOST_TEST(s.message.find("singular step Jacobian") != std::string::npos, s.message);
+  }
 }
