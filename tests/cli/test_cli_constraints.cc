@@ -523,8 +523,8 @@ BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
 // constraints) steps by the sparse constrained step: the dense step's trajectory
 // (integrator.use_structure = false) to round-off, plain and composed to order 4; the
 // combinations the sparse step does not take (a force, --linearize) run the dense one;
-// a redundant constraint is refused by the sparse rank test; and a chain beyond the
-// dense steps' 4096 coordinates runs.
+// a redundant constraint is refused (by the SVD of Dg at 16 rods, by the sparse rank
+// heuristic at 2100); and a chain beyond the dense steps' 4096 coordinates runs.
 BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
   const std::string C = "chain_cartesian.toml";
   auto agree = [&](const std::vector<std::string>& sets) {
@@ -564,8 +564,8 @@ BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
   const Output r = dvm(with_sets({"run", scene(C), "--no-output"}, {constraints + "]"}));
   BOOST_TEST(r.status == 2);
   BOOST_TEST(r.err.find("system.constraints") != std::string::npos, r.err);
+  BOOST_TEST(r.err.find("rank 16") != std::string::npos, r.err);
   BOOST_TEST(r.err.find("expected 17") != std::string::npos, r.err);
-  BOOST_TEST(r.err.find("sparse LDL^T") != std::string::npos, r.err);
   // 2100 rods, 4200 coordinates: beyond what the dense steps take, two steps
   const int k = 2100;
   std::string list = "\"x[1]^2 + y[1]^2 - l^2\"";
@@ -583,12 +583,20 @@ BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
     q0 += (i > 1 ? ", " : "") + num(i * 0.1 * std::sin(0.5));
     x0 += ", " + num(-i * 0.1 * std::cos(0.5));
   }
-  const std::string big = write_scene(
-      "chain_2100.toml", "[system]\ncoordinates = [\"x[n]\", \"y[n]\"]\nparams = { n = " + std::to_string(k) +
-                             ", m = 0.1, l = 0.1, g = 9.81 }\nlagrangian = \"sum(i, 1, n, m/2*(x_dot[i]^2 + y_dot[i]^2) "
-                             "- m*g*y[i])\"\nconstraints = [" + list +
-                             "]\n[initial]\nq = [" + q0 + x0 + "]\nv = \"0\"\n"
-                             "[integrator]\nmap = \"midpoint\"\nstep = 1e-3\nt_end = 2e-3\n");
+  auto big_chain = [&](const std::string& name, const std::string& constraints) {
+    return write_scene(name, "[system]\ncoordinates = [\"x[n]\", \"y[n]\"]\nparams = { n = " + std::to_string(k) +
+                                 ", m = 0.1, l = 0.1, g = 9.81 }\nlagrangian = \"sum(i, 1, n, m/2*(x_dot[i]^2 + "
+                                 "y_dot[i]^2) - m*g*y[i])\"\nconstraints = [" + constraints +
+                                 "]\n[initial]\nq = [" + q0 + x0 + "]\nv = \"0\"\n"
+                                 "[integrator]\nmap = \"midpoint\"\nstep = 1e-3\nt_end = 2e-3\n");
+  };
+  const std::string big = big_chain("chain_2100.toml", list);
+  // its first rod twice (times 2): beyond the SVD's size, the sparse rank check
+  const Output twice = dvm({"run", big_chain("chain_2100_twice.toml", list + ", \"2*(x[1]^2 + y[1]^2 - l^2)\""),
+                            "--no-output"});
+  BOOST_TEST(twice.status == 2);
+  BOOST_TEST(twice.err.find("expected 2101") != std::string::npos, twice.err);
+  BOOST_TEST(twice.err.find("sparse LDL^T") != std::string::npos, twice.err);
   const Output b = dvm({"run", big, "--json", "--no-output"});
   BOOST_TEST_REQUIRE(b.status == 0, b.err);
   const Json bj = parse_json(b.out);
