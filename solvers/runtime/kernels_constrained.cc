@@ -42,8 +42,8 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
   // rank of Dg: by its singular values against the largest where the SVD is cheap (m^2 n
   // at most 1e8), else as the sparse step finds it (a heuristic: a repeated constraint
   // is caught, SparseConstrainedThetaStep::rank)
-  const bool svd = static_cast<double>(m) * m * n <= 1e8;
-  if (svd) {
+  const bool by_svd = static_cast<double>(m) * m * n <= 1e8;
+  if (by_svd) {
     Eigen::MatrixXd D = Eigen::MatrixXd::Zero(m, n);
     std::size_t e = 0;
     for (int i = 0; i < m; ++i)
