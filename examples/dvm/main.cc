@@ -359,7 +359,7 @@ const char* kRunHelp =
     "                               more coordinates, keeps the Jacobian of its theta step\n"
     "                               across steps (step_path kept-jacobian-newton);\n"
     "                               with [system] constraints, a theta map on a separable\n"
-    "                               written text of 20 or more coordinates, without\n"
+    "                               written text of 12 or more coordinates, without\n"
     "                               forces or --linearize, solves on sparse matrices\n"
     "                               (step_path constrained-sparse-newton; any size);\n"
     "                               the spherical chain steps by Newton on its own equation,\n"

@@ -16,7 +16,7 @@ namespace dvm::kernels {
 // From this many coordinates a constrained theta step on a separable Lagrangian without
 // a force is the sparse one (solvers/sparse_constrained_step.h); below, the dense one
 // costs less (bench_constrained's table of chains compares them).
-constexpr int kSparseConstrainedMinDim = 20;
+constexpr int kSparseConstrainedMinDim = 12;
 
 void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
                                     Eigen::VectorXd& p, Eigen::VectorXd& v0) {
