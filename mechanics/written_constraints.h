@@ -185,26 +185,37 @@ class WrittenConstraints {
   // denominator is 0 counts its numerator).
   void relative_residuals(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, double& position,
                           double& velocity) const {
-    const int m = count();
-    g_.resize(m);
-    gt_.resize(m);
-    sparse_.resize(static_cast<Eigen::Index>(entries_));
-    sparse_gradients(t, q, sparse_.data(), gt_.data());
-    value(t, q, g_);
+    row_terms(t, q, v, g_, gn_, across_);
     const double qn = q.norm(), vn = v.norm();
     position = velocity = 0.0;
+    for (int i = 0; i < count(); ++i) {
+      const double gn = gn_[i], a = std::fabs(g_[i]), b = std::fabs(across_[i]);
+      position = std::fmax(position, gn * qn > 0.0 ? a / (gn * qn) : a);
+      velocity = std::fmax(velocity, gn * vn > 0.0 ? b / (gn * vn) : b);
+    }
+  }
+
+  // The terms of those measures, per constraint i at (t, q) with velocity v: g_i,
+  // |grad g_i| and grad g_i . v + dg_i/dt (each resized to count()), from the sparse
+  // rows (no count() x dim() matrix).
+  void row_terms(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& v, Eigen::VectorXd& g,
+                 Eigen::VectorXd& norm, Eigen::VectorXd& across) const {
+    const int m = count();
+    g.resize(m);
+    norm.resize(m);
+    across.resize(m);
+    sparse_.resize(static_cast<Eigen::Index>(entries_));
+    sparse_gradients(t, q, sparse_.data(), across.data());  // (g_t first)
+    value(t, q, g);
     std::size_t e = 0;
     for (int i = 0; i < m; ++i) {
-      double gn = 0.0, dot = gt_[i];
+      double gn = 0.0;
       for (int j : pattern_[static_cast<std::size_t>(i)]) {
         const double a = sparse_[static_cast<Eigen::Index>(e++)];
         gn += a * a;
-        dot += a * v[j];
+        across[i] += a * v[j];
       }
-      gn = std::sqrt(gn);
-      const double a = std::fabs(g_[i]), b = std::fabs(dot);
-      position = std::fmax(position, gn * qn > 0.0 ? a / (gn * qn) : a);
-      velocity = std::fmax(velocity, gn * vn > 0.0 ? b / (gn * vn) : b);
+      norm[i] = std::sqrt(gn);
     }
   }
 
@@ -234,7 +245,7 @@ class WrittenConstraints {
   mutable Eigen::MatrixXd Haa_, Hab_, Hbb_;
   mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient
   mutable Eigen::VectorXd sq_, sv_;  // sparse_gradients()'s, zero between calls
-  mutable Eigen::VectorXd g_, gt_, sparse_;
+  mutable Eigen::VectorXd g_, gn_, across_, sparse_;  // relative_residuals()'s
   std::vector<std::vector<int>> pattern_;  // the coordinates each constraint reads
   std::size_t entries_ = 0;
 };

@@ -216,7 +216,7 @@ class SparseConstrainedThetaStep {
     Work& w = *work_;
     const char* failed = w.project(t, q, p, v);
     if (*failed) return failed;
-    constrained_subtract(w, p);
+    w.subtract_normals(w.G1, 1.0, w.mu.data(), p.data());
     return "";
   }
 
@@ -235,7 +235,8 @@ class SparseConstrainedThetaStep {
       s = newton_drive(eq, la, Refresh::within_step, options_, w.y, w.r, w.dx, w.unused, w.state, w.start);
       dq = w.y.head(n);
       if (s.converged) {
-        // p1~ - p0 = h F(q_theta) - G0^T lambda, at the last residual's q_theta
+        // p1~ - p0 = h F(q_theta) - G0^T lambda, at the solution (the driver's last
+        // correction moved it from the last residual's point)
         w.x = q0 + theta_ * dq;
         w.separable.force(w.x, w.F);
         dp = h_ * w.F;
@@ -247,7 +248,7 @@ class SparseConstrainedThetaStep {
           s.converged = false;
           s.message = failed;
         } else {
-          constrained_subtract(w, dp);  // p1 - p0 = (p1~ - p0) - G1^T mu
+          w.subtract_normals(w.G1, 1.0, w.mu.data(), dp.data());  // p1 - p0 = (p1~ - p0) - G1^T mu
           if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
             s.converged = false;
             s.message = "non-finite momentum";
@@ -300,8 +301,6 @@ class SparseConstrainedThetaStep {
 
  private:
   struct Work;
-  // out -= c G^T mu for G held as pattern-ordered entries
-  static void constrained_subtract(Work& w, V& p) { w.subtract_normals(w.G1, 1.0, w.mu.data(), p.data()); }
 
   // Equation 1 for the driver: the step forms its sparse Jacobian itself (the driver's
   // matrix is unused).
@@ -309,12 +308,14 @@ class SparseConstrainedThetaStep {
     using Vector = V;
     using Matrix = Eigen::MatrixXd;
     Work& w;
-    void residual(const V& y, V& r) const { w.residual(y, r); }
+    void residual(const V& y, V& r) const {
+      w.at(y);
+      w.form(y, r);
+    }
     double jacobian(const V& y, V& r, Matrix&) const {
-      const bool first = w.s == 0.0;
-      w.residual(y, r);
+      w.at(y);
       const double big = w.jacobian();
-      if (first) w.residual(y, r);  // (its multiplier and constraint rows, now with s)
+      w.form(y, r);
       return big;
     }
     double scale(double yn, double Jmax) const { return w.pscale + Jmax * yn; }
@@ -335,7 +336,7 @@ class SparseConstrainedThetaStep {
       m = con.count();
       const int k = n + m;
       const WrittenParts& parts = L.parts();
-      zero = V::Zero(n);
+      D.resize(n);
       x.resize(n);
       F.resize(n);
       MD.resize(n);
@@ -417,20 +418,24 @@ class SparseConstrainedThetaStep {
       g0max = 0.0;
       for (double a : G0) g0max = std::fmax(g0max, std::fabs(a));
     }
-    // r = (M D / h - h (1 - theta) F(q_theta) - p0 + s G0^T y_lambda, s g(t1, q0 + D))
-    void residual(const V& y_, V& r_) {
-      const auto D = y_.head(n);
+    // The terms at y = (D, lambda / s): q_theta, F(q_theta), M D, q1 = q0 + D, g(t1, q1).
+    void at(const V& y_) {
+      D = y_.head(n);
       x = *q0 + theta * D;
       separable.force(x, F);
       mass.times(D, MD);
-      r_.head(n) = MD / h - (h * (1.0 - theta)) * F - *p0;
-      add_normals(G0, s, y_.data() + n, r_.data());
       q1 = *q0 + D;
       con.value(t1, q1, g1);
+    }
+    // r = (M D / h - h (1 - theta) F(q_theta) - p0 + s G0^T y_lambda, s g(t1, q0 + D)) from
+    // the terms of the last at()
+    void form(const V& y_, V& r_) const {
+      r_.head(n) = MD / h - (h * (1.0 - theta)) * F - *p0;
+      add_normals(G0, s, y_.data() + n, r_.data());
       r_.tail(m) = s * g1;
     }
-    // J's values at the point of the last residual; its largest entry (INFINITY where
-    // one is not finite)
+    // J's values at the point of the last at() (s set at the first); its largest entry
+    // (INFINITY where one is not finite)
     double jacobian() {
       hessian->evaluate(x.data(), hess.data());
       con.sparse_gradients(t1, q1, G1.data(), gt.data());
@@ -493,7 +498,7 @@ class SparseConstrainedThetaStep {
     const V* q0 = nullptr;
     const V* p0 = nullptr;
     double t1 = 0.0, pscale = 0.0, x0 = 0.0, s = 0.0, g0max = 0.0;
-    V zero, x, F, MD, q1, p1, v1, g1, gt, mu, y, r, dx, start, b;
+    V D, x, F, MD, q1, p1, v1, g1, gt, mu, y, r, dx, start, b;
     std::vector<double> G0, G1, hess;  // Dg at q0 and at q1 (pattern order), Hess U's entries
     Sparse J, P;                       // equation 1's Jacobian, equation 2's matrix
     std::vector<std::size_t> hess_at, G0_at, G1_at, GT_P, G_P;

@@ -220,7 +220,8 @@ int main(int argc, char** argv) {
                   c.iterations_per_step, loose.ns_per_step, loose.iterations_per_step, derivatives.ns_per_step,
                   p.minimal, m.ns_per_step, c.ns_per_step / m.ns_per_step);
     }
-    // chains of k rods: the dense step against the sparse one, about 2 ms of work a cell
+    // chains of k rods: the dense step against the sparse one, the steps of a cell in
+    // proportion to 1 / k^3 (the dense step's cost), at least 10
     std::printf("\nchains of k rods (midpoint, h = 1e-3): the dense constrained step against the sparse one, ns a step"
                 "\n(dvm run takes the sparse one from kSparseConstrainedMinDim coordinates, kernels_constrained.cc)\n\n");
     std::printf("| links k | coordinates | dense: ns/step | sparse: ns/step | dense / sparse |\n|---|---|---|---|---|\n");

@@ -5,8 +5,6 @@
 // Separate from kernels_written.cc so that the two compile side by side.
 #include <Eigen/SVD>
 
-#include <algorithm>
-
 #include "solvers/constrained_galerkin_step.h"
 #include "solvers/runtime/kernels_dynamic.h"
 #include "solvers/sparse_constrained_step.h"
@@ -23,19 +21,16 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
   const WrittenSystem& w = *pr.written;
   const int n = L.dim(), m = static_cast<int>(w.constraints.size());
   const auto con = std::make_shared<const WrittenConstraints>(pr.written);
-  // Dg's rows as sparse entries (no m x n matrix: a long chain has m ~ n / 2)
-  std::vector<double> G(con->entries());
-  Eigen::VectorXd g(m), gt(m);
-  con->sparse_gradients(0.0, q, G.data(), gt.data());
-  con->value(0.0, q, g);
+  // each constraint's g, |grad g| and grad g . v + dg/dt (the terms of
+  // WrittenConstraints::relative_residuals; no m x n matrix: a long chain has m ~ n / 2)
+  Eigen::VectorXd g, norms, across;
+  con->row_terms(0.0, q, v0, g, norms, across);
   auto text = [&](int i) {
     return "system.constraints[" + std::to_string(i + 1) + "] (\"" + w.constraints[static_cast<std::size_t>(i)].text() + "\")";
   };
   std::ostringstream msg;
   msg.precision(6);
-  const bool finite = g.allFinite() && gt.allFinite() &&
-                      std::all_of(G.begin(), G.end(), [](double a) { return std::isfinite(a); });
-  if (!finite) {
+  if (!g.allFinite() || !norms.allFinite() || !across.allFinite()) {
     msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
     throw InputError(msg.str());
   }
@@ -44,6 +39,9 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
   // is caught, SparseConstrainedThetaStep::rank)
   const bool by_svd = static_cast<double>(m) * m * n <= 1e8;
   if (by_svd) {
+    std::vector<double> G(con->entries());
+    Eigen::VectorXd gt(m);
+    con->sparse_gradients(0.0, q, G.data(), gt.data());
     Eigen::MatrixXd D = Eigen::MatrixXd::Zero(m, n);
     std::size_t e = 0;
     for (int i = 0; i < m; ++i)
@@ -73,19 +71,8 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
   }
   // each constraint's relative residuals (WrittenConstraints::relative_residuals)
   const double qn = q.norm(), vn = v0.norm();
-  std::vector<double> norms(static_cast<std::size_t>(m)), across(static_cast<std::size_t>(m));
-  std::size_t e = 0;
   for (int i = 0; i < m; ++i) {
-    double gn = 0.0, dot = gt[i];
-    for (int j : con->pattern()[static_cast<std::size_t>(i)]) {
-      gn += G[e] * G[e];
-      dot += G[e++] * v0[j];
-    }
-    norms[static_cast<std::size_t>(i)] = std::sqrt(gn);
-    across[static_cast<std::size_t>(i)] = dot;
-  }
-  for (int i = 0; i < m; ++i) {
-    const double gn = norms[static_cast<std::size_t>(i)], r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
+    const double gn = norms[i], r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
     if (!(r <= kConstraintStartTolerance)) {
       msg << "initial.q: the initial position is off " << text(i) << ": g = " << g[i] << " at t = 0, relative "
           << r << " (|g| / (|grad g| |q|)), beyond " << kConstraintStartTolerance
@@ -94,7 +81,7 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
     }
   }
   for (int i = 0; i < m; ++i) {
-    const double gn = norms[static_cast<std::size_t>(i)], b = std::fabs(across[static_cast<std::size_t>(i)]);
+    const double gn = norms[i], b = std::fabs(across[i]);
     const double r = b / (gn * vn > 0.0 ? gn * vn : 1.0);
     if (r <= kConstraintStartTolerance) continue;
     if (pr.project_velocity) {
@@ -114,7 +101,7 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
       return;
     }
     msg << (pr.momentum_given ? "initial.p" : "initial.v") << ": the initial velocity is off the hidden constraint of "
-        << text(i) << ": grad g . v + dg/dt = " << across[static_cast<std::size_t>(i)] << ", relative " << r
+        << text(i) << ": grad g . v + dg/dt = " << across[i] << ", relative " << r
         << ", beyond " << kConstraintStartTolerance << "; give a velocity along the constraints, or set "
         << "initial.project_velocity = true to project it";
     throw InputError(msg.str());
