@@ -24,16 +24,19 @@ JOBS  ?= 2
 LAUNCHER := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
 
 # The test tree (build-test/): everything ctest runs, built by clang++-14 at -O1, which
-# compiles it faster than g++ at -O3 (tests/README.md, "Build and CI cost"): clang
-# spends most of its time optimising and g++ most of it instantiating templates, so
-# clang gains most from a lower level. Results do not depend on the level: without
+# compiles it faster than g++ at -O1 or -O3 (tests/README.md, "Build and CI cost").
+# Results do not depend on the level: without
 # -ffast-math and without FMA on x86-64's baseline, every level computes the same IEEE
 # operations; the suites run a little slower than at -O3.
 # The program users run (`make`, `make run`) and the benchmark programs (`make bench`,
 # `make charts`) stay on g++ at -O3 in build/, so the per-step costs the charts publish
 # are those of the shipped build: neither compiler's code is faster everywhere (clang's
-# on the Newton midpoint step, g++'s on TinySolver and on the Galerkin steps of 6
-# stages; bench_midpoint_step and bench_galerkin_kepler built by each show it). Every
+# on the Newton midpoint step, g++'s on TinySolver, on the Galerkin steps of 6 stages
+# and on several runtime paths, the kicks and drifts among them; bench_midpoint_step,
+# bench_galerkin_kepler and bench_written_lagrangian built by each show it), so the
+# shorter build clang would give is not taken at the price of those steps. Not -O2
+# either: g++ inlines less there, and the runs on SO(3), S^2 and Kepler's problem are
+# much slower a step (time `dvm run` of those scenes built each way). Every
 # suite passes with both; `make test TEST_CXX=g++ TEST_FLAGS="-O3 -DNDEBUG"
 # TEST_BUILD=build-test-gcc` runs them on the shipped build.
 TEST_BUILD ?= build-test
