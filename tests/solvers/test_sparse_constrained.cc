@@ -100,44 +100,44 @@ BOOST_AUTO_TEST_CASE(the_sparse_step_is_the_dense_step) {
   // centre held (factored by the sparse LU)
   const int k = 12;
   for (bool centre : {false, true}) {
-  const auto sys = chain(k, false, centre);
-  const WrittenDynamic L(sys);
-  BOOST_REQUIRE(L.separable());
-  const auto con = std::make_shared<const WrittenConstraints>(sys);
-  VectorXd q0, p0;
-  chain_state(k, q0, p0);
-  if (centre) {  // (the momentum along the centre's constraint too)
-    VectorXd v(2 * k);
-    BOOST_REQUIRE(SparseConstrainedThetaStep(L, SparseSeparableThetaStep::hessian_of(L, q0), con, 0.5, 0.01)
-                      .project(0.0, q0, p0, v)
-                      .empty());
-  }
-  const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
-  for (double theta : {0.5, 0.3}) {
-    const double h = 0.01;
-    const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {});
-    BOOST_TEST(sparse.banded() == !centre);
-    const Dense dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant);
-    VectorXd qs = q0, ps = p0, qd = q0, pd = p0, dqs = VectorXd::Zero(2 * k), dps(2 * k), dqd = dqs, dpd(2 * k);
-    double worst = 0.0;
-    for (int j = 0; j < 200; ++j) {
-      const double t = j * h;
-      const StepSummary a = sparse.step(t, qs, ps, dqs, dps);
-      const StepSummary b = dense.step(t, qd, pd, dqd, dpd);
-      BOOST_REQUIRE_MESSAGE(a.converged && b.converged, a.message << " / " << b.message);
-      qs += dqs;
-      ps += dps;
-      qd += dqd;
-      pd += dpd;
-      worst = std::fmax(worst, std::fmax((qs - qd).lpNorm<Eigen::Infinity>() / qd.lpNorm<Eigen::Infinity>(),
-                                         (ps - pd).lpNorm<Eigen::Infinity>() / pd.lpNorm<Eigen::Infinity>()));
+    const auto sys = chain(k, false, centre);
+    const WrittenDynamic L(sys);
+    BOOST_REQUIRE(L.separable());
+    const auto con = std::make_shared<const WrittenConstraints>(sys);
+    VectorXd q0, p0;
+    chain_state(k, q0, p0);
+    if (centre) {  // (the momentum along the centre's constraint too)
+      VectorXd v(2 * k);
+      BOOST_REQUIRE(SparseConstrainedThetaStep(L, SparseSeparableThetaStep::hessian_of(L, q0), con, 0.5, 0.01)
+                        .project(0.0, q0, p0, v)
+                        .empty());
     }
-    BOOST_TEST_MESSAGE((centre ? "centre held, " : "") << "theta " << theta << ": largest relative difference "
-                                                         << worst);
-    BOOST_TEST(worst < 1e-11);
-    // and the motion is not trivial
-    BOOST_TEST((qs - q0).norm() > 0.1);
-  }
+    const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+    for (double theta : {0.5, 0.3}) {
+      const double h = 0.01;
+      const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {});
+      BOOST_TEST(sparse.banded() == !centre);
+      const Dense dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant);
+      VectorXd qs = q0, ps = p0, qd = q0, pd = p0, dqs = VectorXd::Zero(2 * k), dps(2 * k), dqd = dqs, dpd(2 * k);
+      double worst = 0.0;
+      for (int j = 0; j < 200; ++j) {
+        const double t = j * h;
+        const StepSummary a = sparse.step(t, qs, ps, dqs, dps);
+        const StepSummary b = dense.step(t, qd, pd, dqd, dpd);
+        BOOST_REQUIRE_MESSAGE(a.converged && b.converged, a.message << " / " << b.message);
+        qs += dqs;
+        ps += dps;
+        qd += dqd;
+        pd += dpd;
+        worst = std::fmax(worst, std::fmax((qs - qd).lpNorm<Eigen::Infinity>() / qd.lpNorm<Eigen::Infinity>(),
+                                           (ps - pd).lpNorm<Eigen::Infinity>() / pd.lpNorm<Eigen::Infinity>()));
+      }
+      BOOST_TEST_MESSAGE((centre ? "centre held, " : "") << "theta " << theta << ": largest relative difference "
+                                                           << worst);
+      BOOST_TEST(worst < 1e-11);
+      // and the motion is not trivial
+      BOOST_TEST((qs - q0).norm() > 0.1);
+    }
   }
 }
 
