@@ -787,12 +787,16 @@ std::string run_help() {
 }
 
 // A usage error: the message and where the help is, one line each (the command list
-// when no command was recognised, which is short).
+// when no command was recognised, which is short). Thrown, not printed here: main
+// prints it and exits with 2, and a sweep under mpirun has rank 0 print it once, after
+// every rank has found it (a rank that exited at once would have mpirun end the others,
+// rank 0 perhaps before it said why).
+struct UsageError {
+  std::string text;  // what goes to standard error, its lines ended
+};
+
 [[noreturn]] void usage_error(const std::string& msg, const char* help) {
-  if (help == kUsage) {
-    std::cerr << "dvm: " << msg << "\n\n" << kUsage;
-    std::exit(2);
-  }
+  if (help == kUsage) throw UsageError{"dvm: " + msg + "\n\n" + kUsage};
   const char* command = help == kRunHelp        ? "run"
                         : help == kMapsHelp     ? "maps"
                         : help == kMethodsHelp  ? "methods"
@@ -802,8 +806,7 @@ std::string run_help() {
                         : help == kSweepHelp    ? "sweep"
                         : help == kChartHelp    ? "chart"
                                                 : "version";
-  std::cerr << "dvm: " << msg << "\nsee 'dvm " << command << " --help'\n";
-  std::exit(2);
+  throw UsageError{"dvm: " + msg + "\nsee 'dvm " + command + " --help'\n"};
 }
 
 // "unknown option X" with the nearest option of the command, if one is near.
@@ -1080,74 +1083,90 @@ class QuietRank {
 int cmd_sweep(const std::vector<std::string>& args) {
   QuietRank quiet;
   const bool mpirun = dvm::launched_by_mpirun();
+  // MPI from the start under mpirun: every rank reads the same arguments, and bad
+  // ones are said by rank 0 and end every rank together (see UsageError)
+  dvm::SweepRanks ranks;
+  const bool root = ranks.rank() == 0;
   dvm::SweepOptions o;
   o.jobs = mpirun ? 1 : dvm::default_jobs();
   std::vector<std::string> varies;
   std::string scene, out;
   bool json = false, resume = false;
-  for (std::size_t i = 0; i < args.size(); ++i) {
-    const std::string& a = args[i];
-    auto value = [&](const char* name) -> std::string {
-      if (i + 1 >= args.size()) usage_error(std::string(name) + " needs a value", kSweepHelp);
-      return args[++i];
-    };
-    if (is_help(a)) {
-      std::string help = kSweepHelp;
-      const auto at = help.find("@MPI@");
-      if (at != std::string::npos)
-        help.replace(at, 5, dvm::sweep_mpi_built() ? "This dvm was built with MPI." : "This dvm was built without MPI.");
-      std::cout << help;
-      return 0;
-    } else if (a == "--vary") {
-      varies.push_back(value("--vary"));
-    } else if (a.rfind("--vary=", 0) == 0) {
-      varies.push_back(a.substr(7));
-    } else if (a == "--set") {
-      o.sets.push_back(value("--set"));
-    } else if (a.rfind("--set=", 0) == 0) {
-      o.sets.push_back(a.substr(6));
-    } else if (a == "--zip") {
-      o.zip = true;
-    } else if (a == "--error") {
-      o.error = true;
-    } else if (a == "--max-error") {
-      o.error = o.max_error = true;
-    } else if (a == "--resume") {
-      resume = true;
-    } else if (a == "--json") {
-      json = true;
-    } else if (a == "--jobs") {
-      const std::string text = value("--jobs");
-      const double n = parse_number("--jobs", text, kSweepHelp);
-      if (n != std::floor(n) || n < 1 || n > 4096)
-        usage_error("--jobs: got '" + text + "', expected a whole number from 1 to 4096", kSweepHelp);
-      o.jobs = static_cast<int>(n);
-    } else if (a == "--max-runs") {
-      const std::string text = value("--max-runs");
-      o.max_runs = parse_number("--max-runs", text, kSweepHelp);
-      if (o.max_runs != std::floor(o.max_runs) || o.max_runs < 1 || o.max_runs > 1e15)
-        usage_error("--max-runs: got '" + text + "', expected a whole number from 1 to 1e15", kSweepHelp);
-    } else if (a == "--out") {
-      out = value("--out");
-      if (out.empty()) usage_error("--out needs a path (PATH.csv and PATH.json are written)", kSweepHelp);
-    } else if (!a.empty() && a[0] == '-') {
-      usage_error(unknown_option(a, {"--vary", "--zip", "--set", "--error", "--max-error", "--jobs", "--out",
-                                     "--resume", "--json", "--max-runs", "--help"}),
-                  kSweepHelp);
-    } else if (scene.empty()) {
-      scene = a;
-    } else {
-      usage_error("more than one scene file given ('" + scene + "', '" + a + "')", kSweepHelp);
+  std::string argument_error;
+  try {
+    for (std::size_t i = 0; i < args.size(); ++i) {
+      const std::string& a = args[i];
+      auto value = [&](const char* name) -> std::string {
+        if (i + 1 >= args.size()) usage_error(std::string(name) + " needs a value", kSweepHelp);
+        return args[++i];
+      };
+      if (is_help(a)) {
+        std::string help = kSweepHelp;
+        const auto at = help.find("@MPI@");
+        if (at != std::string::npos)
+          help.replace(at, 5,
+                       dvm::sweep_mpi_built() ? "This dvm was built with MPI." : "This dvm was built without MPI.");
+        std::cout << help;
+        return 0;
+      } else if (a == "--vary") {
+        varies.push_back(value("--vary"));
+      } else if (a.rfind("--vary=", 0) == 0) {
+        varies.push_back(a.substr(7));
+      } else if (a == "--set") {
+        o.sets.push_back(value("--set"));
+      } else if (a.rfind("--set=", 0) == 0) {
+        o.sets.push_back(a.substr(6));
+      } else if (a == "--zip") {
+        o.zip = true;
+      } else if (a == "--error") {
+        o.error = true;
+      } else if (a == "--max-error") {
+        o.error = o.max_error = true;
+      } else if (a == "--resume") {
+        resume = true;
+      } else if (a == "--json") {
+        json = true;
+      } else if (a == "--jobs") {
+        const std::string text = value("--jobs");
+        const double n = parse_number("--jobs", text, kSweepHelp);
+        if (n != std::floor(n) || n < 1 || n > 4096)
+          usage_error("--jobs: got '" + text + "', expected a whole number from 1 to 4096", kSweepHelp);
+        o.jobs = static_cast<int>(n);
+      } else if (a == "--max-runs") {
+        const std::string text = value("--max-runs");
+        o.max_runs = parse_number("--max-runs", text, kSweepHelp);
+        if (o.max_runs != std::floor(o.max_runs) || o.max_runs < 1 || o.max_runs > 1e15)
+          usage_error("--max-runs: got '" + text + "', expected a whole number from 1 to 1e15", kSweepHelp);
+      } else if (a == "--out") {
+        out = value("--out");
+        if (out.empty()) usage_error("--out needs a path (PATH.csv and PATH.json are written)", kSweepHelp);
+      } else if (!a.empty() && a[0] == '-') {
+        usage_error(unknown_option(a, {"--vary", "--zip", "--set", "--error", "--max-error", "--jobs", "--out",
+                                       "--resume", "--json", "--max-runs", "--help"}),
+                    kSweepHelp);
+      } else if (scene.empty()) {
+        scene = a;
+      } else {
+        usage_error("more than one scene file given ('" + scene + "', '" + a + "')", kSweepHelp);
+      }
     }
+    if (scene.empty()) usage_error("sweep needs a scene file", kSweepHelp);
+    if (varies.empty()) usage_error("sweep needs at least one --vary KEY=SPEC", kSweepHelp);
+    if (resume && out.empty()) usage_error("--resume needs --out PATH: the table PATH.json it resumes", kSweepHelp);
+    for (const std::string& v : varies) o.axes.push_back(dvm::parse_vary(v, o.max_runs));
+    dvm::sweep_size(o);
+  } catch (const UsageError& e) {
+    argument_error = e.text;
+  } catch (const InputError& e) {
+    argument_error = std::string("dvm: ") + e.what() + "\n";
   }
-  if (scene.empty()) usage_error("sweep needs a scene file", kSweepHelp);
-  if (varies.empty()) usage_error("sweep needs at least one --vary KEY=SPEC", kSweepHelp);
-  if (resume && out.empty()) usage_error("--resume needs --out PATH: the table PATH.json it resumes", kSweepHelp);
-  for (const std::string& v : varies) o.axes.push_back(dvm::parse_vary(v, o.max_runs));
-  dvm::sweep_size(o);
-  // MPI from here on under mpirun (every rank has read the same arguments)
-  dvm::SweepRanks ranks;
-  const bool root = ranks.rank() == 0;
+  // said before the other ranks hear of it, so that none can end first
+  if (root) std::cerr << argument_error;
+  if (ranks.share(argument_error.empty() ? 1 : 0) == 0) return 2;
+  if (!argument_error.empty()) {  // the same arguments, read otherwise on this rank
+    std::cerr << "dvm: internal error: rank " << ranks.rank() << " refused arguments rank 0 took: " << argument_error;
+    ranks.abort(3);
+  }
   // rank 0 reads the scene (the others get its text), checks the table's files and
   // reads the table it resumes
   bool streamed = false;
@@ -1193,10 +1212,8 @@ int cmd_sweep(const std::vector<std::string>& args) {
     setup_error = e.what();
     if (setup_error.empty()) setup_error = "sweep: bad input";
   }
-  if (ranks.share(setup_error.empty() ? 1 : 0) == 0) {
-    if (root) std::cerr << "dvm: " << setup_error << "\n";
-    return 2;
-  }
+  if (root && !setup_error.empty()) std::cerr << "dvm: " << setup_error << "\n";
+  if (ranks.share(setup_error.empty() ? 1 : 0) == 0) return 2;
   o.scene_text = ranks.share(o.scene_text);
   o.scene_path = scene;
   quiet.speak();
@@ -1401,6 +1418,9 @@ int main(int argc, char** argv) {
                     dvm::did_you_mean(command, {"run", "maps", "methods", "systems", "check-map", "converge",
                                                 "sweep", "chart", "version", "help"}),
                 kUsage);
+  } catch (const UsageError& e) {
+    std::cerr << e.text;
+    return 2;
   } catch (const InputError& e) {
     std::cerr << "dvm: " << e.what() << "\n";
     return 2;
