@@ -191,8 +191,7 @@ class ConstrainedGalerkinStep {
       Equation eq{*this, q0, p0, dynamic_detail::inf_norm(p0), dynamic_detail::inf_norm(q0)};
       sum = newton_drive(eq, lu_, Refresh::within_step, g_.options_, y_, r_, dx_, J_, kept_, start_);
     } catch (const std::domain_error& e) {  // L or g undefined at a node
-      sum.converged = false;
-      sum.message = e.what();
+      sum.fail(e.what());
       kept_.valid = false;
     }
     if (!sum.converged) return sum;
@@ -211,19 +210,16 @@ class ConstrainedGalerkinStep {
     try {
       failed = (*proj_)(g_.L_, *con_, t + g_.h_, q_end_, p1_, v1_, momentum_);
     } catch (const std::domain_error& e) {
-      sum.converged = false;
-      sum.message = e.what();
+      sum.fail(e.what());
       return sum;
     }
     if (*failed) {
-      sum.converged = false;
-      sum.message = failed;
+      sum.fail(failed);
       return sum;
     }
     dp = p1_ - p0;
     if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
-      sum.converged = false;
-      sum.message = "non-finite step";
+      sum.fail("non-finite step");
       kept_.valid = false;
       return sum;
     }

@@ -595,21 +595,16 @@ class ConstrainedThetaStep {
         }
         const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, momentum_);
         if (*failed) {
-          s.converged = false;
-          s.message = failed;
+          s.fail(failed);
         } else {
           // p1 - p0 = (p1~ - p0) - G1^T mu, without the round-off of forming p1 first
           for (int i = 0; i < n; ++i) dp[i] = w.dp[i];
           constrained_detail::subtract_normals(w.projection.G, 1.0, w.projection.mu.data(), dp.data());
-          if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-            s.converged = false;
-            s.message = "non-finite momentum";
-          }
+          if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
         }
       }
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     if (!s.converged && s.iterations == 0) s.iterations = 1;
     return s;

@@ -208,8 +208,7 @@ class DynamicGalerkinStep {
     try {
       sum = newton_drive(eq, lu_, Refresh::contracting, options_, X_, R_, delta_, J_, kept_, start_);
     } catch (const std::domain_error& e) {  // L undefined at a node
-      sum.converged = false;
-      sum.message = e.what();
+      sum.fail(e.what());
       kept_.valid = false;
     }
     jacobian_updates_ += sum.jacobians;
@@ -222,8 +221,7 @@ class DynamicGalerkinStep {
       sum.work = w;
     }
     if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
-      sum.converged = false;
-      sum.message = "non-finite step";
+      sum.fail("non-finite step");
       kept_.valid = false;
       return sum;
     }

@@ -419,14 +419,10 @@ class DynamicThetaStep {
           w.eq.momentum(w.D, w.dp);
         dp = w.dp;
         if constexpr (kForced) s.work = w.eq.work(w.D);
-        if (!std::isfinite(dynamic_detail::inf_norm(w.dp))) {
-          s.converged = false;
-          s.message = "non-finite momentum";
-        }
+        if (!std::isfinite(dynamic_detail::inf_norm(w.dp))) s.fail("non-finite momentum");
       }
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
       k.state.valid = false;
     }
     if (!s.converged && s.iterations == 0) s.iterations = 1;
@@ -650,8 +646,7 @@ class DynamicHamiltonianThetaStep {
       s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
       if constexpr (kForced) s.work = w.eq.work(w.y);
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     dq = w.y.head(n);
     dp = w.y.tail(n);

@@ -282,8 +282,7 @@ class GalerkinStep {
     try {
       sum = newton_drive_inlined(eq, lu_, Refresh::contracting, options_, X_, R_, delta_, J_, kept_, start_);
     } catch (const std::domain_error& e) {  // L undefined at a node
-      sum.converged = false;
-      sum.message = e.what();
+      sum.fail(e.what());
       kept_.valid = false;
     }
     jacobian_updates_ += sum.jacobians;
@@ -291,8 +290,7 @@ class GalerkinStep {
     dq = X_.template segment<N>((s - 1) * N);
     dp = force_;  // the force quadrature at the last evaluation (before the final correction)
     if (!std::isfinite(max_abs(dq)) || !std::isfinite(max_abs(dp))) {
-      sum.converged = false;
-      sum.message = "non-finite step";
+      sum.fail("non-finite step");
       kept_.valid = false;
       return sum;
     }

@@ -154,8 +154,7 @@ class HamiltonianStep {
     try {
       s = solve_step_system<2 * N>(f, x, x0, options_, s0);
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     dq = x.template head<N>();
     dp = x.template tail<N>();

@@ -355,8 +355,7 @@ class ManifoldGalerkinStep {
       prev_end_ = q1;
       have_prev_ = true;
     } catch (const std::domain_error& e) {  // L or the chart undefined at a node
-      sum.converged = false;
-      sum.message = e.what();
+      sum.fail(e.what());
       kept_.valid = false;
     }
     return sum;

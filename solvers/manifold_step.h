@@ -41,16 +41,12 @@ void leave_chart(const typename M::template Point<double>& q0, const Vec<double,
   const typename M::template Point<double> raw = M::chart(q0, xi);
   const double defect = M::point_defect(raw);
   if (!(defect <= 1e-12)) {
-    s.converged = false;
-    s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+    s.fail("the chart left the manifold by " + std::to_string(defect) + " (more than round-off)");
     return;
   }
   p1 = covector_from_chart_at<M>(q0, xi, pi1);
   q1 = M::clean(raw);
-  if (!std::isfinite(max_abs(p1))) {
-    s.converged = false;
-    s.message = "non-finite momentum";
-  }
+  if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
 }
 
 // Force: a force on the manifold (ManifoldForce<M>, mechanics/written_manifold.h) or
@@ -109,8 +105,7 @@ class ManifoldStep {
         const Point raw = M::chart(q0, xi);
         const double defect = M::point_defect(raw);
         if (!(defect <= 1e-12)) {
-          s.converged = false;
-          s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+          s.fail("the chart left the manifold by " + std::to_string(defect) + " (more than round-off)");
           return s;
         }
         const auto rel = M::relative_chart(q0, xi);
@@ -121,14 +116,10 @@ class ManifoldStep {
           pi1 = dl_.D2_local(q0, raw, rel);
         p1 = M::covector_from_local(raw, pi1);
         q1 = M::clean(raw);
-        if (!std::isfinite(max_abs(p1))) {
-          s.converged = false;
-          s.message = "non-finite momentum";
-        }
+        if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
       }
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     return s;
   }

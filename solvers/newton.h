@@ -34,6 +34,7 @@
 #include <limits>
 #include <string>
 #include <type_traits>
+#include <utility>
 
 #include "core/dense_solve.h"
 #include "core/scalar.h"
@@ -67,6 +68,12 @@ struct StepSummary {
   double scale = NAN;     // the scale the residual was judged against
   double work = 0.0;      // a step with forces: their discrete work over the step (else 0)
   std::string message;    // why a solve failed
+
+  // Marks the step failed, saying why.
+  void fail(std::string why) {
+    converged = false;
+    message = std::move(why);
+  }
 };
 
 // The force type of a step that takes none: the steps with a force term

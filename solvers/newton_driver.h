@@ -151,8 +151,7 @@ template <class E, class LA>
   bool formed = false;  // a Jacobian formed in this call
   if (refresh != Refresh::every_iteration) start = x;
   auto failed = [&](std::string message) {
-    s.converged = false;
-    s.message = std::move(message);
+    s.fail(std::move(message));
     if (contracting) state.valid = false;
   };
   for (int it = 0; it < opt.max_iterations; ++it) {

@@ -110,14 +110,10 @@ class PositionMomentumStep {
       if (s.converged) {
         V d2;
         dl_.D2Ld_and_shift(q0, dq, d2, dp);
-        if (!std::isfinite(max_abs(dp))) {
-          s.converged = false;
-          s.message = "non-finite momentum";
-        }
+        if (!std::isfinite(max_abs(dp))) s.fail("non-finite momentum");
       }
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     return s;
   }

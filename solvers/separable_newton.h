@@ -85,10 +85,7 @@ class SeparableThetaNewton {
       x_ = q0 + theta_ * dq;
       self.force(x_, F_);
       dp = h_ * F_;
-      if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-        s.converged = false;
-        s.message = "non-finite momentum";
-      }
+      if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
     }
     if (!s.converged && s.iterations == 0) s.iterations = 1;
     return s;

@@ -65,10 +65,7 @@ class SeparableThetaStep {
     V F;
     force(q0 + theta_ * dq, F);
     dp = h_ * F;
-    if (!std::isfinite(max_abs(dp))) {
-      s.converged = false;
-      s.message = "non-finite momentum";
-    }
+    if (!std::isfinite(max_abs(dp))) s.fail("non-finite momentum");
     return s;
   }
 

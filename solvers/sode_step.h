@@ -103,8 +103,7 @@ StepSummary solve_increments(const Step& step, const Vec<double, 2 * N>& Y0, dou
   try {
     s = solve_step_system<2 * N>(f, x, max_abs(Y0), options, s0);
   } catch (const std::domain_error& e) {
-    s.converged = false;
-    s.message = e.what();
+    s.fail(e.what());
   }
   dq = x.template head<N>();
   dv = x.template tail<N>();

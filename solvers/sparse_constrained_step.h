@@ -245,19 +245,14 @@ class SparseConstrainedThetaStep {
         w.p1 = p0 + dp;
         const char* failed = w.project(w.t1, w.q1, w.p1, w.v1);
         if (*failed) {
-          s.converged = false;
-          s.message = failed;
+          s.fail(failed);
         } else {
           w.subtract_normals(w.G1, 1.0, w.mu.data(), dp.data());  // p1 - p0 = (p1~ - p0) - G1^T mu
-          if (!std::isfinite(dynamic_detail::inf_norm(dp))) {
-            s.converged = false;
-            s.message = "non-finite momentum";
-          }
+          if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
         }
       }
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     if (!s.converged && s.iterations == 0) s.iterations = 1;
     return s;

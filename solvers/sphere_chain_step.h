@@ -87,8 +87,7 @@ class SphereChainStep {
       if (!s.converged) return s;
       finish(q0, xi, s, q1, p1);
     } catch (const std::domain_error& e) {
-      s.converged = false;
-      s.message = e.what();
+      s.fail(e.what());
     }
     return s;
   }
@@ -263,8 +262,7 @@ class SphereChainStep {
       const Vec<double, 3> raw = Sphere::chart(x0, xii);
       const double defect = Sphere::point_defect(raw);
       if (!(defect <= 1e-12)) {
-        s.converged = false;
-        s.message = "the chart left the manifold by " + std::to_string(defect) + " (more than round-off)";
+        s.fail("the chart left the manifold by " + std::to_string(defect) + " (more than round-off)");
         return;
       }
       q1.segment<3>(3 * i) = raw;
@@ -292,10 +290,7 @@ class SphereChainStep {
           B1[u].transpose() * (w.MU.segment<3>(3 * i) / h_) - (h_ * L_.height_coefficient(i)) * A1[u];
       p1.segment<3>(3 * i) = Sphere::tangent(Vec<double, 3>(q1.segment<3>(3 * i)), pi1);
     }
-    if (!std::isfinite(max_abs(p1))) {
-      s.converged = false;
-      s.message = "non-finite momentum";
-    }
+    if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
   }
 
   DynamicSphericalChain L_;
