@@ -1164,6 +1164,7 @@ int cmd_sweep(const std::vector<std::string>& args) {
   if (root) std::cerr << argument_error;
   if (ranks.share(argument_error.empty() ? 1 : 0) == 0) return 2;
   if (!argument_error.empty()) {  // the same arguments, read otherwise on this rank
+    quiet.speak();
     std::cerr << "dvm: internal error: rank " << ranks.rank() << " refused arguments rank 0 took: " << argument_error;
     ranks.abort(3);
   }
