@@ -73,9 +73,9 @@ SAN_CXX   := clang++-14
 # allocations meet the 16-byte alignment of Eigen's SSE2 vectors, and an x86-64 load does
 # not fault when misaligned), pointer-overflow (pointer arithmetic wrapping around the
 # address space) and vptr (the dynamic type of a polymorphic object at a cast or a call).
-# Each instruments most of the kernels' Eigen and Jet code, and together they were a
-# quarter of a kernel file's compile time under the sanitizers; time a file with and without
-# them (clang++-14 with SAN_FLAGS, /usr/bin/time) to weigh another.
+# Each instruments most of the kernels' Eigen and Jet code, which makes a kernel file
+# compile much longer under the sanitizers; time a file with and without a check
+# (clang++-14 with SAN_FLAGS, /usr/bin/time) to weigh another.
 SAN_FLAGS := -O1 -gline-tables-only -fno-omit-frame-pointer -fsanitize=address,undefined \
              -fno-sanitize=alignment,pointer-overflow,vptr \
              -fno-sanitize-recover=all -DTOML_ASSERT\(expr\)=static_assert\(true\)
