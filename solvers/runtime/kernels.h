@@ -292,8 +292,8 @@ class StepperRun final : public Run {
     };
     const auto start = std::chrono::steady_clock::now();
     // the next step that writes a row and the next one monitored (rec->wants and
-    // k % monitor_every, counted instead of divided: two integer divisions a step cost
-    // a Kepler Galerkin step 4%)
+    // k % monitor_every, counted instead of divided: two integer divisions a step are
+    // visible in the cost of a short step; bench_galerkin_kepler times one)
     const bool rows = rec && rec->writes_rows();
     const std::int64_t every = rec ? std::max<std::int64_t>(1, rec->every()) : 1;
     std::int64_t next_row = rows ? every : -1, next_monitor = monitor_every;

@@ -96,8 +96,8 @@ void invariant_values(const NBody<B>&, const Vec<double, 3 * B>& q, const Vec<do
 }
 // ---- the monitored energy: E_L ----------------------------------------------------------
 // (A separable system's v = M^{-1} p is in closed form or from a factored M, so
-// dL/dv(q, v) = M v is p to round-off: E_L = <p, v> - L(q, v) without the gradient,
-// a third of a Kepler Galerkin step's monitoring cost.)
+// dL/dv(q, v) = M v is p to round-off: E_L = <p, v> - L(q, v) without evaluating the
+// gradient; bench_galerkin_kepler times the Kepler scene, monitored at every step.)
 template <class S, int N>
 double monitored_energy(const S& L, const Vec<double, N>& q, const Vec<double, N>& v, const Vec<double, N>& p) {
   if constexpr (is_separable_v<S>)
