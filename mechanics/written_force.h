@@ -77,7 +77,37 @@ class WrittenForce {
     qt_.setZero(n + 1 + c);
     gq_.resize(n + 1 + c);
     gv_.resize(n);
+    sq_.setZero(n + 1 + c);
+    sv_.setZero(n);
+    // the coordinates and velocities each component reads, off its tape (a component
+    // that reads a definition, which may read any, depends on all of them)
+    for (const auto& [i, e] : system_->forces) {
+      std::vector<char> rq(static_cast<std::size_t>(n), 0), rv(static_cast<std::size_t>(n), 0);
+      bool all = false;
+      e.for_each_variable([&](int block, int index) {
+        if (block == 0 && index >= 0 && index < n)
+          rq[static_cast<std::size_t>(index)] = 1;
+        else if (block == 1 && index >= 0 && index < n)
+          rv[static_cast<std::size_t>(index)] = 1;
+        else if (!(block == 0 && index >= n && index < n + 1 + c))  // (t and the controls)
+          all = true;
+      });
+      Row row{i, {}, {}};
+      for (int j = 0; j < n; ++j) {
+        if (all || rq[static_cast<std::size_t>(j)]) row.q.push_back(j);
+        if (all || rv[static_cast<std::size_t>(j)]) row.v.push_back(j);
+      }
+      pattern_.push_back(std::move(row));
+    }
   }
+
+  // The entries of F_q and F_v that may be nonzero: for each component (in the order of
+  // WrittenSystem::forces) its coordinate i and the coordinates q and velocities v it reads.
+  struct Row {
+    int i;
+    std::vector<int> q, v;
+  };
+  const std::vector<Row>& pattern() const { return pattern_; }
 
   int dim() const { return system_->dim(); }
   int controls() const { return static_cast<int>(system_->controls.size()); }
@@ -115,6 +145,45 @@ class WrittenForce {
     }
   }
 
+  // F (size dim()) and the entries of F_q and F_v in the order of pattern() (row by row:
+  // a row's q entries in Fq, its v entries in Fv), by reverse mode on each component's
+  // tape: O(the tapes' length), nothing of size dim() per component (the sparse
+  // constrained step, solvers/sparse_constrained_step.h).
+  template <class Q, class V, class Out>
+  void sparse_jacobian(double t, const Q& q, const V& v, Out& F, double* Fq, double* Fv) const {
+    load(t, q);
+    F.setZero();
+    const int n = dim(), c = controls();
+    std::size_t eq = 0, ev = 0, k = 0;
+    for (const auto& [i, e] : system_->forces) {
+      const Row& row = pattern_[k++];
+      F[i] = e(qt_.data(), v.data());
+      // sq_ and sv_ are zero outside a call: the tape adds to them, the entries read are
+      // cleared (t's and the controls' too)
+      e.gradient(qt_.data(), v.data(), sq_.data(), sv_.data());
+      for (int j : row.q) {
+        Fq[eq++] = sq_[j];
+        sq_[j] = 0.0;
+      }
+      for (int j : row.v) {
+        Fv[ev++] = sv_[j];
+        sv_[j] = 0.0;
+      }
+      for (int j = n; j < n + 1 + c; ++j) sq_[j] = 0.0;
+    }
+  }
+  // The number of entries of sparse_jacobian's Fq and Fv.
+  std::size_t q_entries() const {
+    std::size_t e = 0;
+    for (const Row& r : pattern_) e += r.q.size();
+    return e;
+  }
+  std::size_t v_entries() const {
+    std::size_t e = 0;
+    for (const Row& r : pattern_) e += r.v.size();
+    return e;
+  }
+
  private:
   template <class Q>
   void load(double t, const Q& q) const {
@@ -127,6 +196,8 @@ class WrittenForce {
   std::shared_ptr<const WrittenSystem> system_;
   std::shared_ptr<const ControlSignal> controls_;
   mutable Eigen::VectorXd qt_, gq_, gv_;  // (q, t), and one component's gradient
+  mutable Eigen::VectorXd sq_, sv_;       // the same for sparse_jacobian, zero between calls
+  std::vector<Row> pattern_;
 };
 
 }  // namespace dvm

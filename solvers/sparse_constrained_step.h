@@ -10,10 +10,12 @@
 //   1. M D / h - h (1 - theta) F(q_theta) - p0 + G0^T lambda = 0,   g(t1, q0 + D) = 0,
 //   2. p1~ = p0 + h F(q_theta) - G0^T lambda,
 //      M v1 + G1^T mu = p1~,   G1 v1 + g_t(t1, q1) = 0,   p1 = p1~ - G1^T mu,
-// the first solved for (D, lambda) by newton_drive (solvers/newton_driver.h) with the
-// saddle-point Jacobian
-//   [ M / h - h theta (1 - theta) Hess U    s G0^T ]
-//   [ s G1(q0 + D)                          0      ]
+// With a generalized force F_f(t, q, v) (mechanics/written_force.h) F is grad U + F_f at
+// the node (t0 + theta h, q_theta, D / h), as in the dense step (the discrete
+// Lagrange-d'Alembert principle, solvers/dynamic_step.h). The first equation is solved
+// for (D, lambda) by newton_drive (solvers/newton_driver.h) with the saddle-point Jacobian
+//   [ M / h - h theta (1 - theta) (Hess U + d F_f/dq) - (1 - theta) d F_f/dv    s G0^T ]
+//   [ s G1(q0 + D)                                                             0      ]
 // (the multiplier carried as lambda / s, s = max|J_DD| / max|G0| fixed at the object's
 // first Jacobian and kept for its later steps, as the dense step scales it), the
 // second by one linear solve with
@@ -21,15 +23,17 @@
 //   [ G1   0    ].
 // Both matrices are sparse: Hess U's pattern and colouring come from
 // SparsePotentialHessian (mechanics/sparse_hessian.h), Dg's pattern from the
-// constraints' tapes (WrittenConstraints::pattern). Each is factored with partial
-// pivoting (the zero block rules out a Cholesky factorisation), its ordering analysed
-// once at construction (SparseOrBanded below): in a band where a Cuthill-McKee
-// ordering makes one narrow (a chain of links), else by Eigen's SparseLU. A chain of k
+// constraints' tapes (WrittenConstraints::pattern), the force's from its components'
+// tapes (WrittenForce::pattern: a damping force on each coordinate adds the diagonal).
+// Each is factored with partial pivoting (the zero block rules out a Cholesky
+// factorisation), its ordering analysed once at construction (SparseOrBanded below): in
+// a band where a Cuthill-McKee ordering makes one narrow (a chain of links), else by
+// Eigen's SparseLU. A chain of k
 // links costs O(k) a step where the dense ConstrainedThetaStep costs O(k^3)
 // (bench_constrained measures both). The equations are the dense step's, so the two
 // agree to round-off (tests/solvers/test_sparse_constrained.cc).
 //
-// No force and no step derivative: the runtime takes the dense step for those
+// No step derivative: the runtime takes the dense step for --linearize
 // (solvers/runtime/kernels_constrained.cc). The Jacobian is formed at each step's first
 // iterate and serves its later ones while each shrinks the residual fourfold
 // (Refresh::within_step). Workspace is allocated at construction; a step allocates
@@ -56,6 +60,7 @@
 #include "mechanics/dynamic_system.h"
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_constraints.h"
+#include "mechanics/written_force.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/newton_driver.h"
 #include "solvers/separable_newton.h"
@@ -177,11 +182,13 @@ class SparseConstrainedThetaStep {
   using Sparse = Eigen::SparseMatrix<double>;
 
   // hessian: the pattern of Hess U (SparseSeparableThetaStep::hessian_of), shared by the
-  // steps of a composition.
+  // steps of a composition. force: a generalized force F(t, q, v) (mechanics/written_force.h),
+  // or none; each step keeps a copy of it (its workspace).
   SparseConstrainedThetaStep(const WrittenDynamic& L, std::shared_ptr<SparsePotentialHessian> hessian,
                              std::shared_ptr<const WrittenConstraints> constraints, double theta, double h,
-                             StepOptions options = {})
-      : L_(L), hessian_(std::move(hessian)), con_(std::move(constraints)), theta_(theta), h_(h), options_(options) {
+                             StepOptions options = {}, std::shared_ptr<const WrittenForce> force = nullptr)
+      : L_(L), hessian_(std::move(hessian)), con_(std::move(constraints)), theta_(theta), h_(h), options_(options),
+        force_(std::move(force)) {
     if (!L_.separable()) throw std::invalid_argument("SparseConstrainedThetaStep: the Lagrangian is not separable");
     if (!(theta >= 0.0 && theta <= 1.0)) throw std::invalid_argument("theta must lie in [0, 1]");
     dynamic_detail::require_step(h);
@@ -193,10 +200,13 @@ class SparseConstrainedThetaStep {
     if (con_->count() >= n)
       throw std::invalid_argument("SparseConstrainedThetaStep: " + std::to_string(con_->count()) +
                                   " constraints on " + std::to_string(n) + " coordinates leave no motion");
+    if (force_ && force_->dim() != n)
+      throw std::invalid_argument("SparseConstrainedThetaStep: the force is not on the system's coordinates");
     work_ = std::make_shared<Work>(*this);
   }
   SparseConstrainedThetaStep(const SparseConstrainedThetaStep& o)
-      : L_(o.L_), hessian_(o.hessian_), con_(o.con_), theta_(o.theta_), h_(o.h_), options_(o.options_) {
+      : L_(o.L_), hessian_(o.hessian_), con_(o.con_), theta_(o.theta_), h_(o.h_), options_(o.options_),
+        force_(o.force_) {
     work_ = std::make_shared<Work>(*this);
   }
   SparseConstrainedThetaStep& operator=(const SparseConstrainedThetaStep&) = delete;
@@ -205,6 +215,7 @@ class SparseConstrainedThetaStep {
   double theta() const { return theta_; }
   int dim() const { return L_.dim(); }
   int constraints() const { return con_->count(); }
+  bool forced() const { return force_ != nullptr; }
   const WrittenDynamic& lagrangian() const { return L_; }
   // Whether Newton's saddle-point Jacobian is factored in a band (else by SparseLU).
   bool banded() const { return work_->lu.banded(); }
@@ -236,9 +247,10 @@ class SparseConstrainedThetaStep {
       dq = w.y.head(n);
       if (s.converged) {
         // p1~ - p0 = h F(q_theta) - G0^T lambda, at the solution (the driver's last
-        // correction moved it from the last residual's point)
-        w.x = q0 + theta_ * dq;
-        w.separable.force(w.x, w.F);
+        // correction moved it from the last residual's point), F with the force's
+        // component and its work <F_f, D> there
+        w.forces(dq);
+        if (w.force) s.work = w.Ff.dot(dq);
         dp = h_ * w.F;
         w.subtract_normals(w.G0, w.s, w.y.data() + n, dp.data());
         w.q1 = q0 + dq;
@@ -326,14 +338,17 @@ class SparseConstrainedThetaStep {
   struct Work {
     explicit Work(const SparseConstrainedThetaStep& step)
         : L(step.L_), separable(L), mass(constant_mass(L)), hessian(step.hessian_), con(*step.con_),
-          theta(step.theta_), h(step.h_) {
+          force(step.force_ ? std::make_unique<WrittenForce>(*step.force_) : nullptr), theta(step.theta_),
+          h(step.h_) {
       n = L.dim();
       m = con.count();
       const int k = n + m;
       const WrittenParts& parts = L.parts();
       D.resize(n);
       x.resize(n);
+      u.resize(n);
       F.resize(n);
+      Ff.resize(n);
       MD.resize(n);
       q1.resize(n);
       p1.resize(n);
@@ -372,6 +387,17 @@ class SparseConstrainedThetaStep {
           tp.emplace_back(j, n + c, 0.0);
           tp.emplace_back(n + c, j, 0.0);
         }
+      // the force's F_q and F_v (a row per component), the pattern kept symmetric
+      if (force) {
+        for (const WrittenForce::Row& row : force->pattern())
+          for (const auto* cols_of : {&row.q, &row.v})
+            for (int j : *cols_of) {
+              t.emplace_back(row.i, j, 0.0);
+              t.emplace_back(j, row.i, 0.0);
+            }
+        Fq.resize(force->q_entries());
+        Fv.resize(force->v_entries());
+      }
       J.resize(k, k);
       J.setFromTriplets(t.begin(), t.end());  // duplicates summed: zeros
       J.makeCompressed();
@@ -392,6 +418,11 @@ class SparseConstrainedThetaStep {
         mass_J.emplace_back(at(J, e.first, e.second), mass_at(e.first, e.second) / h);
         mass_P.emplace_back(at(P, e.first, e.second), mass_at(e.first, e.second));
       }
+      if (force)
+        for (const WrittenForce::Row& row : force->pattern()) {
+          for (int j : row.q) Fq_at.push_back(at(J, row.i, j));
+          for (int j : row.v) Fv_at.push_back(at(J, row.i, j));
+        }
       for (int c = 0; c < m; ++c)
         for (int j : pattern[static_cast<std::size_t>(c)]) {
           G0_at.push_back(at(J, j, n + c));
@@ -407,17 +438,28 @@ class SparseConstrainedThetaStep {
       q0 = &q0_;
       p0 = &p0_;
       t1 = t0 + h;
+      tn = t0 + theta * h;
       pscale = dynamic_detail::inf_norm(p0_);
       x0 = dynamic_detail::inf_norm(q0_);
       con.sparse_gradients(t0, q0_, G0.data(), gt.data());
       g0max = 0.0;
       for (double a : G0) g0max = std::fmax(g0max, std::fabs(a));
     }
+    // q_theta = q0 + theta D, v = D / h and the force at the node: F = grad U(q_theta), plus
+    // with a force F_f(t_theta, q_theta, v), which Ff receives.
+    void forces(const V& D_) {
+      x = *q0 + theta * D_;
+      separable.force(x, F);
+      if (force) {
+        u = D_ / h;
+        force->value(tn, x, u, Ff);
+        F += Ff;
+      }
+    }
     // The terms at y = (D, lambda / s): q_theta, F(q_theta), M D, q1 = q0 + D, g(t1, q1).
     void at(const V& y_) {
       D = y_.head(n);
-      x = *q0 + theta * D;
-      separable.force(x, F);
+      forces(D);
       mass.times(D, MD);
       q1 = *q0 + D;
       con.value(t1, q1, g1);
@@ -440,6 +482,11 @@ class SparseConstrainedThetaStep {
       for (const auto& e : mass_J) v[e.first] = e.second;
       const double c = h * theta * (1.0 - theta);
       for (std::size_t e = 0; e < hess_at.size(); ++e) v[hess_at[e]] -= c * hess[e];
+      if (force) {  // d/dD of -h (1 - theta) F_f(t, q0 + theta D, D / h)
+        force->sparse_jacobian(tn, x, u, Ff, Fq.data(), Fv.data());
+        for (std::size_t e = 0; e < Fq_at.size(); ++e) v[Fq_at[e]] -= c * Fq[e];
+        for (std::size_t e = 0; e < Fv_at.size(); ++e) v[Fv_at[e]] -= (1.0 - theta) * Fv[e];
+      }
       if (s == 0.0) {
         double jd = 0.0;
         for (std::size_t e = 0; e < size; ++e) jd = std::fmax(jd, std::fabs(v[e]));
@@ -488,12 +535,15 @@ class SparseConstrainedThetaStep {
     ConstantMass mass;
     std::shared_ptr<SparsePotentialHessian> hessian;
     WrittenConstraints con;  // this step's copy (its workspace)
+    std::unique_ptr<WrittenForce> force;  // and of the force (none: null)
     double theta, h;
     int n = 0, m = 0;
     const V* q0 = nullptr;
     const V* p0 = nullptr;
-    double t1 = 0.0, pscale = 0.0, x0 = 0.0, s = 0.0, g0max = 0.0;
-    V D, x, F, MD, q1, p1, v1, g1, gt, mu, y, r, dx, start, b;
+    double t1 = 0.0, tn = 0.0, pscale = 0.0, x0 = 0.0, s = 0.0, g0max = 0.0;
+    V D, x, u, F, Ff, MD, q1, p1, v1, g1, gt, mu, y, r, dx, start, b;
+    std::vector<double> Fq, Fv;                // the force's Jacobian entries (pattern order)
+    std::vector<std::size_t> Fq_at, Fv_at;     // where they go in J
     std::vector<double> G0, G1, hess;  // Dg at q0 and at q1 (pattern order), Hess U's entries
     Sparse J, P;                       // equation 1's Jacobian, equation 2's matrix
     std::vector<std::size_t> hess_at, G0_at, G1_at, GT_P, G_P;
@@ -508,6 +558,7 @@ class SparseConstrainedThetaStep {
   std::shared_ptr<const WrittenConstraints> con_;
   double theta_, h_;
   StepOptions options_;
+  std::shared_ptr<const WrittenForce> force_;
   std::shared_ptr<Work> work_;
 };
 

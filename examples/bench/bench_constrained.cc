@@ -12,7 +12,8 @@
 // Then chains of k rods in Cartesian coordinates (2k coordinates, k constraints; the
 // scene written here), k = 1 .. 128: the dense ConstrainedThetaStep against the sparse
 // SparseConstrainedThetaStep from the same state, ns a step and their ratio (where the
-// runtime's line between them belongs).
+// runtime's line between them belongs), undamped and with a damping force on every
+// coordinate.
 //
 // Each pair runs the midpoint map (sphere-exp on S^2) with the same step from the same
 // state; the table gives ns per step (the best of the repeats), the constrained run's
@@ -100,8 +101,9 @@ Timing measure(const std::string& dir, const std::string& file, std::int64_t ste
 // origin in the plane, as a scene: 2k Cartesian coordinates (x1, y1, ..., xk, yk), k
 // distance constraints, gravity; the joints at angles 0.4 sin(i) from the vertical,
 // turning at rates 0.3 cos(2 i) (a state on the constraints and their hidden constraint).
-std::string chain_scene(int k) {
-  std::string coords, lagrangian, constraints, q, v;
+// damped: a force -c v_i on every coordinate.
+std::string chain_scene(int k, bool damped) {
+  std::string coords, lagrangian, constraints, q, v, forces;
   double x = 0, y = 0, vx = 0, vy = 0;
   const double l = 0.5;
   char buf[160];
@@ -117,21 +119,23 @@ std::string chain_scene(int k) {
     lagrangian += std::string(i > 1 ? " + " : "") + "m/2*(x" + b + "_dot^2 + y" + b + "_dot^2) - m*g*y" + b;
     constraints += std::string(sep) + (i == 1 ? "\"x1^2 + y1^2 - l^2\""
                                               : "\"(x" + b + " - x" + a + ")^2 + (y" + b + " - y" + a + ")^2 - l^2\"");
+    forces += std::string(sep) + "x" + b + " = \"-c*x" + b + "_dot\", y" + b + " = \"-c*y" + b + "_dot\"";
     std::snprintf(buf, sizeof buf, "%s%.17g, %.17g", sep, x, y);
     q += buf;
     std::snprintf(buf, sizeof buf, "%s%.17g, %.17g", sep, vx, vy);
     v += buf;
   }
-  return "[system]\ncoordinates = [" + coords + "]\nparams = { m = 0.7, l = 0.5, g = 9.81 }\nlagrangian = \"" +
-         lagrangian + "\"\nconstraints = [" + constraints + "]\n[initial]\nq = [" + q + "]\nv = [" + v +
-         "]\n[integrator]\nmap = \"midpoint\"\nstep = 1e-3\nt_end = 1.0\n";
+  return "[system]\ncoordinates = [" + coords + "]\nparams = { m = 0.7, l = 0.5, g = 9.81, c = 0.2 }\nlagrangian = \"" +
+         lagrangian + "\"\nconstraints = [" + constraints + "]\n" + (damped ? "forces = { " + forces + " }\n" : "") +
+         "[initial]\nq = [" + q + "]\nv = [" + v + "]\n[integrator]\nmap = \"midpoint\"\nstep = 1e-3\nt_end = 1.0\n";
 }
 
 // The cost of a step of the chain of k rods by the dense constrained step (an LU of
 // the (3k) x (3k) saddle-point matrix) and by the sparse one, from the same state, in
-// this process: ns per step, the best of `repeats` runs of `steps` steps each.
+// this process: ns per step, the best of `repeats` runs of `steps` steps each; then the
+// same with the damping force.
 void chain_row(int k, std::int64_t steps, int repeats) {
-  const Scene sc = load_scene_text(chain_scene(k), "chain", {});
+  const Scene sc = load_scene_text(chain_scene(k, false), "chain", {});
   const Problem& pr = sc.problem;
   const WrittenDynamic L(pr.written);
   const auto con = std::make_shared<const WrittenConstraints>(pr.written);
@@ -156,10 +160,20 @@ void chain_row(int k, std::int64_t steps, int repeats) {
     }
     return best;
   };
-  const double sparse = time(SparseConstrainedThetaStep(L, SparseSeparableThetaStep::hessian_of(L, q0), con, 0.5, h));
+  const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+  const double sparse = time(SparseConstrainedThetaStep(L, H, con, 0.5, h));
   const double dense = time(ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>(L, ThetaMap(0.5), h, con, {},
                                                                                       MomentumMap::constant));
-  std::printf("| %d | %d | %.0f | %.0f | %.2f |\n", k, n, dense, sparse, dense / sparse);
+  const Scene damped = load_scene_text(chain_scene(k, true), "damped chain", {});
+  const auto force = std::make_shared<const WrittenForce>(damped.problem.written);
+  const WrittenDynamic Ld(damped.problem.written);
+  const auto cond = std::make_shared<const WrittenConstraints>(damped.problem.written);
+  const double sparse_f =
+      time(SparseConstrainedThetaStep(Ld, SparseSeparableThetaStep::hessian_of(Ld, q0), cond, 0.5, h, {}, force));
+  const double dense_f = time(ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>(
+      Ld, ThetaMap(0.5), h, cond, {}, MomentumMap::constant, force));
+  std::printf("| %d | %d | %.0f | %.0f | %.2f | %.0f | %.0f | %.2f |\n", k, n, dense, sparse, dense / sparse, dense_f,
+              sparse_f, dense_f / sparse_f);
 }
 
 }  // namespace
@@ -224,7 +238,9 @@ int main(int argc, char** argv) {
     // proportion to 1 / k^3 (the dense step's cost), at least 10
     std::printf("\nchains of k rods (midpoint, h = 1e-3): the dense constrained step against the sparse one, ns a step"
                 "\n(dvm run takes the sparse one from kSparseConstrainedMinDim coordinates, kernels_constrained.cc)\n\n");
-    std::printf("| links k | coordinates | dense: ns/step | sparse: ns/step | dense / sparse |\n|---|---|---|---|---|\n");
+    std::printf(
+        "| links k | coordinates | dense: ns/step | sparse: ns/step | dense / sparse | damped, dense: ns/step "
+        "| damped, sparse: ns/step | dense / sparse |\n|---|---|---|---|---|---|---|---|\n");
     for (int k : {1, 2, 4, 6, 8, 10, 12, 16, 32, 64, 128}) {
       const std::int64_t n = std::max<std::int64_t>(10, std::min<std::int64_t>(steps / 20, 2000000 / (k * k * k)));
       chain_row(k, n, repeats);

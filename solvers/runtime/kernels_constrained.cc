@@ -11,9 +11,9 @@
 
 namespace dvm::kernels {
 
-// From this many coordinates a constrained theta step on a separable Lagrangian without
-// a force is the sparse one (solvers/sparse_constrained_step.h); below, the dense one
-// costs less (bench_constrained's table of chains compares them).
+// From this many coordinates a constrained theta step on a separable Lagrangian, with a
+// force or not, is the sparse one (solvers/sparse_constrained_step.h); below, the dense
+// one costs less (bench_constrained's table of chains compares them).
 constexpr int kSparseConstrainedMinDim = 12;
 
 void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
@@ -121,36 +121,6 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
   const StepOptions opt = me.step_options();
   const double h = pr.step;
   const auto con = std::make_shared<const WrittenConstraints>(pr.written);
-  // a separable Lagrangian of many coordinates without a force: the sparse step (no
-  // derivative: --linearize takes the dense one below)
-  if (!pr.forced() && !me.galerkin && !me.linearize && me.use_structure && L.separable() &&
-      n >= kSparseConstrainedMinDim) {
-    std::shared_ptr<SparsePotentialHessian> H;
-    try {
-      H = SparseSeparableThetaStep::hessian_of(L, q);
-    } catch (const SparsePotentialHessian::TooDense&) {
-      // terms coupling most coordinates: the dense step below, within its limit
-    }
-    if (H) {
-      con->check_pattern(0.0, q);
-      auto make = [&](double hk, const ThetaMap& Rk) { return SparseConstrainedThetaStep(L, H, con, Rk.theta(), hk, opt); };
-      base.step_path = StepPath::constrained_sparse_newton;
-      base.hessian_colours = H->colours();
-      return composable_run(view, me, h, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
-    }
-  }
-  if (n > kMaxDenseDynamicDim)
-    throw InputError((me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
-                                  : "integrator.map: map = \"" + me.map->name + "\"") +
-                     " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
-                     " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
-                     " coordinates the run-time-sized dense steps take (the sparse constrained step takes a "
-                     "separable Lagrangian of any size whose potential's Hessian is sparse: a theta map, without "
-                     "system.forces or --linearize)");
-  base.step_path = StepPath::generic;
-  const MomentumMap momentum = L.separable()               ? MomentumMap::constant
-                               : L.parts().split.quadratic ? MomentumMap::linear
-                                                           : MomentumMap::general;
   std::shared_ptr<const WrittenForce> force;
   if (pr.forced()) {
     auto f = std::make_shared<WrittenForce>(pr.written, signal);
@@ -158,6 +128,24 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
     base.forced = true;
     force = std::move(f);
   }
+  // a separable Lagrangian of many coordinates, with a force or not: the sparse step (no
+  // derivative: --linearize takes the dense one below)
+  // (kernels_sparse_constrained.cc; none where the potential's terms couple most
+  // coordinates: the dense step below, within its limit)
+  if (!me.galerkin && !me.linearize && me.use_structure && L.separable() && n >= kSparseConstrainedMinDim)
+    if (auto run = make_sparse_constrained_run(L, pr, me, view, q, p, v0, base, con, force)) return run;
+  if (n > kMaxDenseDynamicDim)
+    throw InputError((me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
+                                  : "integrator.map: map = \"" + me.map->name + "\"") +
+                     " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
+                     " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
+                     " coordinates the run-time-sized dense steps take (the sparse constrained step takes a "
+                     "separable Lagrangian of any size whose potential's Hessian is sparse: a theta map, without "
+                     "--linearize)");
+  base.step_path = StepPath::generic;
+  const MomentumMap momentum = L.separable()               ? MomentumMap::constant
+                               : L.parts().split.quadratic ? MomentumMap::linear
+                                                           : MomentumMap::general;
   if (me.galerkin) {  // the constraints at the Lobatto nodes (validate refused Gauss)
     auto galerkin = [&](auto fo) {
       using Force = std::remove_const_t<typename decltype(fo)::element_type>;

@@ -21,11 +21,13 @@
 //   galerkin        DynamicGalerkinStep<Sys>
 //   composition     ComposedStep of either step, the adjoint stages at 1 - theta
 //   system.forces   the theta, Galerkin and Hamiltonian steps with their Force
-//                   (WrittenForce), never the structured separable paths
+//                   (WrittenForce), never the structured separable paths of an
+//                   unconstrained system
 //   system.constraints  ConstrainedThetaStep (solvers/constrained_step.h), forces or
 //                   not, composed or not (make_constrained_run, kernels_constrained.cc:
 //                   of fixed size for 2 and 3 coordinates and one constraint without a
-//                   force), and ConstrainedGalerkinStep (Lobatto,
+//                   force; SparseConstrainedThetaStep for a separable text of 12
+//                   coordinates or more, forces or not), and ConstrainedGalerkinStep (Lobatto,
 //                   solvers/constrained_galerkin_step.h); the initial state checked
 //                   against the constraints (check_constrained_start)
 //   L(t, q, v)      (a written Lagrangian that reads t) the generic steps above, which
@@ -374,6 +376,16 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
                                           const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,
                                           const Eigen::VectorXd& p, const Eigen::VectorXd& v0, const RunReport& base,
                                           const std::shared_ptr<const ControlSignal>& signal);
+
+// The constrained run on sparse matrices (SparseConstrainedThetaStep) for
+// make_constrained_run, from a separable L with its constraints and its force (or
+// none); null where the potential's Hessian is not sparse enough for it. Its own
+// translation unit (kernels_sparse_constrained.cc).
+std::unique_ptr<Run> make_sparse_constrained_run(const WrittenDynamic& L, const Problem& pr, const Method& me,
+                                                 const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,
+                                                 const Eigen::VectorXd& p, const Eigen::VectorXd& v0, RunReport base,
+                                                 const std::shared_ptr<const WrittenConstraints>& con,
+                                                 const std::shared_ptr<const WrittenForce>& force);
 
 // `hamiltonian`: the written H, when the scene gives one (null: H from L).
 template <class Sys>

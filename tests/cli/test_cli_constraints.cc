@@ -521,10 +521,12 @@ BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
 
 // A chain of rods in Cartesian coordinates (chain_cartesian.toml: 32 coordinates, 16
 // constraints) steps by the sparse constrained step: the dense step's trajectory
-// (integrator.use_structure = false) to round-off, plain and composed to order 4; the
-// combinations the sparse step does not take (a force, --linearize) run the dense one;
+// (integrator.use_structure = false) to round-off, plain and composed to order 4, damped
+// and driven or not, the same work of the forces; --linearize, which the sparse step
+// does not take, runs the dense one;
 // a redundant constraint is refused (by the SVD of Dg at 16 rods, by the sparse rank
-// heuristic at 2100); and a chain beyond the dense steps' 4096 coordinates runs.
+// heuristic at 2100); and a chain beyond the dense steps' 4096 coordinates runs, damped
+// or not.
 BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
   const std::string C = "chain_cartesian.toml";
   auto agree = [&](const std::vector<std::string>& sets) {
@@ -540,6 +542,10 @@ BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
                                       << (a - b).lpNorm<Eigen::Infinity>() / b.lpNorm<Eigen::Infinity>());
       BOOST_TEST((a - b).lpNorm<Eigen::Infinity>() <= 1e-11 * b.lpNorm<Eigen::Infinity>());
     }
+    if (s.contains("work")) {
+      const double ws = s.at("work").get<double>(), wd = d.at("work").get<double>();
+      BOOST_TEST(std::fabs(ws - wd) <= 1e-11 * std::fabs(wd));
+    }
     BOOST_TEST(s.at("max_constraint_residual").get<double>() <= 1e-14);
     BOOST_TEST(s.at("max_hidden_constraint_residual").get<double>() <= 1e-12);
     return s;
@@ -549,9 +555,14 @@ BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
   BOOST_TEST(vec(plain, "q_final")[0] < 0.03);
   agree({"integrator.t_end=0.5", "integrator.composition=\"triple-jump:4\""});
   agree({"integrator.t_end=0.5", "integrator.map=\"theta\"", "integrator.theta=0.3"});
-  // with a force, and with --linearize: the dense step
-  const Json forced = run(C, {"integrator.t_end=0.05", "system.forces={ \"x[3]\" = \"-0.1*x_dot[3]\" }"});
-  BOOST_TEST(forced.at("step_path").get<std::string>() == "generic");
+  // damped and driven: a damper on two joints, one between joints, a drive in t
+  const std::string forces = "system.forces={ \"x[3]\" = \"-0.1*x_dot[3]\", \"y[5]\" = \"-0.2*y_dot[5] - "
+                             "0.3*(y_dot[5] - y_dot[6])\", \"y[6]\" = \"0.3*(y_dot[5] - y_dot[6])\", "
+                             "\"x[16]\" = \"0.05*sin(4*t)\" }";
+  const Json forced = agree({"integrator.t_end=0.5", forces});
+  BOOST_TEST(forced.at("work").get<double>() != 0.0);
+  agree({"integrator.t_end=0.5", forces, "integrator.composition=\"triple-jump:4\""});
+  // with --linearize: the dense step
   const std::string npy = temp_dir() + "/chain_A.npy";
   const Output lin = dvm({"run", scene(C), "--no-output", "--quiet", "--linearize", npy, "--set", "integrator.t_end=0.003"});
   BOOST_TEST(lin.status == 0, lin.err);
@@ -602,6 +613,13 @@ BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
   const Json bj = parse_json(b.out);
   BOOST_TEST(bj.at("step_path").get<std::string>() == "constrained-sparse-newton");
   BOOST_TEST(bj.at("max_constraint_residual").get<double>() <= 1e-14);
+  // damped at its free end too (before, a force sent it to the dense step, which refused it)
+  const Output bf = dvm({"run", big, "--json", "--no-output", "--set",
+                         "system.forces={ \"x[2100]\" = \"-0.1*x_dot[2100]\", \"y[2100]\" = \"-0.1*y_dot[2100]\" }"});
+  BOOST_TEST_REQUIRE(bf.status == 0, bf.err);
+  const Json bfj = parse_json(bf.out);
+  BOOST_TEST(bfj.at("step_path").get<std::string>() == "constrained-sparse-newton");
+  BOOST_TEST(bfj.at("max_constraint_residual").get<double>() <= 1e-14);
   // and the dense step refuses it, naming the sparse one
   const Output bd = dvm({"run", big, "--no-output", "--set", "integrator.use_structure=false"});
   BOOST_TEST(bd.status == 2);

@@ -2,16 +2,19 @@
 // rigid links in Cartesian coordinates: the same equations as the dense
 // ConstrainedThetaStep, so the same steps to round-off; the constraint and its hidden
 // constraint kept at every step of a long chain; Dg's pattern read off the tapes; the
-// rank of Dg by the sparse LDL^T of Dg Dg^T.
+// rank of Dg by the sparse LDL^T of Dg Dg^T; with a force, the same steps as the dense
+// forced step and the force's Jacobian entries read off its tapes.
 #define BOOST_TEST_MODULE sparse_constrained
 #include <boost/test/unit_test.hpp>
 
 #include <cmath>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
 #include "mechanics/written_constraints.h"
+#include "mechanics/written_force.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/constrained_step.h"
 #include "solvers/sparse_constrained_step.h"
@@ -91,6 +94,62 @@ std::shared_ptr<WrittenSystem> chain(int k, bool twice = false, bool centre = fa
 
 using Dense = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>;
 
+// Forces on the chain of `chain`: a damping of every coordinate, a damper between the
+// first two joints' horizontal velocities, a force in a position and a velocity, and a
+// periodic drive of the last joint (t, and no coordinate).
+void add_forces(WrittenSystem& s, int k) {
+  const auto symbols = s.symbols(WrittenSystem::Kind::force);
+  auto component = [&](const std::string& name) {
+    for (std::size_t i = 0; i < s.coordinates.size(); ++i)
+      if (s.coordinates[i] == name) return static_cast<int>(i);
+    throw std::logic_error(name);
+  };
+  for (int i = 1; i <= k; ++i)
+    for (const char* c : {"x", "y"}) {
+      const std::string v = c + std::to_string(i);
+      std::string f = "-0.2*" + v + "_dot";
+      if (v == "x1") f += " - 0.5*(x1_dot - x2_dot)";
+      if (v == "x2") f += " + 0.5*(x1_dot - x2_dot)";
+      if (v == "y3") f += " - 0.3*x3*y3_dot";
+      if (i == k && std::string(c) == "x") f += " + 0.4*sin(3*t)";
+      s.forces.emplace_back(component(v), Expression::parse(f, symbols));
+    }
+}
+
+// 200 steps of h from (q0, p0) by the sparse step and by a dense one side by side: the
+// largest relative difference of their states, of their works a step, the sparse run's
+// total work, their Newton iterations, and how far the sparse run moved.
+struct SideBySide {
+  double worst = 0.0, worst_work = 0.0, work = 0.0, moved = 0.0;
+  int sparse_iterations = 0, dense_iterations = 0;
+};
+template <class DenseStep>
+SideBySide side_by_side(const SparseConstrainedThetaStep& sparse, const DenseStep& dense, const VectorXd& q0,
+                        const VectorXd& p0, double h) {
+  const Eigen::Index n = q0.size();
+  VectorXd qs = q0, ps = p0, qd = q0, pd = p0, dqs = VectorXd::Zero(n), dps(n), dqd = dqs, dpd(n);
+  SideBySide r;
+  for (int j = 0; j < 200; ++j) {
+    const double t = j * h;
+    const StepSummary a = sparse.step(t, qs, ps, dqs, dps);
+    const StepSummary b = dense.step(t, qd, pd, dqd, dpd);
+    BOOST_REQUIRE_MESSAGE(a.converged && b.converged, a.message << " / " << b.message);
+    qs += dqs;
+    ps += dps;
+    qd += dqd;
+    pd += dpd;
+    r.work += a.work;
+    r.sparse_iterations += a.iterations;
+    r.dense_iterations += b.iterations;
+    r.worst = std::fmax(r.worst, std::fmax((qs - qd).lpNorm<Eigen::Infinity>() / qd.lpNorm<Eigen::Infinity>(),
+                                           (ps - pd).lpNorm<Eigen::Infinity>() / pd.lpNorm<Eigen::Infinity>()));
+    if (a.work != b.work)
+      r.worst_work = std::fmax(r.worst_work, std::fabs(a.work - b.work) / std::fabs(b.work));
+  }
+  r.moved = (qs - q0).norm();
+  return r;
+}
+
 }  // namespace
 
 BOOST_AUTO_TEST_CASE(the_sparse_step_is_the_dense_step) {
@@ -118,25 +177,12 @@ BOOST_AUTO_TEST_CASE(the_sparse_step_is_the_dense_step) {
       const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {});
       BOOST_TEST(sparse.banded() == !centre);
       const Dense dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant);
-      VectorXd qs = q0, ps = p0, qd = q0, pd = p0, dqs = VectorXd::Zero(2 * k), dps(2 * k), dqd = dqs, dpd(2 * k);
-      double worst = 0.0;
-      for (int j = 0; j < 200; ++j) {
-        const double t = j * h;
-        const StepSummary a = sparse.step(t, qs, ps, dqs, dps);
-        const StepSummary b = dense.step(t, qd, pd, dqd, dpd);
-        BOOST_REQUIRE_MESSAGE(a.converged && b.converged, a.message << " / " << b.message);
-        qs += dqs;
-        ps += dps;
-        qd += dqd;
-        pd += dpd;
-        worst = std::fmax(worst, std::fmax((qs - qd).lpNorm<Eigen::Infinity>() / qd.lpNorm<Eigen::Infinity>(),
-                                           (ps - pd).lpNorm<Eigen::Infinity>() / pd.lpNorm<Eigen::Infinity>()));
-      }
+      const SideBySide r = side_by_side(sparse, dense, q0, p0, h);
       BOOST_TEST_MESSAGE((centre ? "centre held, " : "") << "theta " << theta << ": largest relative difference "
-                                                           << worst);
-      BOOST_TEST(worst < 1e-11);
+                                                           << r.worst);
+      BOOST_TEST(r.worst < 1e-11);
       // and the motion is not trivial
-      BOOST_TEST((qs - q0).norm() > 0.1);
+      BOOST_TEST(r.moved > 0.1);
     }
   }
 }
@@ -267,5 +313,85 @@ BOOST_AUTO_TEST_CASE(a_singular_saddle_point_fails_the_step) {
     // (Newton's factorisation refuses it: SparseLU alone would pass its pivots at
     // round-off, and the step would fail later, if at all)
     BOOST_TEST(s.message.find("singular step Jacobian") != std::string::npos, s.message);
+  }
+}
+
+BOOST_AUTO_TEST_CASE(the_force_jacobian_entries_are_the_dense_ones) {
+  // WrittenForce::sparse_jacobian's entries, placed by pattern(), are F_q and F_v as
+  // jacobian() forms them densely, and no nonzero entry of those lies outside the pattern
+  const int k = 4;
+  const auto sys = chain(k);
+  add_forces(*sys, k);
+  const WrittenForce f(sys);
+  const int n = 2 * k;
+  VectorXd q, p;
+  chain_state(k, q, p);
+  const VectorXd v = p / kM;
+  VectorXd F(n), Fs(n);
+  Eigen::MatrixXd Fq(n, n), Fv(n, n);
+  f.jacobian(0.7, q, v, F, Fq, Fv);
+  std::vector<double> sq(f.q_entries()), sv(f.v_entries());
+  f.sparse_jacobian(0.7, q, v, Fs, sq.data(), sv.data());
+  BOOST_TEST((F - Fs).norm() == 0.0);
+  Eigen::MatrixXd Pq = Eigen::MatrixXd::Zero(n, n), Pv = Pq;
+  std::size_t eq = 0, ev = 0;
+  for (const WrittenForce::Row& r : f.pattern()) {
+    for (int j : r.q) Pq(r.i, j) = sq[eq++];
+    for (int j : r.v) Pv(r.i, j) = sv[ev++];
+  }
+  BOOST_TEST((Pq - Fq).norm() == 0.0);
+  BOOST_TEST((Pv - Fv).norm() == 0.0);
+  // the couplings are there: x1 reads x2's velocity, y3 reads x3, and y3's velocity
+  BOOST_TEST(Fv(0, 2) == 0.5);
+  BOOST_TEST(Fq(5, 4) != 0.0);
+  // a second call gives the same entries (the workspace is cleared between calls)
+  std::vector<double> sq2(sq.size()), sv2(sv.size());
+  f.sparse_jacobian(0.7, q, v, Fs, sq2.data(), sv2.data());
+  BOOST_TEST(sq2 == sq);
+  BOOST_TEST(sv2 == sv);
+}
+
+BOOST_AUTO_TEST_CASE(the_forced_sparse_step_is_the_forced_dense_step) {
+  // with damping, a damper between joints, a force in a position and a drive in t: the
+  // same trajectory and the same work as the dense forced step, to round-off, over 200
+  // steps of a chain of 12 links (a band) and of the same chain with its centre held
+  // (sparse LU), for the midpoint and an asymmetric theta; the force takes energy out
+  const int k = 12;
+  using DenseForced = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>;
+  for (bool centre : {false, true}) {
+    const auto sys = chain(k, false, centre);
+    add_forces(*sys, k);
+    const WrittenDynamic L(sys);
+    BOOST_REQUIRE(L.separable());
+    const auto con = std::make_shared<const WrittenConstraints>(sys);
+    const auto force = std::make_shared<const WrittenForce>(sys);
+    VectorXd q0, p0;
+    chain_state(k, q0, p0);
+    const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+    if (centre) {
+      VectorXd v(2 * k);
+      BOOST_REQUIRE(SparseConstrainedThetaStep(L, H, con, 0.5, 0.01).project(0.0, q0, p0, v).empty());
+    }
+    for (double theta : {0.5, 0.3}) {
+      const double h = 0.01;
+      const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {}, force);
+      BOOST_TEST(sparse.forced());
+      BOOST_TEST(sparse.banded() == !centre);
+      const DenseForced dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant, force);
+      const SideBySide r = side_by_side(sparse, dense, q0, p0, h);
+      const int its = r.sparse_iterations, itd = r.dense_iterations;
+      BOOST_TEST_MESSAGE((centre ? "centre held, " : "") << "theta " << theta << ": largest relative difference "
+                                                           << r.worst << ", of the work " << r.worst_work
+                                                           << "; iterations " << its << " and " << itd);
+      BOOST_TEST(r.worst < 1e-11);
+      BOOST_TEST(r.worst_work < 1e-9);
+      // the same Jacobian (the force's entries included), so the same iterations up to a
+      // step that stops one sooner or later at round-off (without the force's F_v entries
+      // the sparse step takes more)
+      BOOST_TEST(std::abs(its - itd) <= 2);
+      BOOST_TEST(r.moved > 0.1);
+      // the damping dominates the drive over these 2 s: negative work
+      BOOST_TEST(r.work < 0.0);
+    }
   }
 }
