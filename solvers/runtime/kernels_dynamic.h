@@ -367,6 +367,11 @@ constexpr double kConstraintStartTolerance = 1e-10;
 void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
                              Eigen::VectorXd& p, Eigen::VectorXd& v0);
 
+// From this many coordinates a constrained theta step on a separable Lagrangian, with a
+// force or not, is the sparse one (solvers/sparse_constrained_step.h); below, the dense
+// one costs less (bench_constrained's table of chains compares them).
+constexpr int kSparseConstrainedMinDim = 12;
+
 // The run of a written system with constraints (system.constraints): the constrained
 // theta step, with the force where the system has one (the lagrangian form of the
 // theta-family maps, composed or not: the registry's "lagrangian with constraints"),

@@ -1,14 +1,112 @@
 // The constrained theta step on sparse matrices (SparseConstrainedThetaStep,
 // solvers/sparse_constrained_step.h) as make_constrained_run (kernels_constrained.cc)
-// takes it: a separable text of many coordinates, with a force or not, composed or not.
-// A translation unit of its own, compiled beside kernels_constrained.cc: with it there,
-// GCC's inliner (its budget per translation unit, solvers/CMakeLists.txt) left more of
-// the small fixed-size constrained steps out of line (time `dvm run
-// examples/scenes/pendulum_cartesian.toml --no-output` built each way).
+// takes it: a separable text of many coordinates, with a force or not, composed or not;
+// and the check of a constrained run's initial state, which projects a velocity with
+// the sparse step's projection on such a text. A translation unit of its own, compiled
+// beside kernels_constrained.cc: with the sparse step there, GCC's inliner (its budget
+// per translation unit, solvers/CMakeLists.txt) left more of the small fixed-size
+// constrained steps out of line (time `dvm run examples/scenes/pendulum_cartesian.toml
+// --no-output` and four_bar.toml built each way).
+#include <Eigen/SVD>
+
+#include "solvers/constrained_step.h"
 #include "solvers/runtime/kernels_dynamic.h"
 #include "solvers/sparse_constrained_step.h"
 
 namespace dvm::kernels {
+
+void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
+                                    Eigen::VectorXd& p, Eigen::VectorXd& v0) {
+  const WrittenSystem& w = *pr.written;
+  const int n = L.dim(), m = static_cast<int>(w.constraints.size());
+  const auto con = std::make_shared<const WrittenConstraints>(pr.written);
+  // each constraint's g, |grad g| and grad g . v + dg/dt (the terms of
+  // WrittenConstraints::relative_residuals; no m x n matrix: a long chain has m ~ n / 2)
+  Eigen::VectorXd g, norms, across;
+  con->row_terms(0.0, q, v0, g, norms, across);
+  auto text = [&](int i) {
+    return "system.constraints[" + std::to_string(i + 1) + "] (\"" + w.constraints[static_cast<std::size_t>(i)].text() + "\")";
+  };
+  std::ostringstream msg;
+  msg.precision(6);
+  if (!g.allFinite() || !norms.allFinite() || !across.allFinite()) {
+    msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
+    throw InputError(msg.str());
+  }
+  // rank of Dg: by its singular values against the largest where the SVD is cheap (m^2 n
+  // at most 1e8), else as the sparse step finds it (a heuristic: a repeated constraint
+  // is caught, SparseConstrainedThetaStep::rank)
+  const bool by_svd = static_cast<double>(m) * m * n <= 1e8;
+  if (by_svd) {
+    std::vector<double> G(con->entries());
+    Eigen::VectorXd gt(m);
+    con->sparse_gradients(0.0, q, G.data(), gt.data());
+    Eigen::MatrixXd D = Eigen::MatrixXd::Zero(m, n);
+    std::size_t e = 0;
+    for (int i = 0; i < m; ++i)
+      for (int j : con->pattern()[static_cast<std::size_t>(i)]) D(i, j) = G[e++];
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(D);
+    const Eigen::VectorXd s = svd.singularValues();
+    int rank = 0;
+    for (Eigen::Index i = 0; i < s.size(); ++i)
+      if (s[i] > 1e-10 * s[0]) ++rank;
+    if (rank < m) {
+      msg << pr.constraints_where << ": the constraint Jacobian Dg has rank " << rank << " at the initial state, "
+          << "expected " << m << " (one per constraint; singular values [";
+      for (Eigen::Index i = 0; i < s.size(); ++i) msg << (i ? ", " : "") << s[i];
+      msg << "]): the constraints are redundant there, or contradict each other";
+      throw InputError(msg.str());
+    }
+  } else {
+    const int rank = SparseConstrainedThetaStep::rank(*con, 0.0, q);
+    if (rank < m) {
+      msg << pr.constraints_where << ": the constraint Jacobian Dg has "
+          << (rank < 0 ? std::string("rank below ") + std::to_string(m) : "rank " + std::to_string(rank))
+          << " at the initial state, expected " << m << " (one per constraint; by the pivots of the sparse LDL^T "
+          << "factorisation of Dg Dg^T, those below 1e-12 of the largest taken as zero): the constraints are "
+          << "redundant there, or contradict each other";
+      throw InputError(msg.str());
+    }
+  }
+  // each constraint's relative residuals (WrittenConstraints::relative_residuals)
+  const double qn = q.norm(), vn = v0.norm();
+  for (int i = 0; i < m; ++i) {
+    const double gn = norms[i], r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
+    if (!(r <= kConstraintStartTolerance)) {
+      msg << "initial.q: the initial position is off " << text(i) << ": g = " << g[i] << " at t = 0, relative "
+          << r << " (|g| / (|grad g| |q|)), beyond " << kConstraintStartTolerance
+          << "; give a position on the constraints";
+      throw InputError(msg.str());
+    }
+  }
+  for (int i = 0; i < m; ++i) {
+    const double gn = norms[i], b = std::fabs(across[i]);
+    const double r = b / (gn * vn > 0.0 ? gn * vn : 1.0);
+    if (r <= kConstraintStartTolerance) continue;
+    if (pr.project_velocity) {
+      std::string failed;
+      std::shared_ptr<SparsePotentialHessian> H;
+      if (L.separable() && n >= kSparseConstrainedMinDim) try {
+          H = SparseSeparableThetaStep::hessian_of(L, q);
+        } catch (const SparsePotentialHessian::TooDense&) {
+        }
+      if (H) {  // (the sparse step's projection; its theta and step do not enter it)
+        failed = SparseConstrainedThetaStep(L, H, con, 0.5, 1.0).project(0.0, q, p, v0);
+      } else {
+        constrained_detail::Projection<WrittenDynamic, WrittenConstraints> project(n, m);
+        failed = project(L, *con, 0.0, q, p, v0, MomentumMap::general);
+      }
+      if (!failed.empty()) throw InputError(pr.project_velocity_where + ": " + failed);
+      return;
+    }
+    msg << (pr.momentum_given ? "initial.p" : "initial.v") << ": the initial velocity is off the hidden constraint of "
+        << text(i) << ": grad g . v + dg/dt = " << across[i] << ", relative " << r
+        << ", beyond " << kConstraintStartTolerance << "; give a velocity along the constraints, or set "
+        << "initial.project_velocity = true to project it";
+    throw InputError(msg.str());
+  }
+}
+
 
 std::unique_ptr<Run> make_sparse_constrained_run(const WrittenDynamic& L, const Problem& pr, const Method& me,
                                                  const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,
