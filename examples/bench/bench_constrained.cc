@@ -237,7 +237,7 @@ int main(int argc, char** argv) {
     // chains of k rods: the dense step against the sparse one, the steps of a cell in
     // proportion to 1 / k^3 (the dense step's cost), at least 10
     std::printf("\nchains of k rods (midpoint, h = 1e-3): the dense constrained step against the sparse one, ns a step"
-                "\n(dvm run takes the sparse one from kSparseConstrainedMinDim coordinates, kernels_constrained.cc)\n\n");
+                "\n(dvm run takes the sparse one from kSparseConstrainedMinDim coordinates, kernels_dynamic.h)\n\n");
     std::printf(
         "| links k | coordinates | dense: ns/step | sparse: ns/step | dense / sparse | damped, dense: ns/step "
         "| damped, sparse: ns/step | dense / sparse |\n|---|---|---|---|---|---|---|---|\n");

@@ -3,10 +3,10 @@
 // takes it: a separable text of many coordinates, with a force or not, composed or not;
 // and the check of a constrained run's initial state, which projects a velocity with
 // the sparse step's projection on such a text. A translation unit of its own, compiled
-// beside kernels_constrained.cc: with the sparse step there, GCC's inliner (its budget
-// per translation unit, solvers/CMakeLists.txt) left more of the small fixed-size
-// constrained steps out of line (time `dvm run examples/scenes/pendulum_cartesian.toml
-// --no-output` and four_bar.toml built each way).
+// beside kernels_constrained.cc, which is then shorter to compile; with the sparse step
+// in that file, its small fixed-size constrained steps also ran slower (GCC inlines up
+// to a budget per translation unit, solvers/CMakeLists.txt; time `dvm run
+// examples/scenes/pendulum_cartesian.toml --no-output` built each way).
 #include <Eigen/SVD>
 
 #include "solvers/constrained_step.h"
