@@ -249,7 +249,10 @@ class Expression {
   // when the text is not quadratic, n > kMaxMassDim, a definition the text uses
   // depends on the velocities, or a term in several velocities does not vanish when
   // all but one are zero (its cross entries would be differences that can cancel; the
-  // caller then forms M from gradients). Throws ExpressionError as parse does.
+  // caller then forms M from gradients), or a term with its velocities set to those
+  // constants folds to a value that is not finite (x_dot^0 * 20/0, which parse accepts
+  // as a product with a velocity: the text is not finite anywhere). Throws
+  // ExpressionError where parse does.
   static constexpr int kMaxMassDim = 8;
   static bool split_mass(const std::string& text, const ExpressionSymbols& symbols, int n,
                          std::vector<Expression>& mass, Expression& potential);
@@ -1810,100 +1813,106 @@ inline bool Expression::split_mass(const std::string& text, const ExpressionSymb
   Parser p(text, symbols);
   NodePtr root = simplify(p.parse());
   Definitions& defs = p.definitions();
-  std::vector<Degree> def_degrees;
-  for (const auto& tree : defs.trees) {
-    def_degrees.push_back(term_degree(*tree, def_degrees));
-    if (def_degrees.back().degree != 0) return false;  // a definition in the velocities
-  }
-  double constant_term = 0.0;
-  std::vector<Term> terms = additive_terms(root, constant_term);
-  const auto entry = [n](int i, int j) { return i * n - i * (i - 1) / 2 + (j - i); };  // i <= j
-  std::vector<NodePtr> sums(static_cast<std::size_t>(n * (n + 1) / 2));
-  auto add = [](NodePtr& sum, NodePtr x, double scale) {  // zeros (folded products) left out
-    if (!(x->is_const() && x->c == 0.0)) add_scaled(sum, std::move(x), scale);
-  };
-  std::size_t budget = kMaxNodes;
-  std::vector<Term> pot;
-  std::vector<double> e(static_cast<std::size_t>(n), 0.0);
-  for (const Term& t : terms) {
-    const Degree d = term_degree(**t.slot, def_degrees);
-    if (d.degree == 0) {
-      pot.push_back(t);
-      continue;
+  // past the parse, an ExpressionError (a term folded to a value that is not finite)
+  // means no split: the caller forms M from gradients
+  try {
+    std::vector<Degree> def_degrees;
+    for (const auto& tree : defs.trees) {
+      def_degrees.push_back(term_degree(*tree, def_degrees));
+      if (def_degrees.back().degree != 0) return false;  // a definition in the velocities
     }
-    if (d.degree != 2) return false;
-    std::vector<int> used;  // the velocities the term reads
-    for (const Node* x : post_order(**t.slot))
-      if (x->op == O::Var && x->block == 1 && std::find(used.begin(), used.end(), x->index) == used.end())
-        used.push_back(x->index);
-    std::sort(used.begin(), used.end());
-    std::vector<NodePtr> at_unit(used.size());  // t(e_i)
-    for (std::size_t a = 0; a < used.size(); ++a) {
-      e[static_cast<std::size_t>(used[a])] = 1.0;
-      at_unit[a] = substitute_velocities(**t.slot, e.data(), budget);
-      e[static_cast<std::size_t>(used[a])] = 0.0;
-      if (!at_unit[a]) return false;
-    }
-    // a term in two or more velocities is read off only where t(e_i) folds to zero for
-    // each of them (c(q) v_i v_j, not (v_i + v_j)^2 c(q)): then M_ij = t(e_i + e_j)
-    // exactly, where the difference t(e_i + e_j) - t(e_i) - t(e_j) could cancel
-    if (used.size() > 1)
-      for (const NodePtr& x : at_unit)
-        if (!(x->is_const() && x->c == 0.0)) return false;
-    for (std::size_t a = 0; a < used.size(); ++a)
-      for (std::size_t b = a + 1; b < used.size(); ++b) {
-        e[static_cast<std::size_t>(used[a])] = e[static_cast<std::size_t>(used[b])] = 1.0;
-        NodePtr both = substitute_velocities(**t.slot, e.data(), budget);
-        e[static_cast<std::size_t>(used[a])] = e[static_cast<std::size_t>(used[b])] = 0.0;
-        if (!both) return false;
-        add(sums[static_cast<std::size_t>(entry(used[a], used[b]))], std::move(both), t.scale);
-      }
-    for (std::size_t a = 0; a < used.size(); ++a)
-      add(sums[static_cast<std::size_t>(entry(used[a], used[a]))], std::move(at_unit[a]), 2.0 * t.scale);
-  }
-  auto emit_sum = [&](NodePtr sum, const std::string& what) {
-    Expression r;
-    r.text_ = what + " of: " + text;
-    if (!sum) sum = make_node(O::Const, 0.0);
-    sum = simplify(std::move(sum));
-    // the definitions this sum reads, and theirs (a definition reads lower slots only)
-    std::vector<bool> needed(defs.trees.size(), false);
-    auto mark = [&](const Node& tree) {
-      for (const Node* x : post_order(tree))
-        if (x->op == O::Var && x->block == 3) needed[static_cast<std::size_t>(x->index)] = true;
+    double constant_term = 0.0;
+    std::vector<Term> terms = additive_terms(root, constant_term);
+    const auto entry = [n](int i, int j) { return i * n - i * (i - 1) / 2 + (j - i); };  // i <= j
+    std::vector<NodePtr> sums(static_cast<std::size_t>(n * (n + 1) / 2));
+    auto add = [](NodePtr& sum, NodePtr x, double scale) {  // zeros (folded products) left out
+      if (!(x->is_const() && x->c == 0.0)) add_scaled(sum, std::move(x), scale);
     };
-    mark(*sum);
-    for (std::size_t k = defs.trees.size(); k-- > 0;)
-      if (needed[k]) mark(*defs.trees[k]);
-    for (std::size_t k = 0; k < defs.trees.size(); ++k)
-      if (needed[k]) {
-        r.depth_ = std::max(r.depth_, emit(*defs.trees[k], r.tape_));
-        Instr let{};
-        let.op = O::Let;
-        let.index = static_cast<std::int32_t>(k);
-        r.tape_.push_back(let);
-        r.definitions_ = static_cast<int>(k) + 1;  // the slots (gradient() zeroes their adjoints)
+    std::size_t budget = kMaxNodes;
+    std::vector<Term> pot;
+    std::vector<double> e(static_cast<std::size_t>(n), 0.0);
+    for (const Term& t : terms) {
+      const Degree d = term_degree(**t.slot, def_degrees);
+      if (d.degree == 0) {
+        pot.push_back(t);
+        continue;
       }
-    r.depth_ = std::max(r.depth_, emit_blocked(sum, r.tape_, r.blocks_));
-    require_depth(r.depth_);
-    return r;
-  };
-  std::vector<Expression> entries;
-  for (int i = 0; i < n; ++i)
-    for (int j = i; j < n; ++j)
-      entries.push_back(emit_sum(std::move(sums[static_cast<std::size_t>(entry(i, j))]),
-                                 "M(q) entry (" + std::to_string(i) + ", " + std::to_string(j) + ")"));
-  NodePtr u;  // (a term of degree 0 may still read a velocity, as v^0: set to 0 here)
-  std::fill(e.begin(), e.end(), 0.0);
-  for (Term& t : pot) {
-    NodePtr x = substitute_velocities(**t.slot, e.data(), budget);
-    if (!x) return false;
-    add(u, std::move(x), t.scale);
+      if (d.degree != 2) return false;
+      std::vector<int> used;  // the velocities the term reads
+      for (const Node* x : post_order(**t.slot))
+        if (x->op == O::Var && x->block == 1 && std::find(used.begin(), used.end(), x->index) == used.end())
+          used.push_back(x->index);
+      std::sort(used.begin(), used.end());
+      std::vector<NodePtr> at_unit(used.size());  // t(e_i)
+      for (std::size_t a = 0; a < used.size(); ++a) {
+        e[static_cast<std::size_t>(used[a])] = 1.0;
+        at_unit[a] = substitute_velocities(**t.slot, e.data(), budget);
+        e[static_cast<std::size_t>(used[a])] = 0.0;
+        if (!at_unit[a]) return false;
+      }
+      // a term in two or more velocities is read off only where t(e_i) folds to zero for
+      // each of them (c(q) v_i v_j, not (v_i + v_j)^2 c(q)): then M_ij = t(e_i + e_j)
+      // exactly, where the difference t(e_i + e_j) - t(e_i) - t(e_j) could cancel
+      if (used.size() > 1)
+        for (const NodePtr& x : at_unit)
+          if (!(x->is_const() && x->c == 0.0)) return false;
+      for (std::size_t a = 0; a < used.size(); ++a)
+        for (std::size_t b = a + 1; b < used.size(); ++b) {
+          e[static_cast<std::size_t>(used[a])] = e[static_cast<std::size_t>(used[b])] = 1.0;
+          NodePtr both = substitute_velocities(**t.slot, e.data(), budget);
+          e[static_cast<std::size_t>(used[a])] = e[static_cast<std::size_t>(used[b])] = 0.0;
+          if (!both) return false;
+          add(sums[static_cast<std::size_t>(entry(used[a], used[b]))], std::move(both), t.scale);
+        }
+      for (std::size_t a = 0; a < used.size(); ++a)
+        add(sums[static_cast<std::size_t>(entry(used[a], used[a]))], std::move(at_unit[a]), 2.0 * t.scale);
+    }
+    auto emit_sum = [&](NodePtr sum, const std::string& what) {
+      Expression r;
+      r.text_ = what + " of: " + text;
+      if (!sum) sum = make_node(O::Const, 0.0);
+      sum = simplify(std::move(sum));
+      // the definitions this sum reads, and theirs (a definition reads lower slots only)
+      std::vector<bool> needed(defs.trees.size(), false);
+      auto mark = [&](const Node& tree) {
+        for (const Node* x : post_order(tree))
+          if (x->op == O::Var && x->block == 3) needed[static_cast<std::size_t>(x->index)] = true;
+      };
+      mark(*sum);
+      for (std::size_t k = defs.trees.size(); k-- > 0;)
+        if (needed[k]) mark(*defs.trees[k]);
+      for (std::size_t k = 0; k < defs.trees.size(); ++k)
+        if (needed[k]) {
+          r.depth_ = std::max(r.depth_, emit(*defs.trees[k], r.tape_));
+          Instr let{};
+          let.op = O::Let;
+          let.index = static_cast<std::int32_t>(k);
+          r.tape_.push_back(let);
+          r.definitions_ = static_cast<int>(k) + 1;  // the slots (gradient() zeroes their adjoints)
+        }
+      r.depth_ = std::max(r.depth_, emit_blocked(sum, r.tape_, r.blocks_));
+      require_depth(r.depth_);
+      return r;
+    };
+    std::vector<Expression> entries;
+    for (int i = 0; i < n; ++i)
+      for (int j = i; j < n; ++j)
+        entries.push_back(emit_sum(std::move(sums[static_cast<std::size_t>(entry(i, j))]),
+                                   "M(q) entry (" + std::to_string(i) + ", " + std::to_string(j) + ")"));
+    NodePtr u;  // (a term of degree 0 may still read a velocity, as v^0: set to 0 here)
+    std::fill(e.begin(), e.end(), 0.0);
+    for (Term& t : pot) {
+      NodePtr x = substitute_velocities(**t.slot, e.data(), budget);
+      if (!x) return false;
+      add(u, std::move(x), t.scale);
+    }
+    if (constant_term != 0.0) add(u, make_node(O::Const, constant_term), 1.0);
+    potential = emit_sum(std::move(u), "the potential terms");
+    mass = std::move(entries);
+    return true;
+  } catch (const ExpressionError&) {
+    return false;
   }
-  if (constant_term != 0.0) add(u, make_node(O::Const, constant_term), 1.0);
-  potential = emit_sum(std::move(u), "the potential terms");
-  mass = std::move(entries);
-  return true;
 }
 
 }  // namespace dvm
