@@ -145,19 +145,20 @@ class WrittenForce {
     }
   }
 
-  // F (size dim()) and the entries of F_q and F_v in the order of pattern() (row by row:
-  // a row's q entries in Fq, its v entries in Fv), by reverse mode on each component's
-  // tape: O(the tapes' length), nothing of size dim() per component (the sparse
-  // constrained step, solvers/sparse_constrained_step.h).
-  template <class Q, class V, class Out>
-  void sparse_jacobian(double t, const Q& q, const V& v, Out& F, double* Fq, double* Fv) const {
+  // The entries of F_q and F_v in the order of pattern() (row by row: a row's q entries
+  // in Fq, its v entries in Fv), and F (size dim()) where F is given, by reverse mode on
+  // each component's tape: O(the tapes' length), nothing of size dim() per component
+  // (the sparse constrained step, solvers/sparse_constrained_step.h, which has F from
+  // value() at the same point already).
+  template <class Q, class V>
+  void sparse_jacobian(double t, const Q& q, const V& v, double* Fq, double* Fv, Eigen::VectorXd* F = nullptr) const {
     load(t, q);
-    F.setZero();
+    if (F) F->setZero();
     const int n = dim(), c = controls();
     std::size_t eq = 0, ev = 0, k = 0;
     for (const auto& [i, e] : system_->forces) {
       const Row& row = pattern_[k++];
-      F[i] = e(qt_.data(), v.data());
+      if (F) (*F)[i] = e(qt_.data(), v.data());
       // sq_ and sv_ are zero outside a call: the tape adds to them, the entries read are
       // cleared (t's and the controls' too)
       e.gradient(qt_.data(), v.data(), sq_.data(), sv_.data());

@@ -482,8 +482,8 @@ class SparseConstrainedThetaStep {
       for (const auto& e : mass_J) v[e.first] = e.second;
       const double c = h * theta * (1.0 - theta);
       for (std::size_t e = 0; e < hess_at.size(); ++e) v[hess_at[e]] -= c * hess[e];
-      if (force) {  // d/dD of -h (1 - theta) F_f(t, q0 + theta D, D / h)
-        force->sparse_jacobian(tn, x, u, Ff, Fq.data(), Fv.data());
+      if (force) {  // d/dD of -h (1 - theta) F_f(t, q0 + theta D, D / h) (F_f itself: at())
+        force->sparse_jacobian(tn, x, u, Fq.data(), Fv.data());
         for (std::size_t e = 0; e < Fq_at.size(); ++e) v[Fq_at[e]] -= c * Fq[e];
         for (std::size_t e = 0; e < Fv_at.size(); ++e) v[Fv_at[e]] -= (1.0 - theta) * Fv[e];
       }

@@ -16,7 +16,7 @@
 namespace dvm::kernels {
 
 void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
-                                    Eigen::VectorXd& p, Eigen::VectorXd& v0) {
+                             Eigen::VectorXd& p, Eigen::VectorXd& v0) {
   const WrittenSystem& w = *pr.written;
   const int n = L.dim(), m = static_cast<int>(w.constraints.size());
   const auto con = std::make_shared<const WrittenConstraints>(pr.written);
@@ -106,7 +106,6 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
     throw InputError(msg.str());
   }
 }
-
 
 std::unique_ptr<Run> make_sparse_constrained_run(const WrittenDynamic& L, const Problem& pr, const Method& me,
                                                  const DynamicView<WrittenDynamic>& view, const Eigen::VectorXd& q,

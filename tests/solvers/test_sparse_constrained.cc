@@ -331,7 +331,7 @@ BOOST_AUTO_TEST_CASE(the_force_jacobian_entries_are_the_dense_ones) {
   Eigen::MatrixXd Fq(n, n), Fv(n, n);
   f.jacobian(0.7, q, v, F, Fq, Fv);
   std::vector<double> sq(f.q_entries()), sv(f.v_entries());
-  f.sparse_jacobian(0.7, q, v, Fs, sq.data(), sv.data());
+  f.sparse_jacobian(0.7, q, v, sq.data(), sv.data(), &Fs);
   BOOST_TEST((F - Fs).norm() == 0.0);
   Eigen::MatrixXd Pq = Eigen::MatrixXd::Zero(n, n), Pv = Pq;
   std::size_t eq = 0, ev = 0;
@@ -346,7 +346,7 @@ BOOST_AUTO_TEST_CASE(the_force_jacobian_entries_are_the_dense_ones) {
   BOOST_TEST(Fq(5, 4) != 0.0);
   // a second call gives the same entries (the workspace is cleared between calls)
   std::vector<double> sq2(sq.size()), sv2(sv.size());
-  f.sparse_jacobian(0.7, q, v, Fs, sq2.data(), sv2.data());
+  f.sparse_jacobian(0.7, q, v, sq2.data(), sv2.data(), &Fs);
   BOOST_TEST(sq2 == sq);
   BOOST_TEST(sv2 == sv);
 }
