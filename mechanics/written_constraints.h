@@ -180,6 +180,58 @@ class WrittenConstraints {
     }
   }
 
+  // The same second derivatives on the pattern, for the derivative of the sparse
+  // constrained step: for constraint i, whose row of pattern() lists k coordinates, H
+  // receives its Hessian in those coordinates (k x k, row by row) after the entries of
+  // the constraints before it (hessian_entries() in all), and Gqt the gradient of dg_i/dt
+  // in them (k entries, entries() in all). By forward mode over the reverse sweep of each
+  // constraint's tape, in Jets seeded in 8 of its coordinates at a time: ceil(k / 8)
+  // sweeps a constraint, nothing of size dim() per constraint.
+  template <class Q>
+  void sparse_second_derivatives(double t, const Q& q, double* H, double* Gqt) const {
+    using J = ceres::Jet<double, kSecondChunk>;
+    const int n = dim();
+    if (jq_.size() != static_cast<std::size_t>(n + 1)) {
+      jq_.assign(static_cast<std::size_t>(n + 1), J(0.0));
+      jv_.assign(static_cast<std::size_t>(n + 1), J(0.0));
+      jg_.assign(static_cast<std::size_t>(n + 1), J(0.0));
+      jgv_.assign(static_cast<std::size_t>(n + 1), J(0.0));
+    }
+    // (the inputs' derivative parts, and the adjoints, are zero between sweeps: each
+    // sweep clears the entries it seeded or that the tape wrote)
+    for (int i = 0; i < n; ++i) jq_[static_cast<std::size_t>(i)].a = q[i];
+    jq_[static_cast<std::size_t>(n)].a = t;
+    std::size_t eh = 0, eg = 0;
+    for (int c = 0; c < count(); ++c) {
+      const std::vector<int>& row = pattern_[static_cast<std::size_t>(c)];
+      const int k = static_cast<int>(row.size());
+      for (int first = 0; first < k; first += kSecondChunk) {
+        const int w = std::min(kSecondChunk, k - first);
+        for (int d = 0; d < w; ++d) jq_[static_cast<std::size_t>(row[static_cast<std::size_t>(first + d)])].v[d] = 1.0;
+        system_->constraints[static_cast<std::size_t>(c)].gradient(jq_.data(), jv_.data(), jg_.data(), jgv_.data());
+        for (int a = 0; a < k; ++a) {
+          const J& g = jg_[static_cast<std::size_t>(row[static_cast<std::size_t>(a)])];
+          for (int d = 0; d < w; ++d) H[eh + static_cast<std::size_t>(a * k + first + d)] = g.v[d];
+        }
+        for (int d = 0; d < w; ++d) Gqt[eg + static_cast<std::size_t>(first + d)] = jg_[static_cast<std::size_t>(n)].v[d];
+        for (int d = 0; d < w; ++d) jq_[static_cast<std::size_t>(row[static_cast<std::size_t>(first + d)])].v[d] = 0.0;
+        for (int j : row) jg_[static_cast<std::size_t>(j)] = J(0.0);
+        jg_[static_cast<std::size_t>(n)] = J(0.0);
+        if (k == n)  // (a row of all coordinates: the constraint may read a definition, which may
+                     // read a velocity, zero here; a shorter row reads coordinates and t only)
+          for (J& g : jgv_) g = J(0.0);
+      }
+      eh += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
+      eg += static_cast<std::size_t>(k);
+    }
+  }
+  // The number of entries of sparse_second_derivatives' H: the sum of k^2 over the rows.
+  std::size_t hessian_entries() const {
+    std::size_t e = 0;
+    for (const auto& row : pattern_) e += row.size() * row.size();
+    return e;
+  }
+
   // The largest relative residuals of the constraint and of its hidden constraint at
   // (t, q) with velocity v (the measures of the header comment; a term whose
   // denominator is 0 counts its numerator).
@@ -241,6 +293,8 @@ class WrittenConstraints {
   std::vector<std::shared_ptr<const DerivativeProgram>> programs_;  // per constraint, or null
   mutable std::vector<std::vector<double>> slots_;                  // their workspaces
   mutable std::vector<dynamic_detail::TapeDerivatives> hessians_;   // second_derivatives()'s
+  static constexpr int kSecondChunk = 8;  // sparse_second_derivatives' directions a sweep
+  mutable std::vector<ceres::Jet<double, kSecondChunk>> jq_, jv_, jg_, jgv_;  // and its Jets
   mutable Eigen::VectorXd hga_, hgb_;                                // and their workspace
   mutable Eigen::MatrixXd Haa_, Hab_, Hbb_;
   mutable Eigen::VectorXd qt_, zero_, gq_, gv_;  // (q, t), a zero velocity block, one gradient

@@ -149,12 +149,15 @@ class WrittenForce {
   // in Fq, its v entries in Fv), and F (size dim()) where F is given, by reverse mode on
   // each component's tape: O(the tapes' length), nothing of size dim() per component
   // (the sparse constrained step, solvers/sparse_constrained_step.h, which has F from
-  // value() at the same point already).
+  // value() at the same point already). Where Fu is given, F_u as jacobian() gives it
+  // (n x controls(): a few columns).
   template <class Q, class V>
-  void sparse_jacobian(double t, const Q& q, const V& v, double* Fq, double* Fv, Eigen::VectorXd* F = nullptr) const {
+  void sparse_jacobian(double t, const Q& q, const V& v, double* Fq, double* Fv, Eigen::VectorXd* F = nullptr,
+                       Eigen::MatrixXd* Fu = nullptr) const {
     load(t, q);
     if (F) F->setZero();
     const int n = dim(), c = controls();
+    if (Fu) Fu->setZero(n, c);
     std::size_t eq = 0, ev = 0, k = 0;
     for (const auto& [i, e] : system_->forces) {
       const Row& row = pattern_[k++];
@@ -170,6 +173,8 @@ class WrittenForce {
         Fv[ev++] = sv_[j];
         sv_[j] = 0.0;
       }
+      if (Fu)
+        for (int j = 0; j < c; ++j) (*Fu)(i, j) += sq_[n + 1 + j];
       for (int j = n; j < n + 1 + c; ++j) sq_[j] = 0.0;
     }
   }

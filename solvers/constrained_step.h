@@ -553,16 +553,7 @@ class ConstrainedThetaStep {
     MI dp1;
     if (!constrained_detail::right_transform_derivative<NX, MX, IX>(L_, con, t1, q1, v1, mu, G1, dq1, dpt, dp1))
       return false;
-    A.resize(2 * n, 2 * n);
-    A.topRows(n) = dq1.leftCols(2 * n);
-    A.bottomRows(n) = dp1.leftCols(2 * n);
-    if (B) {
-      B->resize(2 * n, c);
-      B->topRows(n) = dq1.rightCols(c);
-      B->bottomRows(n) = dp1.rightCols(c);
-      return A.allFinite() && B->allFinite();
-    }
-    return A.allFinite();
+    return dynamic_detail::assemble_derivative(n, dq1, dp1, A, B);
   }
 
  public:

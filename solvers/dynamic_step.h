@@ -75,6 +75,22 @@ namespace dvm {
 
 namespace dynamic_detail {
 
+// A = d(q1, p1)/d(q0, p0) and, where B is given, B = d(q1, p1)/du from the derivatives
+// dq1 and dp1 (n x (2n + c): the columns of q0, p0, then the c inputs), as the constrained
+// steps' derivatives give them; false where a value is not finite.
+template <class M1, class M2>
+bool assemble_derivative(Eigen::Index n, const M1& dq1, const M2& dp1, Eigen::MatrixXd& A, Eigen::MatrixXd* B) {
+  A.resize(2 * n, 2 * n);
+  A.topRows(n) = dq1.leftCols(2 * n);
+  A.bottomRows(n) = dp1.leftCols(2 * n);
+  if (!B) return A.allFinite();
+  const Eigen::Index c = dq1.cols() - 2 * n;
+  B->resize(2 * n, c);
+  B->topRows(n) = dq1.rightCols(c);
+  B->bottomRows(n) = dp1.rightCols(c);
+  return A.allFinite() && B->allFinite();
+}
+
 inline void require_newton(const StepOptions& options) {
   if (options.solver != SolverKind::newton)
     throw std::invalid_argument("run-time-sized steps solve by Newton's method only (solver = \"newton\")");

@@ -33,8 +33,8 @@
 // (bench_constrained measures both). The equations are the dense step's, so the two
 // agree to round-off (tests/solvers/test_sparse_constrained.cc).
 //
-// No step derivative: the runtime takes the dense step for --linearize
-// (solvers/runtime/kernels_constrained.cc). The Jacobian is formed at each step's first
+// derivative() gives the step's derivative by the implicit function theorem, as the
+// dense step's does, with these matrices. The Jacobian is formed at each step's first
 // iterate and serves its later ones while each shrinks the residual fourfold
 // (Refresh::within_step). Workspace is allocated at construction; a step allocates
 // nothing in the banded case, and in SparseLU's factorisations and solves otherwise.
@@ -270,6 +270,39 @@ class SparseConstrainedThetaStep {
     return s;
   }
 
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const { return force_ ? force_->controls() : 0; }
+
+  // The derivative A = d(q1, p1)/d(q0, p0) (2n x 2n, coordinates before momenta) of the
+  // step from (q0, p0) at t0 whose solved increment is dq, as
+  // ConstrainedThetaStep::derivative gives it: the implicit function theorem on the two
+  // equations of the header comment, with the step's sparse matrices. With
+  // G = grad U + F_f at the node, G_q = Hess U + dF_f/dq, G_v = dF_f/dv and
+  // H_lambda = sum lambda_i Hess g_i(t0, q0),
+  //   [J_D    G0^T] [dD     ]     [ H_lambda - h (1 - theta) G_q ]        [ I ]
+  //   [G1     0   ] [dlambda] = - [ G1                           ] dq0 +  [ 0 ] dp0,
+  // J_D = M / h - h theta (1 - theta) G_q - (1 - theta) G_v (equation 1's Jacobian at the
+  // solution, the multiplier column scaled as the step scales it); lambda itself is the
+  // solution of the same system for the residual's terms without it (G0^T lambda is
+  // that, exactly, at the solution). Then dp1~ = dp0 + h G_q (dq0 + theta dD) + G_v dD
+  // - H_lambda dq0 - G0^T dlambda, and equation 2 with [M G1^T; G1 0] as
+  // constrained_detail::right_transform_derivative differentiates it (L_vq = 0, L_vv = M).
+  // The constraints' Hessians are those of each on the coordinates it reads
+  // (WrittenConstraints::sparse_second_derivatives). The right-hand sides are 2n columns
+  // (and one per control input): O(n) solves in the step's factorisations, which cost
+  // O(n) each in a band, and A of 4 n^2 numbers. Allocates; false where a matrix is
+  // singular or a value not finite. Not from two threads at once.
+  bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return differentiate(t0, q0, p0, dq, A, nullptr);
+  }
+  // The derivative B = d(q1, p1)/du (2n x controls()) in the force's control inputs u,
+  // held over the step: F_u enters as the force does, h (1 - theta) F_u in equation 1's
+  // right-hand side and h F_u in dp1~.
+  bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    Eigen::MatrixXd A;
+    return differentiate(t0, q0, p0, dq, A, &B);
+  }
+
   // The rank of Dg at (t, q) as the runtime checks it where a dense SVD of Dg would cost
   // O(m^2 n): the pivots of the sparse LDL^T factorisation (fill-reducing ordering) of
   // D D^T, D = Dg with each row scaled to unit length, above 1e-12 of the largest. A
@@ -308,6 +341,132 @@ class SparseConstrainedThetaStep {
 
  private:
   struct Work;
+
+  bool differentiate(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    const int n = dim(), m = constraints();
+    if (q0.size() != n || p0.size() != n || dq.size() != n)
+      throw std::invalid_argument("SparseConstrainedThetaStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates; the system has " + std::to_string(n));
+    const double th = theta_, h = h_;
+    Work& w = *work_;
+    const WrittenConstraints& con = w.con;
+    const auto& pattern = con.pattern();
+    // equation 1's Jacobian at the solution (G1 at q1 = q0 + dq with it), factored
+    w.begin(q0, p0, t0);
+    V y = V::Zero(n + m);
+    y.head(n) = dq;
+    w.at(y);
+    if (!std::isfinite(w.jacobian()) || !w.factor()) return false;
+    const Eigen::MatrixXd Fu = [&] {
+      Eigen::MatrixXd f(n, 0);
+      if (B && w.force) w.force->sparse_jacobian(w.tn, w.x, w.u, w.Fq.data(), w.Fv.data(), nullptr, &f);
+      return f;
+    }();
+    const int c = static_cast<int>(Fu.cols()), in = 2 * n + c;
+    // lambda: J (0, lambda / s) = (rho, 0), rho = p0 + h (1 - theta) G - M D / h
+    V rhs = V::Zero(n + m), z(n + m);
+    rhs.head(n) = p0 + (h * (1.0 - th)) * w.F - w.MD / h;
+    w.lu.solve(rhs, z);
+    const V lambda = w.s * z.tail(m);
+    // G_q and G_v at the node
+    std::vector<Eigen::Triplet<double>> tq, tv;
+    const auto& cols = w.hessian->columns();
+    std::size_t e = 0;
+    for (int j = 0; j < n; ++j)
+      for (int i : cols[static_cast<std::size_t>(j)]) tq.emplace_back(i, j, w.hess[e++]);
+    if (w.force) {
+      std::size_t eq = 0, ev = 0;
+      for (const WrittenForce::Row& row : w.force->pattern()) {
+        for (int j : row.q) tq.emplace_back(row.i, j, w.Fq[eq++]);
+        for (int j : row.v) tv.emplace_back(row.i, j, w.Fv[ev++]);
+      }
+    }
+    Sparse Gq(n, n), Gv(n, n);
+    Gq.setFromTriplets(tq.begin(), tq.end());
+    Gv.setFromTriplets(tv.begin(), tv.end());
+    // Dg's rows as sparse matrices, and the constraints' Hessians on their patterns
+    auto rows_of = [&](const std::vector<double>& G) {
+      std::vector<Eigen::Triplet<double>> t;
+      t.reserve(G.size());
+      std::size_t k = 0;
+      for (int i = 0; i < m; ++i)
+        for (int j : pattern[static_cast<std::size_t>(i)]) t.emplace_back(i, j, G[k++]);
+      Sparse S(m, n);
+      S.setFromTriplets(t.begin(), t.end());
+      return S;
+    };
+    const Sparse G0 = rows_of(w.G0), G1 = rows_of(w.G1);
+    std::vector<double> H(con.hessian_entries()), Gqt(con.entries());
+    // out += sum_i weight_i Hess g_i X, the Hessians in H
+    auto add_weighted = [&](const V& weight, const Eigen::MatrixXd& X, Eigen::MatrixXd& out) {
+      std::size_t eh = 0;
+      for (int i = 0; i < m; ++i) {
+        const auto& row = pattern[static_cast<std::size_t>(i)];
+        const int k = static_cast<int>(row.size());
+        for (int a = 0; a < k; ++a)
+          for (int b = 0; b < k; ++b) {
+            const double hab = weight[i] * H[eh + static_cast<std::size_t>(a * k + b)];
+            if (hab != 0.0) out.row(row[static_cast<std::size_t>(a)]) += hab * X.row(row[static_cast<std::size_t>(b)]);
+          }
+        eh += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
+      }
+    };
+    auto solve_columns = [](constrained_detail::SparseOrBanded& lu, const Eigen::MatrixXd& R, Eigen::MatrixXd& X) {
+      X.resize(R.rows(), R.cols());
+      V r(R.rows()), x(R.rows());
+      for (Eigen::Index j = 0; j < R.cols(); ++j) {
+        r = R.col(j);
+        lu.solve(r, x);
+        X.col(j) = x;
+      }
+    };
+    // equation 1: the inputs (dq0, dp0, du) as columns, the multiplier rows times s
+    con.sparse_second_derivatives(t0, q0, H.data(), Gqt.data());
+    const Eigen::MatrixXd In = Eigen::MatrixXd::Identity(n, n);
+    Eigen::MatrixXd R1 = Eigen::MatrixXd::Zero(n + m, in), Z1;
+    Eigen::MatrixXd Hl = Eigen::MatrixXd::Zero(n, n);  // H_lambda
+    add_weighted(lambda, In, Hl);
+    R1.topLeftCorner(n, n) = (h * (1.0 - th)) * (Gq * In) - Hl;
+    R1.block(0, n, n, n) = In;
+    if (c > 0) R1.topRightCorner(n, c) = (h * (1.0 - th)) * Fu;
+    R1.bottomLeftCorner(m, n) = -w.s * (G1 * In);
+    solve_columns(w.lu, R1, Z1);
+    const Eigen::MatrixXd dD = Z1.topRows(n);
+    const Eigen::MatrixXd dlambda = w.s * Z1.bottomRows(m);
+    Eigen::MatrixXd dq1 = dD;
+    dq1.leftCols(n) += In;
+    Eigen::MatrixXd dpt = (h * th) * (Gq * dD) + Gv * dD - G0.transpose() * dlambda;
+    dpt.leftCols(n) += h * (Gq * In) - Hl;
+    dpt.block(0, n, n, n) += In;
+    if (c > 0) dpt.rightCols(c) += h * Fu;
+    // equation 2 at (t1, q1, p1~): v1, mu and [M G1^T; G1 0] factored by the projection
+    w.q1 = q0 + dq;
+    w.p1 = p0 + h * w.F;
+    w.subtract_normals(w.G0, 1.0, lambda.data(), w.p1.data());
+    if (*w.project(w.t1, w.q1, w.p1, w.v1)) return false;
+    con.sparse_second_derivatives(w.t1, w.q1, H.data(), Gqt.data());
+    Eigen::MatrixXd R2 = Eigen::MatrixXd::Zero(n + m, in), Y2;
+    R2.topRows(n) = dpt;
+    Eigen::MatrixXd Hmu = Eigen::MatrixXd::Zero(n, in);
+    add_weighted(w.mu, dq1, Hmu);
+    R2.topRows(n) -= Hmu;
+    // rows v1^T Hess g_i + grad (g_t)_i, times dq1
+    std::size_t eh = 0, eg = 0;
+    for (int i = 0; i < m; ++i) {
+      const auto& row = pattern[static_cast<std::size_t>(i)];
+      const int k = static_cast<int>(row.size());
+      for (int b = 0; b < k; ++b) {
+        double hv = Gqt[eg + static_cast<std::size_t>(b)];
+        for (int a = 0; a < k; ++a) hv += w.v1[row[static_cast<std::size_t>(a)]] * H[eh + static_cast<std::size_t>(a * k + b)];
+        if (hv != 0.0) R2.row(n + i) -= hv * dq1.row(row[static_cast<std::size_t>(b)]);
+      }
+      eh += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
+      eg += static_cast<std::size_t>(k);
+    }
+    solve_columns(w.plu, R2, Y2);
+    const Eigen::MatrixXd dp1 = dpt - Hmu - G1.transpose() * Y2.bottomRows(m);
+    return dynamic_detail::assemble_derivative(n, dq1, dp1, A, B);
+  }
 
   // Equation 1 for the driver: the step forms its sparse Jacobian itself (the driver's
   // matrix is unused).

@@ -29,11 +29,10 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
     base.forced = true;
     force = std::move(f);
   }
-  // a separable Lagrangian of many coordinates, with a force or not: the sparse step (no
-  // derivative: --linearize takes the dense one below)
-  // (kernels_sparse_constrained.cc; none where the potential's terms couple most
-  // coordinates: the dense step below, within its limit)
-  if (!me.galerkin && !me.linearize && me.use_structure && L.separable() && n >= kSparseConstrainedMinDim)
+  // a separable Lagrangian of many coordinates, with a force or not, --linearize or not:
+  // the sparse step (kernels_sparse_constrained.cc; none where the potential's terms
+  // couple most coordinates: the dense step below, within its limit)
+  if (!me.galerkin && me.use_structure && L.separable() && n >= kSparseConstrainedMinDim)
     if (auto run = make_sparse_constrained_run(L, pr, me, view, q, p, v0, base, con, force)) return run;
   if (n > kMaxDenseDynamicDim)
     throw InputError((me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
@@ -41,8 +40,7 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
                      " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
                      " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
                      " coordinates the run-time-sized dense steps take (the sparse constrained step takes a "
-                     "separable Lagrangian of any size whose potential's Hessian is sparse: a theta map, without "
-                     "--linearize)");
+                     "separable Lagrangian of any size whose potential's Hessian is sparse: a theta map)");
   base.step_path = StepPath::generic;
   const MomentumMap momentum = L.separable()               ? MomentumMap::constant
                                : L.parts().split.quadratic ? MomentumMap::linear

@@ -522,8 +522,7 @@ BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
 // A chain of rods in Cartesian coordinates (chain_cartesian.toml: 32 coordinates, 16
 // constraints) steps by the sparse constrained step: the dense step's trajectory
 // (integrator.use_structure = false) to round-off, plain and composed to order 4, damped
-// and driven or not, the same work of the forces; --linearize, which the sparse step
-// does not take, runs the dense one;
+// and driven or not, the same work of the forces, and with --linearize the same A_k;
 // a redundant constraint is refused (by the SVD of Dg at 16 rods, by the sparse rank
 // heuristic at 2100); and a chain beyond the dense steps' 4096 coordinates runs, damped
 // or not.
@@ -562,10 +561,33 @@ BOOST_AUTO_TEST_CASE(a_chain_of_rods_steps_on_sparse_matrices) {
   const Json forced = agree({"integrator.t_end=0.5", forces});
   BOOST_TEST(forced.at("work").get<double>() != 0.0);
   agree({"integrator.t_end=0.5", forces, "integrator.composition=\"triple-jump:4\""});
-  // with --linearize: the dense step
-  const std::string npy = temp_dir() + "/chain_A.npy";
-  const Output lin = dvm({"run", scene(C), "--no-output", "--quiet", "--linearize", npy, "--set", "integrator.t_end=0.003"});
-  BOOST_TEST(lin.status == 0, lin.err);
+  // with --linearize, damped and driven: the sparse step's derivatives A_k, the dense
+  // step's to round-off (tests/solvers/test_sparse_constrained.cc compares the two steps'
+  // derivatives with a control input and against central differences)
+  const std::string npy = temp_dir() + "/chain_A.npy", npy_dense = temp_dir() + "/chain_A_dense.npy";
+  auto linearized = [&](const std::string& path, const std::vector<std::string>& sets) {
+    const Output o = dvm(with_sets({"run", scene(C), "--no-output", "--json", "--linearize", path}, sets));
+    BOOST_TEST_REQUIRE(o.status == 0, o.err);
+    return parse_json(o.out).at("step_path").get<std::string>();
+  };
+  BOOST_TEST(linearized(npy, {"integrator.t_end=0.003", forces}) == "constrained-sparse-newton");
+  BOOST_TEST(linearized(npy_dense, {"integrator.t_end=0.003", forces, "integrator.use_structure=false"}) == "generic");
+  const std::string sparse_bytes = slurp(npy), dense_bytes = slurp(npy_dense);
+  BOOST_TEST_REQUIRE(sparse_bytes.size() == dense_bytes.size());
+  const std::size_t hlen =
+      static_cast<unsigned char>(sparse_bytes[8]) + 256u * static_cast<unsigned char>(sparse_bytes[9]);
+  const std::size_t count = (sparse_bytes.size() - 10 - hlen) / sizeof(double);
+  BOOST_TEST_REQUIRE(count == 3u * (1u + 64u * 64u));  // 3 steps: t_k and A_k (64 x 64)
+  std::vector<double> As(count), Ad(count);
+  std::memcpy(As.data(), sparse_bytes.data() + 10 + hlen, count * sizeof(double));
+  std::memcpy(Ad.data(), dense_bytes.data() + 10 + hlen, count * sizeof(double));
+  double diff = 0.0, size = 0.0;
+  for (std::size_t i = 0; i < count; ++i) {
+    diff = std::fmax(diff, std::fabs(As[i] - Ad[i]));
+    size = std::fmax(size, std::fabs(Ad[i]));
+  }
+  BOOST_TEST_MESSAGE("--linearize: sparse A_k against dense " << diff / size);
+  BOOST_TEST(diff <= 1e-11 * size);
   // the first rod written twice: Dg rank-deficient
   std::string constraints = "system.constraints=[\"x[1]^2 + y[1]^2 - l^2\"";
   for (int i = 1; i <= 16; ++i)

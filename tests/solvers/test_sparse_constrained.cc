@@ -3,7 +3,8 @@
 // ConstrainedThetaStep, so the same steps to round-off; the constraint and its hidden
 // constraint kept at every step of a long chain; Dg's pattern read off the tapes; the
 // rank of Dg by the sparse LDL^T of Dg Dg^T; with a force, the same steps as the dense
-// forced step and the force's Jacobian entries read off its tapes.
+// forced step and the force's Jacobian entries read off its tapes; the step's derivatives
+// (in the state and in a control input) the dense step's, and central differences.
 #define BOOST_TEST_MODULE sparse_constrained
 #include <boost/test/unit_test.hpp>
 
@@ -54,7 +55,8 @@ void chain_state(int k, VectorXd& q, VectorXd& p) {
 // `twice`: the first rod's constraint written a second time, times 1.1 (redundant); `centre`: one
 // constraint more, the sum of the x_i held at its initial value (a row of Dg that
 // couples every joint: no narrow band).
-std::shared_ptr<WrittenSystem> chain(int k, bool twice = false, bool centre = false) {
+// `moving`: the chain hung from a support moved along x by 0.1 sin(2 t) (a constraint in t).
+std::shared_ptr<WrittenSystem> chain(int k, bool twice = false, bool centre = false, bool moving = false) {
   auto s = std::make_shared<WrittenSystem>();
   s->name = "chain";
   for (int i = 1; i <= k; ++i) {
@@ -76,7 +78,7 @@ std::shared_ptr<WrittenSystem> chain(int k, bool twice = false, bool centre = fa
   L += " - c/2*((" + xe + " - a)^2 + (" + ye + " - b)^2)";
   s->lagrangian = Expression::parse(L, s->symbols(WrittenSystem::Kind::lagrangian));
   auto rod = [&](int i) {
-    if (i == 1) return std::string("x1^2 + y1^2 - l^2");
+    if (i == 1) return std::string(moving ? "(x1 - 0.1*sin(2*t))^2 + y1^2 - l^2" : "x1^2 + y1^2 - l^2");
     const std::string a = std::to_string(i - 1), b = std::to_string(i);
     return "(x" + b + " - x" + a + ")^2 + (y" + b + " - y" + a + ")^2 - l^2";
   };
@@ -96,8 +98,10 @@ using Dense = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>;
 
 // Forces on the chain of `chain`: a damping of every coordinate, a damper between the
 // first two joints' horizontal velocities, a force in a position and a velocity, and a
-// periodic drive of the last joint (t, and no coordinate).
-void add_forces(WrittenSystem& s, int k) {
+// periodic drive of the last joint (t, and no coordinate); `control`: a control input u
+// (tabulated: 0.3, then 1.7) pushing the last joint up in proportion to its x.
+void add_forces(WrittenSystem& s, int k, bool control = false) {
+  if (control) s.controls.push_back({"u", {}, {0.3, 1.7}, "test", "test"});
   const auto symbols = s.symbols(WrittenSystem::Kind::force);
   auto component = [&](const std::string& name) {
     for (std::size_t i = 0; i < s.coordinates.size(); ++i)
@@ -112,6 +116,7 @@ void add_forces(WrittenSystem& s, int k) {
       if (v == "x2") f += " + 0.5*(x1_dot - x2_dot)";
       if (v == "y3") f += " - 0.3*x3*y3_dot";
       if (i == k && std::string(c) == "x") f += " + 0.4*sin(3*t)";
+      if (control && i == k && std::string(c) == "y") f += " + u*x" + std::to_string(k);
       s.forces.emplace_back(component(v), Expression::parse(f, symbols));
     }
 }
@@ -394,4 +399,106 @@ BOOST_AUTO_TEST_CASE(the_forced_sparse_step_is_the_forced_dense_step) {
       BOOST_TEST(r.work < 0.0);
     }
   }
+}
+
+BOOST_AUTO_TEST_CASE(the_sparse_derivative_is_the_dense_derivative) {
+  // A = d(q1, p1)/d(q0, p0) and B = d(q1, p1)/du of one step equal the dense step's
+  // (which tests/solvers/test_constrained.cc checks against central differences) to
+  // round-off: a chain of 12 links, banded and with its centre held (sparse LU), with and
+  // without a force (damping, a drive in t and a control input in a position), hung from
+  // a fixed and from a moving support (the constraints' second derivatives in t), for the
+  // midpoint and an asymmetric theta
+  const int k = 12, n = 2 * k;
+  using DenseForced = ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>;
+  for (bool centre : {false, true})
+    for (bool forced : {false, true})
+      for (bool moving : {false, true}) {
+        const auto sys = chain(k, false, centre, moving);
+        if (forced) add_forces(*sys, k, true);
+        const WrittenDynamic L(sys);
+        const auto con = std::make_shared<const WrittenConstraints>(sys);
+        std::shared_ptr<const WrittenForce> force;
+        if (forced) {
+          auto signal = std::make_shared<ControlSignal>(sys->controls);
+          signal->set_step(1);
+          force = std::make_shared<const WrittenForce>(sys, signal);
+        }
+        VectorXd q0, p0, v(n);
+        chain_state(k, q0, p0);
+        const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+        if (centre || moving)  // (the momentum on the hidden constraints at t = 0)
+          BOOST_REQUIRE(SparseConstrainedThetaStep(L, H, con, 0.5, 0.01).project(0.0, q0, p0, v).empty());
+        for (double theta : {0.5, 0.3}) {
+          const double h = 0.01, t0 = 0.0;
+          const SparseConstrainedThetaStep sparse(L, H, con, theta, h, {}, force);
+          BOOST_TEST(sparse.controls() == (forced ? 1 : 0));
+          VectorXd dqs = VectorXd::Zero(n), dps(n), dqd = dqs, dpd(n);
+          BOOST_REQUIRE(sparse.step(t0, q0, p0, dqs, dps).converged);
+          Eigen::MatrixXd As, Ad, Bs, Bd;
+          BOOST_REQUIRE(sparse.derivative(t0, q0, p0, dqs, As));
+          if (forced) {
+            const DenseForced dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant, force);
+            BOOST_REQUIRE(dense.step(t0, q0, p0, dqd, dpd).converged);
+            BOOST_REQUIRE(dense.derivative(t0, q0, p0, dqd, Ad));
+            BOOST_REQUIRE(sparse.control_derivative(t0, q0, p0, dqs, Bs));
+            BOOST_REQUIRE(dense.control_derivative(t0, q0, p0, dqd, Bd));
+          } else {
+            const Dense dense(L, ThetaMap(theta), h, con, {}, MomentumMap::constant);
+            BOOST_REQUIRE(dense.step(t0, q0, p0, dqd, dpd).converged);
+            BOOST_REQUIRE(dense.derivative(t0, q0, p0, dqd, Ad));
+          }
+          const double err = (As - Ad).lpNorm<Eigen::Infinity>() / Ad.lpNorm<Eigen::Infinity>();
+          BOOST_TEST_MESSAGE((centre ? "centre held, " : "") << (forced ? "forced, " : "") << (moving ? "moving, " : "")
+                                                               << "theta " << theta << ": A differs by " << err);
+          BOOST_TEST(err < 1e-11);
+          BOOST_TEST((As - Eigen::MatrixXd::Identity(2 * n, 2 * n)).lpNorm<Eigen::Infinity>() > 1e-3);
+          if (forced) {
+            BOOST_REQUIRE(Bs.cols() == 1);
+            const double eb = (Bs - Bd).lpNorm<Eigen::Infinity>() / Bd.lpNorm<Eigen::Infinity>();
+            BOOST_TEST(eb < 1e-11, "B differs by " << eb);
+            BOOST_TEST(Bd.lpNorm<Eigen::Infinity>() > 1e-5);  // the control moves the step (by h^2 u x / m)
+          }
+        }
+      }
+}
+
+BOOST_AUTO_TEST_CASE(the_sparse_derivative_against_central_differences) {
+  // independently of the dense step: the columns of A against central differences of the
+  // step in each coordinate and momentum (relative 1e-7), for the forced chain on its
+  // moving support with theta = 0.3, factored by the sparse LU (the centre held)
+  const int k = 12, n = 2 * k;
+  const auto sys = chain(k, false, true, true);
+  add_forces(*sys, k);
+  const WrittenDynamic L(sys);
+  const auto con = std::make_shared<const WrittenConstraints>(sys);
+  const auto force = std::make_shared<const WrittenForce>(sys);
+  VectorXd q0, p0, v(n);
+  chain_state(k, q0, p0);
+  const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
+  BOOST_REQUIRE(SparseConstrainedThetaStep(L, H, con, 0.5, 0.01).project(0.0, q0, p0, v).empty());
+  const double h = 0.02;
+  const SparseConstrainedThetaStep S(L, H, con, 0.3, h, {}, force);
+  BOOST_TEST(!S.banded());
+  auto advance = [&](const VectorXd& q, const VectorXd& p) {
+    VectorXd dq = VectorXd::Zero(n), dp(n), z(2 * n);
+    const StepSummary r = S.step(0.0, q, p, dq, dp);
+    BOOST_REQUIRE_MESSAGE(r.converged, r.message);
+    z << q + dq, p + dp;
+    return z;
+  };
+  VectorXd dq = VectorXd::Zero(n), dp(n);
+  BOOST_REQUIRE(S.step(0.0, q0, p0, dq, dp).converged);
+  Eigen::MatrixXd A;
+  BOOST_REQUIRE(S.derivative(0.0, q0, p0, dq, A));
+  const double eps = 1e-6;
+  double worst = 0.0;
+  for (int j = 0; j < 2 * n; ++j) {
+    VectorXd qa = q0, pa = p0, qb = q0, pb = p0;
+    (j < n ? qa[j] : pa[j - n]) += eps;
+    (j < n ? qb[j] : pb[j - n]) -= eps;
+    const VectorXd fd = (advance(qa, pa) - advance(qb, pb)) / (2 * eps);
+    worst = std::fmax(worst, (A.col(j) - fd).lpNorm<Eigen::Infinity>() / A.lpNorm<Eigen::Infinity>());
+  }
+  BOOST_TEST_MESSAGE("A against central differences: " << worst);
+  BOOST_TEST(worst < 1e-7);
 }
