@@ -12,8 +12,10 @@
 // Then chains of k rods in Cartesian coordinates (2k coordinates, k constraints; the
 // scene written here), k = 1 .. 128: the dense ConstrainedThetaStep against the sparse
 // SparseConstrainedThetaStep from the same state, ns a step and their ratio (where the
-// runtime's line between them belongs), undamped and with a damping force on every
-// coordinate.
+// runtime's line between them belongs), undamped, with a damping force on every
+// coordinate, and undamped with each step's derivative A formed after it (both steps'
+// derivative(): the dense one factors (3k) x (3k) matrices, the sparse one solves with
+// its band for 4k right-hand sides).
 //
 // Each pair runs the midpoint map (sphere-exp on S^2) with the same step from the same
 // state; the table gives ns per step (the best of the repeats), the constrained run's
@@ -133,7 +135,8 @@ std::string chain_scene(int k, bool damped) {
 // The cost of a step of the chain of k rods by the dense constrained step (an LU of
 // the (3k) x (3k) saddle-point matrix) and by the sparse one, from the same state, in
 // this process: ns per step, the best of `repeats` runs of `steps` steps each; then the
-// same with the damping force.
+// same with the damping force; then undamped with each step's derivative A (4k x 4k)
+// formed after it, as `dvm run --linearize` forms it (not written).
 void chain_row(int k, std::int64_t steps, int repeats) {
   const Scene sc = load_scene_text(chain_scene(k, false), "chain", {});
   const Problem& pr = sc.problem;
@@ -144,14 +147,18 @@ void chain_row(int k, std::int64_t steps, int repeats) {
   Eigen::VectorXd p0(n), v0 = Eigen::Map<const Eigen::VectorXd>(pr.v.data(), n);
   p0 = L.parts().mass_diagonal.cwiseProduct(v0);
   const double h = pr.step;
-  auto time = [&](const auto& step) {
+  auto time = [&](const auto& step, bool derivative = false) {
     double best = INFINITY;
+    Eigen::MatrixXd A;
     for (int r = 0; r < repeats; ++r) {
       Eigen::VectorXd q = q0, p = p0, dq = Eigen::VectorXd::Zero(n), dp(n);
       const auto t0 = std::chrono::steady_clock::now();
       for (std::int64_t j = 0; j < steps; ++j) {
-        const StepSummary s = step.step(static_cast<double>(j) * h, q, p, dq, dp);
+        const double t = static_cast<double>(j) * h;
+        const StepSummary s = step.step(t, q, p, dq, dp);
         if (!s.converged) throw std::runtime_error("chain of " + std::to_string(k) + ": " + s.message);
+        if (derivative && !step.derivative(t, q, p, dq, A))
+          throw std::runtime_error("chain of " + std::to_string(k) + ": no derivative");
         q += dq;
         p += dp;
       }
@@ -161,9 +168,11 @@ void chain_row(int k, std::int64_t steps, int repeats) {
     return best;
   };
   const auto H = SparseSeparableThetaStep::hessian_of(L, q0);
-  const double sparse = time(SparseConstrainedThetaStep(L, H, con, 0.5, h));
-  const double dense = time(ConstrainedThetaStep<WrittenDynamic, WrittenConstraints>(L, ThetaMap(0.5), h, con, {},
-                                                                                      MomentumMap::constant));
+  const SparseConstrainedThetaStep sparse_step(L, H, con, 0.5, h);
+  const ConstrainedThetaStep<WrittenDynamic, WrittenConstraints> dense_step(L, ThetaMap(0.5), h, con, {},
+                                                                            MomentumMap::constant);
+  const double sparse = time(sparse_step), dense = time(dense_step);
+  const double sparse_a = time(sparse_step, true), dense_a = time(dense_step, true);
   const Scene damped = load_scene_text(chain_scene(k, true), "damped chain", {});
   const auto force = std::make_shared<const WrittenForce>(damped.problem.written);
   const WrittenDynamic Ld(damped.problem.written);
@@ -172,8 +181,8 @@ void chain_row(int k, std::int64_t steps, int repeats) {
       time(SparseConstrainedThetaStep(Ld, SparseSeparableThetaStep::hessian_of(Ld, q0), cond, 0.5, h, {}, force));
   const double dense_f = time(ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>(
       Ld, ThetaMap(0.5), h, cond, {}, MomentumMap::constant, force));
-  std::printf("| %d | %d | %.0f | %.0f | %.2f | %.0f | %.0f | %.2f |\n", k, n, dense, sparse, dense / sparse, dense_f,
-              sparse_f, dense_f / sparse_f);
+  std::printf("| %d | %d | %.0f | %.0f | %.2f | %.0f | %.0f | %.2f | %.0f | %.0f | %.2f |\n", k, n, dense, sparse,
+              dense / sparse, dense_f, sparse_f, dense_f / sparse_f, dense_a, sparse_a, dense_a / sparse_a);
 }
 
 }  // namespace
@@ -240,7 +249,8 @@ int main(int argc, char** argv) {
                 "\n(dvm run takes the sparse one from kSparseConstrainedMinDim coordinates, kernels_dynamic.h)\n\n");
     std::printf(
         "| links k | coordinates | dense: ns/step | sparse: ns/step | dense / sparse | damped, dense: ns/step "
-        "| damped, sparse: ns/step | dense / sparse |\n|---|---|---|---|---|---|---|---|\n");
+        "| damped, sparse: ns/step | dense / sparse | with A: dense ns/step | with A: sparse ns/step "
+        "| dense / sparse |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
     for (int k : {1, 2, 4, 6, 8, 10, 12, 16, 32, 64, 128}) {
       const std::int64_t n = std::max<std::int64_t>(10, std::min<std::int64_t>(steps / 20, 2000000 / (k * k * k)));
       chain_row(k, n, repeats);
