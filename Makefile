@@ -20,8 +20,10 @@ BUILD := build
 SUDO  := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 JOBS  ?= 2
 
-# ccache, when installed, speeds up rebuilds of the test and sanitizer builds
-LAUNCHER := $(shell command -v ccache >/dev/null 2>&1 && echo -DCMAKE_CXX_COMPILER_LAUNCHER=ccache)
+# ccache, when installed, speeds up rebuilds of the test and sanitizer builds; without it
+# the launcher is set empty, so that one left in a tree's cache by an earlier configure
+# is not used
+LAUNCHER := -DCMAKE_CXX_COMPILER_LAUNCHER=$(shell command -v ccache >/dev/null 2>&1 && echo ccache)
 
 # The test tree (build-test/): everything ctest runs, built by clang++-14 at -O1, which
 # compiles it faster than g++ at -O1 or -O3 (tests/README.md, "Build and CI cost").
