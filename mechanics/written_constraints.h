@@ -213,7 +213,8 @@ class WrittenConstraints {
           const J& g = jg_[static_cast<std::size_t>(row[static_cast<std::size_t>(a)])];
           for (int d = 0; d < w; ++d) H[eh + static_cast<std::size_t>(a * k + first + d)] = g.v[d];
         }
-        for (int d = 0; d < w; ++d) Gqt[eg + static_cast<std::size_t>(first + d)] = jg_[static_cast<std::size_t>(n)].v[d];
+        const J& gt = jg_[static_cast<std::size_t>(n)];
+        for (int d = 0; d < w; ++d) Gqt[eg + static_cast<std::size_t>(first + d)] = gt.v[d];
         for (int d = 0; d < w; ++d) jq_[static_cast<std::size_t>(row[static_cast<std::size_t>(first + d)])].v[d] = 0.0;
         for (int j : row) jg_[static_cast<std::size_t>(j)] = J(0.0);
         jg_[static_cast<std::size_t>(n)] = J(0.0);

@@ -457,7 +457,8 @@ class SparseConstrainedThetaStep {
       const int k = static_cast<int>(row.size());
       for (int b = 0; b < k; ++b) {
         double hv = Gqt[eg + static_cast<std::size_t>(b)];
-        for (int a = 0; a < k; ++a) hv += w.v1[row[static_cast<std::size_t>(a)]] * H[eh + static_cast<std::size_t>(a * k + b)];
+        for (int a = 0; a < k; ++a)
+          hv += w.v1[row[static_cast<std::size_t>(a)]] * H[eh + static_cast<std::size_t>(a * k + b)];
         if (hv != 0.0) R2.row(n + i) -= hv * dq1.row(row[static_cast<std::size_t>(b)]);
       }
       eh += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
