@@ -397,8 +397,9 @@ class SparseConstrainedThetaStep {
     };
     const Sparse G0 = rows_of(w.G0), G1 = rows_of(w.G1);
     std::vector<double> H(con.hessian_entries()), Gqt(con.entries());
-    // out += sum_i weight_i Hess g_i X, the Hessians in H
-    auto add_weighted = [&](const V& weight, const Eigen::MatrixXd& X, Eigen::MatrixXd& out) {
+    // f(a, b, weight_i H_i(a, b)) for each nonzero entry of sum_i weight_i Hess g_i (the
+    // Hessians in H, on each constraint's pattern)
+    auto for_weighted = [&](const V& weight, auto&& f) {
       std::size_t eh = 0;
       for (int i = 0; i < m; ++i) {
         const auto& row = pattern[static_cast<std::size_t>(i)];
@@ -406,7 +407,7 @@ class SparseConstrainedThetaStep {
         for (int a = 0; a < k; ++a)
           for (int b = 0; b < k; ++b) {
             const double hab = weight[i] * H[eh + static_cast<std::size_t>(a * k + b)];
-            if (hab != 0.0) out.row(row[static_cast<std::size_t>(a)]) += hab * X.row(row[static_cast<std::size_t>(b)]);
+            if (hab != 0.0) f(row[static_cast<std::size_t>(a)], row[static_cast<std::size_t>(b)], hab);
           }
         eh += static_cast<std::size_t>(k) * static_cast<std::size_t>(k);
       }
@@ -422,22 +423,22 @@ class SparseConstrainedThetaStep {
     };
     // equation 1: the inputs (dq0, dp0, du) as columns, the multiplier rows times s
     con.sparse_second_derivatives(t0, q0, H.data(), Gqt.data());
-    const Eigen::MatrixXd In = Eigen::MatrixXd::Identity(n, n);
     Eigen::MatrixXd R1 = Eigen::MatrixXd::Zero(n + m, in), Z1;
+    const Eigen::MatrixXd Gqd = Gq;                    // G_q, dense
     Eigen::MatrixXd Hl = Eigen::MatrixXd::Zero(n, n);  // H_lambda
-    add_weighted(lambda, In, Hl);
-    R1.topLeftCorner(n, n) = (h * (1.0 - th)) * (Gq * In) - Hl;
-    R1.block(0, n, n, n) = In;
+    for_weighted(lambda, [&](int a, int b, double x) { Hl(a, b) += x; });
+    R1.topLeftCorner(n, n) = (h * (1.0 - th)) * Gqd - Hl;
+    R1.block(0, n, n, n).setIdentity();
     if (c > 0) R1.topRightCorner(n, c) = (h * (1.0 - th)) * Fu;
-    R1.bottomLeftCorner(m, n) = -w.s * (G1 * In);
+    R1.bottomLeftCorner(m, n) = -w.s * Eigen::MatrixXd(G1);
     solve_columns(w.lu, R1, Z1);
     const Eigen::MatrixXd dD = Z1.topRows(n);
     const Eigen::MatrixXd dlambda = w.s * Z1.bottomRows(m);
     Eigen::MatrixXd dq1 = dD;
-    dq1.leftCols(n) += In;
+    dq1.leftCols(n).diagonal().array() += 1.0;
     Eigen::MatrixXd dpt = (h * th) * (Gq * dD) + Gv * dD - G0.transpose() * dlambda;
-    dpt.leftCols(n) += h * (Gq * In) - Hl;
-    dpt.block(0, n, n, n) += In;
+    dpt.leftCols(n) += h * Gqd - Hl;
+    dpt.block(0, n, n, n).diagonal().array() += 1.0;
     if (c > 0) dpt.rightCols(c) += h * Fu;
     // equation 2 at (t1, q1, p1~): v1, mu and [M G1^T; G1 0] factored by the projection
     w.q1 = q0 + dq;
@@ -447,8 +448,8 @@ class SparseConstrainedThetaStep {
     con.sparse_second_derivatives(w.t1, w.q1, H.data(), Gqt.data());
     Eigen::MatrixXd R2 = Eigen::MatrixXd::Zero(n + m, in), Y2;
     R2.topRows(n) = dpt;
-    Eigen::MatrixXd Hmu = Eigen::MatrixXd::Zero(n, in);
-    add_weighted(w.mu, dq1, Hmu);
+    Eigen::MatrixXd Hmu = Eigen::MatrixXd::Zero(n, in);  // H_mu dq1
+    for_weighted(w.mu, [&](int a, int b, double x) { Hmu.row(a) += x * dq1.row(b); });
     R2.topRows(n) -= Hmu;
     // rows v1^T Hess g_i + grad (g_t)_i, times dq1
     std::size_t eh = 0, eg = 0;
