@@ -89,6 +89,25 @@ class DerivativeProgram {
   // 2n > kMaxInputs. Without `hessian`, only the gradient (hessian() must not be called).
   static std::shared_ptr<const DerivativeProgram> build(const Expression& e, int n, bool hessian = true);
 
+  // The values of several tapes without blocks, in blocks 0 and 1 of n variables each,
+  // as one program: the tapes are read into one graph (step 1), so that an operation
+  // they share is made once, and where one needs sin x and another cos x one sincos
+  // gives both. Null where a tape is empty or has blocks, or the graph would exceed
+  // kMaxNodes. Such a program has values() only (not gradient(), hessian() or a C
+  // source): the entries of a mass matrix M(q) and the potential, each a tape of its
+  // own, cost one run instead of one walk of the interpreter's stack per tape. The
+  // values agree with the tapes' to round-off, not to the bit (products regrouped).
+  static std::shared_ptr<const DerivativeProgram> build_values(const std::vector<const Expression*>& tapes, int n);
+  bool values_only() const { return values_only_; }
+  std::size_t outputs() const { return grad_out_.size(); }
+  // out[i]: the value of tape i at (a, b) (b may be null where no tape reads block 1);
+  // v: a workspace().
+  void values(const double* a, const double* b, double* out, double* v) const {
+    load(a, b, v);
+    run(grad_code_, v, a, b);
+    for (std::size_t i = 0; i < grad_out_.size(); ++i) out[i] = v[grad_out_[i]] * grad_factor_[i];
+  }
+
   int dim() const { return n_; }
   bool has_hessian() const { return has_hessian_; }
   // Whether the tape had blocks (then gradient_any, which runs no blocks, must not be called).
@@ -294,6 +313,7 @@ class DerivativeProgram {
   std::vector<std::pair<std::int32_t, double>> constant_slots_;
   std::vector<BlockProgram> blocks_;
   bool has_hessian_ = false;
+  bool values_only_ = false;  // built by build_values
   GradientFn gradient_fn_ = nullptr;  // compiled code (with_native), or null
   HessianFn hessian_fn_ = nullptr;
   std::shared_ptr<const void> native_;
@@ -465,6 +485,23 @@ class DerivativeProgramBuilder {
 
  public:
   DerivativeProgramBuilder(int n, bool hessian) : n_(n), hessian_(hessian) {}
+
+  // Step 1 for each tape and step 4 with their values as the outputs.
+  bool build_values(const std::vector<const Expression*>& tapes, DerivativeProgram& out) {
+    if (tapes.empty()) return false;
+    for (const Expression* e : tapes)
+      if (e->empty() || !e->blocks().empty()) return false;
+    try {
+      std::vector<int> roots;
+      for (const Expression* e : tapes) roots.push_back(read(*e));
+      emit(roots, {}, out);
+      out.hess_code_.clear();  // (emit writes the same code twice without Hessian entries)
+      out.values_only_ = true;
+      return true;
+    } catch (const TooLarge&) {
+      return false;
+    }
+  }
 
   bool build(const Expression& e, DerivativeProgram& out) {
     if (e.empty()) return false;
@@ -1072,6 +1109,7 @@ class DerivativeProgramBuilder {
 };
 
 inline std::string DerivativeProgram::c_source(const std::string& prefix) const {
+  if (values_only_) return {};
   using Op = Expression::Op;
   if (!blocks_.empty()) return {};
   auto literal = [](double c) -> std::string {
@@ -1206,6 +1244,14 @@ inline std::shared_ptr<const DerivativeProgram> DerivativeProgram::build(const E
   auto p = std::make_shared<DerivativeProgram>();
   DerivativeProgramBuilder b(n, hessian);
   if (!b.build(e, *p)) return nullptr;
+  return p;
+}
+
+inline std::shared_ptr<const DerivativeProgram> DerivativeProgram::build_values(
+    const std::vector<const Expression*>& tapes, int n) {
+  auto p = std::make_shared<DerivativeProgram>();
+  DerivativeProgramBuilder b(n, false);
+  if (!b.build_values(tapes, *p)) return nullptr;
   return p;
 }
 

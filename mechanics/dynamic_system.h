@@ -97,6 +97,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <sstream>
 #include <stdexcept>
@@ -714,11 +715,16 @@ struct WrittenParts {
   // The potential's gradient as a DerivativeProgram (separable only; null where none
   // is built: then its tape's reverse mode).
   std::shared_ptr<const DerivativeProgram> potential_program;
+  // and its value (DerivativeProgram::build_values), the monitored energy's U
+  std::shared_ptr<const DerivativeProgram> potential_values;
   // When quadratic with M depending on q (and n <= Expression::kMaxMassDim): the
   // entries of M(q) read off the text (Expression::split_mass), upper triangle row by
   // row, and U(q), its terms free of the velocities (`potential` then holds U).
   std::vector<Expression> mass_entries;
   bool has_mass_entries() const { return !mass_entries.empty(); }
+  // Those entries and U(q) as one program (DerivativeProgram::build_values), outputs in
+  // that order; null where none is built (then each tape is evaluated).
+  std::shared_ptr<const DerivativeProgram> mass_program;
 
   // A full M is formed from n gradients of the kinetic tape and factored; beyond this
   // size (a dense factor of 8 n^2 bytes) such a system takes the generic path.
@@ -743,6 +749,12 @@ struct WrittenParts {
       } catch (const ExpressionError&) {  // a limit met by the rewritten entries (the text itself
         mass_entries.clear();             // parsed above): M then comes from gradients
       }
+      if (has_mass_entries()) {
+        std::vector<const Expression*> tapes;
+        for (const Expression& e : mass_entries) tapes.push_back(&e);
+        tapes.push_back(&potential);
+        mass_program = DerivativeProgram::build_values(tapes, n);
+      }
     }
     if (!split.constant_mass || split.kinetic_terms == 0) return;
     const Eigen::VectorXd zero = Eigen::VectorXd::Zero(n);
@@ -758,6 +770,7 @@ struct WrittenParts {
       inverse_mass = mass_diagonal.cwiseInverse();
       if (separable && (mass_diagonal.array() == mass_diagonal[0]).all()) uniform_inverse_mass = inverse_mass[0];
       if (separable) potential_program = DerivativeProgram::build(potential, n, false);
+      if (separable) potential_values = DerivativeProgram::build_values({&potential}, n);
       return;
     }
     if (n > kMaxDenseMass) return;
@@ -772,6 +785,7 @@ struct WrittenParts {
     separable = M.allFinite() && mass_factor.info() == Eigen::Success;
     mass = std::move(M);
     if (separable) potential_program = DerivativeProgram::build(potential, n, false);
+    if (separable) potential_values = DerivativeProgram::build_values({&potential}, n);
   }
   // v = M^{-1} p (separable only)
   void velocity(const DynIn& p, DynOut v) const {
@@ -796,7 +810,7 @@ class WrittenDynamic {
         parts_(parts_of(*system_, mode, tape_)),
         Lq_(system_->dim()),
         Lv_(system_->dim()) {
-    if (parts_->split.quadratic && !parts_->separable) mass_ = Mass(system_->dim());
+    if (parts_->split.quadratic && !parts_->separable) mass_ = Mass(system_->dim(), parts_->mass_program.get());
     if (timed_) time_ = Timed(system_->dim());
   }
 
@@ -818,9 +832,10 @@ class WrittenDynamic {
     Mass& m = mass_;
     if (parts_->has_mass_entries()) {
       const int n = dim();
+      const double* entries = mass_and_potential(q);
       std::size_t k = 0;
       for (int i = 0; i < n; ++i)
-        for (int j = i; j < n; ++j, ++k) m.M(i, j) = m.M(j, i) = parts_->mass_entries[k](q.data());
+        for (int j = i; j < n; ++j, ++k) m.M(i, j) = m.M(j, i) = entries[k];
     } else {
       for (int i = 0; i < dim(); ++i) {
         m.unit[i] = 1.0;
@@ -829,9 +844,19 @@ class WrittenDynamic {
         m.unit[i] = 0.0;
       }
     }
-    if (dim() == 2) {  // the same elimination, unrolled (two degrees of freedom are common)
-      if (!m.lu2.factor(m.M)) return false;
-      m.lu2.solve(p, v);
+    if (dim() == 2) {
+      // two degrees of freedom (common): Cramer's rule, one division where an
+      // elimination waits on two in a row (the run's energy solves this every step).
+      // Singular where DenseLU finds it so: a pivot not above 1e-14 max |M_ij|, the
+      // first pivot max(|a|, |c|), the second |det| over the first.
+      const double a = m.M(0, 0), b = m.M(0, 1), c = m.M(1, 0), d = m.M(1, 1);
+      const double first = std::fmax(std::fabs(a), std::fabs(c));
+      const double tiny = 1e-14 * std::fmax(first, std::fmax(std::fabs(b), std::fabs(d)));
+      const double det = a * d - b * c;
+      if (!(first > tiny) || !(std::fabs(det) > tiny * first) || !std::isfinite(det)) return false;
+      const double r = 1.0 / det, p0 = p[0], p1 = p[1];
+      v[0] = (d * p0 - b * p1) * r;
+      v[1] = (a * p1 - c * p0) * r;
     } else {
       if (!m.lu.factor(m.M)) return false;
       m.lu.solve(p, v);
@@ -895,8 +920,16 @@ class WrittenDynamic {
   // is its terms of degree 0 in the velocities, which may still name one, as x_dot^0.)
   double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
     if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
-    if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - parts_->potential(q.data());
-    if (parts_->separable) return 0.5 * p.dot(v) - parts_->potential(q.data(), v.data());
+    if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - mass_and_potential(q)[mass_.potential];
+    if (parts_->separable) {
+      if (const DerivativeProgram* U = parts_->potential_values.get()) {
+        if (potential_work_.empty()) potential_work_ = U->workspace();
+        double u;
+        U->values(q.data(), v.data(), &u, potential_work_.data());
+        return 0.5 * p.dot(v) - u;
+      }
+      return 0.5 * p.dot(v) - parts_->potential(q.data(), v.data());
+    }
     return p.dot(v) - value(q, v);
   }
   bool has_hamiltonian() const { return !system_->hamiltonian.empty(); }
@@ -918,12 +951,38 @@ class WrittenDynamic {
   // Workspace of closed_velocity for a text quadratic in the velocities (M(q) and its LU).
   struct Mass {
     Mass() = default;
-    explicit Mass(int n) : unit(Eigen::VectorXd::Zero(n)), M(n, n), lu(n) {}
+    explicit Mass(int n, const DerivativeProgram* program)
+        : unit(Eigen::VectorXd::Zero(n)),
+          M(n, n),
+          lu(n),
+          potential(static_cast<std::size_t>(n * (n + 1) / 2)),
+          values(potential + 1),
+          at(Eigen::VectorXd::Constant(n, std::numeric_limits<double>::quiet_NaN())) {
+      if (program) work = program->workspace();
+    }
     Eigen::VectorXd unit;  // e_i, zero between uses
     Eigen::MatrixXd M;
     DenseLU lu;
-    DenseLUOf<2> lu2;  // used instead when n = 2
+    // With the entries read off the text: their values and U's (the last) at q = `at`
+    // (NaN until the first evaluation), and the workspace of their program.
+    std::size_t potential = 0;
+    std::vector<double> values, work;
+    Eigen::VectorXd at;
   };
+  // The entries of M(q), upper triangle row by row, then U(q), evaluated once per q: the
+  // run's energy at q_k reads U(q_k) after v = M(q_k)^{-1} p_k was solved there.
+  const double* mass_and_potential(const DynIn& q) const {
+    Mass& m = mass_;
+    if (m.at == q) return m.values.data();
+    if (const DerivativeProgram* prog = parts_->mass_program.get()) {
+      prog->values(q.data(), nullptr, m.values.data(), m.work.data());
+    } else {
+      for (std::size_t k = 0; k < m.potential; ++k) m.values[k] = parts_->mass_entries[k](q.data());
+      m.values[m.potential] = parts_->potential(q.data());
+    }
+    m.at = q;
+    return m.values.data();
+  }
   // The time and the tape's inputs and outputs of n + 1 entries (L(t, q, v) only).
   struct Timed {
     Timed() = default;
@@ -948,6 +1007,7 @@ class WrittenDynamic {
   std::shared_ptr<const WrittenParts> parts_;
   mutable Eigen::VectorXd Lq_, Lv_;
   mutable Mass mass_;    // sized only for a text quadratic in the velocities and not separable
+  mutable std::vector<double> potential_work_;  // WrittenParts::potential_values' workspace
   mutable Timed time_;   // sized only for L(t, q, v)
 };
 

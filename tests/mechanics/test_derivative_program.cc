@@ -377,6 +377,103 @@ BOOST_AUTO_TEST_CASE(terms_that_read_definitions_stay_out_of_blocks) {
   }
 }
 
+BOOST_AUTO_TEST_CASE(several_tapes_evaluated_as_one_program) {
+  // the double pendulum's mass entries and potential (Expression::split_mass): the
+  // values of the tapes to round-off, cos(a - b) made once though two entries' tapes
+  // could share it, and sin and cos of a computed together where one tape needs each
+  auto s = written({"a", "b"}, "1.5*a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + 2*cos(a)");
+  std::vector<Expression> mass;
+  Expression U;
+  BOOST_TEST_REQUIRE(Expression::split_mass(s->lagrangian.text(), s->symbols(WrittenSystem::Kind::lagrangian), 2, mass, U));
+  const ExpressionSymbols sym = s->symbols(WrittenSystem::Kind::lagrangian);
+  const Expression extra = Expression::parse("sin(a) + cos(a - b)^2", sym);
+  std::vector<const Expression*> tapes;
+  for (const Expression& e : mass) tapes.push_back(&e);
+  tapes.push_back(&U);
+  tapes.push_back(&extra);
+  const auto p = DerivativeProgram::build_values(tapes, 2);
+  BOOST_TEST_REQUIRE(p != nullptr);
+  BOOST_TEST(p->values_only());
+  BOOST_TEST(p->outputs() == tapes.size());
+  BOOST_TEST(p->c_source("x").empty());
+  int fused = 0, cos = 0, sin = 0;
+  for (const auto& in : p->gradient_code()) {
+    if (in.op == Expression::Op::Sin) (in.sign ? fused : sin) += 1;
+    if (in.op == Expression::Op::Cos) ++cos;
+  }
+  BOOST_TEST(fused == 1);  // sin a and cos a
+  BOOST_TEST(sin == 0);
+  BOOST_TEST(cos == 1);  // cos(a - b), once
+  auto w = p->workspace();
+  std::vector<double> out(tapes.size());
+  for (int k = 0; k < 20; ++k) {
+    const VectorXd q = random_vector(2, 3.0, 10 + k);
+    p->values(q.data(), nullptr, out.data(), w.data());
+    for (std::size_t i = 0; i < tapes.size(); ++i) {
+      const double t = (*tapes[i])(q.data());
+      BOOST_TEST(std::fabs(out[i] - t) <= 1e-15 * std::fmax(1.0, std::fabs(t)));
+    }
+  }
+  // not built for a tape with blocks, or for none
+  auto chain = std::make_shared<WrittenSystem>();
+  chain->add_array("q", 20, ExpressionSymbols::Boundary::none);
+  chain->check_names();
+  const Expression blocks = Expression::parse("sum(i, 1, 19, cos(q[i+1] - q[i]))", chain->symbols(WrittenSystem::Kind::lagrangian));
+  BOOST_TEST_REQUIRE(!blocks.blocks().empty());
+  BOOST_TEST(DerivativeProgram::build_values({&blocks}, 20) == nullptr);
+  BOOST_TEST(DerivativeProgram::build_values({}, 2) == nullptr);
+}
+
+BOOST_AUTO_TEST_CASE(the_velocity_and_energy_of_a_mass_matrix_read_off_the_text) {
+  // L = v^T M(q) v / 2 + U(q) with M's entries read off the text: v = M(q)^{-1} p and
+  // E = <p, v>/2 - U(q) by one program of M's entries and U, against the velocity that
+  // gave p and E_L = <L_v, v> - L from the tape
+  const auto s = written({"a", "b"}, texts()[0].L);
+  const WrittenDynamic L(s);
+  BOOST_TEST_REQUIRE(L.parts().has_mass_entries());
+  BOOST_TEST_REQUIRE(L.parts().mass_program != nullptr);
+  for (int k = 0; k < 10; ++k) {
+    const VectorXd q = random_vector(2, 2.0, 30 + k), v = random_vector(2, 1.0, 50 + k);
+    VectorXd gq(2), p(2), w(2);
+    L.gradient(q, v, gq, p);
+    BOOST_TEST_REQUIRE(L.closed_velocity(q, p, w));
+    BOOST_TEST((w - v).cwiseAbs().maxCoeff() <= 1e-14 * std::fmax(1.0, v.cwiseAbs().maxCoeff()));
+    const double E = p.dot(v) - L.value(q, v);
+    BOOST_TEST(std::fabs(L.energy_at(q, w, p) - E) <= 1e-14 * std::fmax(1.0, std::fabs(E)));
+    // at another q than the last velocity's: U evaluated there, not the one kept
+    const VectorXd q2 = q + VectorXd::Constant(2, 0.3);
+    VectorXd p2(2);
+    L.gradient(q2, v, gq, p2);
+    const double E2 = p2.dot(v) - L.value(q2, v);
+    BOOST_TEST(std::fabs(L.energy_at(q2, v, p2) - E2) <= 1e-14 * std::fmax(1.0, std::fabs(E2)));
+  }
+  // a separable text (M constant): v = M^{-1} p and U(q) by a program of its value
+  const WrittenDynamic K(written({"x", "y"}, texts()[1].L));
+  BOOST_TEST_REQUIRE(K.separable());
+  BOOST_TEST_REQUIRE(K.parts().potential_values != nullptr);
+  for (int k = 0; k < 5; ++k) {
+    const VectorXd q = random_vector(2, 2.0, 70 + k), v = random_vector(2, 1.0, 80 + k);
+    VectorXd gq(2), p(2), w(2);
+    K.gradient(q, v, gq, p);
+    BOOST_TEST_REQUIRE(K.closed_velocity(q, p, w));
+    const double E = p.dot(v) - K.value(q, v);
+    BOOST_TEST(std::fabs(K.energy_at(q, w, p) - E) <= 1e-14 * std::fmax(1.0, std::fabs(E)));
+  }
+  // M(q) singular to working precision (M = [1 + cos a, 1; 1, 1] at a = pi/2): no closed
+  // form there (Newton's method then reports the degeneracy), one a little away
+  const WrittenDynamic S(written({"a", "b"}, "a_dot^2/2 + a_dot*b_dot + b_dot^2/2 + cos(a)*a_dot^2/2 + cos(b)"));
+  BOOST_TEST_REQUIRE(S.parts().has_mass_entries());
+  VectorXd q(2), p(2), w(2);
+  p << 0.3, -0.2;
+  q << std::acos(0.0), 0.1;
+  BOOST_TEST(!S.closed_velocity(q, p, w));
+  q[0] = 1.5;
+  BOOST_TEST_REQUIRE(S.closed_velocity(q, p, w));
+  VectorXd gq(2), pw(2);
+  S.gradient(q, w, gq, pw);
+  BOOST_TEST((pw - p).cwiseAbs().maxCoeff() <= 1e-14);
+}
+
 BOOST_AUTO_TEST_CASE(programs_are_not_built_beyond_their_scope) {
   // more than 32 coordinates (64 inputs): a gradient program, no Hessian program
   std::string L33;
