@@ -42,6 +42,14 @@ struct has_control_derivative<S, std::void_t<decltype(std::declval<const S&>().c
                                      0.0, std::declval<const Eigen::VectorXd&>(), std::declval<const Eigen::VectorXd&>(),
                                      std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>()))>>
     : std::true_type {};
+// A step with derivatives(t, q, p, dq, A, B*): A and B from one differentiation.
+template <class S, class = void>
+struct has_joint_derivatives : std::false_type {};
+template <class S>
+struct has_joint_derivatives<S, std::void_t<decltype(std::declval<const S&>().derivatives(
+                                    0.0, std::declval<const Eigen::VectorXd&>(), std::declval<const Eigen::VectorXd&>(),
+                                    std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>(),
+                                    std::declval<Eigen::MatrixXd*>()))>> : std::true_type {};
 }  // namespace composition_detail
 
 // The substeps of "no composition": the map's own step.
@@ -164,6 +172,19 @@ class ComposedStep {
     Eigen::MatrixXd A;
     return chain(t, q0, p0, dq, A, &B);
   }
+  // A and, where B is not null, B from one pass through the substeps.
+  template <class P = Plain, class D = Dual,
+            class = decltype(std::declval<const P&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<Eigen::MatrixXd&>())),
+            class = decltype(std::declval<const D&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<const Eigen::VectorXd&>(),
+                                                                          std::declval<Eigen::MatrixXd&>()))>
+  bool derivatives(double t, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    return chain(t, q0, p0, dq, A, B);
+  }
   // The controls the substeps' force reads (where the substep type says).
   template <class P = Plain, class = decltype(std::declval<const P&>().controls())>
   int controls() const {
@@ -174,6 +195,8 @@ class ComposedStep {
   template <class S>
   static bool substep_derivative(const S& s, double t, const Eigen::VectorXd& q, const Eigen::VectorXd& p,
                                  const Eigen::VectorXd& d, Eigen::MatrixXd& A, Eigen::MatrixXd* B) {
+    if constexpr (composition_detail::has_joint_derivatives<S>::value)
+      if (B) return s.derivatives(t, q, p, d, A, B);
     if (!s.derivative(t, q, p, d, A)) return false;
     if (B) {
       if constexpr (composition_detail::has_control_derivative<S>::value)

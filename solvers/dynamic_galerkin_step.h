@@ -179,6 +179,15 @@ class DynamicGalerkinStep {
   bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
     return linearise(t0, q0, p0, dq, nullptr, &B);
   }
+  // A and, where B is not null, B from one differentiation: what derivative() and
+  // control_derivative() give (B 2n x 0 without control inputs).
+  bool derivatives(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    if (B && controls() == 0) {
+      B->resize(2 * q0.size(), 0);
+      B = nullptr;
+    }
+    return linearise(t0, q0, p0, dq, &A, B);
+  }
 
   // One step from (q0, p0); dq carries a guess of q1 - q0 on entry (used unless the
   // step continues the previous one), q1 - q0 on return; dp receives p1 - p0.

@@ -349,36 +349,7 @@ class DynamicThetaStep {
     return derivative(t0, q0, dq, A);
   }
   bool derivative(double t0, const V& q0, const V& dq, Eigen::MatrixXd& A) const {
-    const int n = L_.dim();
-    if (q0.size() != n || dq.size() != n)
-      throw std::invalid_argument("DynamicThetaStep::derivative: a state of " + std::to_string(q0.size()) +
-                                  " coordinates (dq " + std::to_string(dq.size()) + "); the system has " +
-                                  std::to_string(n));
-    using M = Eigen::MatrixXd;
-    const double th = R_.theta(), h = h_;
-    Work& w = *work_;
-    w.q0 = q0;
-    w.p0.setZero();  // (F_D does not depend on p0)
-    w.D = dq;
-    w.eq.begin(w.q0, w.p0, t0);
-    if (!std::isfinite(w.eq.jacobian(w.D, w.r, w.J))) return false;
-    const M FD = w.J, Lvq = w.eq.Lqv().transpose();
-    M Gq = w.eq.Lqq(), Gv = w.eq.Lqv();
-    if constexpr (kForced) {
-      Gq += w.eq.Fq();
-      Gv += w.eq.Fv();
-    }
-    const Eigen::FullPivLU<M> lu(FD);
-    if (!lu.isInvertible()) return false;
-    const M Dq = -lu.solve(M(h * (1.0 - th) * Gq - Lvq));  // d dq / d q0
-    const M Dp = -lu.inverse();                             // d dq / d p0
-    const M I = M::Identity(n, n);
-    A.resize(2 * n, 2 * n);
-    A.topLeftCorner(n, n) = I + Dq;
-    A.topRightCorner(n, n) = Dp;
-    A.bottomLeftCorner(n, n) = h * Gq * (I + th * Dq) + Gv * Dq;
-    A.bottomRightCorner(n, n) = I + (h * th) * Gq * Dp + Gv * Dp;
-    return A.allFinite();
+    return differentiate(t0, q0, dq, &A, nullptr);
   }
 
   // The derivative B = d(q1, p1)/du (2n x c) of the step in the force's control inputs
@@ -388,27 +359,12 @@ class DynamicThetaStep {
   // Returns false where F_D is singular. Allocates.
   template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
   bool control_derivative(double t0, const V& q0, const V&, const V& dq, Eigen::MatrixXd& B) const {
-    using M = Eigen::MatrixXd;
-    const int n = L_.dim();
-    const double th = R_.theta(), h = h_;
-    Work& w = *work_;
-    w.q0 = q0;
-    w.p0.setZero();
-    w.D = dq;
-    w.eq.begin(w.q0, w.p0, t0);
-    if (!std::isfinite(w.eq.jacobian(w.D, w.r, w.J))) return false;
-    const V x = q0 + th * dq, v = dq / h;
-    V F(n);
-    M Fq(n, n), Fv(n, n), Fu;
-    w.force->jacobian(t0 + th * h, x, v, F, Fq, Fv, &Fu);
-    const M FD = w.J, Gq = w.eq.Lqq() + w.eq.Fq(), Gv = w.eq.Lqv() + w.eq.Fv();
-    const Eigen::FullPivLU<M> lu(FD);
-    if (!lu.isInvertible()) return false;
-    const M dD = -lu.solve(M(h * (1.0 - th) * Fu));
-    B.resize(2 * n, Fu.cols());
-    B.topRows(n) = dD;
-    B.bottomRows(n) = h * th * Gq * dD + Gv * dD + h * Fu;
-    return B.allFinite();
+    return differentiate(t0, q0, dq, nullptr, &B);
+  }
+  // A and, where B is not null, B (2n x controls(); 2n x 0 without a force) from one
+  // Jacobian and one factorisation: what derivative() and control_derivative() give.
+  bool derivatives(double t0, const V& q0, const V&, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    return differentiate(t0, q0, dq, &A, B);
   }
 
   // One step from (q0, p0); dq holds the starting guess on entry and q1 - q0 on return,
@@ -446,6 +402,63 @@ class DynamicThetaStep {
   }
 
  private:
+  bool differentiate(double t0, const V& q0, const V& dq, Eigen::MatrixXd* A, Eigen::MatrixXd* B) const {
+    const int n = L_.dim();
+    if (q0.size() != n || dq.size() != n)
+      throw std::invalid_argument("DynamicThetaStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates (dq " + std::to_string(dq.size()) + "); the system has " +
+                                  std::to_string(n));
+    using M = Eigen::MatrixXd;
+    const double th = R_.theta(), h = h_;
+    Work& w = *work_;
+    w.q0 = q0;
+    w.p0.setZero();  // (F_D does not depend on p0)
+    w.D = dq;
+    w.eq.begin(w.q0, w.p0, t0);
+    if (!std::isfinite(w.eq.jacobian(w.D, w.r, w.J))) return false;
+    M Fu;
+    if constexpr (kForced) {
+      if (B) {
+        const V x = q0 + th * dq, v = dq / h;
+        V F(n);
+        M Fq(n, n), Fv(n, n);
+        w.force->jacobian(t0 + th * h, x, v, F, Fq, Fv, &Fu);
+      }
+    }
+    const M FD = w.J;
+    M Gq = w.eq.Lqq(), Gv = w.eq.Lqv();
+    if constexpr (kForced) {
+      Gq += w.eq.Fq();
+      Gv += w.eq.Fv();
+    }
+    const Eigen::FullPivLU<M> lu(FD);
+    if (!lu.isInvertible()) return false;
+    if (A) {
+      const M Lvq = w.eq.Lqv().transpose();
+      const M Dq = -lu.solve(M(h * (1.0 - th) * Gq - Lvq));  // d dq / d q0
+      const M Dp = -lu.inverse();                             // d dq / d p0
+      const M I = M::Identity(n, n);
+      A->resize(2 * n, 2 * n);
+      A->topLeftCorner(n, n) = I + Dq;
+      A->topRightCorner(n, n) = Dp;
+      A->bottomLeftCorner(n, n) = h * Gq * (I + th * Dq) + Gv * Dq;
+      A->bottomRightCorner(n, n) = I + (h * th) * Gq * Dp + Gv * Dp;
+      if (!A->allFinite()) return false;
+    }
+    if (B) {
+      if constexpr (kForced) {
+        const M dD = -lu.solve(M(h * (1.0 - th) * Fu));
+        B->resize(2 * n, Fu.cols());
+        B->topRows(n) = dD;
+        B->bottomRows(n) = h * th * Gq * dD + Gv * dD + h * Fu;
+        return B->allFinite();
+      } else {
+        B->resize(2 * n, 0);
+      }
+    }
+    return true;
+  }
+
   using SV = Eigen::Matrix<double, K, 1>;
   using SM = Eigen::Matrix<double, K, K>;
   // The equation and the driver's workspace, sized once.

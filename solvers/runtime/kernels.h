@@ -166,22 +166,26 @@ class StepDerivatives<Stepper, true> {
     if (!out_) return;
     const Eigen::VectorXd dq = Eigen::VectorXd(qk) - q_;
     row_[0] = t;
-    if (stepper_->derivative(t, q_, p_, dq, A_)) {
-      const Eigen::Index m = A_.rows();
+    // with control inputs, A and B from one differentiation where the step gives them
+    // so; where that fails, each alone (A may exist where B does not)
+    int got = 0;  // 1: A, 2: A and B
+    if constexpr (composition_detail::has_joint_derivatives<Stepper>::value)
+      if (controls_ > 0 && stepper_->derivatives(t, q_, p_, dq, A_, &B_)) got = 2;
+    if (got == 0 && stepper_->derivative(t, q_, p_, dq, A_)) {
+      got = 1;
+      if constexpr (has_control_derivative<Stepper>::value)
+        if (controls_ > 0 && stepper_->control_derivative(t, q_, p_, dq, B_)) got = 2;
+    }
+    const Eigen::Index m = 2 * q_.size();
+    const std::size_t at = static_cast<std::size_t>(1 + m * m);
+    if (got == 0) std::fill(row_.begin() + 1, row_.end(), NAN);  // singular at the solution
+    if (got >= 1)
       for (Eigen::Index i = 0; i < m; ++i)
         for (Eigen::Index j = 0; j < m; ++j) row_[static_cast<std::size_t>(1 + i * m + j)] = A_(i, j);
-      if constexpr (has_control_derivative<Stepper>::value)
-        if (controls_ > 0) {
-          const std::size_t at = static_cast<std::size_t>(1 + m * m);
-          if (stepper_->control_derivative(t, q_, p_, dq, B_))
-            for (Eigen::Index i = 0; i < m; ++i)
-              for (int j = 0; j < controls_; ++j) row_[at + static_cast<std::size_t>(i * controls_ + j)] = B_(i, j);
-          else
-            std::fill(row_.begin() + static_cast<std::ptrdiff_t>(at), row_.end(), NAN);
-        }
-    } else {
-      std::fill(row_.begin() + 1, row_.end(), NAN);  // singular at the solution
-    }
+    if (got == 1) std::fill(row_.begin() + static_cast<std::ptrdiff_t>(at), row_.end(), NAN);
+    if (got == 2)
+      for (Eigen::Index i = 0; i < m; ++i)
+        for (int j = 0; j < controls_; ++j) row_[at + static_cast<std::size_t>(i * controls_ + j)] = B_(i, j);
     out_->row(row_.data());
     q_ = qk;
     p_ = pk;

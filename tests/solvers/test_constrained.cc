@@ -95,6 +95,20 @@ Eigen::MatrixXd central_differences(const Advance& advance, const VectorXd& q0, 
   return F;
 }
 // J = [0 I; -I 0] of 2n x 2n
+// derivatives(t, q, p, dq, A, &B): A and B from one differentiation, as derivative()
+// and control_derivative() (B, given) give them one at a time, to round-off
+template <class S>
+void check_joint_derivatives(const S& step, double t, const VectorXd& q, const VectorXd& p, const VectorXd& dq,
+                             const Eigen::MatrixXd& B) {
+  Eigen::MatrixXd A1, A2, B2;
+  BOOST_REQUIRE(step.derivative(t, q, p, dq, A1));
+  BOOST_REQUIRE(step.derivatives(t, q, p, dq, A2, &B2));
+  BOOST_REQUIRE(A2.rows() == A1.rows() && A2.cols() == A1.cols());
+  BOOST_REQUIRE(B2.rows() == B.rows() && B2.cols() == B.cols());
+  BOOST_TEST((A2 - A1).lpNorm<Eigen::Infinity>() <= 1e-13 * A1.lpNorm<Eigen::Infinity>());
+  BOOST_TEST((B2 - B).lpNorm<Eigen::Infinity>() <= 1e-13 * B.lpNorm<Eigen::Infinity>());
+}
+
 Eigen::MatrixXd J_of(Eigen::Index n) {
   Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
   J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
@@ -691,6 +705,7 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
     Eigen::MatrixXd B;
     BOOST_REQUIRE(S.control_derivative(0.1, q0, p0, dq, B));
     BOOST_TEST(B.cols() == 1);
+    check_joint_derivatives(S, 0.1, q0, p0, dq, B);
     // the same step with u_1 moved by +-eps (its own signal: the force's copy reads it)
     auto moved = [&](double du) {
       auto t = s->controls;
@@ -802,6 +817,7 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_a_composition_is_the_product_of_its_subst
     BOOST_REQUIRE(S.derivative(0.2, q, p, dq, A));
     BOOST_REQUIRE(S.control_derivative(0.2, q, p, dq, B));
     BOOST_TEST(S.controls() == 1);
+    check_joint_derivatives(S, 0.2, q, p, dq, B);
     const double err = (A - central(S, q, p)).lpNorm<Eigen::Infinity>() / A.lpNorm<Eigen::Infinity>();
     auto end = [&](double u) {
       VectorXd d = VectorXd::Zero(2), e(2);
@@ -896,6 +912,7 @@ BOOST_AUTO_TEST_CASE(the_galerkin_derivative_is_the_linearisation_of_the_stages)
     fresh_step(S, q, p, dq, dpk);
     Eigen::MatrixXd B;
     BOOST_REQUIRE(S.control_derivative(t0, q, p, dq, B));
+    check_joint_derivatives(S, t0, q, p, dq, B);
     auto moved = [&](double du) {
       auto c = cartpole->controls;
       c[0].table[1] += du;

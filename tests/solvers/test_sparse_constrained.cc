@@ -457,6 +457,12 @@ BOOST_AUTO_TEST_CASE(the_sparse_derivative_is_the_dense_derivative) {
             const double eb = (Bs - Bd).lpNorm<Eigen::Infinity>() / Bd.lpNorm<Eigen::Infinity>();
             BOOST_TEST(eb < 1e-11, "B differs by " << eb);
             BOOST_TEST(Bd.lpNorm<Eigen::Infinity>() > 1e-5);  // the control moves the step (by h^2 u x / m)
+            // both from one differentiation, as each alone
+            Eigen::MatrixXd Aj, Bj;
+            BOOST_REQUIRE(sparse.derivatives(t0, q0, p0, dqs, Aj, &Bj));
+            BOOST_REQUIRE(Aj.rows() == As.rows() && Bj.cols() == Bs.cols());
+            BOOST_TEST((Aj - As).lpNorm<Eigen::Infinity>() <= 1e-13 * As.lpNorm<Eigen::Infinity>());
+            BOOST_TEST((Bj - Bs).lpNorm<Eigen::Infinity>() <= 1e-13 * Bs.lpNorm<Eigen::Infinity>());
           }
         }
       }
