@@ -715,8 +715,6 @@ struct WrittenParts {
   // The potential's gradient as a DerivativeProgram (separable only; null where none
   // is built: then its tape's reverse mode).
   std::shared_ptr<const DerivativeProgram> potential_program;
-  // and its value (DerivativeProgram::build_values), the monitored energy's U
-  std::shared_ptr<const DerivativeProgram> potential_values;
   // When quadratic with M depending on q (and n <= Expression::kMaxMassDim): the
   // entries of M(q) read off the text (Expression::split_mass), upper triangle row by
   // row, and U(q), its terms free of the velocities (`potential` then holds U).
@@ -770,7 +768,6 @@ struct WrittenParts {
       inverse_mass = mass_diagonal.cwiseInverse();
       if (separable && (mass_diagonal.array() == mass_diagonal[0]).all()) uniform_inverse_mass = inverse_mass[0];
       if (separable) potential_program = DerivativeProgram::build(potential, n, false);
-      if (separable) potential_values = DerivativeProgram::build_values({&potential}, n);
       return;
     }
     if (n > kMaxDenseMass) return;
@@ -785,7 +782,6 @@ struct WrittenParts {
     separable = M.allFinite() && mass_factor.info() == Eigen::Success;
     mass = std::move(M);
     if (separable) potential_program = DerivativeProgram::build(potential, n, false);
-    if (separable) potential_values = DerivativeProgram::build_values({&potential}, n);
   }
   // v = M^{-1} p (separable only)
   void velocity(const DynIn& p, DynOut v) const {
@@ -921,15 +917,7 @@ class WrittenDynamic {
   double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
     if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
     if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - mass_and_potential(q)[mass_.potential];
-    if (parts_->separable) {
-      if (const DerivativeProgram* U = parts_->potential_values.get()) {
-        if (potential_work_.empty()) potential_work_ = U->workspace();
-        double u;
-        U->values(q.data(), v.data(), &u, potential_work_.data());
-        return 0.5 * p.dot(v) - u;
-      }
-      return 0.5 * p.dot(v) - parts_->potential(q.data(), v.data());
-    }
+    if (parts_->separable) return 0.5 * p.dot(v) - parts_->potential(q.data(), v.data());
     return p.dot(v) - value(q, v);
   }
   bool has_hamiltonian() const { return !system_->hamiltonian.empty(); }
@@ -1007,7 +995,6 @@ class WrittenDynamic {
   std::shared_ptr<const WrittenParts> parts_;
   mutable Eigen::VectorXd Lq_, Lv_;
   mutable Mass mass_;    // sized only for a text quadratic in the velocities and not separable
-  mutable std::vector<double> potential_work_;  // WrittenParts::potential_values' workspace
   mutable Timed time_;   // sized only for L(t, q, v)
 };
 
