@@ -160,28 +160,18 @@ class ComposedStep {
     return chain(t, q0, p0, dq, A, nullptr);
   }
   template <class P = Plain, class D = Dual,
-            class = decltype(std::declval<const P&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<Eigen::MatrixXd&>())),
-            class = decltype(std::declval<const D&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<Eigen::MatrixXd&>()))>
+            std::enable_if_t<composition_detail::has_control_derivative<P>::value &&
+                                 composition_detail::has_control_derivative<D>::value,
+                             int> = 0>
   bool control_derivative(double t, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
     Eigen::MatrixXd A;
     return chain(t, q0, p0, dq, A, &B);
   }
   // A and, where B is not null, B from one pass through the substeps.
   template <class P = Plain, class D = Dual,
-            class = decltype(std::declval<const P&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<Eigen::MatrixXd&>())),
-            class = decltype(std::declval<const D&>().control_derivative(0.0, std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<const Eigen::VectorXd&>(),
-                                                                          std::declval<Eigen::MatrixXd&>()))>
+            std::enable_if_t<composition_detail::has_control_derivative<P>::value &&
+                                 composition_detail::has_control_derivative<D>::value,
+                             int> = 0>
   bool derivatives(double t, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
     return chain(t, q0, p0, dq, A, B);
   }
