@@ -466,10 +466,6 @@ class ConstrainedThetaStep {
   // A and, where B is not null, B from one differentiation: what derivative() and
   // control_derivative() give (B 2n x 0 without control inputs).
   bool derivatives(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
-    if (B && controls() == 0) {
-      B->resize(2 * q0.size(), 0);
-      B = nullptr;
-    }
     return differentiate(t0, q0, p0, dq, A, B);
   }
 
