@@ -118,12 +118,38 @@ inline NewtonVerdict newton_verdict_floored(StepSummary& s, double dxn, double x
   return verdict;
 }
 
-// The same system solved by ceres::TinySolver, with the result checked here.
-// s0: as for solve_newton (solvers/newton_driver.h), the residual's scale at x is
-// s0 + max|J| max|x|.
-template <int N, class F>
-StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
-  using AD = ceres::TinySolverAutoDiffFunction<F, N, N>;
+// A system of N unknowns seen by ceres::TinySolver: the functor f behind two function
+// pointers, one evaluating it on doubles and one on the Jets of N directions (the two
+// calls TinySolverAutoDiffFunction makes). Every step's f is a type of its own: with f
+// itself, TinySolver and its autodiff wrapper would be compiled again for each step
+// type, map and composition of every kernel; through this they are compiled once per N.
+// The evaluations are f's own, through one indirect call each.
+template <int N>
+class TinyResidual {
+ public:
+  using Jet = ceres::Jet<double, N>;
+  template <class F>
+  explicit TinyResidual(const F& f) : f_(&f), on_doubles_(&evaluate<F, double>), on_jets_(&evaluate<F, Jet>) {}
+  bool operator()(const double* x, double* r) const { return on_doubles_(f_, x, r); }
+  bool operator()(const Jet* x, Jet* r) const { return on_jets_(f_, x, r); }
+
+ private:
+  template <class F, class T>
+  static bool evaluate(const void* f, const T* x, T* r) {
+    return (*static_cast<const F*>(f))(x, r);
+  }
+  const void* f_;
+  bool (*on_doubles_)(const void*, const double*, double*);
+  bool (*on_jets_)(const void*, const Jet*, Jet*);
+};
+
+// The system f(x) = 0 (a TinyResidual) solved by ceres::TinySolver, with the result
+// checked here. s0: as for solve_newton (solvers/newton_driver.h), the residual's scale
+// at x is s0 + max|J| max|x|.
+template <int N>
+StepSummary solve_tiny_residual(const TinyResidual<N>& f, Vec<double, N>& x, double x0, const StepOptions& opt,
+                                double s0) {
+  using AD = ceres::TinySolverAutoDiffFunction<TinyResidual<N>, N, N>;
   AD fn(f);  // holds a reference to f, which outlives it
   ceres::TinySolver<AD> solver;
   solver.options.max_num_iterations = opt.max_iterations;
@@ -149,6 +175,23 @@ StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptio
   s.converged = std::isfinite(s.residual) && s.residual <= opt.accept_tolerance * s.scale;
   if (!s.converged) s.message = "TinySolver ended above the residual tolerance";
   return s;
+}
+
+// Compiled once, in solvers/tiny_solver.cc, for the sizes of the runtime's steps
+// (DVM_TINY_SOLVER_SIZES): a kernel file then compiles no TinySolver of its own. Other
+// sizes are compiled where they are used.
+#define DVM_TINY_SOLVER_SIZES(X) X(1) X(2) X(3) X(4) X(6) X(8) X(12)
+#define DVM_TINY_SOLVER_DECLARE(N)                                                                                  \
+  extern template StepSummary solve_tiny_residual<N>(const TinyResidual<N>&, Vec<double, N>&, double, const StepOptions&, \
+                                                     double);
+DVM_TINY_SOLVER_SIZES(DVM_TINY_SOLVER_DECLARE)
+#undef DVM_TINY_SOLVER_DECLARE
+
+// The functor f (`template <class T> bool operator()(const T* x, T* r) const`) solved by
+// ceres::TinySolver (solve_tiny_residual).
+template <int N, class F>
+StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
+  return solve_tiny_residual<N>(TinyResidual<N>(f), x, x0, opt, s0);
 }
 
 }  // namespace dvm
