@@ -391,28 +391,53 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
   alignas(T) unsigned char raw_defs[kMaxDefinitions * sizeof(T)];  // raw: only Let writes it
   T* defs = std::launder(reinterpret_cast<T*>(raw_defs));
   const T* blocks[4] = {b0, b1, b2, defs};
+  // The top of the stack is held in x, apart from the slots below it (s[0..top]): in
+  // doubles it stays in a register, where a stack slot would be stored by one operation
+  // and loaded by the next, each waiting on the other. The first push stores this zero.
+  T x = constant<T>(0.0);
   int top = -1;
   for (const Instr& in : tape_) {
     switch (in.op) {
-      case Op::Let: new (&defs[in.index]) T(s[top--]); break;
-      case Op::Const: new (&s[++top]) T(constant<T>(in.c)); break;
-      case Op::Var: new (&s[++top]) T(blocks[in.block][in.index]); break;
-      case Op::Add: case Op::Sub: case Op::Mul: case Op::Div: case Op::Pow: case Op::Atan2:
-        s[top - 1] = binary(in.op, s[top - 1], s[top]);
-        --top;
+      case Op::Let:
+        new (&defs[in.index]) T(x);
+        x = s[top--];
+        break;
+      case Op::Const:
+        new (&s[++top]) T(x);
+        x = constant<T>(in.c);
+        break;
+      case Op::Var:
+        new (&s[++top]) T(x);
+        x = blocks[in.block][in.index];
+        break;
+      // the common operations inline (through unary and binary, a call and a second
+      // dispatch each, they cost more than their arithmetic in doubles)
+      case Op::Add: x = s[top--] + x; break;
+      case Op::Sub: x = s[top--] - x; break;
+      case Op::Mul: x = s[top--] * x; break;
+      case Op::Div: x = s[top--] / x; break;
+      case Op::Neg: x = -x; break;
+      case Op::AddC: x = x + in.c; break;
+      case Op::MulC: x = x * in.c; break;
+      case Op::DivC: x = x / in.c; break;
+      case Op::RSubC: x = in.c - x; break;
+      case Op::PowI: x = in.index == 2 ? T(x * x) : expression_detail::power_int(x, in.index); break;
+      case Op::Pow: case Op::Atan2:
+        x = binary(in.op, s[top--], x);
         break;
       case Op::Block: {
         const Block& b = blocks_[static_cast<std::size_t>(in.index)];
         thread_local std::vector<T> work;
         const std::size_t need = b.body.size() * static_cast<std::size_t>(b.terms);
         if (work.size() < need) work.resize(need);
-        new (&s[++top]) T(block_forward(b, blocks, work.data()));
+        new (&s[++top]) T(x);
+        x = block_forward(b, blocks, work.data());
         break;
       }
-      default: s[top] = unary(in.op, s[top], in); break;
+      default: x = unary(in.op, x, in); break;
     }
   }
-  return s[0];
+  return x;
 }
 
 template <class T>
