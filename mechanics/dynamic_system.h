@@ -216,6 +216,29 @@ struct LegendreWork {
   }
 };
 
+// Newton's method for v with L_v(q, v) = p from the v given (legendre_inverse's, apart
+// from it so that the closed forms, which a run meets at every monitored step, do not
+// carry this loop).
+template <class Sys>
+void legendre_newton(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, LegendreWork& w) {
+  const double scale = std::fmax(1e-300, max_abs(p));
+  for (int it = 0; it < 50; ++it) {
+    L.hessian(q, v, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
+    w.r = w.Lv - p;
+    if (max_abs(w.r) <= 1e-14 * scale) {
+      w.current = true;
+      return;
+    }
+    if (!w.lu.factor(w.Lvv))
+      throw DegenerateLagrangianError(L.name() + ": the velocity Hessian d2L/dv2 is singular; "
+                                                 "the Legendre transform cannot be inverted");
+    w.lu.solve(w.r, w.r);
+    v -= w.r;
+    if (max_abs(w.r) <= 4e-16 * std::fmax(1.0, max_abs(v))) return;
+  }
+  throw DegenerateLagrangianError(L.name() + ": Newton's method for the inverse Legendre map did not converge");
+}
+
 // v with L_v(q, v) = p: the closed form, or Newton's method from the v given (the rule
 // of legendre_inverse in mechanics/lagrangian.h). Throws DegenerateLagrangianError.
 template <class Sys>
@@ -226,22 +249,7 @@ void legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, Le
   } else {
     if constexpr (has_runtime_velocity<Sys>::value)
       if (L.closed_velocity(q, p, v)) return;
-    const double scale = std::fmax(1e-300, max_abs(p));
-    for (int it = 0; it < 50; ++it) {
-      L.hessian(q, v, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
-      w.r = w.Lv - p;
-      if (max_abs(w.r) <= 1e-14 * scale) {
-        w.current = true;
-        return;
-      }
-      if (!w.lu.factor(w.Lvv))
-        throw DegenerateLagrangianError(L.name() + ": the velocity Hessian d2L/dv2 is singular; "
-                                                   "the Legendre transform cannot be inverted");
-      w.lu.solve(w.r, w.r);
-      v -= w.r;
-      if (max_abs(w.r) <= 4e-16 * std::fmax(1.0, max_abs(v))) return;
-    }
-    throw DegenerateLagrangianError(L.name() + ": Newton's method for the inverse Legendre map did not converge");
+    legendre_newton(L, q, p, v, w);
   }
 }
 
@@ -784,13 +792,22 @@ struct WrittenParts {
     if (separable) potential_program = DerivativeProgram::build(potential, n, false);
   }
   // v = M^{-1} p (separable only)
+  // (loops on the entries: on a vector of run-time size of a few coordinates they cost
+  // less than Eigen's vectorised expression, which first checks the alignment, and as
+  // much on one or on many; the run's energy solves this every step)
   void velocity(const DynIn& p, DynOut v) const {
-    if (uniform_inverse_mass != 0.0)
-      v = p * uniform_inverse_mass;
-    else if (split.diagonal)
-      v = p.cwiseProduct(inverse_mass);
-    else
+    const Eigen::Index n = p.size();
+    const double* in = p.data();
+    double* out = v.data();
+    if (uniform_inverse_mass != 0.0) {
+      const double c = uniform_inverse_mass;
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = in[i] * c;
+    } else if (split.diagonal) {
+      const double* w = inverse_mass.data();
+      for (Eigen::Index i = 0; i < n; ++i) out[i] = in[i] * w[i];
+    } else {
       v = mass_factor.solve(p);
+    }
   }
 };
 
@@ -825,39 +842,7 @@ class WrittenDynamic {
       return true;
     }
     if (mass_.unit.size() != dim()) return false;  // not quadratic in the velocities
-    Mass& m = mass_;
-    if (parts_->has_mass_entries()) {
-      const int n = dim();
-      const double* entries = mass_and_potential(q);
-      std::size_t k = 0;
-      for (int i = 0; i < n; ++i)
-        for (int j = i; j < n; ++j, ++k) m.M(i, j) = m.M(j, i) = entries[k];
-    } else {
-      for (int i = 0; i < dim(); ++i) {
-        m.unit[i] = 1.0;
-        gradient(q, m.unit, Lq_, Lv_);
-        m.M.col(i) = Lv_;
-        m.unit[i] = 0.0;
-      }
-    }
-    if (dim() == 2) {
-      // two degrees of freedom (common): Cramer's rule, one division where an
-      // elimination waits on two in a row (the run's energy solves this every step).
-      // Singular where DenseLU finds it so: a pivot not above 1e-14 max |M_ij|, the
-      // first pivot max(|a|, |c|), the second |det| over the first.
-      const double a = m.M(0, 0), b = m.M(0, 1), c = m.M(1, 0), d = m.M(1, 1);
-      const double first = std::fmax(std::fabs(a), std::fabs(c));
-      const double tiny = 1e-14 * std::fmax(first, std::fmax(std::fabs(b), std::fabs(d)));
-      const double det = a * d - b * c;
-      if (!(first > tiny) || !(std::fabs(det) > tiny * first) || !std::isfinite(det)) return false;
-      const double r = 1.0 / det, p0 = p[0], p1 = p[1];
-      v[0] = (d * p0 - b * p1) * r;
-      v[1] = (a * p1 - c * p0) * r;
-    } else {
-      if (!m.lu.factor(m.M)) return false;
-      m.lu.solve(p, v);
-    }
-    return v.allFinite();
+    return mass_velocity(q, p, v);
   }
 
   int dim() const { return system_->dim(); }
@@ -936,6 +921,43 @@ class WrittenDynamic {
       parts->potential_program = dynamic_detail::compile_programs_of(tape, s.name, parts->potential_program);
     return parts;
   }
+  // closed_velocity for a text quadratic in the velocities: v = M(q)^{-1} p.
+  bool mass_velocity(const DynIn& q, const DynIn& p, DynOut v) const {
+    Mass& m = mass_;
+    if (parts_->has_mass_entries()) {
+      const int n = dim();
+      const double* entries = mass_and_potential(q);
+      std::size_t k = 0;
+      for (int i = 0; i < n; ++i)
+        for (int j = i; j < n; ++j, ++k) m.M(i, j) = m.M(j, i) = entries[k];
+    } else {
+      for (int i = 0; i < dim(); ++i) {
+        m.unit[i] = 1.0;
+        gradient(q, m.unit, Lq_, Lv_);
+        m.M.col(i) = Lv_;
+        m.unit[i] = 0.0;
+      }
+    }
+    if (dim() == 2) {
+      // two degrees of freedom (common): Cramer's rule, one division where an
+      // elimination waits on two in a row (the run's energy solves this every step).
+      // Singular where DenseLU finds it so: a pivot not above 1e-14 max |M_ij|, the
+      // first pivot max(|a|, |c|), the second |det| over the first.
+      const double a = m.M(0, 0), b = m.M(0, 1), c = m.M(1, 0), d = m.M(1, 1);
+      const double first = std::fmax(std::fabs(a), std::fabs(c));
+      const double tiny = 1e-14 * std::fmax(first, std::fmax(std::fabs(b), std::fabs(d)));
+      const double det = a * d - b * c;
+      if (!(first > tiny) || !(std::fabs(det) > tiny * first) || !std::isfinite(det)) return false;
+      const double r = 1.0 / det, p0 = p[0], p1 = p[1];
+      v[0] = (d * p0 - b * p1) * r;
+      v[1] = (a * p1 - c * p0) * r;
+    } else {
+      if (!m.lu.factor(m.M)) return false;
+      m.lu.solve(p, v);
+    }
+    return v.allFinite();
+  }
+
   // Workspace of closed_velocity for a text quadratic in the velocities (M(q) and its LU).
   struct Mass {
     Mass() = default;

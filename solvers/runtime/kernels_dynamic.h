@@ -181,12 +181,15 @@ struct DynamicView {
   // Newton's method from v = 0), in the view's workspace: a run monitors the energy
   // every step by default, and vectors allocated per call are a visible part of a
   // written system's step (compare `dvm run` of a written scene with
-  // integrator.monitor_every at its default and at the step count).
+  // output.monitor_every at its default and at the step count).
   double energy(const Point& q, const Covector& p) const {
     if (velocity_.size() != n()) {
       velocity_.resize(n());
       legendre_.resize(n());
     }
+    // a closed form first, without zeroing the guess Newton's method would start from
+    if constexpr (has_runtime_velocity<Sys>::value)
+      if (L.closed_velocity(q, p, velocity_)) return dynamic_energy(L, q, velocity_, p);
     velocity_.setZero();
     dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_);
     return dynamic_energy(L, q, velocity_, p);
