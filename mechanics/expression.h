@@ -396,6 +396,7 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
   // and loaded by the next, each waiting on the other. The first push stores this zero.
   T x = constant<T>(0.0);
   int top = -1;
+  using std::sqrt;
   for (const Instr& in : tape_) {
     switch (in.op) {
       case Op::Let:
@@ -411,7 +412,8 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
         x = blocks[in.block][in.index];
         break;
       // the common operations inline (through unary and binary, a call and a second
-      // dispatch each, they cost more than their arithmetic in doubles)
+      // dispatch each, they cost more than their arithmetic in doubles; sqrt is one
+      // instruction)
       case Op::Add: x = s[top--] + x; break;
       case Op::Sub: x = s[top--] - x; break;
       case Op::Mul: x = s[top--] * x; break;
@@ -421,7 +423,9 @@ T Expression::operator()(const T* b0, const T* b1, const T* b2) const {
       case Op::MulC: x = x * in.c; break;
       case Op::DivC: x = x / in.c; break;
       case Op::RSubC: x = in.c - x; break;
+      case Op::RDivC: x = in.c / x; break;
       case Op::PowI: x = in.index == 2 ? T(x * x) : expression_detail::power_int(x, in.index); break;
+      case Op::Sqrt: x = sqrt(x); break;
       case Op::Pow: case Op::Atan2:
         x = binary(in.op, s[top--], x);
         break;
