@@ -239,16 +239,19 @@ void legendre_newton(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, Leg
   throw DegenerateLagrangianError(L.name() + ": Newton's method for the inverse Legendre map did not converge");
 }
 
-// v with L_v(q, v) = p: the closed form, or Newton's method from the v given (the rule
-// of legendre_inverse in mechanics/lagrangian.h). Throws DegenerateLagrangianError.
+// v with L_v(q, v) = p: the closed form, or Newton's method from the v given, or from
+// v = 0 with from_rest (the rule of legendre_inverse in mechanics/lagrangian.h). Throws
+// DegenerateLagrangianError.
 template <class Sys>
-void legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, LegendreWork& w) {
+void legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, LegendreWork& w,
+                      bool from_rest = false) {
   w.current = false;
   if constexpr (has_dynamic_velocity<Sys>::value) {
     L.velocity(q, p, v);
   } else {
     if constexpr (has_runtime_velocity<Sys>::value)
       if (L.closed_velocity(q, p, v)) return;
+    if (from_rest) v.setZero();
     legendre_newton(L, q, p, v, w);
   }
 }

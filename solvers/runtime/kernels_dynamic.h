@@ -182,18 +182,7 @@ struct DynamicView {
   // every step by default, and vectors allocated per call are a visible part of a
   // written system's step (compare `dvm run` of a written scene with
   // output.monitor_every at its default and at the step count).
-  double energy(const Point& q, const Covector& p) const {
-    if (velocity_.size() != n()) {
-      velocity_.resize(n());
-      legendre_.resize(n());
-    }
-    // a closed form first, without zeroing the guess Newton's method would start from
-    if constexpr (has_runtime_velocity<Sys>::value)
-      if (L.closed_velocity(q, p, velocity_)) return dynamic_energy(L, q, velocity_, p);
-    velocity_.setZero();
-    dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_);
-    return dynamic_energy(L, q, velocity_, p);
-  }
+  double energy(const Point& q, const Covector& p) const { return dynamic_energy(L, q, velocity_at(q, p), p); }
   int invariant_count() const { return static_cast<int>(dynamic_invariant_names(L).size()); }
   void invariants(const Point& q, const Covector& p, double* out) const { dynamic_invariant_values(L, q, p, out); }
   std::vector<InvariantReport> invariant_reports(const double* I0) const {
@@ -207,13 +196,7 @@ struct DynamicView {
   // FL^{-1}(q, p) in the view's workspace); false without.
   bool constraint_residuals(double t, const Point& q, const Covector& p, double& g, double& hidden) const {
     if (!constraints) return false;
-    if (velocity_.size() != n()) {
-      velocity_.resize(n());
-      legendre_.resize(n());
-    }
-    velocity_.setZero();
-    dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_);
-    constraints->relative_residuals(t, q, velocity_, g, hidden);
+    constraints->relative_residuals(t, q, velocity_at(q, p), g, hidden);
     return true;
   }
   std::shared_ptr<WrittenConstraints> constraints = nullptr;  // the view's own (their workspace), or null
@@ -241,7 +224,16 @@ struct DynamicView {
   }
   bool exact(double, const Point&, const Covector&, std::vector<double>&, std::vector<double>&) const { return false; }
 
-  // energy()'s workspace (sized at the first call; a copy of the view has its own)
+  // v = FL^{-1}(q, p) for energy() and constraint_residuals(), in the view's workspace
+  const Eigen::VectorXd& velocity_at(const Point& q, const Covector& p) const {
+    if (velocity_.size() != n()) {
+      velocity_.resize(n());
+      legendre_.resize(n());
+    }
+    dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_, true);
+    return velocity_;
+  }
+  // velocity_at's workspace (sized at the first call; a copy of the view has its own)
   mutable Eigen::VectorXd velocity_ = Eigen::VectorXd();
   mutable dynamic_detail::LegendreWork legendre_ = dynamic_detail::LegendreWork(0);
 };
