@@ -1,6 +1,6 @@
 // Total momentum and total angular momentum of point masses in R^3, shared by the
 // fixed-size NBody<B> (systems_classic.h) and the run-time-sized NBodyDynamic
-// (dynamic_system.h).
+// (nbody_dynamic.h).
 #pragma once
 
 #include <array>

@@ -30,7 +30,7 @@
 #include <string>
 #include <vector>
 
-#include "mechanics/dynamic_system.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_lagrangian.h"
 
 namespace dvm {

@@ -32,6 +32,8 @@
 #include <utility>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/nbody_dynamic.h"
+#include "mechanics/written_dynamic.h"
 #include "solvers/separable_newton.h"
 
 namespace dvm {

@@ -22,6 +22,8 @@
 #include <utility>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/nbody_dynamic.h"
+#include "mechanics/written_dynamic.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/newton_driver.h"
 

@@ -2,7 +2,7 @@
 // on a separable Lagrangian written in a scene, of any size, with sparse matrices
 // throughout: a chain of rigid links in Cartesian coordinates, a mesh of bars.
 //
-// For L(q, v) = v^T M v / 2 + U(q), M constant (mechanics/dynamic_system.h, WrittenParts),
+// For L(q, v) = v^T M v / 2 + U(q), M constant (mechanics/written_dynamic.h, WrittenParts),
 // holonomic constraints g(t, q) = 0 (mechanics/written_constraints.h), the theta map
 // R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), D = q1 - q0,
 // q_theta = q0 + theta D, F = grad U and G = Dg, the equations of ConstrainedThetaStep
@@ -57,7 +57,7 @@
 #include <vector>
 
 #include "core/banded_solve.h"
-#include "mechanics/dynamic_system.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_constraints.h"
 #include "mechanics/written_force.h"

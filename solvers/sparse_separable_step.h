@@ -2,7 +2,7 @@
 // scene, of any size, by Newton's method with a sparse Jacobian.
 //
 // It solves the equation of SeparableThetaStep (solvers/separable_theta_step.h): for
-// L(q, v) = v^T M v / 2 + U(q) with M constant (mechanics/dynamic_system.h, WrittenParts),
+// L(q, v) = v^T M v / 2 + U(q) with M constant (mechanics/written_dynamic.h, WrittenParts),
 // the theta map R_d(x, v) = (x - theta v, x + (1 - theta) v) (paper Ex. 2.6), D = q1 - q0
 // and q_theta = q0 + theta D, the discrete Legendre equations of Sec. 5.3 are
 //   p0 = M D / h - h (1 - theta) F(q_theta),   p1 - p0 = h F(q_theta),   F = grad U,
@@ -39,7 +39,7 @@
 #include <vector>
 
 #include "core/banded_solve.h"
-#include "mechanics/dynamic_system.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/sparse_hessian.h"
 #include "solvers/separable_newton.h"
 

@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/nbody_dynamic.h"
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/recorder.h"
 #include "solvers/runtime/run.h"

@@ -20,7 +20,7 @@
 //                      code, mechanics/native_code.h; needs the C compiler cc or $DVM_CC);
 //   ..., E each        the built-in and the text as a scene runs them by default, the
 //                      energy monitored at every step: for a text, its inverse Legendre
-//                      map and energy each step (mechanics/dynamic_system.h).
+//                      map and energy each step (mechanics/written_dynamic.h).
 //
 // Each runs the midpoint map's position-momentum step with Newton's method, the same
 // tolerances and start, and reports ns/step, the ratio to the built-in row, and the
@@ -44,6 +44,7 @@
 #include "mechanics/written_lagrangian.h"
 #include "mechanics/chain.h"
 #include "mechanics/dynamic_system.h"
+#include "mechanics/written_dynamic.h"
 #include "solvers/chain_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/integrate.h"

@@ -45,6 +45,8 @@
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/nbody_dynamic.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/hamiltonian.h"
 #include "mechanics/written_constraints.h"
 #include "mechanics/written_force.h"

@@ -19,6 +19,7 @@
 
 #include "mechanics/derivative_program.h"
 #include "mechanics/dynamic_system.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/native_code.h"
 #include "mechanics/written_lagrangian.h"
 #include "tests/random_vector.h"

@@ -66,6 +66,8 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/nbody_dynamic.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/hamiltonian.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/dense_separable_step.h"

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "mechanics/systems_classic.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/composition.h"
 #include "solvers/integrate.h"
