@@ -65,15 +65,18 @@ class Slots<N, TypeList<Ts...>> : public Slot<N, Ts>... {
 
 }  // namespace erased_detail
 
-// The scalar types a fixed-size step of N coordinates evaluates L in.
+// The scalar types the steps of kernels_rn_sized.h evaluate L in, and no others: each
+// is a value and a gradient compiled for every system, with nested Jets where the
+// system's gradient is not in closed form. (Removing one and compiling the sized
+// kernels names the steps that need it.)
 template <int N>
 struct ErasedScalars {
   using J1 = ceres::Jet<double, N>;
   using J2 = ceres::Jet<double, 2 * N>;
   using type = typename erased_detail::Unique<
-      erased_detail::TypeList<>, double, J1, J2, ceres::Jet<J1, N>, ceres::Jet<J1, 2 * N>, ceres::Jet<J2, N>,
-      ceres::Jet<J2, 2 * N>,
-      ceres::Jet<double, 3 * N>,              // the boundary-value problems' three nodes
+      erased_detail::TypeList<>, double, J1, J2,
+      ceres::Jet<J2, 2 * N>,                    // second derivatives in (q, v) (the Hamiltonian form)
+      ceres::Jet<double, 3 * N>,                // the boundary-value problems' three nodes
       ceres::Jet<double, 1>, ceres::Jet<J2, 1>  // a derivative along one direction (the Legendre lift)
       >::type;
 };
