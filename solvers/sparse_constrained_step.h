@@ -57,9 +57,9 @@
 #include <vector>
 
 #include "core/banded_solve.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/sparse_hessian.h"
 #include "mechanics/written_constraints.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_force.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/newton_driver.h"

@@ -39,8 +39,8 @@
 #include <vector>
 
 #include "core/banded_solve.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/sparse_hessian.h"
+#include "mechanics/written_dynamic.h"
 #include "solvers/separable_newton.h"
 
 namespace dvm {

@@ -45,10 +45,10 @@
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
-#include "mechanics/nbody_dynamic.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/hamiltonian.h"
+#include "mechanics/nbody_dynamic.h"
 #include "mechanics/written_constraints.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_force.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_step.h"

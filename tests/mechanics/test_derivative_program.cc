@@ -19,8 +19,8 @@
 
 #include "mechanics/derivative_program.h"
 #include "mechanics/dynamic_system.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/native_code.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_lagrangian.h"
 #include "tests/random_vector.h"
 #include "tests/scoped_env.h"

@@ -21,10 +21,10 @@
 
 #include "examples/bench/hand_written.h"
 #include "mechanics/dynamic_system.h"
-#include "mechanics/nbody_dynamic.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/expression.h"
+#include "mechanics/nbody_dynamic.h"
 #include "mechanics/systems_classic.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/collocation_step.h"
 #include "solvers/integrate.h"

@@ -27,8 +27,8 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/written_constraints.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_force.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/composition.h"

@@ -14,8 +14,8 @@
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
-#include "mechanics/written_dynamic.h"
 #include "mechanics/written_constraints.h"
+#include "mechanics/written_dynamic.h"
 #include "mechanics/written_force.h"
 #include "mechanics/written_lagrangian.h"
 #include "solvers/constrained_step.h"
