@@ -18,17 +18,6 @@
 #pragma once
 
 #include <ceres/jet.h>
-// TinySolver leaves a member uninitialised until its first Update(); GCC 12 warns
-// about it at the header's own lines (clang has no such warning).
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-#include <ceres/tiny_solver.h>
-#include <ceres/tiny_solver_autodiff_function.h>
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
 
 #include <cmath>
 #include <limits>
@@ -118,80 +107,60 @@ inline NewtonVerdict newton_verdict_floored(StepSummary& s, double dxn, double x
   return verdict;
 }
 
-// A system of N unknowns seen by ceres::TinySolver: the functor f behind two function
-// pointers, one evaluating it on doubles and one on the Jets of N directions (the two
-// calls TinySolverAutoDiffFunction makes). Every step's f is a type of its own: with f
-// itself, TinySolver and its autodiff wrapper would be compiled again for each step
-// type, map and composition of every kernel; through this they are compiled once per N.
-// The evaluations are f's own, through one indirect call each.
-template <int N>
-class TinyResidual {
+// A system of n unknowns seen by ceres::TinySolver, which is compiled once, at run-time
+// size (solvers/tiny_solver.cc), for every step type, size, map and composition: the
+// functor f behind one function pointer, compiled with f in the step's translation unit,
+// that evaluates it on doubles, or on the Jets of its N unknowns where the Jacobian is
+// asked for (column-major, as TinySolver reads it: what ceres::TinySolverAutoDiffFunction
+// does for a size known when compiled). The interface of TinySolver's Function.
+class TinyFunction {
  public:
-  using Jet = ceres::Jet<double, N>;
-  template <class F>
-  explicit TinyResidual(const F& f) : f_(&f), on_doubles_(&evaluate<F, double>), on_jets_(&evaluate<F, Jet>) {}
-  bool operator()(const double* x, double* r) const { return on_doubles_(f_, x, r); }
-  bool operator()(const Jet* x, Jet* r) const { return on_jets_(f_, x, r); }
+  using Scalar = double;
+  enum { NUM_RESIDUALS = Eigen::Dynamic, NUM_PARAMETERS = Eigen::Dynamic };
+  // f, of N unknowns and N residuals (held by reference: it outlives the solve)
+  template <int N, class F>
+  static TinyFunction of(const F& f) {
+    return TinyFunction(N, &f, &evaluate<N, F>);
+  }
+  int NumResiduals() const { return n_; }
+  int NumParameters() const { return n_; }
+  bool operator()(const double* x, double* r, double* J) const { return evaluate_(f_, x, r, J); }
 
  private:
-  template <class F, class T>
-  static bool evaluate(const void* f, const T* x, T* r) {
-    return (*static_cast<const F*>(f))(x, r);
+  using Evaluate = bool (*)(const void*, const double*, double*, double*);
+  TinyFunction(int n, const void* f, Evaluate e) : n_(n), f_(f), evaluate_(e) {}
+  template <int N, class F>
+  static bool evaluate(const void* f, const double* x, double* r, double* J) {
+    const F& fn = *static_cast<const F*>(f);
+    if (!J) return fn(x, r);
+    using Jet = ceres::Jet<double, N>;
+    Jet xj[N], rj[N];
+    for (int i = 0; i < N; ++i) xj[i] = Jet(x[i], i);
+    if (!fn(xj, rj)) return false;
+    for (int i = 0; i < N; ++i) {
+      r[i] = rj[i].a;
+      for (int j = 0; j < N; ++j) J[i + N * j] = rj[i].v[j];
+    }
+    return true;
   }
+  int n_;
   const void* f_;
-  bool (*on_doubles_)(const void*, const double*, double*);
-  bool (*on_jets_)(const void*, const Jet*, Jet*);
+  Evaluate evaluate_;
 };
 
-// The system f(x) = 0 (a TinyResidual) solved by ceres::TinySolver, with the result
-// checked here. s0: as for solve_newton (solvers/newton_driver.h), the residual's scale
-// at x is s0 + max|J| max|x|.
-template <int N>
-StepSummary solve_tiny_residual(const TinyResidual<N>& f, Vec<double, N>& x, double x0, const StepOptions& opt,
-                                double s0) {
-  using AD = ceres::TinySolverAutoDiffFunction<TinyResidual<N>, N, N>;
-  AD fn(f);  // holds a reference to f, which outlives it
-  ceres::TinySolver<AD> solver;
-  solver.options.max_num_iterations = opt.max_iterations;
-  solver.options.gradient_tolerance = 0.0;
-  solver.options.function_tolerance = 0.0;
-  // TinySolver's own stall test is |dx| <= tol (|x| + tol), relative to x alone; the
-  // floor set by x0 is left to the residual check below.
-  (void)x0;
-  solver.options.parameter_tolerance = opt.stall_tolerance;
-  // cost = |F|^2/2; stop once |F| is below the tolerance for the current scale
-  Vec<double, N> r = Vec<double, N>::Zero();
-  Mat<double, N, N> J = Mat<double, N, N>::Zero();
-  fn(x.data(), r.data(), J.data());
-  const double scale0 = s0 + max_abs(J) * max_abs(x) + opt.absolute_floor;
-  const double target = opt.residual_tolerance * scale0;
-  solver.options.cost_threshold = 0.5 * target * target;
-  const auto& summary = solver.Solve(fn, &x);
-  StepSummary s;
-  s.iterations = s.jacobians = summary.iterations + 1;
-  fn(x.data(), r.data(), J.data());
-  s.residual = max_abs(r);
-  s.scale = s0 + max_abs(J) * max_abs(x) + opt.absolute_floor;
-  s.converged = std::isfinite(s.residual) && s.residual <= opt.accept_tolerance * s.scale;
-  if (!s.converged) s.message = "TinySolver ended above the residual tolerance";
-  return s;
-}
-
-// Compiled once, in solvers/tiny_solver.cc, for the sizes of the runtime's steps
-// (DVM_TINY_SOLVER_SIZES): a kernel file then compiles no TinySolver of its own. Other
-// sizes are compiled where they are used.
-#define DVM_TINY_SOLVER_SIZES(X) X(1) X(2) X(3) X(4) X(6) X(8) X(12)
-#define DVM_TINY_SOLVER_DECLARE(N)                                                                                  \
-  extern template StepSummary solve_tiny_residual<N>(const TinyResidual<N>&, Vec<double, N>&, double, const StepOptions&, \
-                                                     double);
-DVM_TINY_SOLVER_SIZES(DVM_TINY_SOLVER_DECLARE)
-#undef DVM_TINY_SOLVER_DECLARE
+// The system f(x) = 0 (x: its n unknowns, the guess in, the result out) solved by
+// ceres::TinySolver, with the result checked here. s0: as for solve_newton
+// (solvers/newton_driver.h), the residual's scale at x is s0 + max|J| max|x|; x0 (the
+// size of the point x is an increment of) is not read, TinySolver's stall test being
+// relative to x alone. The
+// solver's workspace is kept per thread (allocated at a thread's first solve of a size).
+StepSummary solve_tiny_function(const TinyFunction& f, double* x, double x0, const StepOptions& opt, double s0);
 
 // The functor f (`template <class T> bool operator()(const T* x, T* r) const`) solved by
-// ceres::TinySolver (solve_tiny_residual).
+// ceres::TinySolver (solve_tiny_function).
 template <int N, class F>
 StepSummary solve_tiny(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
-  return solve_tiny_residual<N>(TinyResidual<N>(f), x, x0, opt, s0);
+  return solve_tiny_function(TinyFunction::of<N>(f), x.data(), x0, opt, s0);
 }
 
 }  // namespace dvm
