@@ -3,9 +3,12 @@
 #define BOOST_TEST_MODULE solvers
 #include <boost/test/unit_test.hpp>
 
+#include <cmath>
+
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "solvers/integrate.h"
+#include "solvers/newton.h"
 #include "solvers/position_momentum_step.h"
 
 using namespace dvm;
@@ -98,6 +101,49 @@ BOOST_AUTO_TEST_CASE(a_step_that_cannot_converge_is_reported) {
   const PositionMomentumStep<Pendulum, ThetaMap> T(Pendulum(), ThetaMap::midpoint(), 0.5, opt);
   dq = V1(1.0);
   BOOST_TEST(!T.step(0.0, V1(2.0), V1(0.3), dq, dp).converged);
+}
+
+namespace {
+// x - 2 y = 0 with y the root of y^2 - c, which each evaluation finds by a TinySolver solve
+// of its own, on the thread of the outer one: the outer solve's workspace must not be
+// the inner one's.
+struct NestedRoot {
+  double c;
+  template <class T>
+  bool operator()(const T* x, T* r) const {
+    V1 y(1.0);
+    const StepSummary inner = solve_tiny<1>(Square{c}, y, 0.0, tiny_options(), c);
+    if (!inner.converged) return false;
+    r[0] = x[0] - 2.0 * y[0];
+    return true;
+  }
+  struct Square {
+    double c;
+    template <class T>
+    bool operator()(const T* y, T* r) const {
+      r[0] = y[0] * y[0] - c;
+      return true;
+    }
+  };
+  static StepOptions tiny_options() {
+    StepOptions o;
+    o.solver = SolverKind::tiny;
+    return o;
+  }
+};
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(a_tiny_solve_inside_another_keeps_its_own_workspace) {
+  for (double c : {2.0, 9.0}) {
+    V1 x(0.5);
+    const StepSummary s = solve_tiny<1>(NestedRoot{c}, x, 0.0, NestedRoot::tiny_options(), 1.0);
+    BOOST_TEST(s.converged);
+    BOOST_TEST(std::fabs(x[0] - 2.0 * std::sqrt(c)) <= 1e-14 * std::sqrt(c));
+    // and a solve after it starts afresh on the thread's workspace
+    V1 y(1.0);
+    BOOST_TEST(solve_tiny<1>(NestedRoot::Square{c}, y, 0.0, NestedRoot::tiny_options(), c).converged);
+    BOOST_TEST(std::fabs(y[0] - std::sqrt(c)) <= 1e-14 * std::sqrt(c));
+  }
 }
 
 BOOST_AUTO_TEST_CASE(non_finite_states_are_reported) {
