@@ -152,8 +152,8 @@ class TinyFunction {
 // ceres::TinySolver, with the result checked here. s0: as for solve_newton
 // (solvers/newton_driver.h), the residual's scale at x is s0 + max|J| max|x|; x0 (the
 // size of the point x is an increment of) is not read, TinySolver's stall test being
-// relative to x alone. The
-// solver's workspace is kept per thread (allocated at a thread's first solve of a size).
+// relative to x alone. The solver's workspace is kept per thread (allocated at a
+// thread's first solve of a size).
 StepSummary solve_tiny_function(const TinyFunction& f, double* x, double x0, const StepOptions& opt, double s0);
 
 // The functor f (`template <class T> bool operator()(const T* x, T* r) const`) solved by
