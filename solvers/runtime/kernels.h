@@ -23,6 +23,7 @@
 //   composition       ComposedStep<Step> of any of these, adjoint stages from the
 //                     adjoint map (theta -> 1 - theta, Prop. 2.4) or Newmark's adjoint
 //   boundary value    BoundaryValueProblem<S, Map>        SphereBoundaryValueProblem
+// (Systems of run-time size on R^n: kernels_dynamic.h.)
 //
 // On R^n, S is the system's own type only for the theta maps solved by Newton's method,
 // the splitting and Gauss collocation; every other row runs with S = ErasedLagrangian<N>,

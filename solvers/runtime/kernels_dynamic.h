@@ -18,8 +18,11 @@
 //                   in closed form)
 //   hamiltonian     DynamicHamiltonianThetaStep of the scene's written H, or of H from
 //                   L by the Legendre transform
+//   sode1 / sode2   DynamicSodeStep<Sys> (solvers/dynamic_sode_step.h) through the tangent
+//   / newmark       or Legendre lift of the theta maps, or Newmark's map; separable systems only
 //   galerkin        DynamicGalerkinStep<Sys>
-//   composition     ComposedStep of either step, the adjoint stages at 1 - theta
+//   composition     ComposedStep of any of these steps, the adjoint stages at 1 - theta
+//                   (Newmark's at (1 - gamma, 1/2 - gamma + beta))
 //   system.forces   the theta, Galerkin and Hamiltonian steps with their Force
 //                   (WrittenForce), never the structured separable paths of an
 //                   unconstrained system
@@ -51,6 +54,7 @@
 #include "mechanics/written_dynamic.h"
 #include "mechanics/written_force.h"
 #include "solvers/dynamic_galerkin_step.h"
+#include "solvers/dynamic_sode_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/dense_separable_step.h"
 #include "solvers/sparse_separable_step.h"
@@ -593,6 +597,34 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     auto make = [&](double hk, const ThetaMap& Rk) { return Step(L, work, Rk.theta(), hk, opt); };
     base.step_path = StepPath::separable_dense_newton;
     return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+  }
+  // the sode and newmark forms (paper Sec. 4) on a separable system, whose acceleration's
+  // Jacobian comes from L's Hessian (solvers/dynamic_sode_step.h): the tangent or Legendre
+  // lift of a theta map, or Newmark's map on TQ; composed or not, as the fixed-size steps are
+  if (me.form == Form::sode1 || me.form == Form::sode2 || me.form == Form::newmark) {
+    const std::string form = "form = \"" + std::string(to_string(me.form)) + "\"";
+    if (!dynamic_separable(L))
+      throw InputError(pr.origin + ": key 'integrator.form': " + form +
+                       " on a system of run-time size needs a separable Lagrangian, "
+                       "v^T M v / 2 - U(q) with M constant (its acceleration's Jacobian then needs second "
+                       "derivatives of L only); " + where + " is not separable (the built-in systems of fixed size "
+                       "run these forms on any Lagrangian)");
+    dense_limit("integrator.form: " + form);
+    using Step = DynamicSodeStep<Sys>;
+    const auto Minv = Step::mass_inverse(L, q, v0);
+    if (me.form == Form::newmark) {
+      const Step basic(L, Minv, SodeScheme::newmark(me.newmark_gamma, me.newmark_beta), h, opt);
+      auto make = [](double hk, const Step& b) { return b.with_step(hk); };
+      const auto stages = composition_stages(
+          me, basic, me.newmark_gamma == 0.5, [](const Step& b) { return b.adjoint(); },
+          [&](double) -> Step { throw InputError("integrator.thetas: unsupported"); });  // refused by validate()
+      return composable_run(view, me, h, stages, make, q, p, v0, base, pr.steps);
+    }
+    const bool first = me.form == Form::sode1, legendre = me.effective_lift() == Lift::legendre;
+    auto make = [&](double hk, const ThetaMap& Rk) {
+      return Step(L, Minv, SodeScheme::sode(first, Rk.theta(), legendre), hk, opt);
+    };
+    return composable_run(view, me, h, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
   }
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                           : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");

@@ -40,15 +40,16 @@ const std::vector<Form> kAllForms = {Form::lagrangian, Form::hamiltonian, Form::
 // boundary values.
 SystemCapabilities fixed_rn() { return {kAllForms, true, true, true, true, ""}; }
 
-// Systems whose size is known only at run time (N bodies, written Lagrangians).
+// Systems whose size is known only at run time (N bodies, written Lagrangians); the
+// SODE and Newmark forms on separable ones (make_dynamic_run refuses the others).
 SystemCapabilities run_time_sized() {
-  return {{Form::lagrangian, Form::hamiltonian},
+  return {kAllForms,
           true,
           true,
           true,
           false,
-          "the SODE and Newmark forms, boundary-value problems, solver = \"tiny\" and written maps are built for "
-          "the fixed-size systems",
+          "the SODE and Newmark forms run on separable Lagrangians (v^T M v / 2 - U(q), M constant); boundary-value "
+          "problems, solver = \"tiny\" and written maps are built for the fixed-size systems",
           false,
           false};
 }

@@ -1,11 +1,11 @@
 // Run-time-sized systems and steps (mechanics/dynamic_system.h, solvers/dynamic_step.h,
-// solvers/dynamic_galerkin_step.h): derivatives of every dynamic system against the
-// fixed-size systems and nested Jets; each step against its fixed-size counterpart;
-// adjoints and composition; written chains of 10 and 50 coordinates and 10 bodies
-// (momentum conserved to round-off, bounded energy error); measured orders; forces (orders
-// against the driven damped oscillator, work and impulse balances); a degenerate
-// Lagrangian reported as a failure; steps that allocate nothing (those that keep their
-// Jacobian across steps included).
+// solvers/dynamic_galerkin_step.h, solvers/dynamic_sode_step.h): derivatives of every
+// dynamic system against the fixed-size systems and nested Jets; each step against its
+// fixed-size counterpart; adjoints and composition; written chains of 10 and 50
+// coordinates and 10 bodies (momentum conserved to round-off, bounded energy error);
+// measured orders; forces (orders against the driven damped oscillator, work and impulse
+// balances); a degenerate Lagrangian reported as a failure; steps that allocate nothing
+// (those that keep their Jacobian across steps included).
 //
 // The allocation check: Eigen's EIGEN_RUNTIME_NO_MALLOC makes every Eigen heap
 // allocation call eigen_assert, which is redefined here so that it is active in release
@@ -76,11 +76,13 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include "solvers/composition.h"
 #include "solvers/dense_separable_step.h"
 #include "solvers/dynamic_galerkin_step.h"
+#include "solvers/dynamic_sode_step.h"
 #include "solvers/dynamic_step.h"
 #include "solvers/galerkin_step.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
+#include "solvers/sode_step.h"
 #include "tests/verification/common.h"
 #include "tests/random_vector.h"
 #include "tests/solvers/trajectories.h"
@@ -605,6 +607,24 @@ BOOST_AUTO_TEST_CASE(galerkin_step_equals_the_fixed_size_galerkin_step) {
 // ---------------------------------------------------------------------------------
 // Adjoints and composition.
 
+namespace {
+// A step of S from (q0, p0) from the guess dq, then a step of `back` from where it ended
+// from the guess -dq (and -dp for the momentum where guess_dp): `back` must return to
+// (q0, p0) to 1e-15. Returns the increment dq of S.
+template <class Step, class Back>
+VectorXd undone_by(const Step& S, const Back& back, const VectorXd& q0, const VectorXd& p0, VectorXd dq,
+                   bool guess_dp = false) {
+  VectorXd dp = VectorXd::Zero(q0.size());
+  BOOST_TEST(S.step(0.0, q0, p0, dq, dp).converged);
+  const VectorXd q1 = q0 + dq, p1 = p0 + dp;
+  VectorXd eq = -dq, ep = guess_dp ? VectorXd(-dp) : VectorXd::Zero(q0.size());
+  BOOST_TEST(back.step(0.0, q1, p1, eq, ep).converged);
+  BOOST_TEST((q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
+  BOOST_TEST((p1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
+  return dq;
+}
+}  // namespace
+
 BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
   // Phi^*_h = (Phi_{-h})^{-1}: the (1 - theta) step of size -h takes Phi_h(y) back to y
   const FixedAsDynamic<Kepler> L(kKepler);
@@ -617,26 +637,12 @@ BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
       const DynamicThetaStep<FixedAsDynamic<Kepler>> S(L, ThetaMap(theta), h);
       const auto back = DynamicThetaStep<FixedAsDynamic<Kepler>>(L, ThetaMap(theta), -h).adjoint();
       BOOST_TEST(back.map().theta() == 1.0 - theta);
-      VectorXd dq = h * p0, dp = VectorXd::Zero(2);
-      BOOST_TEST(S.step(0.0, q0, p0, dq, dp).converged);
-      const VectorXd q1 = q0 + dq, p1 = p0 + dp;
-      VectorXd eq = -dq, ep = VectorXd::Zero(2);
-      BOOST_TEST(back.step(0.0, q1, p1, eq, ep).converged);
-      BOOST_TEST((q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
-      BOOST_TEST((p1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
+      undone_by(S, back, q0, p0, h * p0);
 
       using HD = LegendreDynamicHamiltonian<FixedAsDynamic<Kepler>>;
       const DynamicHamiltonianThetaStep<HD> T(HD(L), ThetaMap(theta), h);
       const auto tback = DynamicHamiltonianThetaStep<HD>(HD(L), ThetaMap(theta), -h).adjoint();
-      dq = h * p0;
-      dp.setZero();
-      BOOST_TEST(T.step(0.0, q0, p0, dq, dp).converged);
-      const VectorXd Q1 = q0 + dq, P1 = p0 + dp;
-      eq = -dq;
-      ep = -dp;
-      BOOST_TEST(tback.step(0.0, Q1, P1, eq, ep).converged);
-      BOOST_TEST((Q1 + eq - q0).cwiseAbs().maxCoeff() <= 1e-15);
-      BOOST_TEST((P1 + ep - p0).cwiseAbs().maxCoeff() <= 1e-15);
+      undone_by(T, tback, q0, p0, h * p0, true);
     }
   }
 }
@@ -702,6 +708,60 @@ void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0,
   }
 }
 }  // namespace
+
+// The SODE and Newmark steps of a separable system of run-time size (DynamicSodeStep)
+// against the fixed-size steps of the same forms (SodeStep through the tangent lift of
+// the theta map, NewmarkStep, each seen in (q, p) by VelocityFormStep) on Kepler: the same
+// equations and stopping rule, so the states to round-off over 100 steps (measured at
+// most 2.8e-15 relative: the fixed-size step inverts its Jacobian in closed form, this
+// one factors it; 1e-13 leaves a margin of 35) and the same Newton iterations (a wrong
+// Jacobian block still converges, to the same states, but takes more: Newmark's J_qq
+// without its factor h took 17 iterations a step where 4 do). Then the adjoint (1 - theta, or Newmark's (1 - gamma, 1/2 - gamma + beta)) of
+// size -h undoes a step, as Phi^*_h = (Phi_{-h})^{-1} says.
+BOOST_AUTO_TEST_CASE(sode_steps_equal_the_fixed_size_sode_steps) {
+  using D = FixedAsDynamic<Kepler>;
+  const D L(kKepler);
+  Vec<double, 2> qf, pf;
+  verification::kepler_initial(0.6, qf, pf);
+  const Vec<double, 2> vf = legendre_inverse(kKepler, qf, pf);
+  const VectorXd q0 = qf, p0 = pf, v0 = vf;
+  const auto Minv = DynamicSodeStep<D>::mass_inverse(L, q0, v0);
+  const double h = 0.01;
+  for (double theta : {0.0, 0.3, 0.5})
+    for (SodeForm form : {SodeForm::sode1, SodeForm::sode2}) {
+      BOOST_TEST_CONTEXT(to_string(form) << ", theta = " << theta) {
+        const auto lift = tangent_lift(ThetaMap(theta));
+        using Fixed = SodeStep<Kepler, std::decay_t<decltype(lift)>>;
+        RunSummary ra, rb;
+        const auto a = trajectory(VelocityFormStep<Fixed>(Fixed(kKepler, lift, h, form)), qf, pf, vf, 100, &ra);
+        const auto b = trajectory(DynamicSodeStep<D>(L, Minv, SodeScheme::sode(form == SodeForm::sode1, theta), h),
+                                  q0, p0, v0, 100, &rb);
+        BOOST_TEST(trajectory_difference(b, a) <= 1e-13);
+        BOOST_TEST(std::abs(rb.solver_iterations - ra.solver_iterations) <= 5);
+      }
+    }
+  for (auto [gamma, beta] : {std::pair{0.5, 0.25}, std::pair{0.6, 0.3}, std::pair{0.5, 0.0}, std::pair{0.7, 0.1}}) {
+    BOOST_TEST_CONTEXT("newmark, gamma = " << gamma << ", beta = " << beta) {
+      RunSummary ra, rb;
+      const auto a = trajectory(VelocityFormStep<NewmarkStep<Kepler>>(NewmarkStep<Kepler>(kKepler, h, gamma, beta)), qf,
+                                pf, vf, 100, &ra);
+      const auto b = trajectory(DynamicSodeStep<D>(L, Minv, SodeScheme::newmark(gamma, beta), h), q0, p0, v0, 100, &rb);
+      BOOST_TEST(trajectory_difference(b, a) <= 1e-13);
+      BOOST_TEST(std::abs(rb.solver_iterations - ra.solver_iterations) <= 5);
+    }
+  }
+  // the adjoint of size -h from Phi_h(y) back to y
+  const double H = 0.05;
+  for (const SodeScheme& sc : {SodeScheme::sode(true, 0.3), SodeScheme::sode(false, 0.3),
+                               SodeScheme::newmark(0.6, 0.3), SodeScheme::newmark(0.7, 0.1)}) {
+    BOOST_TEST_CONTEXT("kind " << static_cast<int>(sc.kind) << ", theta " << sc.theta << ", gamma " << sc.gamma) {
+      const DynamicSodeStep<D> S(L, Minv, sc, H);
+      const VectorXd dq = undone_by(S, S.adjoint().with_step(-H), q0, p0, H * v0);
+      // and the step did move (a step that returns its input is undone by another)
+      BOOST_TEST(dq.cwiseAbs().maxCoeff() >= 0.01);
+    }
+  }
+}
 
 BOOST_AUTO_TEST_CASE(the_step_derivative_by_the_implicit_function_theorem) {
   const auto pendulum = written({"theta"}, {{"m", 1.3}, {"l", 0.8}, {"g", 9.81}},
@@ -1355,6 +1415,11 @@ BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
   const VectorXd g3 = h * legendre_inverse(B, q, p);
   BOOST_TEST(allocations_in_steps(DynamicThetaStep<NBodyDynamic>(B, ThetaMap::midpoint(), h), q, p, g3, 5) == 0);
   BOOST_TEST(allocations_in_steps(DynamicGalerkinStep<NBodyDynamic>(B, QuadratureKind::gauss, 3, h), q, p, g3, 5, true) == 0);
+  {  // the SODE and Newmark steps: their Newton iteration and M's factorisation
+    const auto Minv = DynamicSodeStep<NBodyDynamic>::mass_inverse(B, q, g3 / h);
+    BOOST_TEST(allocations_in_steps(DynamicSodeStep<NBodyDynamic>(B, Minv, SodeScheme::sode(false, 0.5), h), q, p, g3, 5) == 0);
+    BOOST_TEST(allocations_in_steps(DynamicSodeStep<NBodyDynamic>(B, Minv, SodeScheme::newmark(0.6, 0.3), h), q, p, g3, 5) == 0);
+  }
 
   const auto text = written_kepler();
   Vec<double, 2> qf, pf;
