@@ -93,8 +93,7 @@ class SeparableSodeEquation {
   using Matrix = Eigen::MatrixXd;
 
   // Minv: M^{-1} (shared by the copies of a step and its stages).
-  SeparableSodeEquation(const Sys& L, MassInverse Minv, SodeScheme scheme,
-                        double h)
+  SeparableSodeEquation(const Sys& L, MassInverse Minv, SodeScheme scheme, double h)
       : L_(&L), Minv_(std::move(Minv)), sc_(scheme), h_(h) {
     const int n = L.dim();
     q0_.resize(n);
@@ -271,7 +270,6 @@ class DynamicSodeStep {
   // The adjoint method and the same method with another step (the stages of compositions).
   DynamicSodeStep adjoint() const { return DynamicSodeStep(L_, Minv_, sc_.adjoint(), h_, options_); }
   DynamicSodeStep with_step(double h) const { return DynamicSodeStep(L_, Minv_, sc_, h, options_); }
-  DynamicSodeStep with_scheme(const SodeScheme& s, double h) const { return DynamicSodeStep(L_, Minv_, s, h, options_); }
 
   // One step from (q0, p0); dq holds the guess on entry and q1 - q0 on return, dp
   // receives p1 - p0.

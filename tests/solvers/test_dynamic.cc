@@ -716,8 +716,9 @@ void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0,
 // most 2.8e-15 relative: the fixed-size step inverts its Jacobian in closed form, this
 // one factors it; 1e-13 leaves a margin of 35) and the same Newton iterations (a wrong
 // Jacobian block still converges, to the same states, but takes more: Newmark's J_qq
-// without its factor h took 17 iterations a step where 4 do). Then the adjoint (1 - theta, or Newmark's (1 - gamma, 1/2 - gamma + beta)) of
-// size -h undoes a step, as Phi^*_h = (Phi_{-h})^{-1} says.
+// without its factor h took 17 iterations a step where 4 do). Then the adjoint
+// (1 - theta, or Newmark's (1 - gamma, 1/2 - gamma + beta)) of size -h undoes a step,
+// as Phi^*_h = (Phi_{-h})^{-1} says.
 BOOST_AUTO_TEST_CASE(sode_steps_equal_the_fixed_size_sode_steps) {
   using D = FixedAsDynamic<Kepler>;
   const D L(kKepler);
@@ -743,8 +744,8 @@ BOOST_AUTO_TEST_CASE(sode_steps_equal_the_fixed_size_sode_steps) {
   for (auto [gamma, beta] : {std::pair{0.5, 0.25}, std::pair{0.6, 0.3}, std::pair{0.5, 0.0}, std::pair{0.7, 0.1}}) {
     BOOST_TEST_CONTEXT("newmark, gamma = " << gamma << ", beta = " << beta) {
       RunSummary ra, rb;
-      const auto a = trajectory(VelocityFormStep<NewmarkStep<Kepler>>(NewmarkStep<Kepler>(kKepler, h, gamma, beta)), qf,
-                                pf, vf, 100, &ra);
+      using Fixed = VelocityFormStep<NewmarkStep<Kepler>>;
+      const auto a = trajectory(Fixed(NewmarkStep<Kepler>(kKepler, h, gamma, beta)), qf, pf, vf, 100, &ra);
       const auto b = trajectory(DynamicSodeStep<D>(L, Minv, SodeScheme::newmark(gamma, beta), h), q0, p0, v0, 100, &rb);
       BOOST_TEST(trajectory_difference(b, a) <= 1e-13);
       BOOST_TEST(std::abs(rb.solver_iterations - ra.solver_iterations) <= 5);
@@ -1417,8 +1418,9 @@ BOOST_AUTO_TEST_CASE(steps_allocate_nothing) {
   BOOST_TEST(allocations_in_steps(DynamicGalerkinStep<NBodyDynamic>(B, QuadratureKind::gauss, 3, h), q, p, g3, 5, true) == 0);
   {  // the SODE and Newmark steps: their Newton iteration and M's factorisation
     const auto Minv = DynamicSodeStep<NBodyDynamic>::mass_inverse(B, q, g3 / h);
-    BOOST_TEST(allocations_in_steps(DynamicSodeStep<NBodyDynamic>(B, Minv, SodeScheme::sode(false, 0.5), h), q, p, g3, 5) == 0);
-    BOOST_TEST(allocations_in_steps(DynamicSodeStep<NBodyDynamic>(B, Minv, SodeScheme::newmark(0.6, 0.3), h), q, p, g3, 5) == 0);
+    using Sode = DynamicSodeStep<NBodyDynamic>;
+    BOOST_TEST(allocations_in_steps(Sode(B, Minv, SodeScheme::sode(false, 0.5), h), q, p, g3, 5) == 0);
+    BOOST_TEST(allocations_in_steps(Sode(B, Minv, SodeScheme::newmark(0.6, 0.3), h), q, p, g3, 5) == 0);
   }
 
   const auto text = written_kepler();
