@@ -247,8 +247,7 @@ class DynamicSodeStep {
     return std::make_shared<const Eigen::MatrixXd>(f.solve(Eigen::MatrixXd::Identity(n, n)));
   }
 
-  DynamicSodeStep(Sys L, MassInverse Minv, SodeScheme scheme, double h,
-                  StepOptions options = {})
+  DynamicSodeStep(Sys L, MassInverse Minv, SodeScheme scheme, double h, StepOptions options = {})
       : L_(std::move(L)), Minv_(std::move(Minv)), sc_(scheme), h_(h), options_(options) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
@@ -282,10 +281,7 @@ class DynamicSodeStep {
     try {
       w.v0.noalias() = Minv_->lazyProduct(p0);
       w.x.head(n) = dq;
-      if (w.last_valid)
-        w.x.tail(n) = w.last_dv;
-      else
-        w.x.tail(n).setZero();
+      w.x.tail(n) = w.last_dv;  // (zero before the first converged step)
       w.eq.begin(q0, w.v0);
       s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.x, w.r, w.dx, w.J, w.state, w.start);
       dq = w.x.head(n);
@@ -295,7 +291,6 @@ class DynamicSodeStep {
         L_.gradient(w.q1, w.v1, w.Lq, w.Lv);  // p1 = L_v(q1, v1)
         dp = w.Lv - p0;
         w.last_dv = w.x.tail(n);
-        w.last_valid = true;
         if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
       }
     } catch (const std::domain_error& e) {
@@ -327,7 +322,6 @@ class DynamicSodeStep {
     DriverState state;
     V x, r, dx, start, v0, q1, v1, Lq, Lv, last_dv;
     Eigen::MatrixXd J;
-    bool last_valid = false;
   };
 
   Sys L_;
