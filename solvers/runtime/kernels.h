@@ -228,7 +228,11 @@ struct has_constraint_residuals<
               0.0, std::declval<const typename View::Point&>(), std::declval<const typename View::Covector&>(),
               std::declval<double&>(), std::declval<double&>()))>> : std::true_type {};
 
-template <class View, class Stepper>
+// Linearizable: the run records its step's derivative where the output asks for it
+// (--linearize), and the step's derivative code is compiled with the run; false for the
+// runs validate() keeps --linearize from (their steps' derivatives would be compiled for
+// nothing), which refuse the file if it reaches them.
+template <class View, class Stepper, bool Linearizable = false>
 class StepperRun final : public Run {
  public:
   using Point = typename View::Point;
@@ -265,7 +269,8 @@ class StepperRun final : public Run {
       if (forced) row_values[row_size] = 0.0;
       rec->row(row_values.data());
     }
-    StepDerivatives<Stepper> derivatives(rec, stepper_, q0_, p0_, steps_);
+    StepDerivatives<Stepper, Linearizable && has_step_derivative<Stepper>::value> derivatives(rec, stepper_, q0_, p0_,
+                                                                                           steps_);
     if constexpr (has_after_step<View>::value) view_.after_step(0, 0.0);
     const int n_inv = view_.invariant_count();
     double I0[kMaxInvariantValues] = {}, Ik[kMaxInvariantValues] = {}, Ierr[kMaxInvariantValues] = {};
@@ -385,11 +390,12 @@ class StepperRun final : public Run {
   double E0_ = 0.0;
 };
 
-template <class View, class Stepper>
+// stepper_run<true>: a run that --linearize may reach (StepperRun's Linearizable).
+template <bool Linearizable = false, class View, class Stepper>
 std::unique_ptr<Run> stepper_run(const View& view, Stepper stepper, const typename View::Point& q0,
                                  const typename View::Covector& p0, const typename View::Covector& v0,
                                  const RunReport& base, std::int64_t steps) {
-  return std::make_unique<StepperRun<View, Stepper>>(view, std::move(stepper), q0, p0, v0, base, steps);
+  return std::make_unique<StepperRun<View, Stepper, Linearizable>>(view, std::move(stepper), q0, p0, v0, base, steps);
 }
 
 // ---- compositions: the map of each stage --------------------------------------------
@@ -438,15 +444,17 @@ Composed compose_stages(double h, const std::vector<Stage<Map>>& stages, const M
   return Composed(h, subs, next, next);
 }
 
-// The basic method's run (composition "none"), or its composition's.
-template <class View, class Map, class Make>
+// The basic method's run (composition "none"), or its composition's; composable_run<true>:
+// runs that --linearize may reach (StepperRun's Linearizable).
+template <bool Linearizable = false, class View, class Map, class Make>
 std::unique_ptr<Run> composable_run(const View& view, const Method& me, double h, const std::vector<Stage<Map>>& stages,
                                     const Make& make, const typename View::Point& q0,
                                     const typename View::Covector& p0, const typename View::Covector& v0,
                                     const RunReport& base, std::int64_t steps) {
-  if (me.composition == "none") return stepper_run(view, make(h, stages.front().map), q0, p0, v0, base, steps);
+  if (me.composition == "none")
+    return stepper_run<Linearizable>(view, make(h, stages.front().map), q0, p0, v0, base, steps);
   using Step = decltype(make(h, stages.front().map));
-  return stepper_run(view, compose_stages<ComposedStep<Step>>(h, stages, make), q0, p0, v0, base, steps);
+  return stepper_run<Linearizable>(view, compose_stages<ComposedStep<Step>>(h, stages, make), q0, p0, v0, base, steps);
 }
 
 // The stages of a theta-family map on R^n (ThetaMap, WrittenMap).

@@ -48,10 +48,10 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
   if (me.galerkin) {  // the constraints at the Lobatto nodes (validate refused Gauss)
     auto galerkin = [&](auto fo) {
       using Force = std::remove_const_t<typename decltype(fo)::element_type>;
-      return stepper_run(view,
-                         ConstrainedGalerkinStep<WrittenDynamic, WrittenConstraints, Force>(L, me.stages, h, con, opt,
-                                                                                           momentum, fo),
-                         q, p, v0, base, pr.steps);
+      return stepper_run<true>(view,
+                               ConstrainedGalerkinStep<WrittenDynamic, WrittenConstraints, Force>(L, me.stages, h, con,
+                                                                                                 opt, momentum, fo),
+                               q, p, v0, base, pr.steps);
     };
     return force ? galerkin(force) : galerkin(std::shared_ptr<const NoForce>());
   }
@@ -62,15 +62,17 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
     auto make = [&](double hk, const ThetaMap& Rk) {
       return ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, Force, NC, MC>(L, Rk, hk, con, opt, momentum, fo);
     };
-    return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+    return composable_run<NC == Eigen::Dynamic>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
   };
   if (force) return run_with(force, std::integral_constant<int, Eigen::Dynamic>());
   // the step of fixed size for the few coordinates of a pendulum, a planar linkage or
   // a point on a surface in R^3 with one constraint: the saddle-point Jacobian and its LU
   // of fixed size (bench_constrained measures the constrained scenes)
   const std::shared_ptr<const NoForce> none;
-  if (me.use_structure && con->count() == 1 && n == 2) return run_with(none, std::integral_constant<int, 2>());
-  if (me.use_structure && con->count() == 1 && n == 3) return run_with(none, std::integral_constant<int, 3>());
+  // (--linearize: the step of run-time size, whose derivative alone is compiled)
+  const bool fixed = me.use_structure && !me.linearize && con->count() == 1;
+  if (fixed && n == 2) return run_with(none, std::integral_constant<int, 2>());
+  if (fixed && n == 3) return run_with(none, std::integral_constant<int, 3>());
   return run_with(none, std::integral_constant<int, Eigen::Dynamic>());
 }
 

@@ -405,6 +405,10 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   const double h = pr.step;
   const int n = L.dim();
   const std::string where = pr.written ? pr.written_where : pr.origin;
+  // --linearize (a written Lagrangian only: validate refuses it for n bodies) takes the
+  // theta step of run-time size or Galerkin, never the structured paths or the steps
+  // compiled for a size below: only those runs compile their steps' derivatives
+  constexpr bool linearizable = std::is_same_v<Sys, WrittenDynamic>;
 
   // the initial state, with the velocity Hessian checked where it is used; a declared
   // separable system has d2L/dv2 = M, constant and positive definite (checked at sample
@@ -489,8 +493,9 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       base.forced = true;
       if (me.galerkin) {
         dense_limit("integrator.method: method = \"galerkin\" with system.forces");
-        return stepper_run(view, DynamicGalerkinStep<Sys, WrittenForce>(L, me.quadrature, me.stages, h, opt, force), q,
-                           p, v0, base, pr.steps);
+        return stepper_run<linearizable>(
+            view, DynamicGalerkinStep<Sys, WrittenForce>(L, me.quadrature, me.stages, h, opt, force), q, p, v0, base,
+            pr.steps);
       }
       dense_limit("integrator.map: map = \"" + me.map->name + "\" with system.forces");
       const ThetaMap R = dynamic_theta_map(me);
@@ -509,7 +514,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         }
         return run_with(LegendreDynamicHamiltonian<Sys>(L));
       }
-      if (n <= kFixedWrittenMaxDim && me.use_structure) {
+      if (n <= kFixedWrittenMaxDim && me.use_structure && !me.linearize) {
         auto run_fixed = [&](auto k) {
           constexpr int K = decltype(k)::value;
           auto make = [&](double hk, const ThetaMap& Rk) {
@@ -525,7 +530,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
       auto make = [&](double hk, const ThetaMap& Rk) {
         return DynamicThetaStep<Sys, Eigen::Dynamic, WrittenForce>(L, Rk, hk, opt, keep, force);
       };
-      return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      return composable_run<linearizable>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
     }
 
   // (--linearize: the generic theta step, which gives its derivative)
@@ -629,7 +634,8 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                           : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");
   if (me.galerkin)
-    return stepper_run(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base, pr.steps);
+    return stepper_run<linearizable>(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0,
+                                     base, pr.steps);
   const ThetaMap R = dynamic_theta_map(me);
   if (me.form == Form::hamiltonian) {
     // lift = "none": the theta map on T*Q itself (P = p0 + theta dp, not 1 - theta)
@@ -654,7 +660,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   const bool keep = me.use_structure && n >= kKeptJacobianMinDim;
   if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
     // (use_structure = false: the run-time-sized step, a Jacobian at every iteration)
-    if (n <= kFixedWrittenMaxDim && me.use_structure) {
+    if (n <= kFixedWrittenMaxDim && me.use_structure && !me.linearize) {
       auto run_fixed = [&](auto k) {
         constexpr int K = decltype(k)::value;
         auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys, K>(L, Rk, hk, opt); };
@@ -666,7 +672,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   }
   if (keep) base.step_path = StepPath::kept_jacobian_newton;
   auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt, keep); };
-  return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+  return composable_run<linearizable>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }
 
 }  // namespace dvm::kernels

@@ -125,7 +125,7 @@ std::unique_ptr<Run> make_sparse_constrained_run(const WrittenDynamic& L, const 
   };
   base.step_path = StepPath::constrained_sparse_newton;
   base.hessian_colours = H->colours();
-  return composable_run(view, me, pr.step, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
+  return composable_run<true>(view, me, pr.step, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
 }
 
 }  // namespace dvm::kernels
