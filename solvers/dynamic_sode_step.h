@@ -32,6 +32,22 @@
 //       dF/ddY = [[I + c h A(q1), -(h/2) I], [-gamma h A(q1), I]].
 // Each residual is formed in the order SodeStep forms it (through the maps'
 // displacements), and judged, as there, against |h| max|Gamma(Y0)| + max|J| max|dY|.
+// A generalized force F(t, q, v) (Force; NoForce: none, and no trace of one in the
+// compiled equation) joins the acceleration, a = M^{-1} (L_q + F) (the forced
+// Euler-Lagrange equations, Marsden and West, Acta Numerica 2001, Sec. 3.2), sampled
+// where the field is: Y0 at t0, Y1 at t0 + h, the base point at t0 + theta h (sode2).
+// Its Jacobian adds B = M^{-1} F_v to the velocity columns and M^{-1} F_q to A: with
+// (wq, wv) the weights of dq and dv in the sample point Z ((1, 1), or (theta, theta_v)
+// for sode2), kappa the weight of g_v(Z) in F_v (theta_v, 1 or gamma) and c Newmark's
+// shift (0 for the sode forms),
+//       dF/ddY = [[I + c wq h A, -b h I + c wv h B], [-kappa wq h A, I - kappa wv h B]],
+// b the weight of v(Z) in F_q as above. The work of the force over the step is
+// <F_bar, dq>, F_bar the force with the weights of the velocity update (theta_v F(Y1) +
+// (1 - theta_v) F(Y0), F(Z), gamma F(Y1) + (1 - gamma) F(Y0)), so that M dv = h (the
+// same weighting of L_q) + h F_bar: for a quadratic potential sode2 at theta = 1/2 and
+// Newmark (1/2, 1/4) then keep E_1 - E_0 = <F_bar, dq> exactly, and sode2 at 1/2 is the
+// midpoint position-momentum step with its force (solvers/dynamic_step.h) on a
+// separable L.
 // Adjoints: the sode step of the theta map's adjoint (1 - theta) is the adjoint step
 // (the lift of the adjoint map, Prop. 3.3): theta and theta_v go to 1 - theta and
 // 1 - theta_v; Newmark's adjoint is (1 - gamma, 1/2 - gamma + beta). All are the same
@@ -85,16 +101,20 @@ struct SodeScheme {
 };
 
 // The equation of solvers/newton_driver.h in the increment dY = (dq, dv) of a
-// separable run-time-sized system (the top of this file).
-template <class Sys>
+// separable run-time-sized system (the top of this file), with the force F(t, q, v) of
+// type Force (NoForce: none).
+template <class Sys, class Force = NoForce>
 class SeparableSodeEquation {
  public:
   using Vector = Eigen::VectorXd;
   using Matrix = Eigen::MatrixXd;
+  static constexpr bool kForced = is_force_v<Force>;
 
-  // Minv: M^{-1} (shared by the copies of a step and its stages).
-  SeparableSodeEquation(const Sys& L, MassInverse Minv, SodeScheme scheme, double h)
-      : L_(&L), Minv_(std::move(Minv)), sc_(scheme), h_(h) {
+  // Minv: M^{-1} (shared by the copies of a step and its stages); force: required where
+  // Force is not NoForce.
+  SeparableSodeEquation(const Sys& L, MassInverse Minv, SodeScheme scheme, double h, const Force* force = nullptr)
+      : L_(&L), force_(force), Minv_(std::move(Minv)), sc_(scheme), h_(h) {
+    if (kForced && !force_) throw std::invalid_argument("SeparableSodeEquation: a forced equation needs its force");
     const int n = L.dim();
     q0_.resize(n);
     v0_.resize(n);
@@ -110,52 +130,76 @@ class SeparableSodeEquation {
     Lqv_.resize(n, n);
     Lvv_.resize(n, n);
     A_.resize(n, n);
+    if constexpr (kForced) {
+      F0_.resize(n);
+      Fz_.resize(n);
+      Fq_.resize(n, n);
+      Fv_.resize(n, n);
+      B_.resize(n, n);
+    }
   }
-  // The step starts at (q0, v0): g(Y0) and the scales.
-  void begin(const Vector& q0, const Vector& v0) {
+  // The step starts at (q0, v0) at time t0: g(Y0) and the scales.
+  void begin(double t0, const Vector& q0, const Vector& v0) {
+    t0_ = t0;
     q0_ = q0;
     v0_ = v0;
-    field(q0_, v0_, g0q_, g0v_);
+    field(t0_, q0_, v0_, g0q_, g0v_);
+    if constexpr (kForced) F0_ = Fz_;
     s0_ = std::fmax(dynamic_detail::inf_norm(g0q_), dynamic_detail::inf_norm(g0v_));
     x0_ = std::fmax(dynamic_detail::inf_norm(q0_), dynamic_detail::inf_norm(v0_));
   }
   void residual(const Vector& dY, Vector& r) {
     at(dY);
-    field(zq_, zv_, gq_, gv_);
+    field(sample_time(), zq_, zv_, gq_, gv_);
     form(dY, r);
   }
   double jacobian(const Vector& dY, Vector& r, Matrix& J) {
     at(dY);
     L_->hessian(zq_, zv_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
+    if constexpr (kForced) {
+      force_->jacobian(sample_time(), zq_, zv_, Fz_, Fq_, Fv_);
+      Lq_ += Fz_;
+      Lqq_ += Fq_;
+      B_.noalias() = Minv_->lazyProduct(Fv_);  // B = M^{-1} F_v
+    }
     from_gradient(zv_, gq_, gv_);
     form(dY, r);
-    A_.noalias() = Minv_->lazyProduct(Lqq_);  // A = M^{-1} L_qq
+    A_.noalias() = Minv_->lazyProduct(Lqq_);  // A = M^{-1} (L_qq + F_q)
     const Eigen::Index n = zq_.size();
     const double h = h_;
     // the blocks of dF/ddY (the top of this file)
     double aq, bq, av;  // J_qq = I + aq h A, J_qv = bq h I, J_vq = av h A
+    double cv = 0.0, kv = 0.0;  // with a force: J_qv += cv h B, J_vv = I + kv h B
     if (sc_.kind == SodeScheme::Kind::newmark) {
       aq = shift();
       bq = -0.5;
       av = -sc_.gamma;
+      cv = aq;
+      kv = av;
     } else if (sc_.kind == SodeScheme::Kind::sode1) {
       aq = 0.0;
       bq = -sc_.theta;
       av = -sc_.theta_v;
+      kv = av;
     } else {
       aq = 0.0;
       bq = -sc_.theta_v;
       av = -sc_.theta;
+      kv = -sc_.theta_v;
     }
     J.setZero();
     for (Eigen::Index j = 0; j < n; ++j) {
       for (Eigen::Index i = 0; i < n; ++i) {
         J(i, j) = aq * h * A_(i, j);
         J(n + i, j) = av * h * A_(i, j);
+        if constexpr (kForced) {
+          J(i, n + j) = cv * h * B_(i, j);
+          J(n + i, n + j) = kv * h * B_(i, j);
+        }
       }
       J(j, j) += 1.0;
-      J(j, n + j) = bq * h;
-      J(n + j, n + j) = 1.0;
+      J(j, n + j) += bq * h;
+      J(n + j, n + j) += 1.0;
     }
     const double m = dynamic_detail::inf_norm(J);
     return std::isfinite(m) ? m : INFINITY;
@@ -163,8 +207,27 @@ class SeparableSodeEquation {
   double scale(double xn, double Jmax) const { return s0_ + Jmax * xn; }
   double offset() const { return x0_; }
 
+  // The work of the force over the step, <F_bar, dq> (the top of this file), at the
+  // increment dY: the force at the sample point evaluated there again (0 without one).
+  double work(const Vector& dY) {
+    if constexpr (kForced) {
+      at(dY);
+      force_->value(sample_time(), zq_, zv_, Fz_);
+      const Eigen::Index n = zq_.size();
+      const double w1 = sc_.kind == SodeScheme::Kind::sode2    ? 1.0
+                        : sc_.kind == SodeScheme::Kind::sode1 ? sc_.theta_v
+                                                               : sc_.gamma;
+      double W = 0.0;
+      for (Eigen::Index i = 0; i < n; ++i) W += (w1 * Fz_[i] + (1.0 - w1) * F0_[i]) * dY[i];
+      return W;
+    }
+    return (void)dY, 0.0;
+  }
+
  private:
   double shift() const { return 0.5 * h_ * (sc_.gamma - 2.0 * sc_.beta); }
+  // The time of the sample point Z (at()): t0 + h, or t0 + theta h for sode2's base point.
+  double sample_time() const { return t0_ + (sc_.kind == SodeScheme::Kind::sode2 ? sc_.theta : 1.0) * h_; }
   // The point Z where the field is sampled: Y1 = Y0 + dY, or the base point
   // (q0 + theta dq, v0 + theta_v dv) (sode2).
   void at(const Vector& dY) {
@@ -182,12 +245,19 @@ class SeparableSodeEquation {
       zv_[i] = v0_[i] + wv * dY[n + i];
     }
   }
-  // g(Y) = h Gamma(q, v) = h (v, M^{-1} L_q(q, v)) into (gq, gv)
-  void field(const Vector& q, const Vector& v, Vector& gq, Vector& gv) {
+  // g(Y) = h Gamma(t, q, v) = h (v, M^{-1} (L_q(q, v) + F(t, q, v))) into (gq, gv); the
+  // force in Fz_
+  void field(double t, const Vector& q, const Vector& v, Vector& gq, Vector& gv) {
     L_->gradient(q, v, Lq_, Lv_);
+    if constexpr (kForced) {
+      force_->value(t, q, v, Fz_);
+      Lq_ += Fz_;
+    } else {
+      (void)t;
+    }
     from_gradient(v, gq, gv);
   }
-  // the same from L_q of the last evaluation, at the point of velocity v
+  // the same from L_q (plus F) of the last evaluation, at the point of velocity v
   void from_gradient(const Vector& v, Vector& gq, Vector& gv) {
     gv.noalias() = Minv_->lazyProduct(Lq_);
     gq = h_ * v;
@@ -217,21 +287,26 @@ class SeparableSodeEquation {
   }
 
   const Sys* L_;
+  const Force* force_;
   MassInverse Minv_;
   SodeScheme sc_;
   double h_;
-  double s0_ = 0.0, x0_ = 0.0;
+  double t0_ = 0.0, s0_ = 0.0, x0_ = 0.0;
   Vector q0_, v0_, g0q_, g0v_, zq_, zv_, gq_, gv_, Lq_, Lv_;
   Matrix Lqq_, Lqv_, Lvv_, A_;
+  Vector F0_, Fz_;     // the force at Y0 and at the last sample point (forced only)
+  Matrix Fq_, Fv_, B_;  // its Jacobians there, B = M^{-1} F_v
 };
 
 // The sode1, sode2 and Newmark steps of a separable run-time-sized system Sys in the
-// (q, p) contract of integrate() (the top of this file).
-template <class Sys>
+// (q, p) contract of integrate() (the top of this file), with the force F(t, q, v) of
+// type Force (NoForce: none; with one, each step reports the force's work).
+template <class Sys, class Force = NoForce>
 class DynamicSodeStep {
  public:
   static constexpr int N = Eigen::Dynamic;
   using V = Eigen::VectorXd;
+  static constexpr bool kForced = is_force_v<Force>;
 
   // M^{-1} for the steps of L: L_vv at (q, v), which a separable L has the same
   // everywhere, inverted through its Cholesky factorisation. Throws
@@ -247,18 +322,24 @@ class DynamicSodeStep {
     return std::make_shared<const Eigen::MatrixXd>(f.solve(Eigen::MatrixXd::Identity(n, n)));
   }
 
-  DynamicSodeStep(Sys L, MassInverse Minv, SodeScheme scheme, double h, StepOptions options = {})
-      : L_(std::move(L)), Minv_(std::move(Minv)), sc_(scheme), h_(h), options_(options) {
+  // force: required where Force is not NoForce; each copy of the step evaluates its own
+  // copy of it (the force's workspace).
+  DynamicSodeStep(Sys L, MassInverse Minv, SodeScheme scheme, double h, StepOptions options = {},
+                  std::shared_ptr<const Force> force = nullptr)
+      : L_(std::move(L)), Minv_(std::move(Minv)), sc_(scheme), h_(h), options_(options), force_(std::move(force)) {
     dynamic_detail::require_step(h);
     dynamic_detail::require_newton(options);
     if (!Minv_ || Minv_->rows() != L_.dim())
       throw std::invalid_argument("DynamicSodeStep: M^{-1} must be of the system's size");
-    work_ = std::make_shared<Work>(L_, Minv_, sc_, h_);
+    if constexpr (kForced)
+      if (!force_ || force_->dim() != L_.dim())
+        throw std::invalid_argument("DynamicSodeStep: a forced step needs a force of the system's size");
+    work_ = std::make_shared<Work>(L_, Minv_, sc_, h_, force_.get());
   }
   // A copy has its own workspace and equation (reading its own L).
   DynamicSodeStep(const DynamicSodeStep& o)
-      : L_(o.L_), Minv_(o.Minv_), sc_(o.sc_), h_(o.h_), options_(o.options_) {
-    work_ = std::make_shared<Work>(L_, Minv_, sc_, h_);
+      : L_(o.L_), Minv_(o.Minv_), sc_(o.sc_), h_(o.h_), options_(o.options_), force_(o.force_) {
+    work_ = std::make_shared<Work>(L_, Minv_, sc_, h_, force_.get());
   }
   DynamicSodeStep& operator=(const DynamicSodeStep&) = delete;
 
@@ -267,12 +348,12 @@ class DynamicSodeStep {
   const SodeScheme& scheme() const { return sc_; }
   const StepOptions& options() const { return options_; }
   // The adjoint method and the same method with another step (the stages of compositions).
-  DynamicSodeStep adjoint() const { return DynamicSodeStep(L_, Minv_, sc_.adjoint(), h_, options_); }
-  DynamicSodeStep with_step(double h) const { return DynamicSodeStep(L_, Minv_, sc_, h, options_); }
+  DynamicSodeStep adjoint() const { return DynamicSodeStep(L_, Minv_, sc_.adjoint(), h_, options_, force_); }
+  DynamicSodeStep with_step(double h) const { return DynamicSodeStep(L_, Minv_, sc_, h, options_, force_); }
 
-  // One step from (q0, p0); dq holds the guess on entry and q1 - q0 on return, dp
-  // receives p1 - p0.
-  StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {
+  // One step from (q0, p0) at time t; dq holds the guess on entry and q1 - q0 on return,
+  // dp receives p1 - p0.
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
     StepSummary s;
     const int n = L_.dim();
     if (!dynamic_detail::sizes_match(n, q0, p0, dq, s)) return s;
@@ -282,7 +363,7 @@ class DynamicSodeStep {
       w.v0.noalias() = Minv_->lazyProduct(p0);
       w.x.head(n) = dq;
       w.x.tail(n) = w.last_dv;  // (zero before the first converged step)
-      w.eq.begin(q0, w.v0);
+      w.eq.begin(t, q0, w.v0);
       s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.x, w.r, w.dx, w.J, w.state, w.start);
       dq = w.x.head(n);
       if (s.converged) {
@@ -290,6 +371,7 @@ class DynamicSodeStep {
         w.v1 = w.v0 + w.x.tail(n);
         L_.gradient(w.q1, w.v1, w.Lq, w.Lv);  // p1 = L_v(q1, v1)
         dp = w.Lv - p0;
+        if constexpr (kForced) s.work = w.eq.work(w.x);
         w.last_dv = w.x.tail(n);
         if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
       }
@@ -302,8 +384,8 @@ class DynamicSodeStep {
 
  private:
   struct Work {
-    Work(const Sys& L, const MassInverse& Minv, const SodeScheme& sc, double h)
-        : eq(L, Minv, sc, h), lu(2 * L.dim()) {
+    Work(const Sys& L, const MassInverse& Minv, const SodeScheme& sc, double h, const Force* f)
+        : force(f ? std::make_unique<Force>(*f) : nullptr), eq(L, Minv, sc, h, force.get()), lu(2 * L.dim()) {
       const int n = L.dim();
       x.resize(2 * n);
       r.resize(2 * n);
@@ -317,7 +399,8 @@ class DynamicSodeStep {
       Lv.resize(n);
       last_dv = V::Zero(n);
     }
-    SeparableSodeEquation<Sys> eq;
+    std::unique_ptr<Force> force;  // this step's copy of the force (its workspace)
+    SeparableSodeEquation<Sys, Force> eq;
     DenseLU lu;
     DriverState state;
     V x, r, dx, start, v0, q1, v1, Lq, Lv, last_dv;
@@ -329,6 +412,7 @@ class DynamicSodeStep {
   SodeScheme sc_;
   double h_;
   StepOptions options_;
+  std::shared_ptr<const Force> force_;
   std::shared_ptr<Work> work_;
 };
 

@@ -476,21 +476,52 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 
+  // the sode and newmark forms (paper Sec. 4) on a separable system, whose acceleration's
+  // Jacobian comes from L's Hessian (solvers/dynamic_sode_step.h): the tangent or Legendre
+  // lift of a theta map, or Newmark's map on TQ; composed or not, as the fixed-size steps
+  // are; with the force where the system has one (Force: NoForce for none)
+  auto sode_run = [&](auto force) -> std::unique_ptr<Run> {
+    using Force = std::remove_const_t<typename decltype(force)::element_type>;
+    const std::string form = "form = \"" + std::string(to_string(me.form)) + "\"";
+    if (!dynamic_separable(L))
+      throw InputError(pr.origin + ": key 'integrator.form': " + form +
+                       " on a system of run-time size needs a separable Lagrangian, "
+                       "v^T M v / 2 - U(q) with M constant (its acceleration's Jacobian then needs second "
+                       "derivatives of L only); " + where + " is not separable (the built-in systems of fixed size "
+                       "run these forms on any Lagrangian)");
+    dense_limit("integrator.form: " + form);
+    using Step = DynamicSodeStep<Sys, Force>;
+    const auto Minv = Step::mass_inverse(L, q, v0);
+    if (me.form == Form::newmark) {
+      const Step basic(L, Minv, SodeScheme::newmark(me.newmark_gamma, me.newmark_beta), h, opt, force);
+      auto make = [](double hk, const Step& b) { return b.with_step(hk); };
+      const auto stages = composition_stages(
+          me, basic, me.newmark_gamma == 0.5, [](const Step& b) { return b.adjoint(); },
+          [&](double) -> Step { throw InputError("integrator.thetas: unsupported"); });  // refused by validate()
+      return composable_run(view, me, h, stages, make, q, p, v0, base, pr.steps);
+    }
+    const bool first = me.form == Form::sode1, legendre = me.effective_lift() == Lift::legendre;
+    auto make = [&](double hk, const ThetaMap& Rk) {
+      return Step(L, Minv, SodeScheme::sode(first, Rk.theta(), legendre), hk, opt, force);
+    };
+    return composable_run(view, me, h, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
+  };
+
   // system.constraints: the constrained theta and Galerkin steps (kernels_constrained.cc)
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.constrained()) return make_constrained_run(L, pr, me, view, q, p, v0, base, signal);
 
   // system.forces: the forced steps (the forms and methods the registry's "lagrangian
   // with forces" admits: the theta step, composed or not, Galerkin, the Hamiltonian
-  // step), never the structured paths below, whose equations have no force term; sizes
-  // and Jacobian refresh as the unforced steps' below
+  // step, the SODE and Newmark steps), never the structured paths below, whose
+  // equations have no force term; sizes and Jacobian refresh as the unforced steps' below
   if constexpr (std::is_same_v<Sys, WrittenDynamic>)
     if (pr.forced()) {
       const auto force = std::make_shared<WrittenForce>(pr.written, signal);
       require_finite_force(*force, pr, q, v0);
-      if (me.form != Form::lagrangian && me.form != Form::hamiltonian)  // (validate refuses it first)
-        throw InputError(pr.forces_where + ": forces enter the lagrangian and hamiltonian forms only");
       base.forced = true;
+      if (me.form == Form::sode1 || me.form == Form::sode2 || me.form == Form::newmark)
+        return sode_run(std::shared_ptr<const WrittenForce>(force));
       if (me.galerkin) {
         dense_limit("integrator.method: method = \"galerkin\" with system.forces");
         return stepper_run<linearizable>(
@@ -603,34 +634,8 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     base.step_path = StepPath::separable_dense_newton;
     return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
   }
-  // the sode and newmark forms (paper Sec. 4) on a separable system, whose acceleration's
-  // Jacobian comes from L's Hessian (solvers/dynamic_sode_step.h): the tangent or Legendre
-  // lift of a theta map, or Newmark's map on TQ; composed or not, as the fixed-size steps are
-  if (me.form == Form::sode1 || me.form == Form::sode2 || me.form == Form::newmark) {
-    const std::string form = "form = \"" + std::string(to_string(me.form)) + "\"";
-    if (!dynamic_separable(L))
-      throw InputError(pr.origin + ": key 'integrator.form': " + form +
-                       " on a system of run-time size needs a separable Lagrangian, "
-                       "v^T M v / 2 - U(q) with M constant (its acceleration's Jacobian then needs second "
-                       "derivatives of L only); " + where + " is not separable (the built-in systems of fixed size "
-                       "run these forms on any Lagrangian)");
-    dense_limit("integrator.form: " + form);
-    using Step = DynamicSodeStep<Sys>;
-    const auto Minv = Step::mass_inverse(L, q, v0);
-    if (me.form == Form::newmark) {
-      const Step basic(L, Minv, SodeScheme::newmark(me.newmark_gamma, me.newmark_beta), h, opt);
-      auto make = [](double hk, const Step& b) { return b.with_step(hk); };
-      const auto stages = composition_stages(
-          me, basic, me.newmark_gamma == 0.5, [](const Step& b) { return b.adjoint(); },
-          [&](double) -> Step { throw InputError("integrator.thetas: unsupported"); });  // refused by validate()
-      return composable_run(view, me, h, stages, make, q, p, v0, base, pr.steps);
-    }
-    const bool first = me.form == Form::sode1, legendre = me.effective_lift() == Lift::legendre;
-    auto make = [&](double hk, const ThetaMap& Rk) {
-      return Step(L, Minv, SodeScheme::sode(first, Rk.theta(), legendre), hk, opt);
-    };
-    return composable_run(view, me, h, rn_stages(me, dynamic_theta_map(me)), make, q, p, v0, base, pr.steps);
-  }
+  if (me.form == Form::sode1 || me.form == Form::sode2 || me.form == Form::newmark)
+    return sode_run(std::shared_ptr<const NoForce>());
   dense_limit(me.galerkin ? std::string("integrator.method: method = \"galerkin\"")
                           : "integrator.map: map = \"" + me.map->name + "\" in the " + to_string(me.form) + " form");
   if (me.galerkin)

@@ -361,22 +361,24 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
 const SystemEntry& written_system_entry(Space space, int factors, bool forced, bool constrained, bool time_dependent) {
   static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
                                  factories::written, "the coordinates"};
-  // With forces: the lagrangian form (the theta-family maps composed or not, Galerkin) and
-  // the hamiltonian form (the forced steps of solvers/dynamic_step.h and
-  // dynamic_galerkin_step.h); the rest takes no force term.
+  // With forces: the lagrangian form (the theta-family maps composed or not, Galerkin),
+  // the hamiltonian form and, on a separable Lagrangian, the SODE and Newmark forms (the
+  // forced steps of solvers/dynamic_step.h, dynamic_galerkin_step.h and
+  // dynamic_sode_step.h); the rest takes no force term.
   static const SystemEntry rn_forced = {
       "lagrangian with forces",
       "written in the scene, with generalized forces",
       Space::euclidean,
       0,
       {},
-      {{Form::lagrangian, Form::hamiltonian},
+      {kAllForms,
        true,
        true,
        true,
        false,
-       "system.forces enter the lagrangian form (the theta-family maps, their compositions, Galerkin) and the "
-       "hamiltonian form; SODE, Newmark, boundary values, solver = \"tiny\" and written maps take no forces",
+       "system.forces enter the lagrangian form (the theta-family maps, their compositions, Galerkin), the "
+       "hamiltonian form and, on a separable Lagrangian (v^T M v / 2 - U(q), M constant), the SODE and Newmark "
+       "forms; boundary values, solver = \"tiny\" and written maps take no forces",
        false,
        false},
       factories::written,

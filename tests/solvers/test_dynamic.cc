@@ -1295,6 +1295,132 @@ BOOST_AUTO_TEST_CASE(the_forced_step_balances_energy_and_momentum_by_the_work_an
   BOOST_TEST(std::fabs((p[0] - px0) - impulse) <= 1e-13 * std::fmax(1.0, largest));
 }
 
+// The SODE and Newmark steps with a force (solvers/dynamic_sode_step.h), a = M^{-1}(L_q + F):
+// - sode2 at theta = 1/2 is the forced midpoint position-momentum step on a separable L:
+//   the same states and work of each step (to 1e-13, the round-off two codes accumulate
+//   over 200 steps apart) on a coupled mass matrix with a force
+//   in t, q and x_dot, which a force read at another time or point would not give;
+// - the step's equation is linear on the driven damped oscillator, so Newton with the
+//   exact Jacobian (F_v in its velocity columns) ends in at most two iterations: a
+//   Jacobian without the force's terms takes more;
+// - orders against the oscillator's exact solution: Newmark (1/2, 1/4) and (1/2, 0) 2,
+//   sode1 at theta 0.3 1, sode2 at theta 0.3 composed with its adjoint 2, the triple
+//   jump of Newmark 4 (each stage's force at its own time);
+// - Newmark (1/2, 1/4) and sode2 at 1/2 keep E_N - E_0 = W_N to round-off (a quadratic
+//   potential), and the adjoint of size -h from t0 + h undoes a step from t0.
+BOOST_AUTO_TEST_CASE(forced_sode_and_newmark_steps) {
+  using Sode = DynamicSodeStep<WrittenDynamic, WrittenForce>;
+  const double h = 0.05;
+  {
+    const auto planar = with_forces(written({"x", "y"}, {{"c", 0.3}}, "(x_dot^2 + y_dot^2)/2 - y^2/2 + x_dot*y_dot/4"),
+                                    {{0, "-c*x_dot + cos(2*t)*y*cos(x)"}, {1, "-c*y_dot + sin(t)*x"}});
+    const WrittenDynamic P(planar);
+    const auto force = std::make_shared<const WrittenForce>(planar);
+    VectorXd q(2), p(2);
+    q << 0.4, 1.0;
+    p << 0.5, -0.2;
+    const VectorXd v = legendre_inverse(P, q, p);
+    const Sode S(P, Sode::mass_inverse(P, q, v), SodeScheme::sode(false, 0.5), h, {}, force);
+    const DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce> T(P, ThetaMap::midpoint(), h, {}, false,
+                                                                            force);
+    VectorXd qa = q, pa = p, qb = q, pb = p, da = h * v, db = h * v, ea(2), eb(2);
+    double d = 0.0, dw = 0.0, work = 0.0;
+    for (int k = 0; k < 200; ++k) {
+      const StepSummary a = S.step(k * h, qa, pa, da, ea), b = T.step(k * h, qb, pb, db, eb);
+      BOOST_TEST_REQUIRE((a.converged && b.converged));
+      dw = std::fmax(dw, std::fabs(a.work - b.work));
+      work += b.work;
+      qa += da, pa += ea, qb += db, pb += eb;
+      d = std::fmax(d, std::fmax((qa - qb).cwiseAbs().maxCoeff(), (pa - pb).cwiseAbs().maxCoeff()));
+    }
+    BOOST_TEST_MESSAGE("forced sode2 midpoint against the forced midpoint step: states " << d << ", work of a step "
+                                                                                      << dw << " (of " << work << ")");
+    BOOST_TEST(std::fabs(work) > 0.05);
+    BOOST_TEST(d <= 1e-13);
+    BOOST_TEST(dw <= 1e-13);
+  }
+  const DrivenOscillator osc;
+  const auto text = osc.text();
+  const WrittenDynamic L(text);
+  const auto force = std::make_shared<const WrittenForce>(text);
+  VectorXd q0(1), p0(1), v0(1);
+  q0 << 1.0;
+  v0 << 0.3;
+  p0 = osc.m * v0;
+  const auto Minv = Sode::mass_inverse(L, q0, v0);
+  auto step = [&](const SodeScheme& sc, double hk) { return Sode(L, Minv, sc, hk, {}, force); };
+  const std::vector<SodeScheme> schemes = {SodeScheme::newmark(0.5, 0.25), SodeScheme::newmark(0.6, 0.3),
+                                           SodeScheme::sode(true, 0.3), SodeScheme::sode(false, 0.3, true)};
+  for (const SodeScheme& sc : schemes) {
+    BOOST_TEST_CONTEXT("kind " << static_cast<int>(sc.kind) << ", theta " << sc.theta << ", gamma " << sc.gamma) {
+      RunSummary run;
+      trajectory(step(sc, h), q0, p0, v0, 200, &run);
+      BOOST_TEST(run.max_step_iterations <= 2);
+      // the adjoint of size -h, from t0 + h, back to the start of a step from t0
+      const double t0 = 0.7;
+      const Sode S = step(sc, h), back = S.adjoint().with_step(-h);
+      VectorXd dq = h * v0, dp = VectorXd::Zero(1);
+      BOOST_TEST_REQUIRE(S.step(t0, q0, p0, dq, dp).converged);
+      const VectorXd q1 = q0 + dq, p1 = p0 + dp;
+      VectorXd eq = -dq, ep = VectorXd::Zero(1);
+      BOOST_TEST_REQUIRE(back.step(t0 + h, q1, p1, eq, ep).converged);
+      BOOST_TEST(std::fabs(q1[0] + eq[0] - q0[0]) <= 1e-15);
+      BOOST_TEST(std::fabs(p1[0] + ep[0] - p0[0]) <= 1e-15);
+      BOOST_TEST(std::fabs(dq[0]) >= 0.01);
+    }
+  }
+  // orders against the exact solution
+  const double T = 2.0;
+  double xe, pe;
+  osc.exact(T, q0[0], v0[0], xe, pe);
+  auto composed = [&](const SodeScheme& sc, const char* scheme, double hk) {
+    return ComposedStep<Sode>(
+        hk, substeps(find_composition(scheme), sc.kind == SodeScheme::Kind::newmark ? sc.gamma == 0.5 : false),
+        [&](double hj) { return step(sc, hj); }, [&](double hj) { return step(sc, hj).adjoint(); });
+  };
+  std::vector<double> hs, trapezoid, explicit_newmark, sode1, verlet, jump;
+  for (int k = 0; k < 5; ++k) {
+    const double hk = 0.1 / std::pow(2.0, k);
+    hs.push_back(hk);
+    auto error_of = [&](const auto& S) { return osc.final_error(S, hk, T, q0[0], v0[0], xe, pe); };
+    trapezoid.push_back(error_of(step(SodeScheme::newmark(0.5, 0.25), hk)));
+    explicit_newmark.push_back(error_of(step(SodeScheme::newmark(0.5, 0.0), hk)));
+    sode1.push_back(error_of(step(SodeScheme::sode(true, 0.3), hk)));
+    verlet.push_back(error_of(composed(SodeScheme::sode(false, 0.3), "stormer-verlet", hk)));
+    jump.push_back(error_of(composed(SodeScheme::newmark(0.5, 0.25), "triple-jump:4", hk)));
+  }
+  const double o_trap = verification::fit_order(hs, trapezoid), o_expl = verification::fit_order(hs, explicit_newmark);
+  const double o_sode1 = verification::fit_order(hs, sode1), o_verlet = verification::fit_order(hs, verlet);
+  const double o_jump = verification::fit_order(hs, jump);
+  BOOST_TEST_MESSAGE("forced sode orders: newmark (1/2, 1/4) " << o_trap << ", (1/2, 0) " << o_expl << ", sode1 theta 0.3 "
+                                                               << o_sode1 << ", sode2 theta 0.3 with its adjoint "
+                                                               << o_verlet << ", newmark triple jump " << o_jump);
+  BOOST_TEST(std::fabs(o_trap - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_expl - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_sode1 - 1.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_verlet - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_jump - 4.0) <= 0.2);
+  BOOST_TEST(trapezoid.back() <= 1e-4);  // close to the solution, not only converging
+  // the energy balance
+  for (const SodeScheme& sc : {SodeScheme::newmark(0.5, 0.25), SodeScheme::sode(false, 0.5)}) {
+    const Sode S = step(sc, h);
+    VectorXd q = q0, p = p0, dq = h * v0, dp(1);
+    auto energy = [&] { return p[0] * p[0] / (2 * osc.m) + osc.k * q[0] * q[0] / 2; };
+    const double E0 = energy();
+    double W = 0.0, largest = 0.0;
+    for (int k = 0; k < 2000; ++k) {
+      const StepSummary s = S.step(k * h, q, p, dq, dp);
+      BOOST_TEST_REQUIRE(s.converged);
+      q += dq;
+      p += dp;
+      W += s.work;
+      largest = std::fmax(largest, std::fabs(W));
+    }
+    BOOST_TEST(largest > 0.1);
+    BOOST_TEST(std::fabs(energy() - E0 - W) <= 1e-13 * std::fmax(E0, largest));
+  }
+}
+
 // ---------------------------------------------------------------------------------
 // Failures.
 
