@@ -398,6 +398,11 @@ class LegendreDynamicHamiltonian {
   int dim() const { return L_.dim(); }
   std::string name() const { return L_.name(); }
   const Sys& lagrangian() const { return L_; }
+  // L(t, q, v) (has_time): H(t, q, p) at the time set, L's own.
+  template <class S = Sys, std::enable_if_t<has_time<S>::value, int> = 0>
+  void set_time(double t) const {
+    L_.set_time(t);
+  }
 
   // v = FL^{-1}(q, p). A Newton inverse that fails on a singular L_vv is reported
   // naming the point where it started (v = 0) when L is singular there.

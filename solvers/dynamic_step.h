@@ -507,6 +507,8 @@ class DynamicThetaStep {
 // symplectic unless theta = 1/2). The Jacobian (H_pq = H_qp^T, b the weight of dp in P):
 //   [ I - h theta H_pq      -h b H_pp   ]
 //   [ h theta H_qq           I + h b H_qp ].
+// A Hamiltonian in t (has_time: the Legendre transform of L(t, q, v)) is evaluated at the
+// node's time t0 + theta h, as the lagrangian form's ThetaEquation evaluates L.
 // A generalized force F(t, q, v) (Force; NoForce: none) joins the momentum equation at
 // the node, with the velocity there, V = H_p(Q, P), and t = t0 + theta h:
 //   dp + h H_q(Q, P) - h F(t, Q, V) = 0,
@@ -538,12 +540,13 @@ class HamiltonianThetaEquation {
       Fv_.resize(n, n);
     }
   }
-  // The start of the step, at time t0 (read by a force only): the scale of the terms,
-  // |h| max(|H_p|, |H_q|) at (q0, p0).
+  // The start of the step, at time t0 (read by a force and by H(t, q, p), both at the
+  // node's time t0 + theta h): the scale of the terms, |h| max(|H_p|, |H_q|) at (q0, p0).
   void begin(const Vector& q0, const Vector& p0, double t0 = 0.0) {
     q0_ = &q0;
     p0_ = &p0;
-    if constexpr (kForced) t_ = t0 + th_ * h_;
+    t_ = t0 + th_ * h_;
+    if constexpr (has_time<Ham>::value) H_->set_time(t_);
     H_->gradient(q0, p0, Hq_, Hp_);
     s0_ = std::fabs(h_) * std::fmax(dynamic_detail::inf_norm(Hp_), dynamic_detail::inf_norm(Hq_));
     x0_ = std::fmax(dynamic_detail::inf_norm(q0), dynamic_detail::inf_norm(p0));

@@ -407,22 +407,23 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       factories::written,
       "the coordinates"};
   // A Lagrangian L(t, q, v) (forces or not): the steps that evaluate L at their nodes'
-  // times (the theta step, composed or not, and Galerkin); with constraints, the
-  // constrained step above, which does too.
+  // times (the theta step, composed or not, Galerkin, and the Hamiltonian theta step, H
+  // from L at its node's time); with constraints, the constrained step above, which
+  // does too.
   static const SystemEntry rn_timed = {
       "lagrangian depending on time",
       "written in the scene, L(t, q, v)",
       Space::euclidean,
       0,
       {},
-      {{Form::lagrangian},
+      {{Form::lagrangian, Form::hamiltonian},
        true,
        true,
        true,
        false,
        "a Lagrangian that reads t runs in the lagrangian form (the theta-family maps, their compositions, "
-       "Galerkin); the hamiltonian, SODE and Newmark forms, boundary values, solver = \"tiny\" and written maps "
-       "take none",
+       "Galerkin) and the hamiltonian form (H(t, q, p) from L at each step's node time); the SODE and Newmark "
+       "forms, boundary values, solver = \"tiny\" and written maps take none",
        false,
        false},
       factories::written,

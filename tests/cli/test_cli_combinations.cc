@@ -177,7 +177,7 @@ std::vector<SystemCaps> registry_systems() {
   // written on R^n in t: the lagrangian form (the theta step, its compositions, Galerkin)
   SystemCaps td = w;
   td.name = "lagrangian depending on time";
-  td.forms = {"lagrangian"};
+  td.forms = {"lagrangian", "hamiltonian"};
   out.push_back(td);
   // written on S^2 and SO(3): the capabilities of the spherical pendulum and the top
   for (const char* space : {"S^2", "SO(3)"}) {

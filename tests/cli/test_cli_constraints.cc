@@ -456,10 +456,9 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(P, {"integrator.map=explicit-euler", "integrator.composition=blanes-moan4"},
           {"integrator.composition", "system.constraints"});
   refused(P, {"integrator.solver=tiny"}, {"integrator.solver"});
-  // a Lagrangian in t: the lagrangian form only, no written H, t in no energy, invariant
-  // or Lagrangian on S^2
+  // a Lagrangian in t: the lagrangian and hamiltonian forms only, no written H, t in no
+  // energy, invariant or Lagrangian on S^2
   const std::string K = "kapitza_pendulum.toml";
-  refused(K, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian depending on time"});
   refused(K, {"integrator.form=sode1"}, {"integrator.form", "lagrangian depending on time"});
   refused(K, {"integrator.solver=tiny"}, {"integrator.solver"});
   refused(K, {"problem.kind=\"boundary-value\"", "problem.q_final=[3.0]", "problem.steps=10"}, {"problem.kind"});
@@ -482,6 +481,51 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
           {"system.controls", "forces on R^n only"});
   refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"1\" }"},
           {"system.forces", "on (S^2)^2 a written system is conservative"});
+}
+
+// A Lagrangian in t in the hamiltonian form: H(t, q, p), the Legendre transform of L at
+// each step's node time. Kapitza's pendulum (a pivot shaken in t) converges to the
+// lagrangian form's Galerkin reference (dvm converge) at the orders of the maps: the
+// midpoint 2, theta = 0.3 with its adjoint 2, the triple jump 4 (H read at another time,
+// or at t = 0, converges to another solution or at a lower order); the theta map on T*Q
+// (lift = "none") and a force in t run too.
+BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_runs_in_the_hamiltonian_form) {
+  struct Order {
+    std::vector<std::string> sets;
+    double order;
+  };
+  for (const Order& want :
+       {Order{{}, 2.0}, Order{{"integrator.map=theta", "integrator.theta=0.3", "integrator.composition=stormer-verlet"}, 2.0},
+        Order{{"integrator.composition=\"triple-jump\""}, 4.0}}) {
+    std::vector<std::string> args = {"converge", scene("kapitza_pendulum.toml"), "--t-end", "0.5", "--steps-list",
+                                     "50,100,200,400", "--json", "--set", "integrator.form=hamiltonian"};
+    for (const std::string& k : want.sets) {
+      args.push_back("--set");
+      args.push_back(k);
+    }
+    const Output conv = dvm(args);
+    BOOST_TEST_REQUIRE(conv.status == 0, conv.err);
+    const double fitted = parse_json(conv.out).at("fitted_order").get<double>();
+    BOOST_TEST_MESSAGE("Kapitza's pendulum, hamiltonian form " << (want.sets.empty() ? "midpoint" : want.sets.back())
+                                                               << ": order " << fitted);
+    BOOST_TEST(std::fabs(fitted - want.order) <= 0.05 * want.order, conv.out);
+  }
+  for (const std::vector<std::string>& sets :
+       {std::vector<std::string>{"integrator.lift=none"},
+        std::vector<std::string>{"system.forces={ th = \"-0.1*th_dot + 0.2*cos(3*t)\" }"}}) {
+    std::vector<std::string> args = {"run", scene("kapitza_pendulum.toml"), "--json", "--no-output", "--set",
+                                     "integrator.form=hamiltonian", "--set", "integrator.t_end=1"};
+    for (const std::string& k : sets) {
+      args.push_back("--set");
+      args.push_back(k);
+    }
+    const Output o = dvm(args);
+    BOOST_TEST_CONTEXT(sets.front()) {
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      BOOST_TEST(parse_json(o.out).at("time_dependent").get<bool>());
+      BOOST_TEST(parse_json(o.out).at("form").get<std::string>() == "hamiltonian");
+    }
+  }
 }
 
 // dvm run --linearize on a constrained scene: each step's Jacobian A_k of the

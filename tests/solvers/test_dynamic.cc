@@ -1213,6 +1213,34 @@ BOOST_AUTO_TEST_CASE(a_lagrangian_in_t_converges_to_the_damped_oscillator_at_its
   BOOST_TEST(std::fabs(o_start - 1.0) <= 0.15);
   BOOST_TEST(mid.back() <= 1e-4);
   BOOST_TEST(gauss.back() <= 1e-9);
+  // the hamiltonian form, H(t, q, p) from L at the node's time: its midpoint is the
+  // lagrangian midpoint for this L, quadratic with its coefficients frozen at the node;
+  // the theta = 0.3 lift with its adjoint order 2; H read at the step's start order 1
+  using HL = LegendreDynamicHamiltonian<WrittenDynamic>;
+  using HStep = DynamicHamiltonianThetaStep<HL>;
+  {
+    VectorXd q(1), p(1), v(1);
+    q << x0;
+    v << v0;
+    p = osc.m * v;
+    BOOST_TEST(trajectory_difference(trajectory(HStep(HL(L), ThetaMap::midpoint(), 0.05), q, p, v, 200),
+                                     trajectory(Step(L, ThetaMap::midpoint(), 0.05), q, p, v, 200)) <= 1e-13);
+  }
+  std::vector<double> hverlet, hstart;
+  for (double h : hs) {
+    const ThetaMap R(0.3);
+    hverlet.push_back(error_of(ComposedStep<HStep>(
+                                   h, substeps(find_composition("stormer-verlet"), false),
+                                   [&](double hk) { return HStep(HL(L), R, hk); },
+                                   [&](double hk) { return HStep(HL(L), R, hk).adjoint(); }),
+                               h));
+    hstart.push_back(error_of(AtStart<HStep>{HStep(HL(L), ThetaMap::midpoint(), h)}, h));
+  }
+  const double o_hverlet = verification::fit_order(hs, hverlet), o_hstart = verification::fit_order(hs, hstart);
+  BOOST_TEST_MESSAGE("H(t, q, p) orders: theta 0.3 lift with its adjoint " << o_hverlet << ", H at the step's start "
+                                                                           << o_hstart);
+  BOOST_TEST(std::fabs(o_hverlet - 2.0) <= 0.1);
+  BOOST_TEST(std::fabs(o_hstart - 1.0) <= 0.15);
   // symplectic, and its derivative the linearisation, at a step that starts at t0 = 0.7
   VectorXd q1(1), p1(1);
   q1 << 0.8;
