@@ -80,6 +80,22 @@ inline Json parse_json(const std::string& text) {
   return j;
 }
 
+// The order `dvm converge` fits, run with `args` (the command and its options), --json and
+// --set for each of `sets`; the test stops with its error where it does not exit 0 or
+// fits none.
+inline double fitted_order(std::vector<std::string> args, const std::vector<std::string>& sets) {
+  args.push_back("--json");
+  for (const std::string& s : sets) {
+    args.push_back("--set");
+    args.push_back(s);
+  }
+  const Output o = dvm(args);
+  BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+  const Json j = parse_json(o.out);
+  BOOST_REQUIRE_MESSAGE(j.at("fitted_order").is_number(), o.out);
+  return j.at("fitted_order").get<double>();
+}
+
 // The first member named `key` in document order, depth first (a top-level member before
 // the members of the objects before it only where it comes first); nullptr if none.
 inline const Json* json_find(const Json& j, const std::string& key) {
