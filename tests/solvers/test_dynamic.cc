@@ -866,18 +866,22 @@ void check_chain(const Step& S, const WrittenDynamic& L, int n, int steps, doubl
 
 }  // namespace
 
+// (a tenth of the steps under AddressSanitizer: long_horizon, tests/verification/common.h)
 BOOST_AUTO_TEST_CASE(written_chains_of_10_and_50_coordinates) {
   const double h = 0.05;
   {
     const WrittenDynamic L(written_chain(10));
     BOOST_TEST(L.reverse_mode());
-    check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 10, 2000, 1e-3, true);
-    check_chain(DynamicGalerkinStep<WrittenDynamic>(L, QuadratureKind::gauss, 2, h), L, 10, 1000, 1e-6, false);
+    check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 10,
+                verification::long_horizon(2000), 1e-3, true);
+    check_chain(DynamicGalerkinStep<WrittenDynamic>(L, QuadratureKind::gauss, 2, h), L, 10,
+                verification::long_horizon(1000), 1e-6, false);
   }
   {
     const WrittenDynamic L(written_chain(50));
     BOOST_TEST(L.reverse_mode());  // its tape is longer than the stack storage: the per-thread buffer
-    check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 50, 200, 1e-3, true);
+    check_chain(DynamicThetaStep<WrittenDynamic>(L, ThetaMap::midpoint(), h), L, 50,
+                verification::long_horizon(200), 1e-3, true);
   }
 }
 
