@@ -83,6 +83,14 @@ const std::map<std::string, std::string>& heads() {
        "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + "
        "2*cos(a) + cos(b)\"\nforces = { a = \"-0.3*a_dot + 0.5*cos(2*t)\", b = \"-0.2*(b_dot - a_dot)\" }\n"
        "[initial]\nq = [0.5, 0.3]\nv = [0.3, -0.2]\n"},
+      // (M constant and not diagonal; the force reads t, q and the velocities)
+      {"lagrangian, separable",
+       "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"a_dot^2 + a_dot*b_dot/2 + b_dot^2/2 + 2*cos(a) + "
+       "cos(b) - 0.3*a*b\"\n[initial]\nq = [0.5, 0.3]\nv = [0.3, -0.2]\n"},
+      {"lagrangian with forces, separable",
+       "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"a_dot^2 + a_dot*b_dot/2 + b_dot^2/2 + 2*cos(a) + "
+       "cos(b) - 0.3*a*b\"\nforces = { a = \"-0.3*a_dot + 0.5*cos(2*t)\", b = \"-0.2*(b_dot - a_dot) + 0.1*a\" }\n"
+       "[initial]\nq = [0.5, 0.3]\nv = [0.3, -0.2]\n"},
       {"lagrangian with constraints",
        "[system]\ncoordinates = [\"x\", \"y\"]\nlagrangian = \"(x_dot^2 + y_dot^2)/2 - y\"\n"
        "constraints = [\"x^2 + y^2 - 1\"]\n[initial]\nq = [0.6, -0.8]\nv = [0.4, 0.3]\n"},
@@ -166,6 +174,14 @@ std::vector<SystemCaps> registry_systems() {
   SystemCaps f = w;
   f.name = "lagrangian with forces";
   out.push_back(f);
+  // written on R^n and separable (v^T M v / 2 - U(q), M constant), with forces or not:
+  // every form, the SODE and Newmark forms too (the run-time-sized SODE step)
+  for (const char* name : {"lagrangian, separable", "lagrangian with forces, separable"}) {
+    SystemCaps sep = w;
+    sep.name = name;
+    sep.forms = {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"};
+    out.push_back(sep);
+  }
   // written on R^n with constraints: the lagrangian form of the theta-family maps,
   // composed or not (the constrained theta step), and Lobatto Galerkin (the constraints
   // at its nodes)
@@ -587,8 +603,8 @@ BOOST_AUTO_TEST_CASE(every_splitting_runs_or_is_refused) {
   // (with forces: kicks are the gradient of a potential, which a force is not)
   // (with constraints: the drifts leave them; in t: no structure is read off the text)
   const std::set<std::string> not_separable = {"double-pendulum", "charged-particle", "lagrangian",
-                                               "lagrangian with forces", "lagrangian with constraints",
-                                               "lagrangian depending on time"};
+                                               "lagrangian with forces", "lagrangian with forces, separable",
+                                               "lagrangian with constraints", "lagrangian depending on time"};
   for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
     const Reference ref = reference_of(head, sys.space);
