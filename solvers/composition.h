@@ -17,7 +17,9 @@
 //    leaving substep k equals the one entering substep k + 1, so the solution is the
 //    map of route 1; tests check this to round-off.
 //
-// Both types plug into `integrate` (they have N, step_size() and step(q, p, dq, dp)).
+// Route 1 is ComposedStep (any step type and its adjoint's, composed); the
+// position-momentum steps of R_d and R_d^* composed are its instance that route 2
+// equals. Both plug into `integrate` (they have N, step_size() and step(q, p, dq, dp)).
 #pragma once
 
 #include <string>
@@ -239,21 +241,6 @@ class ComposedStep {
   std::vector<Dual> dual_;
 };
 
-// Route 1 for a map: position-momentum steps of R_d and of its adjoint R_d^*.
-template <class System, class Map>
-class CompositionStep
-    : public ComposedStep<PositionMomentumStep<System, Map>, PositionMomentumStep<System, Adjoint<Map>>> {
- public:
-  using Plain = PositionMomentumStep<System, Map>;
-  using Dual = PositionMomentumStep<System, Adjoint<Map>>;
-  using Base = ComposedStep<Plain, Dual>;
-
-  CompositionStep(const System& L, const Map& R, double h, std::vector<Substep> substeps, StepOptions options = {})
-      : Base(
-            h, std::move(substeps), [&](double hk) { return Plain(L, R, hk, options); },
-            [&](double hk) { return Dual(L, adjoint(R), hk, options); }) {}
-};
-
 // Route 2: the composed discrete Lagrangian sum_k L_d^{(k)}(q_{k-1}, q_k), solved for
 // all nodes at once.
 template <class System, class Map>
@@ -299,7 +286,7 @@ class ComposedLagrangianStep {
       pair_of(plain_[index_[k]], a, d, D1, D2, J1, J2);
   }
 
-  // One step: the same contract as CompositionStep::step. The nodes start from the
+  // One step: the same contract as ComposedStep::step. The nodes start from the
   // guess split in proportion to the weights; Newton's method by the driver
   // (solvers/newton_driver.h), the Jacobian formed and factored at every iteration.
   StepSummary step(double /*t*/, const V& q0, const V& p0, V& dq, V& dp) const {

@@ -13,7 +13,7 @@
 #include <vector>
 
 #include "solvers/composition_methods.h"
-#include "solvers/manifold_step.h"
+#include "solvers/newton.h"
 
 namespace dvm {
 
@@ -85,19 +85,6 @@ class ComposedPointStep {
   double h_;
   std::vector<double> weights_;
   std::vector<Stage> stages_;
-};
-
-// The position-momentum steps of a map on S^2, (S^2)^n or SO(3), composed; a map that
-// is not symmetric enters with its adjoint (theta -> 1 - theta).
-template <class System, class Map>
-class ComposedManifoldStep : public ComposedPointStep<ManifoldStep<System, Map>> {
- public:
-  using Stage = ManifoldStep<System, Map>;
-  ComposedManifoldStep(const System& L, const Map& R, double h, const std::vector<Substep>& substeps,
-                       StepOptions options = {})
-      : ComposedPointStep<Stage>(
-            h, substeps, [&](double hk) { return Stage(L, R, hk, options); },
-            [&](double hk) { return Stage(L, adjoint_map(R), hk, options); }) {}
 };
 
 }  // namespace dvm

@@ -202,7 +202,11 @@ RunFn<System> dvm_composition(ThetaMap R, const std::string& scheme, bool generi
     if (RunFn<System> f = dvm_separable_newton<System>(R, sub)) return f;
   }
   return [R, sub](const Problem<System>& P, double h, std::int64_t steps, const StateObserver<System::dim>* track) {
-    const CompositionStep<System, ThetaMap> S(P.sys, R, h, sub);
+    // the position-momentum steps of R and of its adjoint map, composed
+    using Plain = PositionMomentumStep<System, ThetaMap>;
+    using Dual = PositionMomentumStep<System, Adjoint<ThetaMap>>;
+    const ComposedStep<Plain, Dual> S(
+        h, sub, [&](double hk) { return Plain(P.sys, R, hk); }, [&](double hk) { return Dual(P.sys, adjoint(R), hk); });
     return run_step(S, P, steps, track);
   };
 }

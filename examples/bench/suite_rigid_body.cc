@@ -7,7 +7,7 @@
 //
 // The dvm methods are the position-momentum steps of the SO(3) maps (Cayley and
 // exponential retractions; midpoint theta = 1/2 and fixed first point theta = 0) and
-// compositions of them (ComposedManifoldStep; a map with theta = 0 enters with its
+// compositions of them (ComposedPointStep; a map with theta = 0 enters with its
 // adjoint, theta = 1). The exponential maps with theta = 0 and 1/2 give the same
 // integrator for this left-invariant Lagrangian (L_d(R0, R1) = h L(log(R0^T R1)/h)),
 // so only the midpoint one is swept. The same holds for the Cayley maps with theta = 0
@@ -75,7 +75,10 @@ RBRun composed(const SO3Map& map, const std::string& scheme) {
   const std::vector<Substep> sub = substeps(find_composition(scheme), map.symmetric());
   return [map, sub](const RigidBody& L, const M3& R0, const V3& Pi0, double h, std::int64_t steps,
                     const RBObserver* obs) {
-    const ComposedManifoldStep<RigidBody, SO3Map> S(L, map, h, sub);
+    // the position-momentum steps of the map (and of its adjoint map), composed
+    using Stage = ManifoldStep<RigidBody, SO3Map>;
+    const ComposedPointStep<Stage> S(
+        h, sub, [&](double hk) { return Stage(L, map, hk); }, [&](double hk) { return Stage(L, adjoint_map(map), hk); });
     return run_rb(S, L, R0, Pi0, steps, obs);
   };
 }

@@ -14,6 +14,7 @@
 #include "solvers/hamiltonian_step.h"
 #include "solvers/manifold_composition.h"
 #include "solvers/manifold_galerkin_step.h"
+#include "tests/composed_steps.h"
 #include "tests/solvers/chart_galerkin_step.h"
 #include "tests/verification/common.h"
 

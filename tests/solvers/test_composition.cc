@@ -12,6 +12,7 @@
 #include "mechanics/systems.h"
 #include "solvers/composition.h"
 #include "solvers/manifold_composition.h"
+#include "tests/composed_steps.h"
 #include "tests/displacement_check.h"
 #include "tests/verification/common.h"
 

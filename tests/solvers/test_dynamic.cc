@@ -83,6 +83,7 @@ void operator delete(void* p, std::size_t, std::align_val_t) noexcept { std::fre
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
 #include "solvers/sode_step.h"
+#include "tests/composed_steps.h"
 #include "tests/verification/common.h"
 #include "tests/random_vector.h"
 #include "tests/solvers/trajectories.h"

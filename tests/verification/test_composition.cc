@@ -8,6 +8,7 @@
 #include <cstdio>
 
 #include "solvers/composition.h"
+#include "tests/composed_steps.h"
 #include "solvers/stability.h"
 #include "tests/verification/common.h"
 

@@ -7,6 +7,7 @@
 
 #include "solvers/manifold_composition.h"
 #include "solvers/manifold_step.h"
+#include "tests/composed_steps.h"
 #include "tests/verification/common.h"
 
 using namespace dvm;
