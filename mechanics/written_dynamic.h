@@ -254,6 +254,9 @@ struct WrittenParts {
   VelocitySplit split;
   Expression kinetic, potential;  // when split.constant_mass: L = kinetic + potential
   bool separable = false;         // constant_mass and M positive definite
+  // L(t, q, v) = v^T M v / 2 + U(t, q) with M constant in q and t (its only structure
+  // read: the SODE and Newmark steps then evaluate L itself at their times)
+  bool timed_constant_mass = false;
   Eigen::VectorXd mass_diagonal;  // M when split.diagonal
   Eigen::VectorXd inverse_mass;   // and its reciprocals (v = p * (1/m): the explicit steps
                                   // carry v in their chain from force to force, where a
@@ -285,10 +288,15 @@ struct WrittenParts {
     w.lagrangian.for_each_variable([&](int block, int index) {
       if (block == 0 && index < n) cyclic[static_cast<std::size_t>(index)] = false;  // (index n: the time)
     });
-    // L(t, q, v): no structure is read off the text (its parts would read t, which the
+    // L(t, q, v): no parts are read off the text (they would read t, which the
     // structured steps and closed forms do not pass); the general path, Newton's
-    // method for v = FL^{-1}(t, q, p)
-    if (w.time_dependent()) return;
+    // method for v = FL^{-1}(t, q, p). Only whether M is constant (t counts as a
+    // coordinate: a kinetic term in t is not constant).
+    if (w.time_dependent()) {
+      const VelocitySplit s = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian));
+      timed_constant_mass = s.constant_mass && s.kinetic_terms > 0;
+      return;
+    }
     split = Expression::split_velocity(w.lagrangian.text(), w.symbols(WrittenSystem::Kind::lagrangian), &kinetic,
                                        &potential);
     if (split.quadratic && !split.constant_mass) {

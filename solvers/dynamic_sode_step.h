@@ -1,7 +1,7 @@
 // The SODE forms (paper Sec. 4) and the Newmark family (Sec. 4.1) for run-time-sized
 // separable systems (mechanics/dynamic_system.h): L(q, v) = v^T M v / 2 - U(q) with M
 // constant and positive definite (n bodies, a written Lagrangian whose text is
-// separable). solvers/sode_step.h states the forms; here they are written once over the
+// separable, U(q) or U(t, q)). solvers/sode_step.h states the forms; here they are written once over the
 // system's gradient and Hessian blocks and solved by newton_drive.
 //
 // The Euler-Lagrange equations of a separable L are the SODE Gamma(q, v) = (v, a(q)),
@@ -48,6 +48,9 @@
 // Newmark (1/2, 1/4) then keep E_1 - E_0 = <F_bar, dq> exactly, and sode2 at 1/2 is the
 // midpoint position-momentum step with its force (solvers/dynamic_step.h) on a
 // separable L.
+// A Lagrangian in t (has_time: v^T M v / 2 - U(t, q), M constant in q and t) is
+// evaluated where the force is, at the sample point's time, and p1 = L_v at t0 + h; its
+// L_q(t, q) then enters the field as a force that depends on q alone would.
 // Adjoints: the sode step of the theta map's adjoint (1 - theta) is the adjoint step
 // (the lift of the adjoint map, Prop. 3.3): theta and theta_v go to 1 - theta and
 // 1 - theta_v; Newmark's adjoint is (1 - gamma, 1/2 - gamma + beta). All are the same
@@ -155,6 +158,7 @@ class SeparableSodeEquation {
   }
   double jacobian(const Vector& dY, Vector& r, Matrix& J) {
     at(dY);
+    if constexpr (has_time<Sys>::value) L_->set_time(sample_time());
     L_->hessian(zq_, zv_, Lq_, Lv_, Lqq_, Lqv_, Lvv_);
     if constexpr (kForced) {
       force_->jacobian(sample_time(), zq_, zv_, Fz_, Fq_, Fv_);
@@ -248,6 +252,7 @@ class SeparableSodeEquation {
   // g(Y) = h Gamma(t, q, v) = h (v, M^{-1} (L_q(q, v) + F(t, q, v))) into (gq, gv); the
   // force in Fz_
   void field(double t, const Vector& q, const Vector& v, Vector& gq, Vector& gv) {
+    if constexpr (has_time<Sys>::value) L_->set_time(t);
     L_->gradient(q, v, Lq_, Lv_);
     if constexpr (kForced) {
       force_->value(t, q, v, Fz_);
@@ -369,7 +374,8 @@ class DynamicSodeStep {
       if (s.converged) {
         w.q1 = q0 + dq;
         w.v1 = w.v0 + w.x.tail(n);
-        L_.gradient(w.q1, w.v1, w.Lq, w.Lv);  // p1 = L_v(q1, v1)
+        if constexpr (has_time<Sys>::value) L_.set_time(t + h_);
+        L_.gradient(w.q1, w.v1, w.Lq, w.Lv);  // p1 = L_v(t + h, q1, v1)
         dp = w.Lv - p0;
         if constexpr (kForced) s.work = w.eq.work(w.x);
         w.last_dv = w.x.tail(n);

@@ -19,7 +19,8 @@
 //   hamiltonian     DynamicHamiltonianThetaStep of the scene's written H, or of H from
 //                   L by the Legendre transform
 //   sode1 / sode2   DynamicSodeStep<Sys> (solvers/dynamic_sode_step.h) through the tangent
-//   / newmark       or Legendre lift of the theta maps, or Newmark's map; separable systems only
+//   / newmark       or Legendre lift of the theta maps, or Newmark's map; separable systems
+//                   only (U(q), or U(t, q) for a written Lagrangian in t)
 //   galerkin        DynamicGalerkinStep<Sys>
 //   composition     ComposedStep of any of these steps, the adjoint stages at 1 - theta
 //                   (Newmark's at (1 - gamma, 1/2 - gamma + beta))
@@ -36,7 +37,8 @@
 //   L(t, q, v)      (a written Lagrangian that reads t) the generic steps above, which
 //                   evaluate L at their nodes' times (has_time); its text is given no
 //                   separable or mechanical structure (WrittenParts), so no structured
-//                   path is taken; the view evaluates it at t_k (after_step)
+//                   path is taken; the view evaluates it at t_k (after_step). The SODE
+//                   and Newmark steps take it where M is constant (sode_applies)
 // Included only by the kernels_*.cc translation units.
 #pragma once
 
@@ -252,6 +254,17 @@ bool dynamic_separable(const Sys& L) {
     return L.separable();
   else
     return (void)L, is_separable_v<Sys>;
+}
+
+// Whether the SODE and Newmark steps (solvers/dynamic_sode_step.h) take the system: a
+// separable one, or a written L(t, q, v) = v^T M v / 2 + U(t, q) with M constant (they
+// evaluate it at their times; M's definiteness is checked when M^{-1} is formed).
+template <class Sys>
+bool sode_applies(const Sys& L) {
+  if constexpr (std::is_same_v<Sys, WrittenDynamic>)
+    return L.separable() || L.parts().timed_constant_mass;
+  else
+    return dynamic_separable(L);
 }
 
 // A written Lagrangian's structure, from its text (WrittenParts): separable when its
@@ -483,15 +496,21 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   auto sode_run = [&](auto force) -> std::unique_ptr<Run> {
     using Force = std::remove_const_t<typename decltype(force)::element_type>;
     const std::string form = "form = \"" + std::string(to_string(me.form)) + "\"";
-    if (!dynamic_separable(L))
+    if (!sode_applies(L))
       throw InputError(pr.origin + ": key 'integrator.form': " + form +
                        " on a system of run-time size needs a separable Lagrangian, "
-                       "v^T M v / 2 - U(q) with M constant (its acceleration's Jacobian then needs second "
-                       "derivatives of L only); " + where + " is not separable (the built-in systems of fixed size "
-                       "run these forms on any Lagrangian)");
+                       "v^T M v / 2 - U(q) or - U(t, q) with M constant (its acceleration's Jacobian then needs "
+                       "second derivatives of L only); " + where + " is not separable (the built-in systems of fixed "
+                       "size run these forms on any Lagrangian)");
     dense_limit("integrator.form: " + form);
     using Step = DynamicSodeStep<Sys, Force>;
-    const auto Minv = Step::mass_inverse(L, q, v0);
+    MassInverse Minv;
+    try {
+      Minv = Step::mass_inverse(L, q, v0);
+    } catch (const std::invalid_argument&) {  // (separable texts are checked when read: only L(t, q, v) here)
+      throw InputError(pr.origin + ": key 'integrator.form': " + form + " needs the constant mass matrix M = "
+                       "d2L/dv2 positive definite; " + where + " has an M that is not");
+    }
     if (me.form == Form::newmark) {
       const Step basic(L, Minv, SodeScheme::newmark(me.newmark_gamma, me.newmark_beta), h, opt, force);
       auto make = [](double hk, const Step& b) { return b.with_step(hk); };

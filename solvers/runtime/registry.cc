@@ -407,23 +407,24 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       factories::written,
       "the coordinates"};
   // A Lagrangian L(t, q, v) (forces or not): the steps that evaluate L at their nodes'
-  // times (the theta step, composed or not, Galerkin, and the Hamiltonian theta step, H
-  // from L at its node's time); with constraints, the constrained step above, which
-  // does too.
+  // times (the theta step, composed or not, Galerkin, the Hamiltonian theta step, H
+  // from L at its node's time, and on v^T M v / 2 - U(t, q) with M constant the SODE
+  // and Newmark steps); with constraints, the constrained step above, which does too.
   static const SystemEntry rn_timed = {
       "lagrangian depending on time",
       "written in the scene, L(t, q, v)",
       Space::euclidean,
       0,
       {},
-      {{Form::lagrangian, Form::hamiltonian},
+      {kAllForms,
        true,
        true,
        true,
        false,
        "a Lagrangian that reads t runs in the lagrangian form (the theta-family maps, their compositions, "
-       "Galerkin) and the hamiltonian form (H(t, q, p) from L at each step's node time); the SODE and Newmark "
-       "forms, boundary values, solver = \"tiny\" and written maps take none",
+       "Galerkin), the hamiltonian form (H(t, q, p) from L at each step's node time) and, on v^T M v / 2 - "
+       "U(t, q) with M constant, the SODE and Newmark forms (L at each sample point's time); boundary values, "
+       "solver = \"tiny\" and written maps take none",
        false,
        false},
       factories::written,

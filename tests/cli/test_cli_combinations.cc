@@ -46,6 +46,7 @@
 
 #include "solvers/runtime/run.h"
 #include "solvers/runtime/scene.h"
+#include "tests/address_sanitizer.h"
 #include "tests/cli/cli_harness.h"
 #include "tests/displacement_check.h"
 
@@ -97,6 +98,11 @@ const std::map<std::string, std::string>& heads() {
       {"lagrangian depending on time",
        "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"exp(0.2*t)*(a_dot^2 + b_dot^2/2 + a_dot*b_dot*cos(a - b) + "
        "2*cos(a) + cos(b)) + 0.3*sin(3*t)*a\"\n[initial]\nq = [0.5, 0.3]\nv = [0.3, -0.2]\n"},
+      // (M constant and not diagonal, U(t, q))
+      {"lagrangian depending on time, separable",
+       "[system]\ncoordinates = [\"a\", \"b\"]\nlagrangian = \"a_dot^2 + a_dot*b_dot/2 + b_dot^2/2 + "
+       "(2 + 0.5*sin(3*t))*cos(a) + cos(b) - 0.3*a*b + 0.4*cos(2*t)*b\"\n[initial]\nq = [0.5, 0.3]\n"
+       "v = [0.3, -0.2]\n"},
       {"lagrangian on S^2",
        "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
        "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
@@ -191,9 +197,14 @@ std::vector<SystemCaps> registry_systems() {
   k.galerkin_gauss = false;
   out.push_back(k);
   // written on R^n in t: the lagrangian form (the theta step, its compositions, Galerkin)
+  // and the hamiltonian form
   SystemCaps td = w;
   td.name = "lagrangian depending on time";
   td.forms = {"lagrangian", "hamiltonian"};
+  out.push_back(td);
+  // and with M constant (v^T M v / 2 - U(t, q)): the SODE and Newmark forms too
+  td.name = "lagrangian depending on time, separable";
+  td.forms = {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"};
   out.push_back(td);
   // written on S^2 and SO(3): the capabilities of the spherical pendulum and the top
   for (const char* space : {"S^2", "SO(3)"}) {
@@ -604,7 +615,8 @@ BOOST_AUTO_TEST_CASE(every_splitting_runs_or_is_refused) {
   // (with constraints: the drifts leave them; in t: no structure is read off the text)
   const std::set<std::string> not_separable = {"double-pendulum", "charged-particle", "lagrangian",
                                                "lagrangian with forces", "lagrangian with forces, separable",
-                                               "lagrangian with constraints", "lagrangian depending on time"};
+                                               "lagrangian with constraints", "lagrangian depending on time",
+                                               "lagrangian depending on time, separable"};
   for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
     const Reference ref = reference_of(head, sys.space);
