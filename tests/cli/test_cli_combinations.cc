@@ -464,6 +464,16 @@ bool is_written_map(const std::string& map) {
 }
 
 const char* kCompositions[] = {"none", "stormer-verlet", "mclachlan4", "kahan-li8", "triple-jump:6"};
+// Under AddressSanitizer the compositions of most stages are left out: the four are
+// symmetric compositions of one kind (solvers/composition_methods.h), each run as the
+// same ComposedStep of the same step type, a stage (and on a map that is not symmetric a
+// half stage of its adjoint) per coefficient; only the coefficients differ. So
+// stormer-verlet (1 coefficient) and mclachlan4 (5) take every path the sanitizers
+// check, and kahan-li8 (17) and triple-jump:6 (9) would take them again. (Each system's
+// reference, kahan-li8 of its space's midpoint map, still runs under the sanitizers.)
+bool sanitized_composition_skipped(const std::string& c) {
+  return dvm_tests::kAddressSanitizer && (c == "kahan-li8" || c == "triple-jump:6");
+}
 const char* kForms[] = {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"};
 
 std::string midpoint_map(const std::string& space) {
@@ -524,6 +534,7 @@ BOOST_AUTO_TEST_CASE(every_combination_runs_or_is_refused_naming_the_keys) {
         for (const char* form : kForms)
           for (const char* comp : kCompositions) {
             const std::string f = form, c = comp;
+            if (sanitized_composition_skipped(c)) continue;
             std::string keys = "form = \"" + f + "\"\n";
             if (!map.empty()) keys += "map = \"" + map + "\"\n";
             if (c != "none") keys += "composition = \"" + c + "\"\n";
