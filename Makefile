@@ -78,8 +78,9 @@ SAN_CXX   := clang++-14
 # object-size (an access beyond the object the compiler sees it in, which
 # AddressSanitizer's redzones already catch for every heap, stack and global object).
 # Each instruments most of the kernels' Eigen and Jet code, which makes a kernel file
-# compile much longer under the sanitizers; time a file with and without a check
-# (clang++-14 with SAN_FLAGS, /usr/bin/time) to weigh another.
+# compile much longer under the sanitizers, and object-size makes the suites run much
+# longer too; time a file with and without a check (clang++-14 with SAN_FLAGS,
+# /usr/bin/time), and a suite in a tree built each way, to weigh another.
 SAN_FLAGS := -O1 -gline-tables-only -fno-omit-frame-pointer -fsanitize=address,undefined \
              -fno-sanitize=alignment,pointer-overflow,vptr,object-size \
              -fno-sanitize-recover=all -DTOML_ASSERT\(expr\)=static_assert\(true\)
