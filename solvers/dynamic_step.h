@@ -591,6 +591,16 @@ class HamiltonianThetaEquation {
     if constexpr (kForced) return F_.dot(y.head(F_.size()));
     return (void)y, 0.0;
   }
+  // dF/dP (2n x n) at the point of the last jacobian(): the columns of the momentum P at
+  // which H is evaluated, [-h H_pp; h H_qp - h F_v H_pp] (the constrained step moves the
+  // start momentum p0, and so P, by its multipliers: solvers/constrained_hamiltonian_step.h).
+  void momentum_columns(Matrix& out) const {
+    const Eigen::Index n = x_.size();
+    out.resize(2 * n, n);
+    out.topRows(n) = -h_ * Hpp_;
+    out.bottomRows(n) = h_ * Hqp_;
+    if constexpr (kForced) out.bottomRows(n).noalias() -= h_ * (Fv_ * Hpp_);
+  }
 
  private:
   void at(const Vector& y) {

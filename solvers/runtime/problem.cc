@@ -225,6 +225,10 @@ void validate(const Problem& pr, const Method& me) {
     if (me.lift == Lift::none && sys.space != Space::euclidean)
       throw InputError(std::string("integrator.lift: lift = \"none\" applies the map to (q, p) in T*Q = R^{2n}; on ") +
                        to_string(sys.space) + " the hamiltonian form takes the cotangent lift (lift = \"cotangent\")");
+    if (me.lift == Lift::none && pr.constrained())
+      throw InputError("integrator.lift: lift = \"none\" applies the map to (q, p) in T*Q = R^{2n}; with "
+                       "system.constraints the hamiltonian form takes the cotangent lift (lift = \"cotangent\"), "
+                       "whose step with multipliers keeps (q, p) on the constraint's cotangent bundle");
   }
 
   // [integrator] composition

@@ -384,7 +384,8 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       factories::written,
       "the coordinates"};
   // With constraints (and forces or not): the constrained theta step (the lagrangian
-  // form of the theta-family maps, composed or not; solvers/constrained_step.h) and
+  // form of the theta-family maps, composed or not; solvers/constrained_step.h), its
+  // Hamiltonian form (the cotangent lift; solvers/constrained_hamiltonian_step.h) and
   // Galerkin with Lobatto quadrature (solvers/constrained_galerkin_step.h; validate
   // refuses Gauss).
   static const SystemEntry rn_constrained = {
@@ -393,15 +394,16 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       Space::euclidean,
       0,
       {},
-      {{Form::lagrangian},
+      {{Form::lagrangian, Form::hamiltonian},
        true,
        true,
        true,
        false,
        "system.constraints enter the lagrangian form of the theta-family maps and their compositions (the "
-       "constrained discrete Euler-Lagrange equations with multipliers) and Galerkin with quadrature = \"lobatto\" "
-       "(the constraints at its nodes); Gauss Galerkin, the hamiltonian, SODE and Newmark forms, boundary values, "
-       "solver = \"tiny\" and written maps take no constraints",
+       "constrained discrete Euler-Lagrange equations with multipliers), their hamiltonian form with the "
+       "cotangent lift (the Hamiltonian step from the momentum moved by the multipliers, then projected) and "
+       "Galerkin with quadrature = \"lobatto\" (the constraints at its nodes); Gauss Galerkin, lift = \"none\", the "
+       "SODE and Newmark forms, boundary values, solver = \"tiny\" and written maps take no constraints",
        false,
        false},
       factories::written,
