@@ -234,20 +234,8 @@ class ConstrainedHamiltonianThetaStep {
       if (s.converged) {
         const double work = w.eq.momentum(w.y, w.dp);
         if constexpr (kForced) s.work = work;
-        const double inv_h = 1.0 / h_;
-        for (int i = 0; i < n; ++i) {
-          w.q1[i] = q0[i] + dq[i];
-          w.p1[i] = p0[i] + w.dp[i];
-          w.v1[i] = dq[i] * inv_h;
-        }
-        const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, momentum_);
-        if (*failed) {
-          s.fail(failed);
-        } else {
-          for (int i = 0; i < n; ++i) dp[i] = w.dp[i];
-          constrained_detail::subtract_normals(w.projection.G, 1.0, w.projection.mu.data(), dp.data());
-          if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
-        }
+        constrained_detail::project_end(s, w.projection, L_, *w.con, momentum_, w.eq.end_time(), h_, q0, p0, dq, w.dp,
+                                        w.q1, w.p1, w.v1, dp);
       }
     } catch (const std::domain_error& e) {
       s.fail(e.what());

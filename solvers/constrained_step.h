@@ -353,6 +353,32 @@ bool right_transform_derivative(const Sys& L, const Con& con, double t1, const Q
   return dp1.allFinite();
 }
 
+// After equation 1 of a constrained step has converged (the position-momentum step here,
+// the Hamiltonian one in solvers/constrained_hamiltonian_step.h): from q1 = q0 + dq and
+// the momentum increment before projection dpt = p1~ - p0, equation 2 at t1 (v1 = dq / h
+// its starting guess), and dp = p1 - p0 = dpt - G1^T mu (without the round-off of
+// forming p1 first); s fails where the projection does. q1, p1, v1: workspace.
+template <class Sys, class Con, class Q, class D>
+void project_end(StepSummary& s, Projection<Sys, Con>& projection, const Sys& L, const Con& con, MomentumMap kind,
+                 double t1, double h, const Q& q0, const Q& p0, const Q& dq, const D& dpt, Eigen::VectorXd& q1,
+                 Eigen::VectorXd& p1, Eigen::VectorXd& v1, Eigen::VectorXd& dp) {
+  const Eigen::Index n = q0.size();
+  const double inv_h = 1.0 / h;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    q1[i] = q0[i] + dq[i];
+    p1[i] = p0[i] + dpt[i];
+    v1[i] = dq[i] * inv_h;
+  }
+  const char* failed = projection(L, con, t1, q1, p1, v1, kind);
+  if (*failed) {
+    s.fail(failed);
+    return;
+  }
+  for (Eigen::Index i = 0; i < n; ++i) dp[i] = dpt[i];
+  subtract_normals(projection.G, 1.0, projection.mu.data(), dp.data());
+  if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
+}
+
 }  // namespace constrained_detail
 
 // The constrained step: equation 1 by the driver, then the projection. Sys: a
@@ -583,21 +609,8 @@ class ConstrainedThetaStep {
       if (s.converged) {
         const double work = w.eq.momentum(w.y, w.dp);
         if constexpr (kForced) s.work = work;
-        const double inv_h = 1.0 / h_;
-        for (int i = 0; i < n; ++i) {
-          w.q1[i] = q0[i] + dq[i];
-          w.p1[i] = p0[i] + w.dp[i];
-          w.v1[i] = dq[i] * inv_h;
-        }
-        const char* failed = w.projection(L_, *w.con, w.eq.end_time(), w.q1, w.p1, w.v1, momentum_);
-        if (*failed) {
-          s.fail(failed);
-        } else {
-          // p1 - p0 = (p1~ - p0) - G1^T mu, without the round-off of forming p1 first
-          for (int i = 0; i < n; ++i) dp[i] = w.dp[i];
-          constrained_detail::subtract_normals(w.projection.G, 1.0, w.projection.mu.data(), dp.data());
-          if (!std::isfinite(dynamic_detail::inf_norm(dp))) s.fail("non-finite momentum");
-        }
+        constrained_detail::project_end(s, w.projection, L_, *w.con, momentum_, w.eq.end_time(), h_, q0, p0, dq, w.dp,
+                                        w.q1, w.p1, w.v1, dp);
       }
     } catch (const std::domain_error& e) {
       s.fail(e.what());
