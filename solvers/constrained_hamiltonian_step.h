@@ -30,8 +30,8 @@
 // = max|J_H| / max|G0| from the first Jacobian on, so that the multiplier's columns and
 // the constraint's rows are of the size of J_H's (J_H is near the identity, dF/dP of the
 // size of h: with one scale for both, as the constrained position-momentum step has, the
-// multiplier's updates would stay above the stopping rule's at round-off). The theta map on T*Q itself (lift = "none") is not
-// constrained here (the runtime refuses it).
+// multiplier's updates would stay above the stopping rule's at round-off). The theta
+// map on T*Q itself (lift = "none") is not constrained here (the runtime refuses it).
 //
 // Workspace is allocated at construction; a step allocates nothing. One object must not
 // be used from two threads at once (copies are independent).

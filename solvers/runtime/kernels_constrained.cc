@@ -17,7 +17,8 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
                                           const std::shared_ptr<const ControlSignal>& signal) {
   // (validate refuses these first)
   const bool hamiltonian = me.form == Form::hamiltonian;
-  if ((me.form != Form::lagrangian && !hamiltonian) || (hamiltonian && (me.galerkin || me.effective_lift() != Lift::cotangent)) ||
+  if ((me.form != Form::lagrangian && !hamiltonian) ||
+      (hamiltonian && (me.galerkin || me.effective_lift() != Lift::cotangent)) ||
       (me.galerkin && me.quadrature != QuadratureKind::lobatto))
     throw InputError(pr.constraints_where + ": constraints enter the lagrangian form of the theta-family maps, "
                      "their hamiltonian form (the cotangent lift) and Lobatto Galerkin only");
