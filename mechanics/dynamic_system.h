@@ -185,9 +185,12 @@ template <class Sys>
   throw DegenerateLagrangianError(msg.str());
 }
 
-// Workspace of the Newton inverse of the Legendre map, sized once. `current`: the
-// derivative blocks held are those at the v returned (Newton stopped on the residual
-// of an evaluation at that v), so a caller that needs them there can reuse them.
+// Workspace of the Newton inverse of the Legendre map: three n x n blocks and a
+// factorisation, sized by the first Newton iteration that needs them (legendre_newton),
+// not before, so that a system whose velocity has a closed form never holds them.
+// `current`: the derivative blocks held are those at the v returned (Newton stopped on
+// the residual of an evaluation at that v), so a caller that needs them there can reuse
+// them.
 struct LegendreWork {
   Eigen::VectorXd Lq, Lv, r;
   Eigen::MatrixXd Lqq, Lqv, Lvv;
@@ -211,6 +214,7 @@ struct LegendreWork {
 template <class Sys>
 void legendre_newton(const Sys& L, const DynIn& q, const DynIn& p, DynOut v, LegendreWork& w) {
   const double scale = std::fmax(1e-300, max_abs(p));
+  if (w.Lvv.rows() != L.dim()) w.resize(L.dim());
   for (int it = 0; it < 50; ++it) {
     L.hessian(q, v, w.Lq, w.Lv, w.Lqq, w.Lqv, w.Lvv);
     w.r = w.Lv - p;

@@ -374,7 +374,6 @@ class WrittenDynamic {
         parts_(parts_of(*system_, mode, tape_)),
         Lq_(system_->dim()),
         Lv_(system_->dim()) {
-    if (parts_->split.quadratic && !parts_->separable) mass_ = Mass(system_->dim(), parts_->mass_program.get());
     if (timed_) time_ = Timed(system_->dim());
   }
 
@@ -392,7 +391,7 @@ class WrittenDynamic {
       parts_->velocity(p, v);
       return true;
     }
-    if (mass_.unit.size() != dim()) return false;  // not quadratic in the velocities
+    if (!parts_->split.quadratic) return false;
     return mass_velocity(q, p, v);
   }
 
@@ -433,6 +432,7 @@ class WrittenDynamic {
                DynMatOut Lvv) const {
     if (timed_) {
       Timed& w = time_;
+      w.size_hessians();
       tape_.hessian(w.load(q, v), w.v.data(), w.gq, w.gv, w.Hqq, w.Hqv, w.Hvv);
       const Eigen::Index n = Lq.size();
       Lq = w.gq.head(n);
@@ -452,7 +452,7 @@ class WrittenDynamic {
   // is its terms of degree 0 in the velocities, which may still name one, as x_dot^0.)
   double energy_at(const DynIn& q, const DynIn& v, const DynIn& p) const {
     if (!system_->energy.empty()) return system_->energy(q.data(), v.data(), p.data());
-    if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - mass_and_potential(q)[mass_.potential];
+    if (parts_->has_mass_entries()) return 0.5 * p.dot(v) - mass_and_potential(q)[mass_work().potential];
     if (parts_->separable) return 0.5 * p.dot(v) - parts_->potential(q.data(), v.data());
     return p.dot(v) - value(q, v);
   }
@@ -474,7 +474,7 @@ class WrittenDynamic {
   }
   // closed_velocity for a text quadratic in the velocities: v = M(q)^{-1} p.
   bool mass_velocity(const DynIn& q, const DynIn& p, DynOut v) const {
-    Mass& m = mass_;
+    Mass& m = mass_work();
     if (parts_->has_mass_entries()) {
       const int n = dim();
       const double* entries = mass_and_potential(q);
@@ -533,7 +533,7 @@ class WrittenDynamic {
   // The entries of M(q), upper triangle row by row, then U(q), evaluated once per q: the
   // run's energy at q_k reads U(q_k) after v = M(q_k)^{-1} p_k was solved there.
   const double* mass_and_potential(const DynIn& q) const {
-    Mass& m = mass_;
+    Mass& m = mass_work();
     if (m.at == q) return m.values.data();
     if (const DerivativeProgram* prog = parts_->mass_program.get()) {
       prog->values(q.data(), nullptr, m.values.data(), m.work.data());
@@ -547,9 +547,16 @@ class WrittenDynamic {
   // The time and the tape's inputs and outputs of n + 1 entries (L(t, q, v) only).
   struct Timed {
     Timed() = default;
-    explicit Timed(int n)
-        : q(Eigen::VectorXd::Zero(n + 1)), v(Eigen::VectorXd::Zero(n + 1)), gq(n + 1), gv(n + 1), Hqq(n + 1, n + 1),
-          Hqv(n + 1, n + 1), Hvv(n + 1, n + 1) {}
+    explicit Timed(int n) : q(Eigen::VectorXd::Zero(n + 1)), v(Eigen::VectorXd::Zero(n + 1)), gq(n + 1), gv(n + 1) {}
+    // the (n + 1) x (n + 1) blocks, at the first Hessian (a run that asks for none, an
+    // explicit step of thousands of coordinates, holds none)
+    void size_hessians() {
+      const Eigen::Index m = q.size();
+      if (Hqq.rows() == m) return;
+      Hqq.resize(m, m);
+      Hqv.resize(m, m);
+      Hvv.resize(m, m);
+    }
     // (q, t) and (v, 0); returns the first
     const double* load(const DynIn& qi, const DynIn& vi) {
       const Eigen::Index n = qi.size();
@@ -567,7 +574,14 @@ class WrittenDynamic {
   dynamic_detail::TapeDerivatives tape_;
   std::shared_ptr<const WrittenParts> parts_;
   mutable Eigen::VectorXd Lq_, Lv_;
-  mutable Mass mass_;    // sized only for a text quadratic in the velocities and not separable
+  // mass_'s workspace for a text quadratic in the velocities and not separable, sized at
+  // its first use (the n x n M(q) and its factorisation: a run refused for its size, or a
+  // copy of L made before any use, holds none)
+  Mass& mass_work() const {
+    if (mass_.unit.size() != dim()) mass_ = Mass(dim(), parts_->mass_program.get());
+    return mass_;
+  }
+  mutable Mass mass_;
   mutable Timed time_;   // sized only for L(t, q, v)
 };
 

@@ -234,14 +234,12 @@ struct DynamicView {
 
   // v = FL^{-1}(q, p) for energy() and constraint_residuals(), in the view's workspace
   const Eigen::VectorXd& velocity_at(const Point& q, const Covector& p) const {
-    if (velocity_.size() != n()) {
-      velocity_.resize(n());
-      legendre_.resize(n());
-    }
+    if (velocity_.size() != n()) velocity_.resize(n());
     dynamic_detail::legendre_inverse(L, q, p, velocity_, legendre_, true);
     return velocity_;
   }
-  // velocity_at's workspace (sized at the first call; a copy of the view has its own)
+  // velocity_at's workspace (sized at the first call, the n x n blocks of Newton's
+  // method only where L's velocity has no closed form; a copy of the view has its own)
   mutable Eigen::VectorXd velocity_ = Eigen::VectorXd();
   mutable dynamic_detail::LegendreWork legendre_ = dynamic_detail::LegendreWork(0);
 };

@@ -19,6 +19,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tests/address_sanitizer.h"
 #include "tests/cli/temp_files.h"
 
 namespace cli_test {
@@ -57,6 +58,18 @@ inline Output run_program(const std::string& program, const std::vector<std::str
 
 // Runs dvm with the arguments.
 inline Output dvm(const std::vector<std::string>& args) { return run_program(dvm_binary(), args); }
+
+// Runs dvm with its address space limited to `mebibytes` (the shell's ulimit -v): a run
+// that forms matrices its method does not need fails (dvm exits 3, std::bad_alloc).
+// Under AddressSanitizer, whose shadow memory alone reserves terabytes of address space,
+// no such limit can be set: there it runs unlimited, and `make test` checks the limit.
+inline Output dvm_within(long mebibytes, const std::vector<std::string>& args) {
+  if (dvm_tests::kAddressSanitizer) return dvm(args);
+  std::vector<std::string> shell = {"-c", "ulimit -v " + std::to_string(mebibytes * 1024) + " && exec \"$0\" \"$@\"",
+                                    dvm_binary()};
+  shell.insert(shell.end(), args.begin(), args.end());
+  return run_program("/bin/sh", shell);
+}
 
 inline std::string scene(const std::string& name) { return std::string(DVM_SCENES) + "/" + name; }
 
