@@ -11,7 +11,9 @@
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
+#include <deque>
 #include <fstream>
+#include <mutex>
 #if defined(__x86_64__) || defined(__i386__)
 #include <xmmintrin.h>
 #endif
@@ -78,6 +80,62 @@ struct FpControls {
   }
 };
 
+// The objects this process compiled and loaded, the most recently used first, each with
+// what it was compiled from (the compiler's command and the C source): a later call
+// for the same source and compiler loads the same object again instead of compiling it
+// (the runs of a sweep, of a convergence study, of a test). At most kKept stay loaded.
+class LoadedObjects {
+ public:
+  static constexpr std::size_t kKept = 16;
+  std::shared_ptr<const void> find(const std::string& key) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = kept_.begin(); it != kept_.end(); ++it)
+      if (it->first == key) {
+        auto found = *it;
+        kept_.erase(it);
+        kept_.push_front(found);
+        return found.second;
+      }
+    return nullptr;
+  }
+  void add(const std::string& key, const std::shared_ptr<const void>& code) {
+    const std::lock_guard<std::mutex> lock(mutex_);
+    for (const auto& k : kept_)
+      if (k.first == key) return;  // loaded by another thread meanwhile
+    kept_.emplace_front(key, code);
+    if (kept_.size() > kKept) kept_.pop_back();
+  }
+
+ private:
+  std::mutex mutex_;
+  std::deque<std::pair<std::string, std::shared_ptr<const void>>> kept_;
+};
+
+LoadedObjects& loaded_objects() {
+  static LoadedObjects objects;
+  return objects;
+}
+
+// The programs calling the functions of the loaded object `code`.
+std::vector<std::shared_ptr<const DerivativeProgram>> bind(const std::vector<const DerivativeProgram*>& programs,
+                                                           const std::shared_ptr<const void>& code) {
+  void* handle = const_cast<void*>(code.get());
+  auto symbol = [&](const std::string& name) {
+    void* f = ::dlsym(handle, name.c_str());
+    if (!f) throw NativeCodeError("compiled derivatives: the compiled code has no " + name);
+    return f;
+  };
+  std::vector<std::shared_ptr<const DerivativeProgram>> out;
+  for (std::size_t k = 0; k < programs.size(); ++k) {
+    const std::string prefix = "dvm_program" + std::to_string(k);
+    auto g = reinterpret_cast<DerivativeProgram::GradientFn>(symbol(prefix + "_gradient"));
+    auto h = programs[k]->has_hessian() ? reinterpret_cast<DerivativeProgram::HessianFn>(symbol(prefix + "_hessian"))
+                                        : nullptr;
+    out.push_back(programs[k]->with_native(g, h, code));
+  }
+  return out;
+}
+
 }  // namespace
 
 std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std::vector<const DerivativeProgram*>& programs,
@@ -90,6 +148,15 @@ std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std
       throw NativeCodeError("compiled derivatives: the text has blocks (a sum over an array, or 16 or more terms "
                             "of one shape written out), which have no C source; their loops run interpreted");
     src += s;
+  }
+  const std::string key = compiler + '\n' + src;
+  auto elapsed = [&] {
+    if (seconds) *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  };
+  if (const std::shared_ptr<const void> code = loaded_objects().find(key)) {
+    auto out = bind(programs, code);
+    elapsed();
+    return out;
   }
   ScratchDirectory dir;
   const std::string c = dir.file("programs.c"), so = dir.file("programs.so");
@@ -138,20 +205,9 @@ std::vector<std::shared_ptr<const DerivativeProgram>> compile_programs(const std
                           "(flush-to-zero or rounding; from flags such as -ffast-math in the compiler command '" +
                           compiler + "'); refused, and the modes restored");
   }
-  auto symbol = [&](const std::string& name) {
-    void* f = ::dlsym(handle, name.c_str());
-    if (!f) throw NativeCodeError("compiled derivatives: the compiled code has no " + name);
-    return f;
-  };
-  std::vector<std::shared_ptr<const DerivativeProgram>> out;
-  for (std::size_t k = 0; k < programs.size(); ++k) {
-    const std::string prefix = "dvm_program" + std::to_string(k);
-    auto g = reinterpret_cast<DerivativeProgram::GradientFn>(symbol(prefix + "_gradient"));
-    auto h = programs[k]->has_hessian() ? reinterpret_cast<DerivativeProgram::HessianFn>(symbol(prefix + "_hessian"))
-                                        : nullptr;
-    out.push_back(programs[k]->with_native(g, h, code));
-  }
-  if (seconds) *seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  auto out = bind(programs, code);
+  loaded_objects().add(key, code);
+  elapsed();
   return out;
 }
 

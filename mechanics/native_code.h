@@ -22,7 +22,10 @@
 // interpreter's results to the bit (tests/mechanics/test_derivative_program.cc). Code
 // whose loading changes the floating-point control modes is refused.
 // A run of the compiler costs tens of milliseconds, once per run (compile_seconds in
-// the run report).
+// the run report), and once per process for a given source and compiler: the process
+// keeps the last 16 objects it loaded, and a later call for one of them binds its
+// functions again (the rows of a sweep, the runs of a convergence study), its
+// compile_seconds then the look-up's.
 //
 // Programs with blocks (sums over arrays) have no C source: their loops over the terms
 // are interpreted already at array speed. compile_programs throws NativeCodeError

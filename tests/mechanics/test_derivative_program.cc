@@ -675,6 +675,51 @@ BOOST_AUTO_TEST_CASE(what_cannot_be_compiled_is_refused) {
   }
 }
 
+// The process keeps the last 16 objects it loaded: the same programs compiled again
+// with the same compiler run no compiler and call the same code; another text, or
+// another compiler command, runs it; the 16 most recent stay, the 17th back is
+// compiled again. A compiler command that logs each run to a file counts them.
+BOOST_AUTO_TEST_CASE(compiled_objects_are_loaded_once_per_process) {
+  BOOST_TEST_REQUIRE(compiler_runs());
+  char pattern[] = "/tmp/dvm-test-compiles-XXXXXX";
+  BOOST_TEST_REQUIRE(::mkdtemp(pattern) != nullptr);
+  const std::string log = std::string(pattern) + "/runs";
+  const std::string counting = "f() { echo run >> '" + log + "'; cc \"$@\"; }; f";
+  auto runs = [&] {
+    std::ifstream in(log);
+    int lines = 0;
+    for (std::string line; std::getline(in, line);) ++lines;
+    return lines;
+  };
+  // a text no other case compiles (another case's object may be kept already)
+  auto program = [](int k) {
+    const auto s = written({"x"}, "x_dot^2/2 - x^4/" + std::to_string(k + 7) + " + " + std::to_string(k) + "*x");
+    return DerivativeProgram::build(s->lagrangian, 1);
+  };
+  const auto P = program(0);
+  const auto A = compile_programs({P.get()}, counting)[0];
+  const auto B = compile_programs({P.get()}, counting)[0];
+  BOOST_TEST(runs() == 1);
+  BOOST_TEST(A->compiled());
+  BOOST_TEST(B->compiled());
+  const double q[1] = {0.7}, v[1] = {-0.3};
+  double ga[2][1], gb[2][1];
+  std::vector<double> w = P->workspace();
+  A->gradient(q, v, ga[0], gb[0], w.data());
+  B->gradient(q, v, ga[1], gb[1], w.data());
+  BOOST_TEST(same_bits(ga[0], ga[1], 1));
+  BOOST_TEST(same_bits(gb[0], gb[1], 1));
+  compile_programs({P.get()}, counting + " ");  // another command: compiled
+  BOOST_TEST(runs() == 2);
+  for (int k = 1; k <= 15; ++k) compile_programs({program(k).get()}, counting);
+  BOOST_TEST(runs() == 17);
+  compile_programs({P.get()}, counting + " ");  // the 16th most recent: kept
+  BOOST_TEST(runs() == 17);
+  compile_programs({P.get()}, counting);  // the 17th: compiled again
+  BOOST_TEST(runs() == 18);
+  std::filesystem::remove_all(pattern);
+}
+
 // What compiling can meet on a machine, each refused with what to do and nothing left
 // behind: $TMPDIR that does not exist or holds a quote, a compiler killed by a signal,
 // compiled code that cannot be loaded; the scratch directory is gone after a success
@@ -688,9 +733,13 @@ BOOST_AUTO_TEST_CASE(native_compilation_failures_name_their_cause_and_leave_noth
   BOOST_TEST_REQUIRE(::mkdtemp(pattern) != nullptr);
   const std::string tmp = pattern;
   const auto empty = [&] { return std::filesystem::is_empty(tmp); };
-  const auto refused = [&](const std::string& cc, const std::string& says) {
+  // (the TMPDIR cases compile a text of their own: P, compiled once, is loaded already,
+  // and its next compilation would write nothing)
+  const auto Q = DerivativeProgram::build(written({"x"}, "x_dot^2/2 - x^6")->lagrangian, 1);
+  BOOST_TEST_REQUIRE(Q != nullptr);
+  const auto refused = [&](const std::string& cc, const std::string& says, const DerivativeProgram* program = nullptr) {
     try {
-      compile_programs({P.get()}, cc);
+      compile_programs({program ? program : P.get()}, cc);
       BOOST_ERROR("compiled with '" << cc << "'");
     } catch (const NativeCodeError& e) {
       BOOST_TEST(std::string(e.what()).find(says) != std::string::npos, e.what());
@@ -711,11 +760,11 @@ BOOST_AUTO_TEST_CASE(native_compilation_failures_name_their_cause_and_leave_noth
   }
   {
     const dvm_test::ScopedEnv t("TMPDIR", tmp + "/missing");
-    refused(default_c_compiler(), "set TMPDIR to a writable directory");
+    refused(default_c_compiler(), "set TMPDIR to a writable directory", Q.get());
   }
   {
     const dvm_test::ScopedEnv t("TMPDIR", tmp + "/it's");
-    refused(default_c_compiler(), "TMPDIR contains a quote");
+    refused(default_c_compiler(), "TMPDIR contains a quote", Q.get());
   }
   std::filesystem::remove_all(tmp);
 }
