@@ -31,7 +31,8 @@
 // for each of the thousands of runs); a run refused with InputError counts as exit 2 with
 // its message, a failed one as exit 3. The registries are read from the program's
 // listings, and every reference run also through the program, whose JSON must equal the
-// library's.
+// library's. The convergence studies run in this process too (converge, converge_json),
+// each system's first also through `dvm converge`.
 #define BOOST_TEST_MODULE cli_combinations
 #include <boost/test/unit_test.hpp>
 
@@ -44,6 +45,7 @@
 #include <string>
 #include <vector>
 
+#include "solvers/runtime/converge.h"
 #include "solvers/runtime/run.h"
 #include "solvers/runtime/scene.h"
 #include "tests/address_sanitizer.h"
@@ -309,6 +311,25 @@ Output run_scene_text(const std::string& text) {
     const dvm::RunReport r = run->execute(&rec);
     o.out = dvm::report_json(r) + "\n";
     o.status = r.failed || r.output_error ? 3 : 0;
+  } catch (const dvm::InputError& e) {
+    o.status = 2;
+    o.err = std::string("dvm: ") + e.what() + "\n";
+  }
+  return o;
+}
+
+// `dvm converge SCENE --steps-list N1,N2,... --json` on a scene text, in this process
+// (what the program does for it: load_scene_text, converge, converge_json): status 0
+// (the study's JSON on out), 2 (bad input: the message on err), or 3 (a run failed).
+Output converge_scene_text(const std::string& text, const std::vector<std::int64_t>& steps) {
+  Output o{0, "", ""};
+  try {
+    const dvm::Scene s = dvm::load_scene_text(text, "conv.toml", {});
+    dvm::ConvergeOptions options;
+    options.steps_list = steps;
+    const dvm::ConvergeReport r = dvm::converge(s.problem, s.method, options);
+    o.out = dvm::converge_json(r) + "\n";
+    o.status = r.failure.empty() ? 0 : 3;
   } catch (const dvm::InputError& e) {
     o.status = 2;
     o.err = std::string("dvm: ") + e.what() + "\n";
@@ -697,18 +718,38 @@ BOOST_AUTO_TEST_CASE(every_lift_and_theta_per_stage_runs_or_is_refused) {
 }
 
 // dvm converge on every form, on every space, composed: a table whose runs used the
-// method asked for (the order measured is the method's), or exit 2 naming the keys.
+// method asked for (the order measured is the method's), or exit 2 naming the keys. The
+// studies run in this process, as the scenes of the cross product do; each system's
+// first combination also through `dvm converge`, whose JSON must equal the library's
+// (the runs' wall times aside) and whose exit status must be the same.
 BOOST_AUTO_TEST_CASE(converge_runs_every_combination_or_refuses_it) {
+  int studied = 0, refused = 0, through = 0;
   for (const SystemCaps& sys : registry_systems()) {
     const std::string head = heads().at(sys.name);
+    bool through_dvm = true;
     for (const char* form : kForms)
       for (const char* comp : {"none", "stormer-verlet"}) {
         const std::string f = form, c = comp;
         std::string keys = "form = \"" + f + "\"\nmap = \"" + midpoint_map(sys.space) + "\"\n";
         if (c != "none") keys += "composition = \"" + c + "\"\n";
         const bool supported = sys.forms.count(f) && (c == "none" || sys.composition);
-        const Output o = cli_test::dvm({"converge", write_scene("conv.toml", head + integrator(keys)), "--steps-list", "2,4",
-                              "--json"});
+        const std::string text = head + integrator(keys);
+        const Output o = converge_scene_text(text, {2, 4});
+        if (through_dvm) {
+          through_dvm = false;
+          ++through;
+          const Output d = cli_test::dvm({"converge", write_scene("conv.toml", text), "--steps-list", "2,4", "--json"});
+          BOOST_TEST_CONTEXT(sys.name << " dvm converge form=" << f << " composition=" << c << "\n" << d.err) {
+            BOOST_TEST(d.status == o.status);
+            BOOST_TEST(d.err.find(o.err) != std::string::npos, o.err);
+            if (d.status == 0 && !std::getenv("DVM_TEST_BINARY")) {  // another build may differ
+              Json a = parse_json(d.out), b = parse_json(o.out);
+              for (Json* j : {&a, &b})
+                for (Json& row : j->at("runs")) row.erase("wall_seconds");
+              BOOST_TEST(a == b, "dvm converge and the library differ:\n" << a.dump(2) << "\n" << b.dump(2));
+            }
+          }
+        }
         BOOST_TEST_CONTEXT(sys.name << " converge form=" << f << " composition=" << c << "\n" << o.err << o.out) {
           if (supported) {
             BOOST_TEST(o.status == 0);
@@ -716,13 +757,19 @@ BOOST_AUTO_TEST_CASE(converge_runs_every_combination_or_refuses_it) {
             BOOST_TEST(j.at("form") == f);
             BOOST_TEST(j.at("composition") == c);
             BOOST_TEST(j.contains("fitted_order"));
+            ++studied;
           } else {
             BOOST_TEST(o.status == 2);
             BOOST_TEST(names_a_key(o.err));
+            ++refused;
           }
         }
       }
   }
+  BOOST_TEST_MESSAGE(studied << " studies, " << refused << " refused, " << through << " through dvm converge");
+  BOOST_TEST(studied >= 100);
+  BOOST_TEST(refused >= 10);
+  BOOST_TEST(through == static_cast<int>(registry_systems().size()));
 }
 
 // The check itself, on a real run's numbers: it passes the run and fails the same run
