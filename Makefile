@@ -12,7 +12,7 @@
 #               every kernel) with AddressSanitizer and UndefinedBehaviorSanitizer (in
 #               build-sanitize/) and run them
 #   make fuzz   build the libFuzzer targets with clang in the sanitizer build and run
-#               each for FUZZ_SECONDS (default 60) from the seed corpus in
+#               each for FUZZ_SECONDS (default 60), side by side, from the seed corpus in
 #               tests/fuzz/corpus; fails on a crash, leak or undefined behaviour (the
 #               input is kept in build-sanitize/ as crash-*, leak-* or timeout-*)
 PKGS  := cmake g++ make libeigen3-dev libceres-dev libboost-test-dev libboost-dev libtomlplusplus-dev
@@ -182,20 +182,33 @@ sanitize: fuzz-deps
 fuzz-deps: deps
 	$(call install_missing,$(FUZZ_PKGS))
 
-# Each target runs from a scratch copy of its corpus (new inputs land in
-# build-sanitize/, the committed seeds stay as they are); libFuzzer exits non-zero on
-# a finding (the input is kept in build-sanitize/ as crash-*, leak-* or timeout-*).
+# The two targets run side by side, one a core, each for FUZZ_SECONDS, from a scratch copy
+# of its corpus (new inputs land in build-sanitize/, the committed seeds stay as they
+# are); each writes its log to build-sanitize/fuzz-TARGET.log, whose final statistics
+# are printed after both stop, and all of it for a target that failed. libFuzzer exits non-zero on a
+# finding (the input is kept in build-sanitize/ as crash-*, leak-* or timeout-*), and
+# so does this step.
+FUZZ_TARGETS := scene expression
 fuzz: fuzz-deps
 	$(SAN_CONFIGURE)
-	cmake --build $(SAN_BUILD) -j $(JOBS) --target fuzz_scene fuzz_expression
-	@for t in scene expression; do \
+	cmake --build $(SAN_BUILD) -j $(JOBS) --target $(addprefix fuzz_,$(FUZZ_TARGETS))
+	@pids=""; for t in $(FUZZ_TARGETS); do \
 	  mkdir -p $(SAN_BUILD)/corpus-$$t && \
-	  echo "fuzzing $$t for $(FUZZ_SECONDS) s" && \
-	  ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
-	  ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=$(FUZZ_TIMEOUT) -rss_limit_mb=2048 -max_len=$(FUZZ_MAX_LEN) \
-	    -print_final_stats=1 -artifact_prefix=$(SAN_BUILD)/$$t- \
-	    $(SAN_BUILD)/corpus-$$t tests/fuzz/corpus/$$t || exit 1; \
-	done
+	  echo "fuzzing $$t for $(FUZZ_SECONDS) s (log: $(SAN_BUILD)/fuzz-$$t.log)" && \
+	  { ASAN_OPTIONS=detect_leaks=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+	    ./$(SAN_BUILD)/tests/fuzz/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=$(FUZZ_TIMEOUT) -rss_limit_mb=2048 -max_len=$(FUZZ_MAX_LEN) \
+	      -print_final_stats=1 -artifact_prefix=$(SAN_BUILD)/$$t- \
+	      $(SAN_BUILD)/corpus-$$t tests/fuzz/corpus/$$t > $(SAN_BUILD)/fuzz-$$t.log 2>&1 & } ; \
+	  pids="$$pids $$t:$$!"; \
+	done; \
+	failed=""; for tp in $$pids; do \
+	  t=$${tp%%:*}; if ! wait $${tp#*:}; then failed="$$failed $$t"; fi; \
+	done; \
+	for t in $(FUZZ_TARGETS); do \
+	  echo "== fuzz_$$t"; \
+	  case " $$failed " in *" $$t "*) cat $(SAN_BUILD)/fuzz-$$t.log ;; *) grep -E '^(Done |stat::)' $(SAN_BUILD)/fuzz-$$t.log ;; esac; \
+	done; \
+	if [ -n "$$failed" ]; then echo "fuzzing failed:$$failed"; exit 1; fi
 
 clean:
 	rm -rf $(BUILD) $(TEST_BUILD) $(SAN_BUILD)
