@@ -859,13 +859,15 @@ void check_toml_text(const std::string& text, const std::string& path) {
            ((static_cast<unsigned char>(text[i + 2]) & 0x3Fu) << 6) | (static_cast<unsigned char>(text[i + 3]) & 0x3Fu),
       len = 4;
     }
-    const std::string where = path + ":" + std::to_string(line) + ":" + std::to_string(column) + ": ";
-    if (cp == 0) throw InputError(where + "a NUL character; expected TOML text");
+    // (the position's text only for a message: formed for every character, it was most
+    // of the time of reading a large scene)
+    auto where = [&] { return path + ":" + std::to_string(line) + ":" + std::to_string(column) + ": "; };
+    if (cp == 0) throw InputError(where() + "a NUL character; expected TOML text");
     if ((cp >= 0xA1 && cp <= 0x499) || (cp >= 0x2C5E && cp <= 0x2FFF) || (cp >= 0x3001 && cp <= 0x3057) ||
         (cp >= 0xFB26 && cp <= 0xFEFE)) {
       char u[16];
       std::snprintf(u, sizeof u, "U+%04X", static_cast<unsigned>(cp));
-      throw InputError(where + "the character " + u + ", which the TOML parser in use (toml++ 3.3) cannot read "
+      throw InputError(where() + "the character " + u + ", which the TOML parser in use (toml++ 3.3) cannot read "
                        "safely (nor any in U+00A1-U+0499, U+2C5E-U+2FFF, U+3001-U+3057, U+FB26-U+FEFE); expected other "
                        "text (ASCII is always fine)");
     }
