@@ -65,8 +65,11 @@ SAN_CXX   := clang++-14
 # -gline-tables-only keeps file:line in the symbolized stack traces without full debug
 # information (which costs much more compile time and memory).
 # -O1, not -O2: under the sanitizers -O1 compiles the kernels faster, and the suites run
-# longer by less than that saves; time `make sanitize` from a fresh clone with each to
-# compare (/usr/bin/time; SAN_FLAGS on the command line).
+# longer by less than that saves. Not -O0 for the runtime's kernels either: they compile
+# faster, but the CLI suites, which run them in every dvm process, then take far longer
+# than that saves. Time `make sanitize` from a fresh clone with each to compare
+# (/usr/bin/time; SAN_FLAGS on the command line, or an -O level on dvm_runtime for the
+# Sanitize configuration in solvers/CMakeLists.txt).
 # toml++'s internal debug assertions are off, as in the shipped (NDEBUG, g++) build, where
 # they are no-ops: the sanitizers and fuzzers check what ships. (Without NDEBUG this also
 # keeps TOML_ASSERT_ASSUME from becoming clang's __builtin_assume.) Several of them fail
