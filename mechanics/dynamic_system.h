@@ -279,7 +279,7 @@ Eigen::VectorXd legendre_inverse(const Sys& L, const DynIn& q, const DynIn& p, c
   }
   if constexpr (has_runtime_velocity<Sys>::value)
     if (L.closed_velocity(q, p, v)) return v;
-  dynamic_detail::LegendreWork w(L.dim());
+  dynamic_detail::LegendreWork w;  // sized by legendre_newton, which alone uses it
   dynamic_detail::legendre_inverse(L, q, p, v, w);
   return v;
 }
