@@ -1,9 +1,11 @@
 // Sweep tables compared across runs of dvm sweep (test_cli_sweep, test_cli_sweep_mpi):
-// the JSON and CSV without the fields that measure time, the CSV as cells.
+// the JSON and CSV without the fields that measure time, the CSV as cells; and long
+// runs sized by the speed of the build under test, for the sweeps those suites stop.
 #pragma once
 
 #include <boost/test/unit_test.hpp>
 
+#include <algorithm>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -66,6 +68,26 @@ inline std::vector<std::vector<std::string>> untimed_csv(const std::string& text
     for (std::size_t k : {wall, cpu})
       if (k < rows[i].size()) rows[i][k].clear();
   return rows;
+}
+
+// The step count that makes a run of `scene_head` followed by that count last about
+// `seconds` on the machine and build running the test, and never fewer than
+// `probe_steps`: measured by the fastest of three runs of `probe_steps` steps (a probe
+// slowed by the machine's other work would size the runs too short for a quieter moment
+// after it). A fixed count is not enough for a test that must stop a sweep midway: the
+// same count runs many times faster in one build (or machine) than in another.
+inline long steps_lasting(const std::string& scene_head, double seconds, long probe_steps = 200000) {
+  const std::string probe = write_scene("probe.toml", scene_head + std::to_string(probe_steps) + "\n");
+  double probe_seconds = 1e30;
+  for (int i = 0; i < 3; ++i) {
+    const Output timed = dvm({"run", probe, "--json", "--no-output"});
+    BOOST_TEST_REQUIRE(timed.status == 0, timed.err);
+    probe_seconds = std::min(probe_seconds, parse_json(timed.out).at("wall_seconds").get<double>());
+  }
+  probe_seconds = std::max(probe_seconds, 1e-3);
+  const long steps = std::max(probe_steps, static_cast<long>(seconds * static_cast<double>(probe_steps) / probe_seconds));
+  BOOST_TEST_MESSAGE("runs of " << steps << " steps");
+  return steps;
 }
 
 }  // namespace cli_test

@@ -138,19 +138,7 @@ BOOST_AUTO_TEST_CASE(a_sweep_stopped_on_ranks_resumes) {
   const std::string scene_head =
       "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
       "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = ";
-  const long probe_steps = 200000;
-  const std::string probe = write_scene("probe.toml", scene_head + std::to_string(probe_steps) + "\n");
-  // the fastest of three probes: a probe slowed by the machine's other work would size
-  // the runs too short for a quieter moment after it
-  double probe_seconds = 1e30;
-  for (int i = 0; i < 3; ++i) {
-    const Output timed = dvm({"run", probe, "--json", "--no-output"});
-    BOOST_TEST_REQUIRE(timed.status == 0, timed.err);
-    probe_seconds = std::min(probe_seconds, parse_json(timed.out).at("wall_seconds").get<double>());
-  }
-  probe_seconds = std::max(probe_seconds, 1e-3);
-  const long steps = std::max(probe_steps, static_cast<long>(static_cast<double>(probe_steps) / probe_seconds));
-  BOOST_TEST_MESSAGE("long runs of " << steps << " steps");
+  const long steps = steps_lasting(scene_head, 1.0);
   const std::string s = write_scene("long.toml", scene_head + std::to_string(steps) + "\n");
   const std::vector<std::string> args = {"sweep", s, "--vary", "integrator.step=log:0.0005:0.002:8", "--vary",
                                          "integrator.max_iterations=[25, 1]"};
