@@ -70,6 +70,8 @@ SAN_CXX   := clang++-14
 # than that saves. Time `make sanitize` from a fresh clone with each to compare
 # (/usr/bin/time; SAN_FLAGS on the command line, or an -O level on dvm_runtime for the
 # Sanitize configuration in solvers/CMakeLists.txt).
+# The kernels of the fixed-size built-ins compile without the instrumentation
+# (dvm_fixed_size_kernels in solvers/CMakeLists.txt says why and which).
 # toml++'s internal debug assertions are off, as in the shipped (NDEBUG, g++) build, where
 # they are no-ops: the sanitizers and fuzzers check what ships. (Without NDEBUG this also
 # keeps TOML_ASSERT_ASSUME from becoming clang's __builtin_assume.) Several of them fail
