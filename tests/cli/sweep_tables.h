@@ -70,14 +70,18 @@ inline std::vector<std::vector<std::string>> untimed_csv(const std::string& text
   return rows;
 }
 
-// The step count that makes a run of `scene_head` followed by that count last about
-// `seconds` on the machine and build running the test, and never fewer than
-// `probe_steps`: measured by the fastest of three runs of `probe_steps` steps (a probe
-// slowed by the machine's other work would size the runs too short for a quieter moment
-// after it). A fixed count is not enough for a test that must stop a sweep midway: the
-// same count runs many times faster in one build (or machine) than in another.
-inline long steps_lasting(const std::string& scene_head, double seconds, long probe_steps = 200000) {
-  const std::string probe = write_scene("probe.toml", scene_head + std::to_string(probe_steps) + "\n");
+// A scene of the midpoint pendulum whose run lasts about `seconds` on the machine and
+// build running the test, written as `name`: its step count measured by the fastest of
+// three runs of a probe (a probe slowed by the machine's other work would size the run
+// too short for a quieter moment after it), never fewer than the probe's. A fixed count
+// is not enough for a test that must stop a sweep midway: the same count runs many times
+// faster in one build (or machine) than in another.
+inline std::string write_long_pendulum(const std::string& name, double seconds) {
+  const std::string head =
+      "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
+      "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = ";
+  const long probe_steps = 200000;
+  const std::string probe = write_scene("probe.toml", head + std::to_string(probe_steps) + "\n");
   double probe_seconds = 1e30;
   for (int i = 0; i < 3; ++i) {
     const Output timed = dvm({"run", probe, "--json", "--no-output"});
@@ -87,7 +91,7 @@ inline long steps_lasting(const std::string& scene_head, double seconds, long pr
   probe_seconds = std::max(probe_seconds, 1e-3);
   const long steps = std::max(probe_steps, static_cast<long>(seconds * static_cast<double>(probe_steps) / probe_seconds));
   BOOST_TEST_MESSAGE("runs of " << steps << " steps");
-  return steps;
+  return write_scene(name, head + std::to_string(steps) + "\n");
 }
 
 }  // namespace cli_test

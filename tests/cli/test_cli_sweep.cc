@@ -393,12 +393,10 @@ BOOST_AUTO_TEST_CASE(the_stability_thresholds_of_dvm_methods_are_those_of_the_st
 // its timings are those of the killed sweep), the others run, and the table equals
 // the one of the same sweep never stopped, row for row, but for the timings.
 BOOST_AUTO_TEST_CASE(a_sweep_killed_midway_and_resumed_equals_the_uninterrupted_one) {
-  // 16 runs of midpoint steps, each lasting about a twentieth of a second in the build
-  // under test (the 1 ms polls below see the table grow row by row); those with one
-  // Newton iteration fail at step 0
-  const std::string head = "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
-                           "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = ";
-  const std::string s = write_scene("long.toml", head + std::to_string(steps_lasting(head, 0.05)) + "\n");
+  // 16 runs of the pendulum, each long beside the poll interval below in the build
+  // under test, so that the polls see the table grow row by row; those with one Newton
+  // iteration fail at step 0
+  const std::string s = write_long_pendulum("long.toml", 0.05);
   const std::vector<std::string> args = {"sweep", s, "--jobs", "1", "--vary", "integrator.step=log:0.0005:0.002:8",
                                          "--vary", "integrator.max_iterations=[25, 1]"};
   auto with = [&](std::vector<std::string> extra) {

@@ -135,11 +135,7 @@ BOOST_AUTO_TEST_CASE(errors_against_a_reference_run_are_the_same_on_ranks) {
 // steps it had took a quarter of a second a run, and every row was written before the
 // ranks stopped.
 BOOST_AUTO_TEST_CASE(a_sweep_stopped_on_ranks_resumes) {
-  const std::string scene_head =
-      "[system]\nbuiltin = \"pendulum\"\n[initial]\nq = [1.0]\np = [0.0]\n"
-      "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = ";
-  const long steps = steps_lasting(scene_head, 1.0);
-  const std::string s = write_scene("long.toml", scene_head + std::to_string(steps) + "\n");
+  const std::string s = write_long_pendulum("long.toml", 1.0);
   const std::vector<std::string> args = {"sweep", s, "--vary", "integrator.step=log:0.0005:0.002:8", "--vary",
                                          "integrator.max_iterations=[25, 1]"};
   std::vector<std::string> whole = args, cut = args;
