@@ -10,14 +10,14 @@
 namespace dvm::factories {
 
 namespace {
-using Sys = kernels::BuiltinOrWritten<HeavyTop>;
+using TopSystem = kernels::BuiltinOrWritten<HeavyTop>;
 }  // namespace
 
 std::unique_ptr<Run> heavy_top(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
   const HeavyTop L(kernels::V3(P.at("I1"), P.at("I2"), P.at("I3")), P.at("m"), P.at("g"),
                    kernels::V3(P.at("chi1"), P.at("chi2"), P.at("chi3")));
-  return kernels::make_manifold_run<kRotationParts, Sys, SO3Map, HeavyTop>(kernels::as_builtin(L),
+  return kernels::make_manifold_run<kRotationParts, TopSystem, SO3Map, HeavyTop>(kernels::as_builtin(L),
                                                                               kernels::so3_map(me), pr, me, L);
 }
 
@@ -25,13 +25,13 @@ std::unique_ptr<Run> rigid_body(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
   const RigidBody body(kernels::V3(P.at("I1"), P.at("I2"), P.at("I3")));  // checks the moments
   const HeavyTop top(body.inertia, 1.0, 0.0, kernels::V3::Zero());
-  return kernels::make_manifold_run<kRotationParts, Sys, SO3Map, RigidBody>(kernels::as_builtin(top),
+  return kernels::make_manifold_run<kRotationParts, TopSystem, SO3Map, RigidBody>(kernels::as_builtin(top),
                                                                                kernels::so3_map(me), pr, me, body);
 }
 
 std::unique_ptr<Run> written_rotation(const Problem& pr, const Method& me) {
   const WrittenManifoldLagrangian<SO3> L(pr.written);
-  return kernels::make_manifold_run<kRotationParts, Sys, SO3Map, WrittenManifoldLagrangian<SO3>>(
+  return kernels::make_manifold_run<kRotationParts, TopSystem, SO3Map, WrittenManifoldLagrangian<SO3>>(
       kernels::as_written<HeavyTop>(L), kernels::so3_map(me), pr, me, L);
 }
 

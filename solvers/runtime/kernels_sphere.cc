@@ -6,19 +6,19 @@
 namespace dvm::factories {
 
 namespace {
-using Sys = kernels::BuiltinOrWritten<SphericalPendulum>;
+using SphereSystem = kernels::BuiltinOrWritten<SphericalPendulum>;
 }  // namespace
 
 std::unique_ptr<Run> spherical_pendulum(const Problem& pr, const Method& me) {
   const auto& P = pr.params;
   const SphericalPendulum L(P.at("m"), P.at("l"), P.at("g"));
-  return kernels::make_manifold_run<kSphereParts, Sys, SphereMap, SphericalPendulum>(
+  return kernels::make_manifold_run<kSphereParts, SphereSystem, SphereMap, SphericalPendulum>(
       kernels::as_builtin(L), kernels::sphere_map(me), pr, me, L);
 }
 
 std::unique_ptr<Run> written_sphere(const Problem& pr, const Method& me) {
   const WrittenManifoldLagrangian<Sphere> L(pr.written);
-  return kernels::make_manifold_run<kSphereParts, Sys, SphereMap, WrittenManifoldLagrangian<Sphere>>(
+  return kernels::make_manifold_run<kSphereParts, SphereSystem, SphereMap, WrittenManifoldLagrangian<Sphere>>(
       kernels::as_written<SphericalPendulum>(L), kernels::sphere_map(me), pr, me, L);
 }
 

@@ -83,7 +83,7 @@ std::string Method::label() const {
 
 namespace {
 
-std::string fmt(double x) {
+std::string fmt_exact(double x) {
   std::ostringstream out;
   out.precision(17);
   out << x;
@@ -184,7 +184,7 @@ void validate(const Problem& pr, const Method& me) {
                        " lives on " + to_string(sys.space) + "; expected one of: " + fitting);
     }
     if (!(me.theta >= 0.0 && me.theta <= 1.0))
-      throw InputError("integrator.theta: got " + fmt(me.theta) + ", expected a number in [0, 1]");
+      throw InputError("integrator.theta: got " + fmt_exact(me.theta) + ", expected a number in [0, 1]");
     if (!m.takes_theta && me.theta != m.theta)
       throw InputError("integrator.theta: theta applies only to " + theta_map_names() + ", not \"" + m.name + "\"");
     if ((m.family == MapFamily::retraction_theta || m.family == MapFamily::written) && !caps.retraction_maps)
@@ -202,8 +202,8 @@ void validate(const Problem& pr, const Method& me) {
     if (m.family == MapFamily::written && !me.written_map->is_retraction() && me.theta != m.theta)
       throw InputError("integrator.theta: theta applies to a written retraction, not to a map written as q0 and q1");
     if (m.family == MapFamily::written && me.written_map->is_retraction() && me.theta != me.written_map->theta())
-      throw InputError("integrator.theta: " + fmt(me.theta) + " is not the written retraction's theta " +
-                       fmt(me.written_map->theta()));
+      throw InputError("integrator.theta: " + fmt_exact(me.theta) + " is not the written retraction's theta " +
+                       fmt_exact(me.written_map->theta()));
   }
 
   // [integrator] lift
@@ -300,9 +300,9 @@ void validate(const Problem& pr, const Method& me) {
   // [integrator] newmark
   if (me.form == Form::newmark) {
     if (!(me.newmark_gamma >= 0.0 && me.newmark_gamma <= 1.0))
-      throw InputError("integrator.gamma: got " + fmt(me.newmark_gamma) + ", expected a number in [0, 1]");
+      throw InputError("integrator.gamma: got " + fmt_exact(me.newmark_gamma) + ", expected a number in [0, 1]");
     if (!(me.newmark_beta >= 0.0 && me.newmark_beta <= 0.5))
-      throw InputError("integrator.beta: got " + fmt(me.newmark_beta) + ", expected a number in [0, 0.5]");
+      throw InputError("integrator.beta: got " + fmt_exact(me.newmark_beta) + ", expected a number in [0, 0.5]");
   }
 
   // the solve of each step
@@ -320,7 +320,7 @@ void validate(const Problem& pr, const Method& me) {
     throw InputError("integrator.max_iterations: got " + std::to_string(me.max_iterations) +
                      ", expected a whole number from 1 to 1000");
   if (!(me.tolerance > 0.0 && me.tolerance < 1.0))
-    throw InputError("integrator.tolerance: got " + fmt(me.tolerance) +
+    throw InputError("integrator.tolerance: got " + fmt_exact(me.tolerance) +
                      ", expected a number in (0, 1) (relative residual tolerance)");
 
   // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative,
@@ -352,14 +352,14 @@ void validate(const Problem& pr, const Method& me) {
 
   // the time grid
   if (!(pr.step > 0.0) || !std::isfinite(pr.step))
-    throw InputError("integrator.step: got " + fmt(pr.step) + ", expected a positive number");
+    throw InputError("integrator.step: got " + fmt_exact(pr.step) + ", expected a positive number");
   if (!pr.boundary_value) {
     if (pr.steps < 1) throw InputError("integrator.steps: got " + std::to_string(pr.steps) + ", expected at least 1");
     if (pr.steps > kMaxSteps)
       throw InputError("integrator.steps: got " + std::to_string(pr.steps) + " steps, expected at most 2^53 = " +
                        std::to_string(kMaxSteps) + " (beyond that the step index is not exact in t = k h)");
     if (!std::isfinite(static_cast<double>(pr.steps) * pr.step))
-      throw InputError("integrator.steps: " + std::to_string(pr.steps) + " steps of " + fmt(pr.step) +
+      throw InputError("integrator.steps: " + std::to_string(pr.steps) + " steps of " + fmt_exact(pr.step) +
                        " overflow the time (t_end = inf); expected a finite t_end");
   }
 
@@ -386,7 +386,7 @@ void validate(const Problem& pr, const Method& me) {
                                    std::pow(pr.q[k + 2] + pr.q_final[k + 2], 2));
       if (!(sum > 1e-12))
         throw InputError("problem.q_final: " + std::string(nq > 3 ? "link " + std::to_string(k / 3 + 1) + " is " : "") +
-                         "antipodal to initial.q (|q_final + q| = " + fmt(sum) +
+                         "antipodal to initial.q (|q_final + q| = " + fmt_exact(sum) +
                          ", within 1e-12): every great circle joins the two points, so no path between them is "
                          "singled out; expected end points that are not antipodal");
     }
