@@ -34,6 +34,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -240,7 +241,10 @@ class ExplicitSplittingStep {
   Eigen::Index n_;
   std::vector<Op> ops_;
   bool fsal_ = false;
-  Eigen::LLT<Mat<double, N, N>> llt_;
+  // the factored M, only where S has no closed-form velocity (an LLT that is never
+  // computed holds unset members, which copying the step would read)
+  struct NoFactor {};
+  std::conditional_t<closed_velocity, NoFactor, Eigen::LLT<Mat<double, N, N>>> llt_;
   // workspace, and the last force with, when the step ends with a kick, the point of
   // the step's end
   mutable V q_, p_, vel_, force_, dLdv_, zero_, end_q_;
