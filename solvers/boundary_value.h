@@ -24,8 +24,10 @@
 
 #include <ceres/ceres.h>
 
+#include <cmath>
 #include <exception>
 #include <functional>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -71,6 +73,33 @@ class BoundaryValuePoll final : public ceres::IterationCallback {
   std::exception_ptr error_;
 };
 
+// Solves the least-squares problem of the DEL residual blocks (every boundary-value
+// problem: this file's two, solvers/manifold_boundary_value.h) with Ceres' sparse
+// normal Cholesky, within opt.max_iterations, calling opt.poll after each iteration;
+// the tolerances on the cost's decrease and on the step are the caller's. One thread:
+// the run-time-sized problem's cost functions share their problem's workspace.
+inline ceres::Solver::Summary solve_del_problem(ceres::Problem& problem, const BoundaryValueOptions& opt,
+                                                double function_tolerance, double parameter_tolerance) {
+  ceres::Solver::Options so;
+  so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
+  so.max_num_iterations = opt.max_iterations;
+  so.function_tolerance = function_tolerance;
+  so.gradient_tolerance = 1e-30;
+  so.parameter_tolerance = parameter_tolerance;
+  // The step equations are square and, near a solution, well posed: start with a
+  // trust region so large that the first steps are (nearly) Gauss-Newton steps.
+  so.initial_trust_region_radius = 1e12;
+  so.num_threads = 1;
+  so.minimizer_progress_to_stdout = opt.verbose;
+  so.logging_type = opt.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
+  BoundaryValuePoll poll(opt.poll);
+  poll.attach(so);
+  ceres::Solver::Summary summary;
+  ceres::Solve(so, &problem, &summary);
+  poll.rethrow();
+  return summary;
+}
+
 template <int N>
 struct BoundaryValueResult {
   bool converged = false;
@@ -81,6 +110,72 @@ struct BoundaryValueResult {
   int iterations = 0;
   std::string message;            // Ceres' brief report, or why the check failed
 };
+
+// The solve both boundary-value problems share (this one, of fixed size, and
+// DynamicBoundaryValueProblem of run-time size, solvers/dynamic_boundary_value.h): the
+// nodes q_0 .. q_K of n coordinates each (N: n, or Eigen::Dynamic) as Ceres' parameter
+// blocks, the ends held constant, one residual block DEL_k per interior node from
+// make_cost() (a new ceres::CostFunction of the three nodes k - 1, k, k + 1, owned by the
+// problem); then the momenta and the check of the residual stated at the top, from
+// d1(a, b) = D1 L_d(a, b), d2(a, b) = D2 L_d(a, b) and w(q0, v0) = max |d2L/dv2| at
+// the first node.
+template <int N, class MakeCost, class D1, class D2, class VelocityHessianMax>
+BoundaryValueResult<N> solve_boundary_value(const Vec<double, N>& qa, const Vec<double, N>& qb, int K, double h,
+                                            const BoundaryValueOptions& opt, const std::vector<Vec<double, N>>* guess,
+                                            const MakeCost& make_cost, const D1& d1, const D2& d2,
+                                            const VelocityHessianMax& w) {
+  using V = Vec<double, N>;
+  if (K < 2) throw std::invalid_argument("boundary-value problem: need at least 2 steps (one interior node)");
+  const Eigen::Index n = qa.size();
+  std::vector<double> x(static_cast<std::size_t>(K + 1) * static_cast<std::size_t>(n));
+  auto node = [&](int k) { return x.data() + static_cast<std::size_t>(k) * static_cast<std::size_t>(n); };
+  for (int k = 0; k <= K; ++k) {
+    // the ends as given (qa + (qb - qa) may differ from qb in the last bit)
+    const V qk = k == 0 ? qa
+                 : k == K ? qb
+                 : (guess && static_cast<int>(guess->size()) == K + 1) ? (*guess)[static_cast<std::size_t>(k)]
+                                                                       : V(qa + (static_cast<double>(k) / K) * (qb - qa));
+    for (Eigen::Index i = 0; i < n; ++i) node(k)[i] = qk[i];
+  }
+  ceres::Problem problem;
+  for (int k = 1; k < K; ++k) problem.AddResidualBlock(make_cost(), nullptr, node(k - 1), node(k), node(k + 1));
+  problem.SetParameterBlockConstant(node(0));
+  problem.SetParameterBlockConstant(node(K));
+
+  const ceres::Solver::Summary summary = solve_del_problem(problem, opt, 1e-14, 1e-15);
+
+  BoundaryValueResult<N> res;
+  res.iterations = static_cast<int>(summary.iterations.size());
+  res.q.resize(static_cast<std::size_t>(K + 1));
+  for (int k = 0; k <= K; ++k) res.q[static_cast<std::size_t>(k)] = Eigen::Map<const V>(node(k), n);
+  res.p.resize(static_cast<std::size_t>(K + 1));
+  res.p[0] = -d1(res.q[0], res.q[1]);
+  double rmax = 0.0, pmax = max_abs(res.p[0]);
+  V left = d2(res.q[0], res.q[1]);  // D2 L_d(q_{k-1}, q_k)
+  for (int k = 1; k < K; ++k) {
+    const V& a = res.q[static_cast<std::size_t>(k)];
+    const V& b = res.q[static_cast<std::size_t>(k + 1)];
+    const V right = d1(a, b);  // D1 L_d(q_k, q_{k+1})
+    res.p[static_cast<std::size_t>(k)] = -right;
+    pmax = std::fmax(pmax, max_abs(res.p[static_cast<std::size_t>(k)]));
+    rmax = std::fmax(rmax, max_abs(V(left + right)));  // DEL_k
+    left = d2(a, b);
+  }
+  res.p[static_cast<std::size_t>(K)] = left;
+  pmax = std::fmax(pmax, max_abs(res.p[static_cast<std::size_t>(K)]));
+  double qmax = 0.0;
+  for (const V& qk : res.q) qmax = std::fmax(qmax, max_abs(qk));
+  const V v0 = (res.q[1] - res.q[0]) / h;
+  const double W = w(res.q[0], v0);
+  res.max_residual = rmax;
+  res.scale = pmax + W * qmax / h;
+  res.converged = std::isfinite(rmax) && rmax <= opt.residual_tolerance * std::fmax(res.scale, 1e-300);
+  res.message = summary.BriefReport();
+  if (!res.converged)
+    res.message = "discrete Euler-Lagrange residual " + std::to_string(rmax) + " above tolerance (scale " +
+                  std::to_string(res.scale) + "); Ceres: " + res.message;
+  return res;
+}
 
 template <class System, class Map>
 class BoundaryValueProblem {
@@ -115,69 +210,11 @@ class BoundaryValueProblem {
   // ends ignored) defaults to linear interpolation.
   BoundaryValueResult<N> solve(const V& qa, const V& qb, int K, const BoundaryValueOptions& opt = {},
                                const std::vector<V>* guess = nullptr) const {
-    if (K < 2) throw std::invalid_argument("boundary-value problem: need at least 2 steps (one interior node)");
-    std::vector<double> x(static_cast<std::size_t>(K + 1) * N);
-    auto node = [&](int k) { return x.data() + static_cast<std::size_t>(k) * N; };
-    for (int k = 0; k <= K; ++k) {
-      const V qk = (guess && static_cast<int>(guess->size()) == K + 1 && k > 0 && k < K)
-                       ? (*guess)[static_cast<std::size_t>(k)]
-                       : V(qa + (static_cast<double>(k) / K) * (qb - qa));
-      for (int i = 0; i < N; ++i) node(k)[i] = qk[i];
-    }
-    ceres::Problem problem;
-    for (int k = 1; k < K; ++k) {
-      auto* cost = new ceres::AutoDiffCostFunction<DelResidual, N, N, N, N>(new DelResidual{&dl_});
-      problem.AddResidualBlock(cost, nullptr, node(k - 1), node(k), node(k + 1));
-    }
-    problem.SetParameterBlockConstant(node(0));
-    problem.SetParameterBlockConstant(node(K));
-
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-    so.max_num_iterations = opt.max_iterations;
-    so.function_tolerance = 1e-14;
-    so.gradient_tolerance = 1e-30;
-    so.parameter_tolerance = 1e-15;
-    // The step equations are square and, near a solution, well posed: start with a
-    // trust region so large that the first steps are (nearly) Gauss-Newton steps.
-    so.initial_trust_region_radius = 1e12;
-    so.minimizer_progress_to_stdout = opt.verbose;
-    so.logging_type = opt.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
-    BoundaryValuePoll poll(opt.poll);
-    poll.attach(so);
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
-    poll.rethrow();
-
-    BoundaryValueResult<N> res;
-    res.iterations = static_cast<int>(summary.iterations.size());
-    res.q.resize(static_cast<std::size_t>(K + 1));
-    for (int k = 0; k <= K; ++k)
-      for (int i = 0; i < N; ++i) res.q[static_cast<std::size_t>(k)][i] = node(k)[i];
-    res.p.resize(static_cast<std::size_t>(K + 1));
-    double rmax = 0.0, pmax = 0.0;
-    for (int k = 0; k < K; ++k) {
-      const V& a = res.q[static_cast<std::size_t>(k)];
-      const V& b = res.q[static_cast<std::size_t>(k + 1)];
-      res.p[static_cast<std::size_t>(k)] = -dl_.D1Ld(a, b);
-      pmax = std::fmax(pmax, max_abs(res.p[static_cast<std::size_t>(k)]));
-      if (k >= 1) rmax = std::fmax(rmax, max_abs(del(res.q[static_cast<std::size_t>(k - 1)], a, b)));
-    }
-    res.p[static_cast<std::size_t>(K)] =
-        dl_.D2Ld(res.q[static_cast<std::size_t>(K - 1)], res.q[static_cast<std::size_t>(K)]);
-    pmax = std::fmax(pmax, max_abs(res.p[static_cast<std::size_t>(K)]));
-    double qmax = 0.0;
-    for (const V& qk : res.q) qmax = std::fmax(qmax, max_abs(qk));
-    const V v0 = (res.q[1] - res.q[0]) / dl_.step();
-    const double W = max_abs(velocity_hessian(dl_.lagrangian(), res.q[0], v0));
-    res.max_residual = rmax;
-    res.scale = pmax + W * qmax / dl_.step();
-    res.converged = std::isfinite(rmax) && rmax <= opt.residual_tolerance * std::fmax(res.scale, 1e-300);
-    res.message = summary.BriefReport();
-    if (!res.converged)
-      res.message = "discrete Euler-Lagrange residual " + std::to_string(rmax) + " above tolerance (scale " +
-                    std::to_string(res.scale) + "); Ceres: " + res.message;
-    return res;
+    return solve_boundary_value<N>(
+        qa, qb, K, dl_.step(), opt, guess,
+        [&] { return new ceres::AutoDiffCostFunction<DelResidual, N, N, N, N>(new DelResidual{&dl_}); },
+        [&](const V& a, const V& b) { return V(dl_.D1Ld(a, b)); }, [&](const V& a, const V& b) { return V(dl_.D2Ld(a, b)); },
+        [&](const V& q0, const V& v0) { return max_abs(velocity_hessian(dl_.lagrangian(), q0, v0)); });
   }
 
  private:

@@ -107,20 +107,7 @@ class SphereBoundaryValueProblem {
     problem.SetParameterBlockConstant(node(0));
     problem.SetParameterBlockConstant(node(K));
 
-    ceres::Solver::Options so;
-    so.linear_solver_type = ceres::SPARSE_NORMAL_CHOLESKY;
-    so.max_num_iterations = opt.max_iterations;
-    so.function_tolerance = 1e-16;
-    so.gradient_tolerance = 1e-30;
-    so.parameter_tolerance = 1e-16;
-    so.initial_trust_region_radius = 1e12;
-    so.minimizer_progress_to_stdout = opt.verbose;
-    so.logging_type = opt.verbose ? ceres::PER_MINIMIZER_ITERATION : ceres::SILENT;
-    BoundaryValuePoll poll(opt.poll);
-    poll.attach(so);
-    ceres::Solver::Summary summary;
-    ceres::Solve(so, &problem, &summary);
-    poll.rethrow();
+    const ceres::Solver::Summary summary = solve_del_problem(problem, opt, 1e-16, 1e-16);
 
     BoundaryValueResult<S> res;
     res.iterations = static_cast<int>(summary.iterations.size());
