@@ -22,6 +22,9 @@
 //   / newmark       or Legendre lift of the theta maps, or Newmark's map; separable systems
 //                   only (U(q), or U(t, q) for a written Lagrangian in t)
 //   galerkin        DynamicGalerkinStep<Sys>
+//   boundary value  DynamicBoundaryValueProblem<Sys> (solvers/dynamic_boundary_value.h) of
+//                   a written Lagrangian, the theta-family maps; none with forces,
+//                   constraints or L(t, q, v)
 //   composition     ComposedStep of any of these steps, the adjoint stages at 1 - theta
 //                   (Newmark's at (1 - gamma, 1/2 - gamma + beta))
 //   system.forces   the theta, Galerkin and Hamiltonian steps with their Force
@@ -55,6 +58,7 @@
 #include "mechanics/written_constraints.h"
 #include "mechanics/written_dynamic.h"
 #include "mechanics/written_force.h"
+#include "solvers/dynamic_boundary_value.h"
 #include "solvers/dynamic_galerkin_step.h"
 #include "solvers/dynamic_sode_step.h"
 #include "solvers/dynamic_step.h"
@@ -436,6 +440,19 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
                        " coordinates the run-time-sized dense steps take; on a separable system "
                        "map = \"explicit-euler\" or \"adjoint-euler\", composed or not, steps without them");
   };
+  if (pr.boundary_value) {
+    // a written Lagrangian, with a map of the theta family (validate refuses n bodies,
+    // forces, constraints, L in t and written maps here); dense n x n Jacobian blocks
+    if constexpr (std::is_same_v<Sys, WrittenDynamic>) {
+      dense_limit("problem.kind = \"boundary-value\" (the Jacobian blocks of its nodes)");
+      const ThetaMap R = dynamic_theta_map(me);
+      return std::make_unique<BoundaryValueRun<DynamicView<Sys>, DynamicBoundaryValueProblem<Sys>>>(
+          view, DynamicBoundaryValueProblem<Sys>(L, R.theta(), h), Eigen::Map<const V>(pr.q.data(), n),
+          Eigen::Map<const V>(pr.q_final.data(), n), pr.steps, h, me.max_iterations, base, false);
+    } else {
+      throw InputError("problem.kind: unsupported");  // refused by validate()
+    }
+  }
   if (!constant_hessian)
     dense_limit("system: a Lagrangian that is not separable (its velocity Hessian, checked at the start)");
   const std::vector<std::string> velocities = velocity_names(pr);

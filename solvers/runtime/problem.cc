@@ -104,8 +104,9 @@ bool Problem::constrained() const { return written && !written->constraints.empt
 
 void require_boundary_value(const SystemEntry& sys) {
   if (!sys.caps.boundary_value)
-    throw InputError("problem.kind: boundary-value problems run on the fixed-size R^n systems, the spherical "
-                     "pendulum and Lagrangians written on S^2 only, not on " + sys.name + (sys.caps.note.empty() ? "" : " (" + sys.caps.note + ")"));
+    throw InputError("problem.kind: boundary-value problems run on the fixed-size R^n systems, Lagrangians written "
+                     "on R^n (without forces, constraints or t) and on S^2, and the spherical pendulum only, not on " +
+                     sys.name + (sys.caps.note.empty() ? "" : " (" + sys.caps.note + ")"));
 }
 
 void validate(const Problem& pr, const Method& me) {

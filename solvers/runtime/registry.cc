@@ -41,15 +41,21 @@ const std::vector<Form> kAllForms = {Form::lagrangian, Form::hamiltonian, Form::
 SystemCapabilities fixed_rn() { return {kAllForms, true, true, true, true, ""}; }
 
 // Systems whose size is known only at run time (N bodies, written Lagrangians); the
-// SODE and Newmark forms on separable ones (make_dynamic_run refuses the others).
-SystemCapabilities run_time_sized() {
+// SODE and Newmark forms on separable ones (make_dynamic_run refuses the others), and
+// boundary values where `boundary_value` (a written Lagrangian: the run-time-sized
+// problem of the theta-family maps).
+SystemCapabilities run_time_sized(bool boundary_value) {
   return {kAllForms,
           true,
           true,
           true,
-          false,
-          "the SODE and Newmark forms run on separable Lagrangians (v^T M v / 2 - U(q), M constant); boundary-value "
-          "problems, solver = \"tiny\" and written maps are built for the fixed-size systems",
+          boundary_value,
+          boundary_value ? "the SODE and Newmark forms run on separable Lagrangians (v^T M v / 2 - U(q), M constant); "
+                           "boundary-value problems take the theta-family maps; solver = \"tiny\" and written maps "
+                           "are built for the fixed-size systems"
+                         : "the SODE and Newmark forms run on separable Lagrangians (v^T M v / 2 - U(q), M constant); "
+                           "boundary-value problems run on the fixed-size systems and written Lagrangians, solver = "
+                           "\"tiny\" and written maps on the fixed-size systems",
           false,
           false};
 }
@@ -341,7 +347,7 @@ const std::vector<SystemEntry>& system_registry() {
        Space::euclidean,
        0,
        {{"G", 1.0, "gravitational constant"}},
-       run_time_sized(),
+       run_time_sized(false),
        factories::nbody,
        "3 x bodies"},
   };
@@ -359,7 +365,7 @@ const SystemEntry& find_system_entry(const std::string& name, const std::string&
 }
 
 const SystemEntry& written_system_entry(Space space, int factors, bool forced, bool constrained, bool time_dependent) {
-  static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(),
+  static const SystemEntry rn = {"lagrangian", "written in the scene", Space::euclidean, 0, {}, run_time_sized(true),
                                  factories::written, "the coordinates"};
   // With forces: the lagrangian form (the theta-family maps composed or not, Galerkin),
   // the hamiltonian form and, on a separable Lagrangian, the SODE and Newmark forms (the

@@ -454,7 +454,8 @@ BOOST_AUTO_TEST_CASE(points_off_the_manifold_are_refused_with_the_defect) {
       // what is not wired on curved spaces yet is refused, not run wrongly
       {sp, "integrator.form=sode1", "lagrangian and hamiltonian forms only"},
       {bp, "integrator.form=newmark", "lagrangian and hamiltonian forms only"},
-      {bp, "problem.kind=boundary-value", "the spherical pendulum and Lagrangians written on S^2 only"},
+      {bp, "problem.kind=boundary-value",
+       "Lagrangians written on R^n (without forces, constraints or t) and on S^2, and the spherical pendulum only"},
   };
   for (const auto& c : cases) {
     const Output o = dvm({"run", c.path, "--set", c.set});

@@ -176,7 +176,9 @@ std::vector<SystemCaps> registry_systems() {
   w.space = "R^n";
   w.forms = {"lagrangian", "hamiltonian"};
   w.retraction = w.composition = w.galerkin = true;  // written maps: no (run-time-sized steps)
-  out.push_back(w);
+  SystemCaps plain = w;  // (boundary values: the run-time-sized problem, not with forces, constraints or t)
+  plain.boundary_value = true;
+  out.push_back(plain);
   // written on R^n with forces: the lagrangian form (the forced theta step, its
   // compositions, Galerkin) and the hamiltonian form
   SystemCaps f = w;
@@ -187,6 +189,7 @@ std::vector<SystemCaps> registry_systems() {
   for (const char* name : {"lagrangian, separable", "lagrangian with forces, separable"}) {
     SystemCaps sep = w;
     sep.name = name;
+    sep.boundary_value = sep.name.find("forces") == std::string::npos;
     sep.forms = {"lagrangian", "hamiltonian", "sode1", "sode2", "newmark"};
     out.push_back(sep);
   }

@@ -134,6 +134,72 @@ BOOST_AUTO_TEST_CASE(written_lagrangians_match_the_built_in_systems) {
   BOOST_TEST(std::fabs(json_number(e.out, "energy_initial") - json_number(k.out, "energy_initial")) <= 1e-14);
 }
 
+// Boundary values of a Lagrangian written on R^n (the run-time-sized problem, its
+// Jacobian written out from L's Hessian): the shipped written double pendulum solves and
+// writes its nodes under the coordinates' names; the built-in double pendulum between
+// the same ends (Jets of the three nodes) gives the same solved momenta to round-off,
+// for the midpoint map, theta = 0.3 and retraction-theta; shooting from the solved
+// (q_0, p_0) with the written initial-value run retraces the path; and what the
+// run-time-sized problem does not take (forces, written maps) is refused naming a key.
+BOOST_AUTO_TEST_CASE(written_lagrangians_solve_boundary_value_problems) {
+  const std::string csv = temp_dir() + "/dpw_bvp.csv";
+  const Output w = dvm({"run", scene("double_pendulum_written_bvp.toml"), "--json", "--csv", csv});
+  BOOST_REQUIRE_MESSAGE(w.status == 0, w.err);
+  BOOST_TEST(json_string(w.out, "problem") == "boundary-value");
+  BOOST_TEST(json_number(w.out, "max_del_residual") <= 1e-14 * json_number(w.out, "residual_scale"), w.out);
+  std::ifstream rows(csv);
+  std::string header;
+  std::getline(rows, header);
+  BOOST_TEST(header == "t,a,b,p_a,p_b,energy");
+  const std::string ends = "[initial]\nq = [0.5, 0.2]\n[problem]\nkind = \"boundary-value\"\nq_final = [0.1, -0.4]\n"
+                           "steps = 1000\n[integrator]\nstep = 0.001\n";
+  const std::string builtin = "[system]\nbuiltin = \"double-pendulum\"\n" + ends;
+  std::string written;  // the shipped scene's [system]
+  {
+    std::ifstream f(scene("double_pendulum_written_bvp.toml"));
+    std::stringstream text;
+    text << f.rdbuf();
+    written = text.str().substr(0, text.str().find("[initial]")) + ends;
+  }
+  for (const char* map : {"map = \"midpoint\"\n", "map = \"theta\"\ntheta = 0.3\n",
+                          "map = \"retraction-theta\"\ntheta = 0.3\n"}) {
+    const Output b = dvm({"run", write_scene("dp_bvp_builtin.toml", builtin + map), "--json", "--no-output"});
+    const Output t = dvm({"run", write_scene("dp_bvp_written.toml", written + map), "--json", "--no-output"});
+    BOOST_TEST_CONTEXT(map << b.err << t.err) {
+      BOOST_REQUIRE(b.status == 0);
+      BOOST_REQUIRE(t.status == 0);
+      for (const char* key : {"p_initial", "p_final"}) {
+        const std::vector<double> pb = json_array(b.out, key), pt = json_array(t.out, key);
+        BOOST_TEST(max_diff(pb, pt) <= 1e-11 * std::fmax(1.0, max_diff(pb, std::vector<double>(pb.size(), 0.0))),
+                   key << ": built-in " << b.out << "\nwritten " << t.out);
+      }
+      // the end as given, to the bit (not q_initial + (q_final - q_initial))
+      BOOST_TEST(max_diff(json_array(b.out, "q_final"), {0.1, -0.4}) == 0.0, b.out);
+      BOOST_TEST(max_diff(json_array(t.out, "q_final"), {0.1, -0.4}) == 0.0, t.out);
+    }
+  }
+  // the solved path is a trajectory: the written midpoint run from (q_0, p_0) ends at q_final
+  const std::vector<double> p0 = json_array(w.out, "p_initial");
+  char p[96];
+  std::snprintf(p, sizeof p, "p = [%.17g, %.17g]\n", p0.at(0), p0.at(1));
+  const std::string ivp = written.substr(0, written.find("[initial]")) + "[initial]\nq = [0.5, 0.2]\n" + p +
+                          "[integrator]\nmap = \"midpoint\"\nstep = 0.001\nsteps = 1000\n";
+  const Output s = dvm({"run", write_scene("dp_shoot.toml", ivp), "--json", "--no-output"});
+  BOOST_REQUIRE_MESSAGE(s.status == 0, s.err);
+  BOOST_TEST(max_diff(json_array(s.out, "q_final"), {0.1, -0.4}) <= 1e-9, s.out);
+  // refused: a force, a written map, the hamiltonian form
+  const std::string forced = written.substr(0, written.find("[initial]")) + "forces = { a = \"-0.1*a_dot\" }\n" + ends +
+                             "map = \"midpoint\"\n";
+  const std::string wmap = written + "map = \"written\"\n[map]\nname = \"plain midpoint\"\nq0 = \"x - v/2\"\nq1 = \"x + v/2\"\n";
+  const std::string ham = written + "map = \"midpoint\"\nform = \"hamiltonian\"\n";
+  for (const auto& [text, key] : std::vector<std::pair<std::string, std::string>>{
+           {forced, "problem.kind"}, {wmap, "integrator.map"}, {ham, "integrator.form"}}) {
+    const Output o = dvm({"run", write_scene("dp_bvp_refused.toml", text), "--no-output"});
+    BOOST_TEST(o.status == 2, o.err);
+    BOOST_TEST(o.err.find(key) != std::string::npos, o.err);
+  }
+}
+
 // [system] invariants: quantities of the user's own, monitored like the energy. On
 // Kepler's problem in Cartesian coordinates the angular momentum, written in momenta or
 // in velocities, is kept to round-off by the midpoint map (discrete Noether); the
