@@ -83,6 +83,11 @@ std::string Method::label() const {
 
 namespace {
 
+// The most numbers the Jacobian of a boundary-value problem may hold (2^27 doubles, 1
+// GiB): three n x n blocks per interior node, 3 (K - 1) n^2 for K steps of n
+// coordinates. Ceres' normal equations hold about as many again.
+constexpr double kMaxBoundaryValueJacobian = 134217728.0;
+
 std::string fmt_exact(double x) {
   std::ostringstream out;
   out.precision(17);
@@ -126,6 +131,14 @@ void validate(const Problem& pr, const Method& me) {
     if (me.galerkin) throw InputError("integrator.method: a boundary-value problem takes no method = \"galerkin\"");
     if (pr.steps < 2 || pr.steps > 100000000)
       throw InputError("problem.steps: got " + std::to_string(pr.steps) + ", expected a whole number from 2 to 100000000");
+    const double n = pr.dim;
+    if (n >= 1 && 3.0 * static_cast<double>(pr.steps - 1) * n * n > kMaxBoundaryValueJacobian)
+      throw InputError("problem.steps: K = " + std::to_string(pr.steps) + " steps, n = " + std::to_string(pr.dim) +
+                       " coordinates: the Jacobian of the boundary-value problem would hold 3 (K - 1) n^2 = " +
+                       fmt_exact(3.0 * static_cast<double>(pr.steps - 1) * n * n) +
+                       " numbers, beyond the 2^27 (1 GiB) it may hold; expected at most " +
+                       std::to_string(static_cast<std::int64_t>(kMaxBoundaryValueJacobian / (3.0 * n * n)) + 1) +
+                       " steps");
   }
 
   if (pr.compile && (!pr.written || pr.written->space != WrittenSystem::Space::euclidean))

@@ -796,6 +796,10 @@ BOOST_AUTO_TEST_CASE(new_keys_are_validated) {
       {bvp_head + "[problem]\nkind = \"boundary-value\"\nq_final = [0.5]\nsteps = 1\n[integrator]\n"
                   "map = \"midpoint\"\nstep = 0.1\n",
        "problem.steps"},
+      // a Jacobian of 3 (K - 1) n^2 = 3e8 numbers: refused before Ceres allocates it
+      {bvp_head + "[problem]\nkind = \"boundary-value\"\nq_final = [0.5]\nsteps = 100000000\n[integrator]\n"
+                  "map = \"midpoint\"\nstep = 0.1\n",
+       "expected at most 44739243 steps"},
       {bvp_head + "p = [0.0]\n[problem]\nkind = \"boundary-value\"\nq_final = [0.5]\nsteps = 10\n[integrator]\n"
                   "map = \"midpoint\"\nstep = 0.1\n",
        "initial.p"},

@@ -187,13 +187,15 @@ BOOST_AUTO_TEST_CASE(written_lagrangians_solve_boundary_value_problems) {
   const Output s = dvm({"run", write_scene("dp_shoot.toml", ivp), "--json", "--no-output"});
   BOOST_REQUIRE_MESSAGE(s.status == 0, s.err);
   BOOST_TEST(max_diff(json_array(s.out, "q_final"), {0.1, -0.4}) <= 1e-9, s.out);
-  // refused: a force, a written map, the hamiltonian form
+  // refused: a force, a written map, the hamiltonian form, a Jacobian beyond 2^27 numbers
   const std::string forced = written.substr(0, written.find("[initial]")) + "forces = { a = \"-0.1*a_dot\" }\n" + ends +
                              "map = \"midpoint\"\n";
   const std::string wmap = written + "map = \"written\"\n[map]\nname = \"plain midpoint\"\nq0 = \"x - v/2\"\nq1 = \"x + v/2\"\n";
   const std::string ham = written + "map = \"midpoint\"\nform = \"hamiltonian\"\n";
+  std::string huge = written + "map = \"midpoint\"\n";
+  huge.replace(huge.find("steps = 1000"), 12, "steps = 20000000");
   for (const auto& [text, key] : std::vector<std::pair<std::string, std::string>>{
-           {forced, "problem.kind"}, {wmap, "integrator.map"}, {ham, "integrator.form"}}) {
+           {forced, "problem.kind"}, {wmap, "integrator.map"}, {ham, "integrator.form"}, {huge, "problem.steps"}}) {
     const Output o = dvm({"run", write_scene("dp_bvp_refused.toml", text), "--no-output"});
     BOOST_TEST(o.status == 2, o.err);
     BOOST_TEST(o.err.find(key) != std::string::npos, o.err);
