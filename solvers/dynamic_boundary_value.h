@@ -24,7 +24,6 @@
 #include <ceres/ceres.h>
 
 #include <Eigen/Core>
-#include <string>
 #include <utility>
 #include <vector>
 
@@ -41,10 +40,6 @@ class DynamicBoundaryValueProblem {
 
   DynamicBoundaryValueProblem(Sys L, double theta, double h)
       : L_(std::move(L)), theta_(theta), h_(h), n_(L_.dim()), work_(n_) {}
-
-  int dim() const { return n_; }
-  double step() const { return h_; }
-  double theta() const { return theta_; }
 
   V D1Ld(const V& a, const V& b) const {
     at(a, b, false);
