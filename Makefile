@@ -10,7 +10,8 @@
 #   make sanitize  build the suites labelled "sanitize" (tests/CMakeLists.txt: input,
 #               files, run-time memory, the runtime layer and the CLI, which drives
 #               every kernel) with AddressSanitizer and UndefinedBehaviorSanitizer (in
-#               build-sanitize/) and run them
+#               build-sanitize/) and run them; the fixed-size kernels, not instrumented,
+#               are the test tree's (SAN_KERNELS below), built there first
 #   make fuzz   build the libFuzzer targets with clang in the sanitizer build and run
 #               each for FUZZ_SECONDS (default 60), side by side, from the seed corpus in
 #               tests/fuzz/corpus; fails on a crash, leak or undefined behaviour (the
@@ -109,7 +110,7 @@ FUZZ_MAX_LEN ?= 262144
 # time such a text with `./build-sanitize/tests/fuzz/fuzz_expression FILE`.
 FUZZ_TIMEOUT ?= 60
 
-.PHONY: deps test-deps build run test bench charts clean sanitize fuzz fuzz-deps
+.PHONY: deps test-deps build run test bench charts clean sanitize fuzz fuzz-deps san-kernels
 
 # $(call install_missing,PACKAGES): apt-get install the packages not yet installed.
 define install_missing
@@ -152,9 +153,15 @@ test-deps: deps
 CLANG_LINK := -fuse-ld=lld-14
 TEST_LINK  := $(if $(filter clang++-14,$(TEST_CXX)),-DCMAKE_EXE_LINKER_FLAGS=$(CLANG_LINK) \
               -DCMAKE_SHARED_LINKER_FLAGS=$(CLANG_LINK) -DCMAKE_MODULE_LINKER_FLAGS=$(CLANG_LINK))
+# With clang the test tree compiles the fixed-size built-ins' kernels as a library of their
+# own, which the sanitizer tree links rather than compiling them a second time
+# (SAN_KERNELS below; solvers/CMakeLists.txt, dvm_fixed_size_kernels, says why they can be
+# shared)
+TEST_KERNELS := -DDVM_FIXED_SIZE_KERNELS_LIBRARY=$(if $(filter clang++-14,$(TEST_CXX)),ON,OFF)
+TEST_CONFIGURE = cmake -S . -B $(TEST_BUILD) -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=$(TEST_CXX) \
+	  -DCMAKE_CXX_FLAGS_RELEASE="$(TEST_FLAGS)" $(LAUNCHER) $(TEST_LINK) -DDVM_BUILD_BENCH=$(TEST_BENCH) $(TEST_KERNELS)
 test: test-deps
-	cmake -S . -B $(TEST_BUILD) -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=$(TEST_CXX) \
-	  -DCMAKE_CXX_FLAGS_RELEASE="$(TEST_FLAGS)" $(LAUNCHER) $(TEST_LINK) -DDVM_BUILD_BENCH=$(TEST_BENCH)
+	$(TEST_CONFIGURE)
 	cmake --build $(TEST_BUILD) -j $(JOBS)
 	cd $(TEST_BUILD) && ctest --output-on-failure -j $(JOBS)
 
@@ -187,10 +194,21 @@ charts: deps
 # The benchmark programs no test runs are left out (DVM_BUILD_BENCH=OFF). The fuzz
 # targets are built in the same tree (DVM_FUZZ=ON), so that `make fuzz` after
 # `make sanitize` compiles only them.
+# The fixed-size kernels, uninstrumented in the sanitizer tree, are the test tree's archive
+# when the test tree is clang's (TEST_KERNELS): `make sanitize` and `make fuzz` first build
+# that one target there (nothing, after `make test`), installing the test tree's
+# packages; with another TEST_CXX the sanitizer tree compiles them itself.
+SAN_KERNELS := $(if $(filter clang++-14,$(TEST_CXX)),$(abspath $(TEST_BUILD))/solvers/libdvm_fixed_size_kernels.a)
 SAN_CONFIGURE = cmake -S . -B $(SAN_BUILD) -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_CXX_COMPILER=$(SAN_CXX) $(LAUNCHER) \
 	  -DDVM_BUILD_BENCH=OFF -DDVM_FUZZ=ON -DCMAKE_CXX_FLAGS="$(SAN_FLAGS)" \
-	  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined $(CLANG_LINK)"
-sanitize: fuzz-deps
+	  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined $(CLANG_LINK)" \
+	  -DDVM_FIXED_SIZE_KERNELS_FROM="$(SAN_KERNELS)"
+san-kernels: $(if $(SAN_KERNELS),test-deps)
+ifneq ($(SAN_KERNELS),)
+	$(TEST_CONFIGURE)
+	cmake --build $(TEST_BUILD) -j $(JOBS) --target dvm_fixed_size_kernels
+endif
+sanitize: fuzz-deps san-kernels
 	$(SAN_CONFIGURE)
 	cmake --build $(SAN_BUILD) -j $(JOBS) --target sanitized_suites
 	cd $(SAN_BUILD) && $(SAN_ENV) ctest --output-on-failure -j $(JOBS) -L sanitize
@@ -205,7 +223,7 @@ fuzz-deps: deps
 # finding (the input is kept in build-sanitize/ as crash-*, leak-* or timeout-*), and
 # so does this step.
 FUZZ_TARGETS := scene expression
-fuzz: fuzz-deps
+fuzz: fuzz-deps san-kernels
 	$(SAN_CONFIGURE)
 	cmake --build $(SAN_BUILD) -j $(JOBS) --target $(addprefix fuzz_,$(FUZZ_TARGETS))
 	@pids=""; for t in $(FUZZ_TARGETS); do \
