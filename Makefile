@@ -44,6 +44,8 @@ LAUNCHER := -DCMAKE_CXX_COMPILER_LAUNCHER=$(shell command -v ccache >/dev/null 2
 # TEST_BUILD=build-test-gcc` runs them on the shipped build.
 TEST_BUILD ?= build-test
 TEST_CXX   ?= clang++-14
+# non-empty when the test tree is clang's (its packages, lld, the kernels the sanitizer tree links)
+TEST_CLANG := $(filter clang++-14,$(TEST_CXX))
 TEST_FLAGS ?= -O1 -DNDEBUG
 # ON: the test tree builds the benchmark programs too (DVM_BUILD_BENCH), and
 # test_bench_output runs the chart and ratio programs of `make charts` on a tiny size;
@@ -58,7 +60,7 @@ TEST_BENCH ?= OFF
 # /usr/bin/python3; python3-numpy, python3-pytest, python3-matplotlib: its arrays, its
 # tests and the chart of its example
 TEST_PKGS  := nlohmann-json3-dev libopenmpi-dev openmpi-bin \
-              $(if $(filter clang++-14,$(TEST_CXX)),clang-14 libomp-14-dev lld-14) \
+              $(if $(TEST_CLANG),clang-14 libomp-14-dev lld-14) \
               python3-dev pybind11-dev python3-numpy python3-pytest python3-matplotlib
 
 SAN_BUILD := build-sanitize
@@ -151,13 +153,13 @@ test-deps: deps
 # programs with each (the commands are in CMakeFiles/*/link.txt; clang++-14
 # -fuse-ld=lld-14 for lld). build/ keeps g++'s default linker: it links one program.
 CLANG_LINK := -fuse-ld=lld-14
-TEST_LINK  := $(if $(filter clang++-14,$(TEST_CXX)),-DCMAKE_EXE_LINKER_FLAGS=$(CLANG_LINK) \
+TEST_LINK  := $(if $(TEST_CLANG),-DCMAKE_EXE_LINKER_FLAGS=$(CLANG_LINK) \
               -DCMAKE_SHARED_LINKER_FLAGS=$(CLANG_LINK) -DCMAKE_MODULE_LINKER_FLAGS=$(CLANG_LINK))
 # With clang the test tree compiles the fixed-size built-ins' kernels as a library of their
 # own, which the sanitizer tree links rather than compiling them a second time
 # (SAN_KERNELS below; solvers/CMakeLists.txt, dvm_fixed_size_kernels, says why they can be
 # shared)
-TEST_KERNELS := -DDVM_FIXED_SIZE_KERNELS_LIBRARY=$(if $(filter clang++-14,$(TEST_CXX)),ON,OFF)
+TEST_KERNELS := -DDVM_FIXED_SIZE_KERNELS_LIBRARY=$(if $(TEST_CLANG),ON,OFF)
 TEST_CONFIGURE = cmake -S . -B $(TEST_BUILD) -DCMAKE_BUILD_TYPE=Release -DCMAKE_CXX_COMPILER=$(TEST_CXX) \
 	  -DCMAKE_CXX_FLAGS_RELEASE="$(TEST_FLAGS)" $(LAUNCHER) $(TEST_LINK) -DDVM_BUILD_BENCH=$(TEST_BENCH) $(TEST_KERNELS)
 test: test-deps
@@ -198,7 +200,7 @@ charts: deps
 # when the test tree is clang's (TEST_KERNELS): `make sanitize` and `make fuzz` first build
 # that one target there (nothing, after `make test`), installing the test tree's
 # packages; with another TEST_CXX the sanitizer tree compiles them itself.
-SAN_KERNELS := $(if $(filter clang++-14,$(TEST_CXX)),$(abspath $(TEST_BUILD))/solvers/libdvm_fixed_size_kernels.a)
+SAN_KERNELS := $(if $(TEST_CLANG),$(abspath $(TEST_BUILD))/solvers/libdvm_fixed_size_kernels.a)
 SAN_CONFIGURE = cmake -S . -B $(SAN_BUILD) -DCMAKE_BUILD_TYPE=Sanitize -DCMAKE_CXX_COMPILER=$(SAN_CXX) $(LAUNCHER) \
 	  -DDVM_BUILD_BENCH=OFF -DDVM_FUZZ=ON -DCMAKE_CXX_FLAGS="$(SAN_FLAGS)" \
 	  -DCMAKE_EXE_LINKER_FLAGS="-fsanitize=address,undefined $(CLANG_LINK)" \
