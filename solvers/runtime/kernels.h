@@ -657,6 +657,29 @@ inline std::string initial_state_keys(const Problem& pr) {
   return std::string("initial.q and ") + (pr.momentum_given ? "initial.p" : "initial.v");
 }
 
+// The largest relative residual of the initial state the constrained runs accept
+// (WrittenConstraints::relative_residuals), for the position and for the velocity.
+constexpr double kConstraintStartTolerance = 1e-10;
+
+// The checks of a constrained run's initial state that every space shares
+// (kernels_sparse_constrained.cc), each throwing InputError that names the key:
+//   require_constraint_rank       D (Dg's rows at t = 0, m x dim) of rank m by its singular
+//                                 values (those above 1e-10 of the largest); `along` names
+//                                 where D's columns are, or "" (the coordinates);
+//   check_constraint_start_terms  per constraint i, g_i, |grad g_i| and grad g_i . v +
+//                                 dg_i/dt: refuses a value or derivative that is not finite
+//                                 and a position off a constraint (|g_i| / (|grad g_i| qn)
+//                                 beyond kConstraintStartTolerance, naming position_key);
+//                                 returns the first constraint whose velocity is off its
+//                                 hidden constraint (relative to |grad g_i| vn), or -1;
+//   refuse_velocity_off_constraint  that constraint's refusal, naming velocity_key and
+//                                 initial.project_velocity.
+void require_constraint_rank(const Problem& pr, const Eigen::MatrixXd& D, const std::string& along);
+int check_constraint_start_terms(const Problem& pr, const Eigen::VectorXd& g, const Eigen::VectorXd& norms,
+                                 const Eigen::VectorXd& across, double qn, double vn, const std::string& position_key);
+[[noreturn]] void refuse_velocity_off_constraint(const Problem& pr, int i, double across, double vn, double norm,
+                                                 const std::string& velocity_key);
+
 // Refuses an initial state where the energy is not finite (an overflow, a division by
 // zero in the system's expressions there).
 [[noreturn]] inline void refuse_nonfinite_energy(const Problem& pr) {

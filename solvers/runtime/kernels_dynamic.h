@@ -371,10 +371,6 @@ inline void require_finite_force(const WrittenForce& force, const Problem& pr, c
   throw InputError(m.str() + "]");
 }
 
-// The largest relative residual of the initial state the constrained runs accept
-// (WrittenConstraints::relative_residuals), for the position and for the velocity.
-constexpr double kConstraintStartTolerance = 1e-10;
-
 // The initial state of a constrained run (system.constraints): the constraint Jacobian
 // Dg(0, q) of full rank m, q on the constraints and v on their hidden constraint, each
 // to kConstraintStartTolerance relative; an initial velocity (or momentum) off the

@@ -15,6 +15,65 @@
 
 namespace dvm::kernels {
 
+namespace {
+std::string constraint_text(const Problem& pr, int i) {
+  return "system.constraints[" + std::to_string(i + 1) + "] (\"" +
+         pr.written->constraints[static_cast<std::size_t>(i)].text() + "\")";
+}
+}  // namespace
+
+void require_constraint_rank(const Problem& pr, const Eigen::MatrixXd& D, const std::string& along) {
+  const Eigen::JacobiSVD<Eigen::MatrixXd> svd(D);
+  const Eigen::VectorXd s = svd.singularValues();
+  int rank = 0;
+  for (Eigen::Index i = 0; i < s.size(); ++i)
+    if (s[i] > 1e-10 * s[0]) ++rank;
+  if (rank == D.rows()) return;
+  std::ostringstream msg;
+  msg.precision(6);
+  msg << pr.constraints_where << ": the constraint Jacobian Dg" << along << " has rank " << rank
+      << " at the initial state, expected " << D.rows() << " (one per constraint; singular values [";
+  for (Eigen::Index i = 0; i < s.size(); ++i) msg << (i ? ", " : "") << s[i];
+  msg << "]): the constraints are redundant there, or contradict each other";
+  throw InputError(msg.str());
+}
+
+int check_constraint_start_terms(const Problem& pr, const Eigen::VectorXd& g, const Eigen::VectorXd& norms,
+                                 const Eigen::VectorXd& across, double qn, double vn, const std::string& position_key) {
+  std::ostringstream msg;
+  msg.precision(6);
+  const int m = static_cast<int>(g.size());
+  if (!g.allFinite() || !norms.allFinite() || !across.allFinite()) {
+    msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
+    throw InputError(msg.str());
+  }
+  for (int i = 0; i < m; ++i) {
+    const double gn = norms[i], r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
+    if (!(r <= kConstraintStartTolerance)) {
+      msg << position_key << ": the initial position is off " << constraint_text(pr, i) << ": g = " << g[i]
+          << " at t = 0, relative " << r << " (|g| / (|grad g| |q|)), beyond " << kConstraintStartTolerance
+          << "; give a position on the constraints";
+      throw InputError(msg.str());
+    }
+  }
+  for (int i = 0; i < m; ++i) {
+    const double gn = norms[i], r = std::fabs(across[i]) / (gn * vn > 0.0 ? gn * vn : 1.0);
+    if (!(r <= kConstraintStartTolerance)) return i;
+  }
+  return -1;
+}
+
+[[noreturn]] void refuse_velocity_off_constraint(const Problem& pr, int i, double across, double vn, double norm,
+                                                 const std::string& velocity_key) {
+  std::ostringstream msg;
+  msg.precision(6);
+  msg << velocity_key << ": the initial velocity is off the hidden constraint of " << constraint_text(pr, i)
+      << ": grad g . v + dg/dt = " << across << ", relative "
+      << std::fabs(across) / (norm * vn > 0.0 ? norm * vn : 1.0) << ", beyond " << kConstraintStartTolerance
+      << "; give a velocity along the constraints, or set initial.project_velocity = true to project it";
+  throw InputError(msg.str());
+}
+
 void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const Eigen::VectorXd& q,
                              Eigen::VectorXd& p, Eigen::VectorXd& v0) {
   const WrittenSystem& w = *pr.written;
@@ -24,20 +83,12 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
   // WrittenConstraints::relative_residuals; no m x n matrix: a long chain has m ~ n / 2)
   Eigen::VectorXd g, norms, across;
   con->row_terms(0.0, q, v0, g, norms, across);
-  auto text = [&](int i) {
-    return "system.constraints[" + std::to_string(i + 1) + "] (\"" + w.constraints[static_cast<std::size_t>(i)].text() + "\")";
-  };
-  std::ostringstream msg;
-  msg.precision(6);
-  if (!g.allFinite() || !norms.allFinite() || !across.allFinite()) {
-    msg << pr.constraints_where << ": a constraint or its derivative is not finite at the initial state (t = 0)";
-    throw InputError(msg.str());
-  }
+  if (!g.allFinite() || !norms.allFinite() || !across.allFinite())
+    check_constraint_start_terms(pr, g, norms, across, 1.0, 1.0, "initial.q");  // (refuses)
   // rank of Dg: by its singular values against the largest where the SVD is cheap (m^2 n
   // at most 1e8), else as the sparse step finds it (a heuristic: a repeated constraint
   // is caught, SparseConstrainedThetaStep::rank)
-  const bool by_svd = static_cast<double>(m) * m * n <= 1e8;
-  if (by_svd) {
+  if (static_cast<double>(m) * m * n <= 1e8) {
     std::vector<double> G(con->entries());
     Eigen::VectorXd gt(m);
     con->sparse_gradients(0.0, q, G.data(), gt.data());
@@ -45,21 +96,11 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
     std::size_t e = 0;
     for (int i = 0; i < m; ++i)
       for (int j : con->pattern()[static_cast<std::size_t>(i)]) D(i, j) = G[e++];
-    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(D);
-    const Eigen::VectorXd s = svd.singularValues();
-    int rank = 0;
-    for (Eigen::Index i = 0; i < s.size(); ++i)
-      if (s[i] > 1e-10 * s[0]) ++rank;
-    if (rank < m) {
-      msg << pr.constraints_where << ": the constraint Jacobian Dg has rank " << rank << " at the initial state, "
-          << "expected " << m << " (one per constraint; singular values [";
-      for (Eigen::Index i = 0; i < s.size(); ++i) msg << (i ? ", " : "") << s[i];
-      msg << "]): the constraints are redundant there, or contradict each other";
-      throw InputError(msg.str());
-    }
+    require_constraint_rank(pr, D, "");
   } else {
     const int rank = SparseConstrainedThetaStep::rank(*con, 0.0, q);
     if (rank < m) {
+      std::ostringstream msg;
       msg << pr.constraints_where << ": the constraint Jacobian Dg has "
           << (rank < 0 ? std::string("rank below ") + std::to_string(m) : "rank " + std::to_string(rank))
           << " at the initial state, expected " << m << " (one per constraint; by the pivots of the sparse LDL^T "
@@ -69,42 +110,26 @@ void check_constrained_start(const WrittenDynamic& L, const Problem& pr, const E
     }
   }
   // each constraint's relative residuals (WrittenConstraints::relative_residuals)
-  const double qn = q.norm(), vn = v0.norm();
-  for (int i = 0; i < m; ++i) {
-    const double gn = norms[i], r = std::fabs(g[i]) / (gn * qn > 0.0 ? gn * qn : 1.0);
-    if (!(r <= kConstraintStartTolerance)) {
-      msg << "initial.q: the initial position is off " << text(i) << ": g = " << g[i] << " at t = 0, relative "
-          << r << " (|g| / (|grad g| |q|)), beyond " << kConstraintStartTolerance
-          << "; give a position on the constraints";
-      throw InputError(msg.str());
-    }
-  }
-  for (int i = 0; i < m; ++i) {
-    const double gn = norms[i], b = std::fabs(across[i]);
-    const double r = b / (gn * vn > 0.0 ? gn * vn : 1.0);
-    if (r <= kConstraintStartTolerance) continue;
-    if (pr.project_velocity) {
-      std::string failed;
-      std::shared_ptr<SparsePotentialHessian> H;
-      if (L.separable() && n >= kSparseConstrainedMinDim) try {
-          H = SparseSeparableThetaStep::hessian_of(L, q);
-        } catch (const SparsePotentialHessian::TooDense&) {
-        }
-      if (H) {  // (the sparse step's projection; its theta and step do not enter it)
-        failed = SparseConstrainedThetaStep(L, H, con, 0.5, 1.0).project(0.0, q, p, v0);
-      } else {
-        constrained_detail::Projection<WrittenDynamic, WrittenConstraints> project(n, m);
-        failed = project(L, *con, 0.0, q, p, v0, MomentumMap::general);
+  const double vn = v0.norm();
+  const int i = check_constraint_start_terms(pr, g, norms, across, q.norm(), vn, "initial.q");
+  if (i < 0) return;
+  if (pr.project_velocity) {
+    std::string failed;
+    std::shared_ptr<SparsePotentialHessian> H;
+    if (L.separable() && n >= kSparseConstrainedMinDim) try {
+        H = SparseSeparableThetaStep::hessian_of(L, q);
+      } catch (const SparsePotentialHessian::TooDense&) {
       }
-      if (!failed.empty()) throw InputError(pr.project_velocity_where + ": " + failed);
-      return;
+    if (H) {  // (the sparse step's projection; its theta and step do not enter it)
+      failed = SparseConstrainedThetaStep(L, H, con, 0.5, 1.0).project(0.0, q, p, v0);
+    } else {
+      constrained_detail::Projection<WrittenDynamic, WrittenConstraints> project(n, m);
+      failed = project(L, *con, 0.0, q, p, v0, MomentumMap::general);
     }
-    msg << (pr.momentum_given ? "initial.p" : "initial.v") << ": the initial velocity is off the hidden constraint of "
-        << text(i) << ": grad g . v + dg/dt = " << across[i] << ", relative " << r
-        << ", beyond " << kConstraintStartTolerance << "; give a velocity along the constraints, or set "
-        << "initial.project_velocity = true to project it";
-    throw InputError(msg.str());
+    if (!failed.empty()) throw InputError(pr.project_velocity_where + ": " + failed);
+    return;
   }
+  refuse_velocity_off_constraint(pr, i, across[i], vn, norms[i], pr.momentum_given ? "initial.p" : "initial.v");
 }
 
 std::unique_ptr<Run> make_sparse_constrained_run(const WrittenDynamic& L, const Problem& pr, const Method& me,
