@@ -31,6 +31,28 @@
 
 namespace dvm {
 
+// The point a step solved in the chart centred at q0 ends at, chart(q0, xi), into raw;
+// false (s failed) where the chart left the manifold by more than round-off.
+template <class M>
+bool chart_end(const typename M::template Point<double>& q0, const Vec<double, M::dim>& xi, StepSummary& s,
+               typename M::template Point<double>& raw) {
+  raw = M::chart(q0, xi);
+  const double defect = M::point_defect(raw);
+  if (defect <= 1e-12) return true;
+  s.fail("the chart left the manifold by " + std::to_string(defect) + " (more than round-off)");
+  return false;
+}
+
+// The end of a step: q1 = raw cleaned and p1 from its chart components pi1 in the
+// chart centred at raw (s fails where p1 is not finite).
+template <class M>
+void leave_at(const typename M::template Point<double>& raw, const Vec<double, M::dim>& pi1, StepSummary& s,
+              typename M::template Point<double>& q1, typename M::template Tangent<double>& p1) {
+  p1 = M::covector_from_local(raw, pi1);
+  q1 = M::clean(raw);
+  if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
+}
+
 // The end of a step solved in the chart centred at q0: the point q1 = chart(q0, xi)
 // and the covector p1 with chart components pi1 there. The step s fails if the chart
 // left the manifold by more than round-off or if p1 is not finite.
@@ -38,12 +60,8 @@ template <class M>
 void leave_chart(const typename M::template Point<double>& q0, const Vec<double, M::dim>& xi,
                  const Vec<double, M::dim>& pi1, StepSummary& s, typename M::template Point<double>& q1,
                  typename M::template Tangent<double>& p1) {
-  const typename M::template Point<double> raw = M::chart(q0, xi);
-  const double defect = M::point_defect(raw);
-  if (!(defect <= 1e-12)) {
-    s.fail("the chart left the manifold by " + std::to_string(defect) + " (more than round-off)");
-    return;
-  }
+  typename M::template Point<double> raw;
+  if (!chart_end<M>(q0, xi, s, raw)) return;
   p1 = covector_from_chart_at<M>(q0, xi, pi1);
   q1 = M::clean(raw);
   if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
@@ -101,22 +119,15 @@ class ManifoldStep {
     StepSummary s;
     try {
       s = solve_step_system<n>(f, xi, 1.0, options_, pscale);
-      if (s.converged) {
-        const Point raw = M::chart(q0, xi);
-        const double defect = M::point_defect(raw);
-        if (!(defect <= 1e-12)) {
-          s.fail("the chart left the manifold by " + std::to_string(defect) + " (more than round-off)");
-          return s;
-        }
+      Point raw;
+      if (s.converged && chart_end<M>(q0, xi, s, raw)) {
         const auto rel = M::relative_chart(q0, xi);
         Vec<double, n> pi1;
         if constexpr (kForced)
           pi1 = dl_.D2_local(q0, raw, rel, *force_, t_node, &s.work);
         else
           pi1 = dl_.D2_local(q0, raw, rel);
-        p1 = M::covector_from_local(raw, pi1);
-        q1 = M::clean(raw);
-        if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
+        leave_at<M>(raw, pi1, s, q1, p1);
       }
     } catch (const std::domain_error& e) {
       s.fail(e.what());
