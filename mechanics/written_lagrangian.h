@@ -72,9 +72,11 @@ struct WrittenSystem {
   // expression of Kind::force: q (block 0, entries 0 .. dim() - 1), the time t (block 0,
   // entry dim()) and v (block 1).
   std::vector<std::pair<int, Expression>> forces;
-  // Holonomic constraints g_i(t, q) = 0 ([system] constraints, R^n), in the scene's
-  // order (mechanics/written_constraints.h). An expression of Kind::constraint: q
-  // (block 0, entries 0 .. dim() - 1) and the time t (block 0, entry dim()).
+  // Holonomic constraints g_i(t, q) = 0 ([system] constraints: R^n, S^2, SO(3)), in the
+  // scene's order (mechanics/written_constraints.h; on S^2 and SO(3)
+  // mechanics/written_manifold.h, ManifoldConstraints). An expression of
+  // Kind::constraint: q (block 0, entries 0 .. dim() - 1; on SO(3) R's 9 entries) and the
+  // time t (block 0, the entry after them).
   std::vector<Expression> constraints;
   // Control inputs ([system] controls, R^n), in the scene's order
   // (mechanics/written_force.h, ControlSignal): each an expression in t or a table of
@@ -118,10 +120,13 @@ struct WrittenSystem {
       for (int j = 0; j < 3; ++j)
         for (int i = 0; i < 3; ++i) s.variables.push_back({rotation_entry(i, j), 0, 3 * j + i});
       for (int i = 0; i < 3; ++i) {
-        if (kind != Kind::hamiltonian) s.variables.push_back({"w" + std::to_string(i + 1), 1, i});
-        if (kind != Kind::lagrangian && kind != Kind::force) s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
+        if (kind != Kind::hamiltonian && kind != Kind::constraint)
+          s.variables.push_back({"w" + std::to_string(i + 1), 1, i});
+        if (kind != Kind::lagrangian && kind != Kind::force && kind != Kind::constraint)
+          s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
       }
-      if (kind == Kind::force) s.variables.push_back({"t", 0, 9});  // (a body torque: after R's entries)
+      // (a body torque and a constraint: t after R's entries)
+      if (kind == Kind::force || kind == Kind::constraint) s.variables.push_back({"t", 0, 9});
       s.constants = params;
       s.definitions = definitions;
       return s;

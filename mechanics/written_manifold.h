@@ -24,7 +24,8 @@
 // J_k = (x cross p)_k on S^2 (sum_i (x_i cross p_i)_k on (S^2)^K) and the spatial
 // angular momentum component J_k = (R pi)_k on SO(3). rotation_symmetries() finds the
 // axes numerically: L at a few fixed sample states against L at their rotated images,
-// equal to 1e-10 relative. Those J_k are reported as invariants; the built-in systems
+// equal to 1e-10 relative (and the constraints, where the scene writes some, likewise).
+// Those J_k are reported as invariants; the built-in systems
 // report the same quantities (vertical for the pendulum and the top, all three for the
 // free body).
 #pragma once
@@ -165,11 +166,14 @@ struct WrittenManifoldLagrangian {
             }
             L0 = (*this)(x, v);
             L1 = (*this)(Qx, Qv);
+            if (!constraints_invariant(x, Qx)) invariant = false;
           } else {
             const Mat<double, 3, 3> R = SO3::exp(Vec<double, 3>(1.3 * dirs[s]));
             L0 = (*this)(R, vels[s]);
             L1 = (*this)(Mat<double, 3, 3>(Q * R), vels[s]);
+            if (!constraints_invariant(R, Mat<double, 3, 3>(Q * R))) invariant = false;
           }
+          if (!invariant) break;
           if (!std::isfinite(L0) && !std::isfinite(L1)) continue;  // outside L's domain here
           ++compared;
           if (!(std::fabs(L1 - L0) <= 1e-10 * std::fmax(1.0, std::fabs(L0)))) {
@@ -180,6 +184,28 @@ struct WrittenManifoldLagrangian {
       out[static_cast<std::size_t>(k)] = invariant && compared > 0;
     }
     return out;
+  }
+
+ private:
+  // Whether the constraints (system.constraints, if any) take the same values at x and
+  // at its rotated image y, at two times, to 1e-10 relative: a symmetry of L conserves
+  // its momentum map only where the constraints share it.
+  template <class X>
+  bool constraints_invariant(const X& x, const X& y) const {
+    constexpr int entries = static_cast<int>(X::SizeAtCompileTime);
+    for (const Expression& g : system->constraints)
+      for (double t : {0.0, 0.37}) {
+        std::array<double, entries + 1> a, b;
+        for (int i = 0; i < entries; ++i) {
+          a[static_cast<std::size_t>(i)] = x.data()[i];
+          b[static_cast<std::size_t>(i)] = y.data()[i];
+        }
+        a[entries] = b[entries] = t;
+        const double g0 = g(a.data(), a.data()), g1 = g(b.data(), b.data());
+        if (!std::isfinite(g0) && !std::isfinite(g1)) continue;
+        if (!(std::fabs(g1 - g0) <= 1e-10 * std::fmax(1.0, std::fabs(g0)))) return false;
+      }
+    return true;
   }
 };
 
@@ -270,6 +296,88 @@ class ManifoldForce {
   }
 
   const WrittenSystem& system() const { return *system_; }
+
+ private:
+  std::shared_ptr<const WrittenSystem> system_;
+};
+
+// Holonomic constraints written on S^2 or SO(3) ([system] constraints; Kind::constraint):
+// m expressions g_i(t, x) in the point's stored entries (x, y, z on S^2, R11 ... R33 on
+// SO(3)) and the time t (block 0, after the entries), each constrained to 0. They
+// restrict the motion to a submanifold of the space (on S^2 a curve, on SO(3) rotations
+// about a fixed axis, say); the constrained step (solvers/manifold_constrained_step.h)
+// differentiates them in the chart centred at a point, in any scalar type.
+//
+// `chart_gradient` gives, at (t, c), G(i, j) = d/deta_j g_i(t, chart(c, eta)) at eta = 0
+// (the rows of Dg in the chart's coordinates, which pair with the chart's tangent
+// coordinates: Dg(c) tangent(c, nu) = G nu) and g_t(i) = dg_i/dt, by one Jet level.
+// The relative residuals the runtime reports are R^n's (mechanics/written_constraints.h)
+// taken in the embedding: |g_i| / (|grad g_i| |x|) and |grad g_i . v + dg_i/dt| / (|grad
+// g_i| |v|), grad g_i the gradient along the space (G's rows in the chart's orthonormal
+// coordinates on S^2, the body axes on SO(3)) and |x| the point's Euclidean norm (1 on
+// S^2, sqrt 3 for a rotation matrix).
+template <class M>
+class ManifoldConstraints {
+ public:
+  static constexpr int n = M::dim;
+  // the point's stored numbers
+  static constexpr int entries = std::is_same_v<M, SO3> ? 9 : 3 * written_manifold_detail::sphere_factors<M>::value;
+  template <class T>
+  using P = typename M::template Point<T>;
+
+  explicit ManifoldConstraints(std::shared_ptr<const WrittenSystem> s) : system_(written_manifold_detail::checked<M>(s)) {
+    if (system_->constraints.empty() || count() >= n)
+      throw std::invalid_argument("ManifoldConstraints: from 1 to " + std::to_string(n - 1) + " constraints on " +
+                                  std::string(M::name) + ", got " + std::to_string(count()));
+  }
+  int count() const { return static_cast<int>(system_->constraints.size()); }
+  const WrittenSystem& system() const { return *system_; }
+
+  // g(t, x) into g[0 .. count()), any scalar (t and x of the same).
+  template <class T>
+  void value(const T& t, const P<T>& x, T* g) const {
+    std::array<T, entries + 1> a;
+    for (int i = 0; i < entries; ++i) a[static_cast<std::size_t>(i)] = x.data()[i];
+    a[entries] = t;
+    for (int i = 0; i < count(); ++i) g[i] = system_->constraints[static_cast<std::size_t>(i)](a.data(), a.data());
+  }
+
+  // g, G and g_t at (t, c) (header comment); g, gt of count() entries, G count() x n.
+  template <class Gv, class Gm, class Gt>
+  void chart_gradient(double t, const P<double>& c, Gv& g, Gm& Gc, Gt& gt) const {
+    using D = ceres::Jet<double, n + 1>;
+    Vec<D, n> eta;
+    for (int i = 0; i < n; ++i) eta[i] = D(0.0, i);
+    std::array<D, n> out;  // (fewer constraints than the space's dimension: the scene checks it)
+    value(D(t, n), P<D>(M::chart(c, eta)), out.data());
+    for (int i = 0; i < count(); ++i) {
+      const D& e = out[static_cast<std::size_t>(i)];
+      g[i] = e.a;
+      for (int j = 0; j < n; ++j) Gc(i, j) = e.v[j];
+      gt[i] = e.v[n];
+    }
+  }
+
+  // The largest relative residuals at (t, x) with velocity v (header comment) into
+  // position and velocity.
+  void relative_residuals(double t, const P<double>& x, const typename M::template Tangent<double>& v,
+                          double& position, double& velocity) const {
+    std::array<double, n> g, gt;
+    Mat<double, n, n> G;
+    chart_gradient(t, x, g, G, gt);
+    const Vec<double, n> nu = M::tangent_coordinates(x, v);
+    const double xn = x.norm(), vn = nu.norm();
+    position = velocity = 0.0;
+    for (int i = 0; i < count(); ++i) {
+      const double gn = G.row(i).norm(), a = std::fabs(g[static_cast<std::size_t>(i)]);
+      const double b = std::fabs(G.row(i).dot(nu) + gt[static_cast<std::size_t>(i)]);
+      position = std::fmax(position, gn * xn > 0.0 ? a / (gn * xn) : a);
+      velocity = std::fmax(velocity, gn * vn > 0.0 ? b / (gn * vn) : b);
+    }
+    if (!std::isfinite(position)) position = INFINITY;
+    if (!std::isfinite(velocity)) velocity = INFINITY;
+  }
+
 
  private:
   std::shared_ptr<const WrittenSystem> system_;

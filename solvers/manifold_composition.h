@@ -65,7 +65,8 @@ class ComposedPointStep {
       total.work += s.work;  // (a force's work, summed over the substeps)
       if (!s.converged) {
         total = s;
-        total.message = "substep " + std::to_string(i + 1) + " of " + std::to_string(stages_.size()) + ": " + s.message;
+        if (stages_.size() > 1)  // (one stage: the step itself, a runtime's composition "none")
+          total.message = "substep " + std::to_string(i + 1) + " of " + std::to_string(stages_.size()) + ": " + s.message;
         return total;
       }
       if (s.residual / s.scale > total.residual / std::fmax(total.scale, 1e-300)) {

@@ -241,7 +241,7 @@ const char* kRunHelp =
     "                               count, a value that is not a number (its line named)\n"
     "                               and a control no force reads are refused (exit 2).\n"
     "                               --linearize adds B_k = d(q_{k+1}, p_{k+1})/du_k\n"
-    "    constraints = [\"EXPR\"]     strings, optional, on R^n: holonomic constraints\n"
+    "    constraints = [\"EXPR\"]     strings, optional: holonomic constraints\n"
     "                               g(t, q) = 0 in the time t and x (no velocities),\n"
     "                               fewer than the coordinates, e.g. [\"x^2 + y^2 - l^2\"].\n"
     "                               Each step solves the constrained discrete\n"
@@ -260,6 +260,11 @@ const char* kRunHelp =
     "                               refused (exit 2). The dense steps take\n"
     "                               up to 4096 coordinates; a separable Lagrangian's\n"
     "                               theta step, any number (use_structure below).\n"
+    "                               On S^2 and SO(3): in the point's entries and t\n"
+    "                               (x, y, z; R11 ... R33), fewer than the space's\n"
+    "                               dimension; the lagrangian form of the space's maps,\n"
+    "                               composed or not, with forces or not (the same\n"
+    "                               equations in the chart); not on (S^2)^K\n"
     "                               The initial state must satisfy them: Dg of full\n"
     "                               rank, and |g_i| / (|grad g_i| |q|) and\n"
     "                               |grad g_i . v + dg_i/dt| / (|grad g_i| |v|) at\n"
@@ -797,6 +802,8 @@ std::string run_help() {
   row(dvm::written_system_entry(dvm::Space::sphere, 2), "(S^2)^K");
   row(dvm::written_system_entry(dvm::Space::euclidean, 1, true), nullptr, "lagrangian, forces");
   row(dvm::written_system_entry(dvm::Space::euclidean, 1, false, true), nullptr, "lagrangian, constraints");
+  row(dvm::written_system_entry(dvm::Space::sphere, 1, false, true), nullptr, "lagrangian, constraints");
+  row(dvm::written_system_entry(dvm::Space::rotation, 1, false, true), nullptr, "lagrangian, constraints");
   return h;
 }
 

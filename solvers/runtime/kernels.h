@@ -658,14 +658,15 @@ inline std::string initial_state_keys(const Problem& pr) {
 }
 
 // The largest relative residual of the initial state the constrained runs accept
-// (WrittenConstraints::relative_residuals), for the position and for the velocity.
+// (WrittenConstraints::relative_residuals on R^n, ManifoldConstraints::relative_residuals
+// on S^2 and SO(3)), for the position and for the velocity.
 constexpr double kConstraintStartTolerance = 1e-10;
 
 // The checks of a constrained run's initial state that every space shares
 // (kernels_sparse_constrained.cc), each throwing InputError that names the key:
 //   require_constraint_rank       D (Dg's rows at t = 0, m x dim) of rank m by its singular
 //                                 values (those above 1e-10 of the largest); `along` names
-//                                 where D's columns are, or "" (the coordinates);
+//                                 where D's columns are (" along S^2": in a chart), or "";
 //   check_constraint_start_terms  per constraint i, g_i, |grad g_i| and grad g_i . v +
 //                                 dg_i/dt: refuses a value or derivative that is not finite
 //                                 and a position off a constraint (|g_i| / (|grad g_i| qn)

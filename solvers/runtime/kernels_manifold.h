@@ -25,6 +25,7 @@
 #include "solvers/manifold_boundary_value.h"
 #include "solvers/manifold_composition.h"
 #include "solvers/manifold_galerkin_step.h"
+#include "solvers/manifold_constrained_step.h"
 #include "solvers/manifold_hamiltonian_step.h"
 #include "solvers/manifold_step.h"
 #include "solvers/runtime/kernels.h"
@@ -256,6 +257,9 @@ struct ManifoldView {
   // With forces (system.forces) the momentum maps of L's symmetries are not conserved:
   // their columns are written, but they are not reported as invariants.
   bool forced = false;
+  // With constraints (system.constraints on S^2 or SO(3)), or null.
+  static constexpr bool kConstrainable = std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>;
+  std::shared_ptr<const ManifoldConstraints<Mf>> constraints = nullptr;
 
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
@@ -285,6 +289,15 @@ struct ManifoldView {
     return forced ? std::vector<InvariantReport>() : momentum_reports(L, I0);
   }
   double point_defect(const Point& q) const { return Mf::point_defect(q); }
+  // The relative residuals of the constraints and of their hidden constraint at (t, q, p)
+  // (ManifoldConstraints::relative_residuals, v = FL^{-1}(q, p)); false without.
+  // (compiled for the spaces that take constraints only)
+  template <bool C = kConstrainable, std::enable_if_t<C, int> = 0>
+  bool constraint_residuals(double t, const Point& q, const Covector& p, double& g, double& hidden) const {
+    if (!constraints) return false;
+    constraints->relative_residuals(t, q, manifold_legendre_inverse(L, q, p), g, hidden);
+    return true;
+  }
   void finish_report(RunReport& r, const Point& q, const Covector& p) const {
     r.q_final = stored(q);
     r.p_final = std::vector<double>(p.data(), p.data() + C);
@@ -351,6 +364,59 @@ void manifold_initial_state(const Problem& pr, const S& L, typename Map::Manifol
   }
 }
 
+// The initial state of a constrained run on S^2 or SO(3) (system.constraints): the rows
+// of Dg(0, q) independent, q on the constraints and v on their hidden constraint, each to
+// kConstraintStartTolerance relative (ManifoldConstraints::relative_residuals' measures);
+// a velocity off the hidden constraint is refused, or projected where the scene sets
+// initial.project_velocity (the step's right transform: p moved along the normals).
+template <class Step, class S>
+void check_manifold_constrained_start(const Problem& pr, const S& shown, const Step& step,
+                                      const ManifoldConstraints<typename Step::M>& con,
+                                      const typename Step::Point& q, typename Step::Covector& p,
+                                      typename Step::Covector& v0) {
+  using Mf = typename Step::M;
+  constexpr int n = Mf::dim;
+  const int m = con.count();
+  Eigen::VectorXd g(m), gt(m), norms(m), across(m);
+  Eigen::MatrixXd G(m, n);
+  con.chart_gradient(0.0, q, g, G, gt);
+  const Vec<double, n> nu = Mf::tangent_coordinates(q, v0);
+  for (int i = 0; i < m; ++i) {
+    norms[i] = G.row(i).norm();
+    across[i] = G.row(i).dot(nu) + gt[i];
+  }
+  constexpr bool rotation = std::is_same_v<Mf, SO3>;  // (the keys of the initial state there)
+  if (!G.allFinite() || !g.allFinite() || !gt.allFinite())
+    check_constraint_start_terms(pr, g, norms, across, 1.0, 1.0, "");  // (refuses: not finite)
+  require_constraint_rank(pr, G, std::string(" along ") + Mf::name);
+  const int i = check_constraint_start_terms(pr, g, norms, across, q.norm(), nu.norm(),
+                                             rotation ? "initial.rotation (or initial.R)" : "initial.q");
+  if (i < 0) return;
+  if (pr.project_velocity) {
+    Vec<double, n> pi = Mf::covector_to_local(q, p);
+    StepSummary s;
+    if (!step.project(0.0, q, pi, s)) throw InputError(pr.project_velocity_where + ": " + s.message);
+    p = Mf::covector_from_local(q, pi);
+    v0 = manifold_legendre_inverse(shown, q, p);
+    return;
+  }
+  refuse_velocity_off_constraint(pr, i, across[i], nu.norm(), norms[i],
+                                 pr.momentum_given ? (rotation ? "initial.pi" : "initial.p")
+                                                   : (rotation ? "initial.omega" : "initial.v"));
+}
+
+// The force a scene writes on S^2 or SO(3) (system.forces), refused where it is not
+// finite at the initial state (q, v0) and t = 0.
+template <class Mf>
+std::shared_ptr<const ManifoldForce<Mf>> checked_force(const Problem& pr, const typename Mf::template Point<double>& q,
+                                                       const typename Mf::template Tangent<double>& v0) {
+  auto force = std::make_shared<const ManifoldForce<Mf>>(pr.written);
+  Vec<double, ManifoldForce<Mf>::size> F0;
+  force->value(0.0, q, v0, F0);
+  if (!F0.allFinite()) throw InputError(pr.forces_where + ": the force is not finite at the initial state (t = 0)");
+  return force;
+}
+
 // ---- the factory ---------------------------------------------------------------------
 // Which parts of the method are built for this system (Parts, factories.h: the rest was
 // refused by validate(), which reads the same constant, and is not instantiated): the
@@ -367,12 +433,15 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   using Mf = typename Map::Manifold;
   using Point = typename View::Point;
   using Covector = typename View::Covector;
-  const View view{shown, pr.forced()};
+  View view{shown, pr.forced()};
   RunReport base = base_report(pr, me, shown.name());
   base.manifold = Mf::name;
   const StepOptions opt = me.step_options();
   const double h = pr.step;
 
+  // (validate refuses these first: the steps below but the constrained one hold no constraint)
+  if (pr.constrained() && (pr.boundary_value || me.galerkin || me.form != Form::lagrangian))
+    throw InputError(pr.constraints_where + ": constraints on S^2 and SO(3) enter the lagrangian form of the maps");
   if (pr.boundary_value) {
     if constexpr (BoundaryValue)
       return std::make_unique<BoundaryValueRun<View, SphereBoundaryValueProblem<S, Map>>>(
@@ -416,15 +485,30 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
     }
   }
   if (me.form != Form::lagrangian) throw InputError("integrator.form: unsupported");  // refused by validate()
+  // system.constraints (S^2, SO(3)): the constrained step, with the force where the system
+  // has one, composed or not
+  if constexpr (View::kConstrainable)
+    if (pr.constrained()) {
+      const auto con = std::make_shared<const ManifoldConstraints<Mf>>(pr.written);
+      check_manifold_constrained_start(pr, shown, ConstrainedManifoldStep<S, Map>(L, R, h, opt, con), *con, q, p, v0);
+      view.constraints = con;
+      base.constrained = true;
+      base.constraints = con->count();
+      if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
+      // (one step type with a force or none)
+      const std::shared_ptr<const ManifoldForce<Mf>> force = forced ? checked_force<Mf>(pr, q, v0) : nullptr;
+      base.forced = forced;
+      // (composed also for composition = "none", one stage: one run type)
+      auto make = [&](double hk, const Map& Rk) { return ConstrainedManifoldStep<S, Map>(L, Rk, hk, opt, con, force); };
+      return stepper_run(view, compose_stages<ComposedPointStep<decltype(make(h, R))>>(h, stages, make), q, p, v0, base,
+                         pr.steps);
+    }
+  if (pr.constrained()) throw InputError(pr.constraints_where + ": constraints are written on R^n, S^2 and SO(3)");
   // system.forces: the forced step (the discrete Lagrange-d'Alembert principle at the
   // map's node), composed or not
   if constexpr (std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>)
     if (forced) {
-      const auto force = std::make_shared<const ManifoldForce<Mf>>(pr.written);
-      Vec<double, ManifoldForce<Mf>::size> F0;
-      force->value(0.0, q, v0, F0);
-      if (!F0.allFinite())
-        throw InputError(pr.forces_where + ": the force is not finite at the initial state (t = 0)");
+      const auto force = checked_force<Mf>(pr, q, v0);
       base.forced = true;
       return composed(
           [&](double hk, const Map& Rk) { return ManifoldStep<S, Map, ManifoldForce<Mf>>(L, Rk, hk, opt, force); });

@@ -479,6 +479,30 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
       forced_caps("system.forces on SO(3) (a body torque) enter the lagrangian form of the SO(3) maps, composed or "
                   "not; Galerkin and the hamiltonian form take none"),
       factories::written_rotation, ""};
+  // With constraints (forces or not; S^2 and SO(3)): the lagrangian form of the space's
+  // maps, composed or not (ConstrainedManifoldStep, solvers/manifold_constrained_step.h,
+  // solved by the one Newton driver: no solver = "tiny")
+  auto constrained_caps = [&](const char* note) {
+    SystemCapabilities c = forced_caps(note);
+    c.tiny_solver = false;
+    return c;
+  };
+  static const SystemEntry sphere_constrained = {
+      "lagrangian with constraints on S^2", "written in the scene in x, x_dot, with holonomic constraints",
+      Space::sphere, 3, {},
+      constrained_caps("system.constraints on S^2 enter the lagrangian form of the S^2 maps, composed or not (the "
+                       "constrained discrete Euler-Lagrange equations with multipliers, in the chart); Galerkin, "
+                       "the hamiltonian form, boundary values and solver = \"tiny\" take none"),
+      factories::written_sphere, ""};
+  static const SystemEntry rotation_constrained = {
+      "lagrangian with constraints on SO(3)", "written in the scene in R, w, with holonomic constraints",
+      Space::rotation, 3, {},
+      constrained_caps("system.constraints on SO(3) enter the lagrangian form of the SO(3) maps, composed or not "
+                       "(the constrained discrete Euler-Lagrange equations with multipliers, in the chart); "
+                       "Galerkin, the hamiltonian form and solver = \"tiny\" take none"),
+      factories::written_rotation, ""};
+  if (constrained && space == Space::sphere && factors == 1) return sphere_constrained;
+  if (constrained && space == Space::rotation) return rotation_constrained;
   if (forced && space == Space::sphere && factors == 1) return sphere_forced;
   if (forced && space == Space::rotation) return rotation_forced;
   switch (space) {

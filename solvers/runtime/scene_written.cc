@@ -470,27 +470,38 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     const std::string key = "system.constraints";
     const std::string shape = ": expected a list of expressions g(t, q), each constrained to 0 (e.g. [\"x^2 + y^2 - l^2\"])";
     if (!cs->is_array()) throw InputError(key_where(path, *cs, key) + shape);
-    if (w->space != WrittenSystem::Space::euclidean)
-      throw InputError(key_where(path, *cs, key) + ": constraints are written on R^n; on S^2 and SO(3) the space is "
-                                                  "the constraint (a spherical pendulum in R^3 with x^2 + y^2 + z^2 - "
-                                                  "l^2 is its constrained twin)");
+    if (w->space == WrittenSystem::Space::sphere && w->factors > 1)
+      throw InputError(key_where(path, *cs, key) + ": constraints are written on R^n, S^2 and SO(3); on (S^2)^" +
+                       std::to_string(w->factors) + " a written system takes none");
     const toml::array& a = *cs->as_array();
     if (a.empty()) throw InputError(key_where(path, *cs, key) + ": an empty list" + shape.substr(1));
     for (std::size_t i = 0; i < a.size(); ++i) {
       const toml::node& node = a[i];
       const std::string k = key + "[" + std::to_string(i + 1) + "]";
-      if (!node.is_string()) throw InputError(key_where(path, node, k) + ": expected a string (an expression in t and q)");
+      if (!node.is_string())
+        throw InputError(key_where(path, node, k) + ": expected a string (an expression in t and " +
+                         (w->space == WrittenSystem::Space::rotation ? "R11 ... R33" : "q") + ")");
       try {
         w->constraints.push_back(Expression::parse(*node.value<std::string>(), w->symbols(WrittenSystem::Kind::constraint)));
       } catch (const ExpressionError& e) {
         throw InputError(string_location(path, node, e.offset) + ": in " + k + ": " + e.what() +
-                         " (a constraint is g(t, q): the coordinates, t, the parameters and the definitions)");
+                         (w->space == WrittenSystem::Space::rotation
+                              ? " (a constraint on SO(3) is g(t, R): the entries R11 ... R33, t, the parameters and "
+                                "the definitions)"
+                              : " (a constraint is g(t, q): the coordinates, t, the parameters and the definitions)"));
       }
     }
-    if (a.size() >= w->coordinates.size())
+    // the dimension the constraints cut down: R^n's coordinates, 2 on S^2, 3 on SO(3)
+    const std::size_t dim = w->space == WrittenSystem::Space::euclidean ? w->coordinates.size()
+                            : w->space == WrittenSystem::Space::sphere  ? 2
+                                                                        : 3;
+    if (a.size() >= dim)
       throw InputError(key_where(path, *cs, key) + ": " + std::to_string(a.size()) + " constraints on " +
-                       std::to_string(w->coordinates.size()) + " coordinates leave no motion; expected fewer constraints "
-                                                                "than coordinates");
+                       (w->space == WrittenSystem::Space::euclidean ? std::to_string(dim) + " coordinates"
+                        : w->space == WrittenSystem::Space::sphere  ? std::string("S^2 (dimension 2)")
+                                                                    : std::string("SO(3) (dimension 3)")) +
+                       " leave no motion; expected fewer constraints than " +
+                       (w->space == WrittenSystem::Space::euclidean ? "coordinates" : "the space's dimension"));
     pr.constraints_where = key_where(path, *cs, key);
   }
   const toml::node* L = sys.get("lagrangian");

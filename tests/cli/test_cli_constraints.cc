@@ -4,7 +4,9 @@
 // the constrained steps' Jacobians; every bad input and every combination the
 // constrained step does not take refused with exit 2, naming the keys, nothing written;
 // Lagrangians that depend on time (Kapitza's pendulum, a damping Lagrangian against a
-// damping force); forces on S^2 and SO(3). The long runs (10^6 steps) are in test_cli_constraints_long.cc.
+// damping force); forces on S^2 and SO(3); constraints on S^2 and SO(3) against the
+// systems they reduce to, and their orders. The long runs (10^6 steps) are in
+// test_cli_constraints_long.cc.
 #define BOOST_TEST_MODULE cli_constraints
 #include <boost/test/unit_test.hpp>
 
@@ -414,6 +416,146 @@ BOOST_AUTO_TEST_CASE(forces_on_the_sphere_and_the_rotation_group) {
   }
 }
 
+// Constraints on S^2 and SO(3) (solvers/manifold_constrained_step.h), each against the
+// one-coordinate system it reduces to, composed to order 8 (kahan-li8, h = 0.01) to
+// t = 10 and compared to 1e-10:
+//   - the spherical pendulum held on the great circle y = 0 is the planar pendulum
+//     (pendulum.toml's m = l = g = 1): x = sin q, z = -cos q, and p = p_q (cos q, 0, sin q);
+//   - the bead on a rotating hoop (bead_on_rotating_hoop.toml, a constraint in t) is
+//     the one-coordinate Lagrangian (theta_dot^2 + Om^2 sin^2 theta) / 2 + g cos theta,
+//     its hoop at the angle Om t;
+//   - the compound pendulum on SO(3) (compound_pendulum_so3.toml, two constraints) is
+//     pendulum.toml: the rotation about e1 by q, pi = (p_q, 0, 0);
+//   - the damped bead on a fixed hoop (a force in the embedding with the constraint) is
+//     the damped pendulum, the work equal (the constraint force does none).
+// Each run holds its constraints and their hidden constraint at round-off, and reports
+// the momentum maps of L's symmetries only where the constraints share them.
+BOOST_AUTO_TEST_CASE(constraints_on_the_sphere_and_the_rotation_group) {
+  const std::vector<std::string> order8 = {"integrator.composition=\"kahan-li8\"", "integrator.t_end=10.0",
+                                           "integrator.step=0.01"};
+  const Json a = run("pendulum.toml", order8);
+  const double q = vec(a, "q_final")[0], pq = vec(a, "p_final")[0];
+  auto held = [](const Json& r, int m) {
+    BOOST_TEST(r.at("constrained").get<bool>());
+    BOOST_TEST(r.at("constraints").get<int>() == m);
+    BOOST_TEST(r.at("max_constraint_residual").get<double>() <= 1e-14);
+    BOOST_TEST(r.at("max_hidden_constraint_residual").get<double>() <= 1e-13);
+  };
+  {  // the great circle y = 0
+    auto sets = order8;
+    sets.insert(sets.end(), {"system.constraints=[\"y\"]", "system.params.g=1.0", "initial.q=[0.9092974268256817, 0.0, "
+                             "0.4161468365471424]", "initial.v=[0.0, 0.0, 0.0]"});
+    const Json s = run("spherical_pendulum_written.toml", sets);
+    const auto x = vec(s, "q_final"), p = vec(s, "p_final");
+    BOOST_TEST_MESSAGE("pendulum on a great circle of S^2 against the angle at t = 10: " << std::fabs(x[0] - std::sin(q))
+                                                                                       << " " << std::fabs(x[2] + std::cos(q)));
+    BOOST_TEST(std::fabs(x[0] - std::sin(q)) <= 1e-10);
+    BOOST_TEST(std::fabs(x[1]) <= 1e-15);
+    BOOST_TEST(std::fabs(x[2] + std::cos(q)) <= 1e-10);
+    BOOST_TEST(std::fabs(p[0] - pq * std::cos(q)) <= 1e-10);
+    BOOST_TEST(std::fabs(p[1]) <= 1e-14);
+    BOOST_TEST(std::fabs(p[2] - pq * std::sin(q)) <= 1e-10);
+    held(s, 1);
+    BOOST_TEST(std::fabs(s.at("energy_initial").get<double>() - a.at("energy_initial").get<double>()) <= 1e-15);
+    BOOST_TEST(s.at("max_abs_energy_error").get<double>() <= 1e-9);
+    BOOST_TEST((!s.contains("invariants") || s.at("invariants").empty()));  // (y = 0 breaks the symmetry about e3)
+  }
+  {  // the bead on the rotating hoop against its one coordinate
+    const std::string angle = write_scene(
+        "hoop_angle.toml",
+        "[system]\ncoordinates = [\"th\"]\nparams = { g = 9.81, Om = 4.0 }\n"
+        "lagrangian = \"0.5*(th_dot^2 + Om^2*sin(th)^2) + g*cos(th)\"\n"
+        "[initial]\nq = [0.2]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.01\nt_end = 10.0\n");
+    const Output o = dvm(with_sets({"run", angle, "--json", "--no-output"}, order8));
+    BOOST_TEST_REQUIRE(o.status == 0, o.err);
+    const double th = vec(parse_json(o.out), "q_final")[0], phi = 4.0 * 10.0;
+    const Json b = run("bead_on_rotating_hoop.toml", order8);
+    const auto x = vec(b, "q_final");
+    const double d = std::fmax(std::fabs(x[0] - std::sin(th) * std::cos(phi)),
+                               std::fmax(std::fabs(x[1] - std::sin(th) * std::sin(phi)), std::fabs(x[2] + std::cos(th))));
+    BOOST_TEST_MESSAGE("bead on a rotating hoop against its angle at t = 10: " << d << " (theta " << th << ")");
+    BOOST_TEST(d <= 1e-10);
+    held(b, 1);
+    BOOST_TEST(b.at("max_abs_energy_error").get<double>() > 1.0);  // (the hoop's drive does work)
+  }
+  {  // the compound pendulum on SO(3)
+    const Json r = run("compound_pendulum_so3.toml", order8);
+    const auto u = vec(r, "q_final"), pi = vec(r, "p_final");  // the quaternion [w, x, y, z], pi
+    const double sign = u[0] * std::cos(q / 2) >= 0.0 ? 1.0 : -1.0;
+    BOOST_TEST_MESSAGE("compound pendulum on SO(3) against the angle at t = 10: "
+                       << std::fabs(sign * u[0] - std::cos(q / 2)) << " " << std::fabs(sign * u[1] - std::sin(q / 2)));
+    BOOST_TEST(std::fabs(sign * u[0] - std::cos(q / 2)) <= 1e-10);
+    BOOST_TEST(std::fabs(sign * u[1] - std::sin(q / 2)) <= 1e-10);
+    BOOST_TEST(std::fabs(u[2]) + std::fabs(u[3]) <= 1e-14);
+    BOOST_TEST(std::fabs(pi[0] - pq) <= 1e-10);
+    BOOST_TEST(std::fabs(pi[1]) + std::fabs(pi[2]) <= 1e-13);
+    held(r, 2);
+    BOOST_TEST(std::fabs(r.at("energy_initial").get<double>() - a.at("energy_initial").get<double>()) <= 1e-15);
+    // L (I1 != I2) has no symmetry about e1 in space, nor do the constraints about e2, e3:
+    // no momentum map is reported as conserved
+    BOOST_TEST((!r.contains("invariants") || r.at("invariants").empty()));
+  }
+  {  // damped on a fixed hoop: the force -c v in the embedding against -c th_dot
+    auto sets = order8;
+    sets.insert(sets.end(), {"system.constraints=[\"y\"]", "system.params.g=1.0",
+                             "system.forces={ x = \"-0.3*x_dot\", y = \"-0.3*y_dot\", z = \"-0.3*z_dot\" }",
+                             "initial.q=[0.9092974268256817, 0.0, 0.4161468365471424]", "initial.v=[0.0, 0.0, 0.0]"});
+    const Json s = run("spherical_pendulum_written.toml", sets);
+    const std::string damped = write_scene(
+        "damped_angle.toml",
+        "[system]\ncoordinates = [\"th\"]\nlagrangian = \"0.5*th_dot^2 + cos(th)\"\nforces = { th = \"-0.3*th_dot\" }\n"
+        "[initial]\nq = [2.0]\nv = [0.0]\n[integrator]\nmap = \"midpoint\"\nstep = 0.01\nt_end = 10.0\n");
+    const Output o = dvm(with_sets({"run", damped, "--json", "--no-output"}, order8));
+    BOOST_TEST_REQUIRE(o.status == 0, o.err);
+    const Json t = parse_json(o.out);
+    const double th = vec(t, "q_final")[0];
+    const auto x = vec(s, "q_final");
+    BOOST_TEST_MESSAGE("damped pendulum on a great circle against the angle at t = 10: "
+                       << std::fabs(x[0] - std::sin(th)) << " " << std::fabs(x[2] + std::cos(th)));
+    BOOST_TEST(std::fabs(x[0] - std::sin(th)) <= 1e-10);
+    BOOST_TEST(std::fabs(x[2] + std::cos(th)) <= 1e-10);
+    BOOST_TEST(s.at("forced").get<bool>());
+    held(s, 1);
+    BOOST_TEST(std::fabs(s.at("work").get<double>() - t.at("work").get<double>()) <= 1e-10);
+    BOOST_TEST(s.at("work").get<double>() < -0.5);
+    BOOST_TEST(s.at("max_abs_energy_balance").get<double>() <= 1e-12);
+  }
+}
+
+// Orders under constraints on S^2 and SO(3), measured by `dvm converge`: 2 for the
+// midpoint-type maps, 4 for the triple jump (the constrained step of a scleronomic or a
+// rheonomic constraint composed with its adjoint), and the same with a force.
+BOOST_AUTO_TEST_CASE(orders_under_constraints_on_the_sphere_and_the_rotation_group) {
+  struct Case {
+    const char* scene;
+    std::string composition, steps;
+    double order;
+    std::vector<std::string> sets;
+  };
+  const std::vector<std::string> damped = {
+      "system.constraints=[\"x + y\"]", "initial.q=[0.5, -0.5, -0.7071067811865476]", "initial.v=[0.0, 0.0, 0.0]",
+      "system.forces={ x = \"-0.3*x_dot\", y = \"-0.3*y_dot + 0.4*sin(2*t)\", z = \"-0.3*z_dot\" }"};
+  const std::vector<Case> cases = {
+      {"bead_on_rotating_hoop.toml", "none", "40,80,160,320", 2.0, {}},
+      {"bead_on_rotating_hoop.toml", "triple-jump:4", "20,40,80,160", 4.0, {}},
+      {"compound_pendulum_so3.toml", "none", "40,80,160,320", 2.0, {}},
+      {"compound_pendulum_so3.toml", "triple-jump:4", "20,40,80,160", 4.0, {}},
+      {"spherical_pendulum_written.toml", "none", "40,80,160,320", 2.0, damped},
+      {"spherical_pendulum_written.toml", "triple-jump:4", "20,40,80,160", 4.0, damped},
+  };
+  for (const Case& c : cases) {
+    BOOST_TEST_CONTEXT(c.scene << ", " << c.composition << (c.sets.empty() ? "" : ", damped")) {
+      std::vector<std::string> args = {"converge", scene(c.scene), "--t-end", "1", "--steps-list", c.steps, "--json",
+                                       "--set", "integrator.composition=\"" + c.composition + "\""};
+      const Output o = dvm(with_sets(args, c.sets));
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      const double order = parse_json(o.out).at("fitted_order").get<double>();
+      BOOST_TEST_MESSAGE(c.scene << " " << c.composition << ": " << order);
+      BOOST_TEST(std::fabs(order - c.order) <= 0.1 * c.order, o.out);
+    }
+  }
+}
+
 // Bad input, and the combinations the constrained step does not take: exit 2, the keys
 // named, nothing on stdout, no file written.
 BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_keys) {
@@ -447,7 +589,8 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(P, {"initial.project_velocity=1"}, {"initial.project_velocity", "true or false"});
   refused("pendulum_written.toml", {"initial.project_velocity=true"}, {"initial.project_velocity", "writes none"});
   refused("pendulum.toml", {"system.constraints=[\"theta\"]"}, {"system.constraints", "belongs to a written system"});
-  refused("spherical_pendulum_written.toml", {"system.constraints=[\"x\"]"}, {"system.constraints", "on R^n"});
+  refused("spherical_double_pendulum_written.toml", {"system.constraints=[\"x1\"]"},
+          {"system.constraints", "on (S^2)^2 a written system takes none"});
   // what the constrained step does not take
   refused(P, {"integrator.method=galerkin"}, {"integrator.quadrature", "system.constraints", "\"lobatto\""});
   refused(P, {"integrator.method=galerkin", "integrator.quadrature=\"lobatto\"", "integrator.stages=7"},
@@ -483,6 +626,29 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
           {"system.controls", "forces on R^n only"});
   refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"1\" }"},
           {"system.forces", "on (S^2)^2 a written system is conservative"});
+  // constraints on S^2 and SO(3): the lagrangian form of the maps only, Newton's method,
+  // fewer constraints than the space's dimension, the initial state on them
+  const std::string H = "bead_on_rotating_hoop.toml", C = "compound_pendulum_so3.toml";
+  refused(H, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with constraints on S^2"});
+  refused(H, {"integrator.form=hamiltonian", "system.hamiltonian=\"(p_x^2 + p_y^2 + p_z^2)/2 + 9.81*z\""},
+          {"integrator.form", "lagrangian with constraints on S^2"});
+  refused(H, {"integrator.solver=tiny"}, {"integrator.solver", "lagrangian with constraints on S^2"});
+  refused(H, {"problem.kind=\"boundary-value\"", "problem.q_final=[0.0, 0.6, -0.8]", "problem.steps=10"},
+          {"problem.kind"});
+  refused(H, {"system.constraints=[\"x\", \"y\"]"}, {"system.constraints", "leave no motion", "S^2 (dimension 2)"});
+  refused(H, {"system.constraints=[\"x_dot\"]"}, {"system.constraints[1]", "unknown name 'x_dot'"});
+  refused(H, {"initial.v=[0.0, 0.0, 0.0]"}, {"initial.v", "off the hidden constraint", "system.constraints[1]"});
+  refused(H, {"initial.q=[0.6, 0.0, -0.8]", "system.constraints=[\"x - 0.5\"]"},
+          {"initial.q", "system.constraints[1]", "(\"x - 0.5\")"});
+  refused(C, {"system.constraints=[\"R21\", \"R21 + R31 - R31\"]"},
+          {"system.constraints", "rank 1", "expected 2", "redundant"});
+  refused(C, {"system.constraints=[\"R21\", \"R31\", \"R32\"]"},
+          {"system.constraints", "leave no motion", "SO(3) (dimension 3)"});
+  refused(C, {"system.constraints=[\"w1\"]"}, {"system.constraints[1]", "unknown name 'w1'"});
+  refused(C, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with constraints on SO(3)"});
+  refused(C, {"initial.omega=[0.0, 0.5, 0.0]"}, {"initial.omega", "off the hidden constraint"});
+  refused(C, {"initial.rotation=[0.5403023058681398, 0.0, 0.8414709848078965, 0.0]"},
+          {"initial.rotation", "system.constraints[2]", "(\"R31\")"});
 }
 
 // A Lagrangian in t in the hamiltonian form: H(t, q, p), the Legendre transform of L at
