@@ -9,6 +9,12 @@
 //   spherical_pendulum_r3.toml       (x, y, z), |q| = l           against spherical_pendulum_written.toml (S^2)
 //   scissor_lift.toml                9 coordinates, 8 constraints against scissor_lift_one_coordinate.toml
 //
+// Then constraints on S^2 and SO(3) (solvers/manifold_constrained_step.h; no A_k there):
+//
+//   compound_pendulum_so3.toml       SO(3), R e1 = e1             against pendulum_written.toml (the angle)
+//                                                                 and heavy_top_written.toml (SO(3), free)
+//   bead_on_rotating_hoop.toml       S^2, a hoop turning in t     against spherical_pendulum_written.toml (free)
+//
 // Then chains of k rods in Cartesian coordinates (2k coordinates, k constraints; the
 // scene written here), k = 1 .. 128: the dense ConstrainedThetaStep against the sparse
 // SparseConstrainedThetaStep from the same state, ns a step and their ratio (where the
@@ -242,6 +248,25 @@ int main(int argc, char** argv) {
       std::printf("| %s | %.0f | %.2f | %.0f | %.2f | %.0f | %s | %.0f | %.2f |\n", p.constrained, c.ns_per_step,
                   c.iterations_per_step, loose.ns_per_step, loose.iterations_per_step, derivatives.ns_per_step,
                   p.minimal, m.ns_per_step, c.ns_per_step / m.ns_per_step);
+    }
+    // constraints on S^2 and SO(3): the constrained step in the chart against the same
+    // motion in one coordinate, and against an unconstrained system on the same space
+    std::printf("\nconstraints on S^2 and SO(3) (ConstrainedManifoldStep; --linearize is for R^n, so no A_k): against "
+                "the minimal\ncoordinate, and against an unconstrained system on the same space (another motion)\n\n");
+    std::printf("| constrained scene | ns/step | iterations/step | at 1e-10: ns/step | iterations/step | twin scene "
+                "| ns/step | ratio |\n|---|---|---|---|---|---|---|---|\n");
+    const std::vector<Pair> manifold_pairs = {
+        {"compound_pendulum_so3.toml", "pendulum_written.toml"},
+        {"compound_pendulum_so3.toml", "heavy_top_written.toml"},
+        {"bead_on_rotating_hoop.toml", "spherical_pendulum_written.toml"},
+    };
+    for (const Pair& p : manifold_pairs) {
+      const Timing c = measure(dir, p.constrained, steps, repeats, false);
+      const Timing loose = measure(dir, p.constrained, steps, repeats, false, 1e-10);
+      const Timing m = measure(dir, p.minimal, steps, repeats, false);
+      std::printf("| %s | %.0f | %.2f | %.0f | %.2f | %s | %.0f | %.2f |\n", p.constrained, c.ns_per_step,
+                  c.iterations_per_step, loose.ns_per_step, loose.iterations_per_step, p.minimal, m.ns_per_step,
+                  c.ns_per_step / m.ns_per_step);
     }
     // chains of k rods: the dense step against the sparse one, the steps of a cell in
     // proportion to 1 / k^3 (the dense step's cost), at least 10
