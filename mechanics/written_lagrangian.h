@@ -91,6 +91,11 @@ struct WrittenSystem {
   std::vector<Control> controls;
   // Numbers per stored velocity: the coordinates (R^n, S^2), 3 on SO(3).
   int dim() const { return space == Space::rotation ? 3 : static_cast<int>(coordinates.size()); }
+  // Where a force reads control j in the first block: after the time, which follows the
+  // point's stored entries (the coordinates; R's nine entries on SO(3)).
+  int control_index(std::size_t j) const {
+    return (space == Space::rotation ? 9 : dim()) + 1 + static_cast<int>(j);
+  }
   // Whether the Lagrangian reads the time t: L(t, q, v), whose energy is not conserved.
   bool time_dependent() const { return space == Space::euclidean && lagrangian.uses(0, dim()); }
 
@@ -125,8 +130,10 @@ struct WrittenSystem {
         if (kind != Kind::lagrangian && kind != Kind::force && kind != Kind::constraint)
           s.variables.push_back({"pi" + std::to_string(i + 1), 2, i});
       }
-      // (a body torque and a constraint: t after R's entries)
+      // (a body torque and a constraint: t after R's entries; a torque's controls after t)
       if (kind == Kind::force || kind == Kind::constraint) s.variables.push_back({"t", 0, 9});
+      if (kind == Kind::force)
+        for (std::size_t j = 0; j < controls.size(); ++j) s.variables.push_back({controls[j].name, 0, control_index(j)});
       s.constants = params;
       s.definitions = definitions;
       return s;
@@ -149,7 +156,7 @@ struct WrittenSystem {
       s.variables.push_back({"t", 0, dim()});
     if (kind == Kind::force)
       for (std::size_t j = 0; j < controls.size(); ++j)
-        s.variables.push_back({controls[j].name, 0, dim() + 1 + static_cast<int>(j)});
+        s.variables.push_back({controls[j].name, 0, control_index(j)});
     s.constants = params;
     s.constant_arrays = param_arrays;
     s.definitions = definitions;

@@ -39,6 +39,7 @@
 #include <vector>
 
 #include "mechanics/manifold_systems.h"
+#include "mechanics/written_force.h"
 #include "mechanics/written_lagrangian.h"
 
 namespace dvm {
@@ -239,8 +240,10 @@ WrittenManifoldHamiltonian<M> hamiltonian_of(const WrittenManifoldLagrangian<M>&
 // A force written on S^2 or SO(3) ([system] forces; Kind::force): on S^2 a force in the
 // embedding, one component per coordinate (x, y, z), whose part normal to the sphere does
 // no virtual work; on SO(3) a body torque, one component per body axis (keyed w1, w2,
-// w3). Each component reads the point, the velocity and the time t (block 0, after the
-// point's entries), in any scalar type (the steps differentiate it in Jets).
+// w3). Each component reads the point, the velocity, the time t (block 0, after the
+// point's entries) and the run's control inputs (after t; ControlSignal,
+// mechanics/written_force.h: a tabulated control holds u_k over step k, whatever
+// substep evaluates the force), in any scalar type (the steps differentiate it in Jets).
 //
 // It enters the step by the discrete Lagrange-d'Alembert principle (ManifoldStep,
 // solvers/manifold_step.h) through the virtual work h <F, disp(x, y)> at the map's node
@@ -256,20 +259,34 @@ class ManifoldForce {
   template <class T>
   using V = typename M::template Tangent<T>;
 
-  explicit ManifoldForce(std::shared_ptr<const WrittenSystem> s) : system_(written_manifold_detail::checked<M>(s)) {
+  // controls: the run's control signal, required where the system declares controls.
+  explicit ManifoldForce(std::shared_ptr<const WrittenSystem> s, std::shared_ptr<const ControlSignal> controls = nullptr)
+      : system_(written_manifold_detail::checked<M>(s)), controls_(std::move(controls)) {
     if (system_->forces.empty()) throw std::invalid_argument("ManifoldForce: the system writes no forces");
-    if (!system_->controls.empty()) throw std::invalid_argument("ManifoldForce: controls enter forces on R^n only");
+    const int c = static_cast<int>(system_->controls.size());
+    if (c > 0 && (!controls_ || controls_->count() != c))
+      throw std::invalid_argument("ManifoldForce: the system declares " + std::to_string(c) +
+                                  " controls; their signal is needed");
   }
+  int controls() const { return static_cast<int>(system_->controls.size()); }
 
-  // F(t, x, v) into F.
+  // F(t, x, v) into F, the controls at t (or at the run's step where tabulated). The
+  // expressions' first block is held on the stack for up to kInlineControls controls.
   template <class T>
   void value(double t, const P<T>& x, const V<T>& v, Vec<T, size>& F) const {
-    constexpr int entries = std::is_same_v<M, SO3> ? 9 : 3;
-    std::array<T, entries + 1> a;
-    for (int i = 0; i < entries; ++i) a[static_cast<std::size_t>(i)] = x(i);
-    a[entries] = constant<T>(t);
-    for (int i = 0; i < size; ++i) F[i] = constant<T>(0.0);
-    for (const auto& [i, e] : system_->forces) F[i] = e(a.data(), v.data());
+    const int c = controls();
+    if (c == 0) {
+      std::array<T, entries + 1> a;
+      evaluate(t, x, v, a.data(), nullptr, F);
+    } else if (c <= kInlineControls) {
+      std::array<T, entries + 1 + kInlineControls> a;
+      std::array<double, kInlineControls> u;
+      evaluate(t, x, v, a.data(), u.data(), F);
+    } else {
+      std::vector<T> a(static_cast<std::size_t>(entries + 1 + c));
+      std::vector<double> u(static_cast<std::size_t>(c));
+      evaluate(t, x, v, a.data(), u.data(), F);
+    }
   }
 
   // The virtual displacement's functional disp(x, y) (above), x the node as it is (its
@@ -298,7 +315,24 @@ class ManifoldForce {
   const WrittenSystem& system() const { return *system_; }
 
  private:
+  static constexpr int entries = std::is_same_v<M, SO3> ? 9 : 3;  // the point's stored numbers
+  static constexpr int kInlineControls = 4;
+
+  // a: the first block (entries + 1 + controls()), u: room for the controls' values
+  template <class T>
+  void evaluate(double t, const P<T>& x, const V<T>& v, T* a, double* u, Vec<T, size>& F) const {
+    for (int i = 0; i < entries; ++i) a[i] = x(i);
+    a[entries] = constant<T>(t);
+    if (const int c = controls(); c > 0) {
+      controls_->values(t, u);
+      for (int j = 0; j < c; ++j) a[entries + 1 + j] = constant<T>(u[j]);
+    }
+    for (int i = 0; i < size; ++i) F[i] = constant<T>(0.0);
+    for (const auto& [i, e] : system_->forces) F[i] = e(a, v.data());
+  }
+
   std::shared_ptr<const WrittenSystem> system_;
+  std::shared_ptr<const ControlSignal> controls_;
 };
 
 // Holonomic constraints written on S^2 or SO(3) ([system] constraints; Kind::constraint):

@@ -260,6 +260,12 @@ struct ManifoldView {
   // With constraints (system.constraints on S^2 or SO(3)), or null.
   static constexpr bool kConstrainable = std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>;
   std::shared_ptr<const ManifoldConstraints<Mf>> constraints = nullptr;
+  // The run's control inputs (system.controls, read by the force), or null: after step
+  // k - 1 -> k the force reads u_k (ControlSignal::set_step).
+  std::shared_ptr<const ControlSignal> controls = nullptr;
+  void after_step(std::int64_t k, double) const {
+    if (controls) controls->set_step(k);
+  }
 
   std::vector<std::string> columns() const {
     std::vector<std::string> c{"t"};
@@ -406,11 +412,13 @@ void check_manifold_constrained_start(const Problem& pr, const S& shown, const S
 }
 
 // The force a scene writes on S^2 or SO(3) (system.forces), refused where it is not
-// finite at the initial state (q, v0) and t = 0.
-template <class Mf>
+// finite at the initial state (q, v0) and t = 0; with the run's control signal where
+// the system declares controls (system.controls), which the view advances.
+template <class Mf, class View>
 std::shared_ptr<const ManifoldForce<Mf>> checked_force(const Problem& pr, const typename Mf::template Point<double>& q,
-                                                       const typename Mf::template Tangent<double>& v0) {
-  auto force = std::make_shared<const ManifoldForce<Mf>>(pr.written);
+                                                       const typename Mf::template Tangent<double>& v0, View& view) {
+  if (!pr.written->controls.empty()) view.controls = std::make_shared<const ControlSignal>(pr.written->controls);
+  auto force = std::make_shared<const ManifoldForce<Mf>>(pr.written, view.controls);
   Vec<double, ManifoldForce<Mf>::size> F0;
   force->value(0.0, q, v0, F0);
   if (!F0.allFinite()) throw InputError(pr.forces_where + ": the force is not finite at the initial state (t = 0)");
@@ -496,7 +504,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
       base.constraints = con->count();
       if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
       // (one step type with a force or none)
-      const std::shared_ptr<const ManifoldForce<Mf>> force = forced ? checked_force<Mf>(pr, q, v0) : nullptr;
+      const std::shared_ptr<const ManifoldForce<Mf>> force = forced ? checked_force<Mf>(pr, q, v0, view) : nullptr;
       base.forced = forced;
       // (composed also for composition = "none", one stage: one run type)
       auto make = [&](double hk, const Map& Rk) { return ConstrainedManifoldStep<S, Map>(L, Rk, hk, opt, con, force); };
@@ -508,7 +516,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   // map's node), composed or not
   if constexpr (std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>)
     if (forced) {
-      const auto force = checked_force<Mf>(pr, q, v0);
+      const auto force = checked_force<Mf>(pr, q, v0, view);
       base.forced = true;
       return composed(
           [&](double hk, const Map& Rk) { return ManifoldStep<S, Map, ManifoldForce<Mf>>(L, Rk, hk, opt, force); });

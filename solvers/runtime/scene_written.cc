@@ -251,9 +251,10 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
     if (!controls->is_table())
       throw InputError(key_where(path, *controls, "system.controls") +
                        ": expected a table of name = \"expression in t\" or name = { csv = \"file\" }");
-    if (w->space != WrittenSystem::Space::euclidean)
+    if (w->space == WrittenSystem::Space::sphere && w->factors > 1)
       throw InputError(key_where(path, *controls, "system.controls") +
-                       ": controls enter forces on R^n only");
+                       ": controls enter forces on R^n, S^2 and SO(3); on (S^2)^" + std::to_string(w->factors) +
+                       " a written system is conservative");
     for (const auto& [name, node] : *controls->as_table()) w->controls.push_back({std::string(name.str()), {}, {}, {}, {}});
   }
   try {
@@ -459,7 +460,7 @@ void read_written_system(const std::string& path, const toml::table& sys, Proble
   }
   for (std::size_t j = 0; j < w->controls.size(); ++j) {
     bool read = false;
-    for (const auto& f : w->forces) read = read || f.second.uses(0, w->dim() + 1 + static_cast<int>(j));
+    for (const auto& f : w->forces) read = read || f.second.uses(0, w->control_index(j));
     if (!read)
       throw InputError(key_where(path, *controls->as_table()->get(w->controls[j].name), "system.controls." + w->controls[j].name) +
                        ": no force reads the control '" + w->controls[j].name + "' (system.forces)");

@@ -19,6 +19,7 @@
 #include <sstream>
 #include <string>
 #include <tuple>
+#include <utility>
 #include <vector>
 
 #include "tests/address_sanitizer.h"
@@ -416,6 +417,104 @@ BOOST_AUTO_TEST_CASE(forces_on_the_sphere_and_the_rotation_group) {
   }
 }
 
+// Controls read by forces on S^2 and SO(3) (ManifoldForce with the run's ControlSignal):
+//   - a rest-to-rest slew (satellite_control.toml): a torque of pi/2 then -pi/2 from a
+//     table, held over each step, stops the body turned by pi/2 about e3, exact to
+//     round-off for the midpoint-type map about a fixed axis;
+//   - a table holding f(t_k + h/2) (the midpoint node of step k) gives the run of the
+//     control written as f(t) to round-off, and the same table moved by one step does
+//     not: step k reads u_k, on SO(3) with the state in the torque and under a
+//     constraint;
+//   - on S^2 a control written in t gives the run of the force written in t, composed
+//     (each substep at its own node), and a constant table the run of the constant force
+//     composed (every substep of step k reads u_k).
+// A file of the wrong length, a control no torque reads and controls on (S^2)^K are
+// refused (test below).
+BOOST_AUTO_TEST_CASE(controls_on_the_sphere_and_the_rotation_group) {
+  {
+    const Json r = run("satellite_control.toml", {});
+    BOOST_TEST(r.at("forced").get<bool>());
+    BOOST_TEST(r.at("steps").get<int>() == 200);
+    const auto q = vec(r, "q_final"), p = vec(r, "p_final");
+    const double sign = q[0] >= 0.0 ? 1.0 : -1.0, c = std::cos(M_PI / 4);
+    BOOST_TEST_MESSAGE("slew by a tabulated torque: quaternion error " << std::fabs(sign * q[0] - c) << " "
+                                                                       << std::fabs(sign * q[3] - c) << ", |pi| "
+                                                                       << std::fabs(p[2]));
+    BOOST_TEST(std::fabs(sign * q[0] - c) <= 1e-13);
+    BOOST_TEST(std::fabs(sign * q[3] - c) <= 1e-13);
+    BOOST_TEST(std::fabs(q[1]) + std::fabs(q[2]) <= 1e-14);
+    BOOST_TEST(std::fabs(p[0]) + std::fabs(p[1]) + std::fabs(p[2]) <= 1e-12);
+    BOOST_TEST(std::fabs(r.at("work").get<double>()) <= 1e-12);  // (at rest again: all work given back)
+    BOOST_TEST(r.at("max_abs_energy_balance").get<double>() <= 1e-12);
+  }
+  // f(t) = 0.3 sin 2t + 0.1 tabulated at the nodes t_k + h/2 (shift 0) or one step late
+  const double h = 0.01;
+  const int steps = 300;
+  auto table = [&](const std::string& name, int shift) {
+    std::ostringstream text;
+    text.precision(17);
+    text << "u\n";
+    for (int k = 0; k < steps; ++k) text << 0.3 * std::sin(2.0 * ((k + shift) * h + h / 2)) + 0.1 << "\n";
+    return write_scene(name, text.str());
+  };
+  const std::string on_time = table("u_on_time.csv", 0), late = table("u_late.csv", 1);
+  auto distance = [](const Json& a, const Json& b) {
+    double d = 0.0;
+    for (const char* key : {"q_final", "p_final"}) {
+      const auto x = vec(a, key), y = vec(b, key);
+      for (std::size_t i = 0; i < x.size(); ++i) d = std::fmax(d, std::fabs(x[i] - y[i]));
+    }
+    return d;
+  };
+  const std::string expression = "system.controls={ u = \"0.3*sin(2*t) + 0.1\" }";
+  auto from = [](const std::string& file) { return "system.controls={ u = { csv = \"" + file + "\" } }"; };
+  const std::vector<std::pair<std::string, std::vector<std::string>>> cases = {
+      // an asymmetric body, the torque mixing the control with the state
+      {"satellite_torque.toml",
+       {"system.params={ I1 = 2.0, I2 = 1.5, I3 = 1.0 }", "system.forces={ w1 = \"0.5*u\", w3 = \"u - 0.2*w3\" }",
+        "initial.omega=[0.2, 0.1, 1.0]", "integrator.t_end=3.0"}},
+      // the body on an axle, a control torque about the axle
+      {"compound_pendulum_so3.toml", {"system.forces={ w1 = \"u\" }", "integrator.t_end=3.0"}}};
+  for (const auto& one : cases) {
+    const std::string& name = one.first;
+    const std::vector<std::string>& sets = one.second;
+    BOOST_TEST_CONTEXT(name) {
+      auto with = [&](const std::string& controls) {
+        auto all = sets;
+        all.push_back(controls);
+        return run(name, all);
+      };
+      const Json e = with(expression), t = with(from(on_time)), l = with(from(late));
+      BOOST_TEST_MESSAGE(name << ": tabulated at the nodes against the expression " << distance(t, e)
+                              << ", one step late " << distance(l, e));
+      BOOST_TEST(distance(t, e) <= 1e-13);
+      BOOST_TEST(distance(l, e) >= 1e-4);
+      BOOST_TEST(std::fabs(t.at("work").get<double>()) > 1e-3);
+    }
+  }
+  {  // S^2, composed by the triple jump: a control in t against the force in t, and a
+     // constant table against the constant force
+    const std::vector<std::string> base = {"integrator.composition=\"triple-jump:4\"", "integrator.t_end=3.0",
+                                           "integrator.step=0.01"};
+    auto with = [&](std::vector<std::string> more) {
+      auto all = base;
+      all.insert(all.end(), more.begin(), more.end());
+      return run("spherical_pendulum_written.toml", all);
+    };
+    const Json a = with({"system.forces={ x = \"u*z - 0.2*x_dot\" }", "system.controls={ u = \"0.5*cos(3*t)\" }"});
+    const Json b = with({"system.forces={ x = \"0.5*cos(3*t)*z - 0.2*x_dot\" }"});
+    std::ostringstream constant;
+    for (int k = 0; k < steps; ++k) constant << "0.7\n";
+    const Json c = with({"system.forces={ y = \"u\" }", from(write_scene("u_constant.csv", constant.str()))});
+    const Json d = with({"system.forces={ y = \"0.7\" }"});
+    BOOST_TEST_MESSAGE("S^2, triple jump: control in t against the force in t " << distance(a, b)
+                       << ", constant table against the constant force " << distance(c, d));
+    BOOST_TEST(distance(a, b) <= 1e-14);
+    BOOST_TEST(distance(c, d) <= 1e-14);
+    BOOST_TEST(std::fabs(c.at("work").get<double>()) > 0.1);
+  }
+}
+
 // Constraints on S^2 and SO(3) (solvers/manifold_constrained_step.h), each against the
 // one-coordinate system it reduces to, composed to order 8 (kahan-li8, h = 0.01) to
 // t = 10 and compared to 1e-10:
@@ -613,7 +712,7 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused("spherical_pendulum_written.toml", {"system.lagrangian=\"t*(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\""},
           {"system.lagrangian", "unknown name 't'", "a Lagrangian on S^2 or SO(3)"});
   // forces on S^2 and SO(3): the lagrangian form of the maps only, keyed by a coordinate
-  // (S^2) or a body axis (SO(3)); none on (S^2)^K, no controls
+  // (S^2) or a body axis (SO(3)); none on (S^2)^K, nor controls
   const std::string T = "satellite_torque.toml", W = "spherical_pendulum_written.toml";
   refused(T, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with forces on SO(3)"});
   refused(T, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian with forces on SO(3)"});
@@ -622,8 +721,15 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(W, {"system.forces={ x = \"-x_dot\" }", "integrator.method=galerkin"},
           {"integrator.method", "lagrangian with forces on S^2"});
   refused(W, {"system.forces={ q = \"1\" }"}, {"system.forces.q", "not a coordinate"});
-  refused(W, {"system.forces={ x = \"u\" }", "system.controls={ u = \"t\" }"},
-          {"system.controls", "forces on R^n only"});
+  refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"u\" }", "system.controls={ u = \"t\" }"},
+          {"system.controls", "on (S^2)^2 a written system is conservative"});
+  // controls on SO(3): one value per step, read by the torque (u follows t after R's
+  // nine entries: a torque reading R22, the entry after t on R^n, reads no control)
+  refused("satellite_control.toml", {"integrator.t_end=3.0"}, {"system.controls.u", "holds 200 values", "300"});
+  refused(T, {"system.forces={ w3 = \"R22\" }", "system.controls={ u = \"t\" }"},
+          {"system.controls.u", "no force reads the control 'u'"});
+  refused(T, {"system.forces={ w3 = \"v\" }", "system.controls={ u = \"t\" }"},
+          {"system.forces.w3", "unknown name 'v'"});
   refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"1\" }"},
           {"system.forces", "on (S^2)^2 a written system is conservative"});
   // constraints on S^2 and SO(3): the lagrangian form of the maps only, Newton's method,

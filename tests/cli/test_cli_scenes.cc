@@ -1088,7 +1088,10 @@ BOOST_AUTO_TEST_CASE(controls_from_a_table_or_an_expression) {
   refused(tab, {"system.forces={ x = \"-0.1*x_dot\" }"}, {"system.controls.u", "no force reads"});
   refused(tab, {"system.controls.th=\"1\""}, {"system.controls.th", "'th' is used twice"});
   refused(scene("pendulum.toml"), {"system.controls={ u = \"1\" }"}, {"system.controls", "belongs to a written system"});
-  refused(scene("spherical_pendulum_written.toml"), {"system.controls={ u = \"1\" }"}, {"system.controls", "R^n"});
+  refused(scene("spherical_pendulum_written.toml"), {"system.controls={ u = \"1\" }"},
+          {"system.controls.u", "no force reads the control 'u'"});
+  refused(scene("spherical_double_pendulum_written.toml"), {"system.controls={ u = \"1\" }"},
+          {"system.controls", "on (S^2)^2 a written system is conservative"});
 }
 
 namespace {
