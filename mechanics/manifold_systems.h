@@ -246,6 +246,21 @@ class ManifoldDiscreteLagrangian {
     return with_force(R_.inverse_relative(m.first, m.second), force, t, work).v;
   }
 
+  // The function whose first derivatives are D1_local and D2_local, at a point a and the
+  // relative position r of the other point, both Jets D over scalars T whose derivative
+  // parts move the points: h L at their node, and with a force the virtual work
+  // h <F, disp(x, x')> of F held at the node's value x (type T), at time t. A step's
+  // derivative (ManifoldStep::derivatives) differentiates it once more, in T.
+  template <class D, class Rel>
+  D generating_value(const P<D>& a, const Rel& r) const {
+    return at_node(R_.inverse_relative(a, r));
+  }
+  template <class D, class Rel, class Fo>
+  D generating_value(const P<D>& a, const Rel& r, const Fo& force, double t) const {
+    using T = std::decay_t<decltype(a(0).a)>;
+    return with_force(R_.inverse_relative(a, r), force, t, static_cast<T*>(nullptr));
+  }
+
  private:
   // (a, r) for the derivatives in the chart of q0: a = chart(q0, eta) with Jets seeded in
   // eta, r the relative position of q1 from a with its value replaced by rel.

@@ -289,6 +289,28 @@ class ManifoldForce {
     }
   }
 
+  // dF/du (size x controls()) at (t, x, v), the controls at their current values (one
+  // forward pass per control); a step's derivative in its controls (ManifoldStep::
+  // derivatives) pairs it with the virtual displacement.
+  Eigen::MatrixXd control_jacobian(double t, const P<double>& x, const V<double>& v) const {
+    using J = ceres::Jet<double, 1>;
+    const int c = controls();
+    std::vector<double> u(static_cast<std::size_t>(c));
+    if (c > 0) controls_->values(t, u.data());
+    std::vector<J> a(static_cast<std::size_t>(entries + 1 + c));
+    V<J> vj;
+    for (int i = 0; i < vj.size(); ++i) vj(i) = J(v(i));
+    Eigen::MatrixXd dF = Eigen::MatrixXd::Zero(size, c);
+    for (int j = 0; j < c; ++j) {
+      for (int i = 0; i < entries; ++i) a[static_cast<std::size_t>(i)] = J(x(i));
+      a[entries] = J(t);
+      for (int k = 0; k < c; ++k) a[static_cast<std::size_t>(entries + 1 + k)] = J(u[static_cast<std::size_t>(k)]);
+      a[static_cast<std::size_t>(entries + 1 + j)].v[0] = 1.0;
+      for (const auto& [i, e] : system_->forces) dF(i, j) = e(a.data(), vj.data()).v[0];
+    }
+    return dF;
+  }
+
   // The virtual displacement's functional disp(x, y) (above), x the node as it is (its
   // derivatives dropped), y the node moved.
   template <class D, class T>

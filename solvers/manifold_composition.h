@@ -7,9 +7,11 @@
 // of its stages (discrete Noether holds stage by stage).
 #pragma once
 
+#include <Eigen/Core>
 #include <cmath>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "solvers/composition_methods.h"
@@ -80,6 +82,57 @@ class ComposedPointStep {
     q1 = q;
     p1 = p;
     return total;
+  }
+
+  // The controls the stages' force reads (where the stage type says).
+  template <class S = Stage, class = decltype(std::declval<const S&>().controls())>
+  int controls() const {
+    return stages_.front().controls();
+  }
+
+  // The derivative of the whole step from (q0, p0) at time t to its end q1, in the
+  // canonical coordinates around q0 and q1 (ManifoldStep::derivatives): the product
+  // A_s ... A_1 of the stages' derivatives, each in the canonical coordinates around its
+  // own ends, at the stage states found again by solving the stages from (q0, p0) (the
+  // stages keep no state between steps); with B, u held over the step, the sum of
+  // A_s ... A_{k+1} B_k. False where a stage fails or its derivative does not exist.
+  template <class S = Stage,
+            class = decltype(std::declval<const S&>().derivatives(0.0, std::declval<const Point&>(),
+                                                                  std::declval<const Covector&>(),
+                                                                  std::declval<const Point&>(),
+                                                                  std::declval<Eigen::MatrixXd&>(), nullptr))>
+  bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
+                   Eigen::MatrixXd* B = nullptr) const {
+    if (stages_.size() == 1) return stages_.front().derivatives(t, q0, p0, q1, A, B);
+    Vec<double, n> xi;
+    try {
+      xi = M::chart_inverse(q0, q1);
+    } catch (const std::domain_error&) {
+      return false;
+    }
+    double elapsed = 0.0;
+    Point q = q0;
+    Covector p = p0;
+    A = Eigen::MatrixXd::Identity(2 * n, 2 * n);
+    if (B) B->resize(2 * n, 0);
+    Eigen::MatrixXd Ak, Bk;
+    for (std::size_t i = 0; i < stages_.size(); ++i) {
+      Vec<double, n> guess = weights_[i] * xi;
+      Point qn;
+      Covector pn;
+      const double ti = t + elapsed * h_;
+      if (!stages_[i].step(ti, q, p, guess, qn, pn).converged) return false;
+      if (!stages_[i].derivatives(ti, q, p, qn, Ak, B ? &Bk : nullptr)) return false;
+      if (B) {
+        if (B->cols() == 0) B->setZero(2 * n, Bk.cols());
+        *B = Ak * *B + Bk;
+      }
+      A = Ak * A;
+      q = qn;
+      p = pn;
+      elapsed += weights_[i];
+    }
+    return true;
   }
 
  private:

@@ -19,6 +19,8 @@
 // The starting guess for xi comes from the previous increment (second order in h).
 #pragma once
 
+#include <Eigen/Core>
+#include <Eigen/LU>
 #include <cstdint>
 #include <memory>
 #include <stdexcept>
@@ -67,6 +69,43 @@ void leave_chart(const typename M::template Point<double>& q0, const Vec<double,
   if (!std::isfinite(max_abs(p1))) s.fail("non-finite momentum");
 }
 
+// Canonical coordinates of T*M around a point c, in which a manifold step's derivative
+// (ManifoldStep::derivatives) is written: (eta, pi) is the point q = chart(c, eta) and
+// the covector p at q with components pi_j = <p, d chart(c, eta)/d eta_j> (the cotangent
+// lift of the chart, so these coordinates are canonical: a map that preserves the
+// canonical symplectic form has a symplectic Jacobian in them). At eta = 0, pi is
+// M::covector_to_local(c, p). K(eta) below maps d eta to the tangent coordinates at q.
+template <class M>
+Mat<double, M::dim, M::dim> chart_differential(const typename M::template Point<double>& c,
+                                               const Vec<double, M::dim>& eta) {
+  constexpr int n = M::dim;
+  Mat<double, n, n> K;
+  const typename M::template Point<double> q = M::chart(c, eta);
+  for (int j = 0; j < n; ++j) {
+    const Vec<double, n> e = Vec<double, n>::Unit(j);
+    K.col(j) = M::tangent_coordinates(q, M::chart_and_tangent(c, eta, e).second);
+  }
+  return K;
+}
+// The state (q, p) with canonical coordinates (eta, pi) around c.
+template <class M>
+void canonical_state(const typename M::template Point<double>& c, const Vec<double, M::dim>& eta,
+                     const Vec<double, M::dim>& pi, typename M::template Point<double>& q,
+                     typename M::template Tangent<double>& p) {
+  const Mat<double, M::dim, M::dim> K = chart_differential<M>(c, eta);
+  q = M::chart(c, eta);
+  p = M::covector_from_local(q, Vec<double, M::dim>(K.transpose().partialPivLu().solve(pi)));
+}
+// The canonical coordinates (eta, pi) around c of the state (q, p) (q in the chart's
+// domain around c).
+template <class M>
+void canonical_coordinates(const typename M::template Point<double>& c, const typename M::template Point<double>& q,
+                           const typename M::template Tangent<double>& p, Vec<double, M::dim>& eta,
+                           Vec<double, M::dim>& pi) {
+  eta = M::chart_inverse(c, q);
+  pi = chart_differential<M>(c, eta).transpose() * M::covector_to_local(q, p);
+}
+
 // Force: a force on the manifold (ManifoldForce<M>, mechanics/written_manifold.h) or
 // NoForce; a forced step needs the force object, and adds the discrete
 // forces of the Lagrange-d'Alembert principle at the map's node, time t0 + theta h
@@ -89,6 +128,13 @@ class ManifoldStep {
   }
   const DL& discrete_lagrangian() const { return dl_; }
   double step_size() const { return dl_.step(); }
+  // The controls the force reads (0 without a force).
+  int controls() const {
+    if constexpr (kForced)
+      return force_->controls();
+    else
+      return 0;
+  }
 
   struct Residual {
     const DL* dl;
@@ -134,6 +180,19 @@ class ManifoldStep {
     }
     return s;
   }
+
+  // The derivative of the step from (q0, p0) at time t to its solution q1 (the end of
+  // step), by the implicit function theorem on the step's equation, in the canonical
+  // coordinates (chart_differential above) around q0 before the step and around q1 after
+  // it: A = d(zeta, pi1)/d(eta, pi0) (2n x 2n), and where B is given and the force reads
+  // controls, B = d(zeta, pi1)/du (2n x controls(), u held over the step). False where
+  // the step's solution does not give a derivative (g_zeta singular, a map undefined
+  // there, a non-finite value). Defined in solvers/manifold_step_derivative.h, which a
+  // file that calls it includes or that instantiates it for the step types others call
+  // it on (runtime/kernels_manifold_derivatives.cc), so that a file compiling the step
+  // alone does not compile it.
+  bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
+                   Eigen::MatrixXd* B = nullptr) const;
 
  private:
   DL dl_;

@@ -113,10 +113,26 @@ struct has_step_derivative<S, std::void_t<decltype(std::declval<const S&>().deri
                                   std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>()))>>
     : std::true_type {};
 
+// A manifold step that gives its derivative in canonical coordinates at its solution,
+// derivatives(t0, q0, p0, q1, A, B*) (ManifoldStep, ComposedPointStep of it;
+// solvers/manifold_step.h), and the controls it reads, controls().
+template <class S, class = void>
+struct has_manifold_derivative : std::false_type {};
+template <class S>
+struct has_manifold_derivative<
+    S, std::void_t<decltype(std::declval<const S&>().derivatives(
+                       0.0, std::declval<const typename S::Point&>(), std::declval<const typename S::Covector&>(),
+                       std::declval<const typename S::Point&>(), std::declval<Eigen::MatrixXd&>(), nullptr)),
+                   decltype(std::declval<const S&>().controls())>> : std::true_type {};
+template <class S>
+constexpr bool gives_step_derivative_v = has_step_derivative<S>::value || has_manifold_derivative<S>::value;
+
 // The rows of OutputSpec::linearize: after step k -> k + 1, t_k and the step's Jacobian
-// A_k, row by row, from the step's derivative at (q_k, p_k, q_{k+1} - q_k). Steps without a
-// derivative refuse the file (validate refuses the run first: Method::linearize).
-template <class Stepper, bool = has_step_derivative<Stepper>::value>
+// A_k, row by row: on R^n from the step's derivative at (q_k, p_k, q_{k+1} - q_k), on S^2
+// and SO(3) from its derivative in the canonical coordinates around q_k and q_{k+1}
+// (2 dim columns each). Steps without a derivative refuse the file (validate refuses the
+// run first: Method::linearize).
+template <class Stepper, bool = gives_step_derivative_v<Stepper>>
 class StepDerivatives {
  public:
   template <class Point, class Covector>
@@ -138,11 +154,29 @@ struct has_control_derivative<S, std::void_t<decltype(std::declval<const S&>().c
                                      std::declval<const Eigen::VectorXd&>(), std::declval<Eigen::MatrixXd&>())),
                                  decltype(std::declval<const S&>().controls())>> : std::true_type {};
 
+// The state the derivatives are taken at: run-time-sized vectors on R^n, the step's own
+// point and covector types on a manifold.
+template <class Stepper, bool = has_manifold_derivative<Stepper>::value>
+struct DerivativeState {
+  using Point = Eigen::VectorXd;
+  using Covector = Eigen::VectorXd;
+  static int dim(const Point& q) { return static_cast<int>(q.size()); }
+};
+template <class Stepper>
+struct DerivativeState<Stepper, true> {
+  using Point = typename Stepper::Point;
+  using Covector = typename Stepper::Covector;
+  static int dim(const Point&) { return Stepper::n; }
+};
+
 template <class Stepper>
 class StepDerivatives<Stepper, true> {
+  static constexpr bool kManifold = has_manifold_derivative<Stepper>::value;
+  using Point = typename DerivativeState<Stepper>::Point;
+  using Covector = typename DerivativeState<Stepper>::Covector;
+
  public:
-  StepDerivatives(const Recorder* rec, const Stepper& stepper, const Eigen::VectorXd& q0, const Eigen::VectorXd& p0,
-                  std::int64_t steps)
+  StepDerivatives(const Recorder* rec, const Stepper& stepper, const Point& q0, const Covector& p0, std::int64_t steps)
       : stepper_(&stepper), q_(q0), p_(p0) {
     if (!rec || rec->spec().linearize.empty()) return;
     OutputSpec spec;
@@ -150,34 +184,38 @@ class StepDerivatives<Stepper, true> {
     spec.npy_source = rec->spec().linearize_source;
     spec.inputs = rec->spec().inputs;
     out_ = std::make_unique<Recorder>(spec);
-    const int m = 2 * static_cast<int>(q0.size());
+    m_ = 2 * DerivativeState<Stepper>::dim(q0);
     std::vector<std::string> columns{"t"};
-    for (int i = 0; i < m; ++i)
-      for (int j = 0; j < m; ++j) columns.push_back("A[" + std::to_string(i) + "," + std::to_string(j) + "]");
+    for (int i = 0; i < m_; ++i)
+      for (int j = 0; j < m_; ++j) columns.push_back("A[" + std::to_string(i) + "," + std::to_string(j) + "]");
     // with control inputs, B_k = d(q_{k+1}, p_{k+1})/du_k after A_k, row by row
-    if constexpr (has_control_derivative<Stepper>::value) controls_ = stepper.controls();
-    for (int i = 0; i < m; ++i)
+    if constexpr (kManifold || has_control_derivative<Stepper>::value) controls_ = stepper.controls();
+    for (int i = 0; i < m_; ++i)
       for (int j = 0; j < controls_; ++j) columns.push_back("B[" + std::to_string(i) + "," + std::to_string(j) + "]");
     out_->open(columns, static_cast<double>(steps));
     row_.resize(columns.size());
   }
   // After step k - 1 -> k, which started at t: its derivative, at the state before it.
-  template <class Point, class Covector>
   void record(std::int64_t, double t, const Point& qk, const Covector& pk) {
     if (!out_) return;
-    const Eigen::VectorXd dq = Eigen::VectorXd(qk) - q_;
     row_[0] = t;
     // with control inputs, A and B from one differentiation where the step gives them
     // so; where that fails, each alone (A may exist where B does not)
     int got = 0;  // 1: A, 2: A and B
-    if constexpr (composition_detail::has_joint_derivatives<Stepper>::value)
-      if (controls_ > 0 && stepper_->derivatives(t, q_, p_, dq, A_, &B_)) got = 2;
-    if (got == 0 && stepper_->derivative(t, q_, p_, dq, A_)) {
-      got = 1;
-      if constexpr (has_control_derivative<Stepper>::value)
-        if (controls_ > 0 && stepper_->control_derivative(t, q_, p_, dq, B_)) got = 2;
+    if constexpr (kManifold) {
+      if (controls_ > 0 && stepper_->derivatives(t, q_, p_, qk, A_, &B_)) got = 2;
+      if (got == 0 && stepper_->derivatives(t, q_, p_, qk, A_, nullptr)) got = 1;
+    } else {
+      const Eigen::VectorXd dq = Eigen::VectorXd(qk) - q_;
+      if constexpr (composition_detail::has_joint_derivatives<Stepper>::value)
+        if (controls_ > 0 && stepper_->derivatives(t, q_, p_, dq, A_, &B_)) got = 2;
+      if (got == 0 && stepper_->derivative(t, q_, p_, dq, A_)) {
+        got = 1;
+        if constexpr (has_control_derivative<Stepper>::value)
+          if (controls_ > 0 && stepper_->control_derivative(t, q_, p_, dq, B_)) got = 2;
+      }
     }
-    const Eigen::Index m = 2 * q_.size();
+    const Eigen::Index m = m_;
     const std::size_t at = static_cast<std::size_t>(1 + m * m);
     if (got == 0) std::fill(row_.begin() + 1, row_.end(), NAN);  // singular at the solution
     if (got >= 1)
@@ -202,9 +240,10 @@ class StepDerivatives<Stepper, true> {
 
  private:
   const Stepper* stepper_;
-  Eigen::VectorXd q_, p_;  // the state the next step starts from
+  Point q_;  // the state the next step starts from
+  Covector p_;
   Eigen::MatrixXd A_, B_;
-  int controls_ = 0;
+  int m_ = 0, controls_ = 0;
   std::vector<double> row_;
   std::unique_ptr<Recorder> out_;
 };
@@ -269,7 +308,7 @@ class StepperRun final : public Run {
       if (forced) row_values[row_size] = 0.0;
       rec->row(row_values.data());
     }
-    StepDerivatives<Stepper, Linearizable && has_step_derivative<Stepper>::value> derivatives(rec, stepper_, q0_, p0_,
+    StepDerivatives<Stepper, Linearizable && gives_step_derivative_v<Stepper>> derivatives(rec, stepper_, q0_, p0_,
                                                                                            steps_);
     if constexpr (has_after_step<View>::value) view_.after_step(0, 0.0);
     const int n_inv = view_.invariant_count();

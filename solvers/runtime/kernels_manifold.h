@@ -477,17 +477,21 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   const std::vector<Stage<Map>> stages = composition_stages(
       me, R, R.symmetric(), [](const Map& m) { return adjoint_map(m); },
       [&](double th) { return at_theta(R, th); });
-  auto composed = [&](auto make) -> std::unique_ptr<Run> {
+  // runs of the lagrangian form on S^2 and SO(3) may write their steps' derivatives
+  // (--linearize: ManifoldStep::derivatives), not on (S^2)^K (validate refuses it)
+  constexpr bool Linearizable = std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>;
+  auto composed = [&](auto make, auto linearizable) -> std::unique_ptr<Run> {
     using Step = decltype(make(h, R));
-    if (me.composition == "none") return stepper_run(view, make(h, R), q, p, v0, base, pr.steps);
-    return stepper_run(view, compose_stages<ComposedPointStep<Step>>(h, stages, make), q, p, v0, base, pr.steps);
+    constexpr bool Lin = decltype(linearizable)::value;
+    if (me.composition == "none") return stepper_run<Lin>(view, make(h, R), q, p, v0, base, pr.steps);
+    return stepper_run<Lin>(view, compose_stages<ComposedPointStep<Step>>(h, stages, make), q, p, v0, base, pr.steps);
   };
   if (me.form == Form::hamiltonian) {
     if constexpr (Hamiltonian) {
       using H = decltype(hamiltonian_of(L));
-      return composed([&](double hk, const Map& Rk) {
-        return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), Rk, hk, opt);
-      });
+      return composed(
+          [&](double hk, const Map& Rk) { return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), Rk, hk, opt); },
+          std::false_type{});
     } else {
       throw InputError("integrator.form: unsupported");  // refused by validate()
     }
@@ -519,10 +523,12 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
       const auto force = checked_force<Mf>(pr, q, v0, view);
       base.forced = true;
       return composed(
-          [&](double hk, const Map& Rk) { return ManifoldStep<S, Map, ManifoldForce<Mf>>(L, Rk, hk, opt, force); });
+          [&](double hk, const Map& Rk) { return ManifoldStep<S, Map, ManifoldForce<Mf>>(L, Rk, hk, opt, force); },
+          std::true_type{});
     }
   if (forced) throw InputError(pr.forces_where + ": forces are written on R^n, S^2 and SO(3)");
-  return composed([&](double hk, const Map& Rk) { return ManifoldStep<S, Map>(L, Rk, hk, opt); });
+  return composed([&](double hk, const Map& Rk) { return ManifoldStep<S, Map>(L, Rk, hk, opt); },
+                  std::integral_constant<bool, Linearizable>{});
 }
 
 template <const factories::KernelParts& Parts, class S, class Map>

@@ -339,13 +339,21 @@ void validate(const Problem& pr, const Method& me) {
 
   // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative,
   // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative,
-  // ConstrainedGalerkinStep::derivative)
+  // ConstrainedGalerkinStep::derivative; on S^2 and SO(3) ManifoldStep::derivatives)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
-                             "theta-family maps and by Galerkin (constrained or not), for Lagrangians written on R^n";
-    if (!pr.written || sys.space != Space::euclidean)
-      throw InputError(what + " (system.lagrangian), not " +
-                       (pr.written ? std::string("on ") + to_string(sys.space) : "the built-in system " + name));
+                             "theta-family maps and by Galerkin (constrained or not), for Lagrangians written on R^n, "
+                             "and by the position-momentum step of the maps of S^2 and SO(3) (forced or not, not "
+                             "constrained), for their built-in and written systems";
+    if (sys.space == Space::euclidean) {
+      if (!pr.written) throw InputError(what + " (system.lagrangian), not the built-in system " + name);
+    } else {
+      const bool chain = pr.written ? pr.written->factors > 1 : name == "spherical-chain";
+      if (chain) throw InputError(what + ", not on (S^2)^K (" + (pr.written ? "system.space" : "system " + name) + ")");
+      if (me.galerkin)
+        throw InputError(what + ", not integrator.method = \"galerkin\" on " + std::string(to_string(sys.space)));
+      if (pr.constrained()) throw InputError(pr.constraints_where + ": " + what);
+    }
     if (pr.boundary_value) throw InputError(what + "; problem.kind = \"boundary-value\" takes no steps");
     if (me.form != Form::lagrangian)
       throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"");

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -1116,6 +1117,27 @@ NpyRows read_npy(const std::string& path) {
 }
 }  // namespace
 
+namespace {
+// max |A^T J A - J| of row k of a --linearize file, A (m x m) in columns 1 .. m^2 row by
+// row, J = [0 I; -I 0]
+double symplectic_defect(const NpyRows& a, long long k, int m) {
+  double d = 0.0;
+  const int n = m / 2;
+  for (int i = 0; i < m; ++i)
+    for (int j = 0; j < m; ++j) {
+      // (A^T J A)(i, j) = sum_r A(r, i) (J A)(r, j)
+      double s = 0.0;
+      for (int r = 0; r < m; ++r) {
+        const double JA = r < n ? a.at(k, 1 + m * (r + n) + j) : -a.at(k, 1 + m * (r - n) + j);
+        s += a.at(k, 1 + m * r + i) * JA;
+      }
+      const double J = (i < n && j == i + n) ? 1.0 : (i >= n && j == i - n) ? -1.0 : 0.0;
+      d = std::fmax(d, std::fabs(s - J));
+    }
+  return d;
+}
+}  // namespace
+
 // dvm run --linearize: the Jacobian of every step in a .npy file, row k = (t_k, A_k row
 // by row). A_0 against central differences of one-step runs of dvm itself (relative
 // 1e-7), for the written pendulum (symplectic: det A = 1 at every step) and the damped
@@ -1194,21 +1216,7 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
   const NpyRows A2 = read_npy(path2);
   BOOST_TEST(A2.rows == 3);
   BOOST_TEST(A2.cols == 17);
-  for (long long k = 0; k < A2.rows; ++k) {
-    double worst = 0.0;
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) {
-        // (A^T J A)(i, j) = sum_r A(r, i) (J A)(r, j), J = [0 I; -I 0]
-        double s = 0.0;
-        for (int r = 0; r < 4; ++r) {
-          const double JA = r < 2 ? A2.at(k, 1 + 4 * (r + 2) + j) : -A2.at(k, 1 + 4 * (r - 2) + j);
-          s += A2.at(k, 1 + 4 * r + i) * JA;
-        }
-        const double J = (i < 2 && j == i + 2) ? 1.0 : (i >= 2 && j == i - 2) ? -1.0 : 0.0;
-        worst = std::fmax(worst, std::fabs(s - J));
-      }
-    BOOST_TEST(worst <= 1e-12);
-  }
+  for (long long k = 0; k < A2.rows; ++k) BOOST_TEST(symplectic_defect(A2, k, 4) <= 1e-12);
 
   auto refused = [&](const std::string& scene_name, std::vector<std::string> extra, const std::string& says) {
     const std::string path = dir + "/refused.npy";
@@ -1261,6 +1269,135 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
       BOOST_TEST(b.at(k, 1) * b.at(k, 4) - b.at(k, 2) * b.at(k, 3) < 1.0 - 1e-4, quadrature);
   }
   refused("pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
-  refused("spherical_pendulum_written.toml", {}, "on S^2");
+  // on S^2 and SO(3): the lagrangian form of the maps, forced or not, not constrained,
+  // not Galerkin, not on (S^2)^K (linearize_on_the_sphere_and_the_rotation_group below)
+  refused("spherical_pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
+  refused("spherical-pendulum-galerkin.toml", {}, "not integrator.method = \"galerkin\" on S^2");
+  refused("bead_on_rotating_hoop.toml", {}, "system.constraints");
+  refused("spherical_double_pendulum_written.toml", {}, "not on (S^2)^K");
+  refused("spherical-chain.toml", {}, "not on (S^2)^K");
   refused("pendulum_written.toml", {"--npy", dir + "/refused.npy"}, "the same file as the run's rows");
+}
+
+// dvm run --linearize on S^2 and SO(3): A_k in the canonical coordinates around q_k and
+// q_{k+1} (the chart of S^2 centred at c, chart(c, eta) = (c + e1 eta1 + e2 eta2)/|...|,
+// e1 from the coordinate axis least aligned with c made orthogonal to c, e2 = c x e1; the
+// momentum's components pi_j = <p, d chart/d eta_j>), as `dvm run --help` states them.
+// A_0 of the written spherical pendulum against central differences of one-step runs of
+// dvm, moved in those coordinates (1e-7); A_k symplectic at every step on S^2 and for the
+// heavy top composed; the satellite's control adds B_k (6 x 1).
+BOOST_AUTO_TEST_CASE(linearize_on_the_sphere_and_the_rotation_group) {
+  const std::string dir = temp_dir();
+  using V3 = std::array<double, 3>;
+  auto dot = [](const V3& a, const V3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
+  // the chart's basis at c, as documented
+  auto basis = [&](const V3& c) {
+    int k = 0;
+    for (int i = 1; i < 3; ++i)
+      if (std::fabs(c[i]) < std::fabs(c[k])) k = i;
+    V3 a{0, 0, 0};
+    a[k] = 1.0;
+    V3 e1;
+    for (int i = 0; i < 3; ++i) e1[i] = a[i] - dot(c, a) * c[i];
+    const double n = std::sqrt(dot(e1, e1));
+    for (double& x : e1) x /= n;
+    const V3 e2{c[1] * e1[2] - c[2] * e1[1], c[2] * e1[0] - c[0] * e1[2], c[0] * e1[1] - c[1] * e1[0]};
+    return std::array<V3, 2>{e1, e2};
+  };
+  auto list = [](const V3& x) {
+    std::ostringstream s;
+    s.precision(17);
+    s << "[" << x[0] << ", " << x[1] << ", " << x[2] << "]";
+    return s.str();
+  };
+  const double h = 0.005;
+  auto step_from = [&](const V3& q, const V3& p) {
+    const Output o = dvm({"run", scene("spherical_pendulum_written.toml"), "--json", "--no-output", "--set",
+                          "integrator.t_end=0.005", "--set", "initial.q=" + list(q), "--set", "initial.v=" + list(p)});
+    BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+    const std::vector<double> qf = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
+    BOOST_REQUIRE(qf.size() == 3 && pf.size() == 3);
+    return std::pair<V3, V3>{V3{qf[0], qf[1], qf[2]}, V3{pf[0], pf[1], pf[2]}};
+  };
+  // the scene's start: q = (0.6, 0, -0.8), v = (0, 1.5, 0); m = l = 1, so p = v (the
+  // runs below give the momentum as initial.v)
+  const V3 c{0.6, 0.0, -0.8}, p0{0.0, 1.5, 0.0};
+  const auto E0 = basis(c);
+  const double pi0[2] = {dot(p0, E0[0]), dot(p0, E0[1])};
+  const auto [c1, p1] = step_from(c, p0);
+  const auto E1 = basis(c1);
+  const std::string path = dir + "/sphere.npy";
+  const Output o = dvm({"run", scene("spherical_pendulum_written.toml"), "--no-output", "--quiet", "--linearize", path,
+                        "--set", "integrator.t_end=0.05"});
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  const NpyRows A = read_npy(path);
+  BOOST_TEST(A.rows == 10);
+  BOOST_TEST(A.cols == 17);
+  const double eps = 1e-5;
+  double worst = 0.0;
+  for (int j = 0; j < 4; ++j) {
+    double col[2][4];
+    for (int s = 0; s < 2; ++s) {
+      double eta[2] = {0, 0}, pi[2] = {pi0[0], pi0[1]};
+      (j < 2 ? eta : pi)[j % 2] += s == 0 ? eps : -eps;
+      // the state (q, p) with canonical coordinates (eta, pi) around c
+      V3 y;
+      for (int i = 0; i < 3; ++i) y[i] = c[i] + E0[0][i] * eta[0] + E0[1][i] * eta[1];
+      const double ny = std::sqrt(dot(y, y));
+      V3 q;
+      for (int i = 0; i < 3; ++i) q[i] = y[i] / ny;
+      // p tangent at q with p . e_j = |y| pi_j (d chart/d eta_j = (e_j - (q . e_j) q)/|y|):
+      // p = |y| (pi_1 f1 + pi_2 f2) with (f1, f2) dual to (e1, e2) in the tangent plane
+      V3 t1, t2;
+      for (int i = 0; i < 3; ++i) {
+        t1[i] = E0[0][i] - dot(q, E0[0]) * q[i];
+        t2[i] = E0[1][i] - dot(q, E0[1]) * q[i];
+      }
+      const double g11 = dot(t1, E0[0]), g12 = dot(t2, E0[0]), g21 = dot(t1, E0[1]), g22 = dot(t2, E0[1]);
+      const double det = g11 * g22 - g12 * g21;
+      const double a1 = (g22 * pi[0] - g12 * pi[1]) / det * ny, a2 = (-g21 * pi[0] + g11 * pi[1]) / det * ny;
+      V3 p;
+      for (int i = 0; i < 3; ++i) p[i] = a1 * t1[i] + a2 * t2[i];
+      const auto [qe, pe] = step_from(q, p);
+      // its end in the canonical coordinates around c1: zeta = E1^T (qe/(c1.qe) - c1),
+      // pi_j = (c1 . qe) pe . e_j(c1)
+      const double d = dot(c1, qe);
+      for (int k = 0; k < 2; ++k) {
+        double z = 0.0;
+        for (int i = 0; i < 3; ++i) z += E1[k][i] * (qe[i] / d - c1[i]);
+        col[s][k] = z;
+        col[s][2 + k] = d * dot(pe, E1[k]);
+      }
+    }
+    for (int i = 0; i < 4; ++i) {
+      const double central = (col[0][i] - col[1][i]) / (2 * eps);
+      worst = std::fmax(worst, std::fabs(A.at(0, 1 + 4 * i + j) - central) / std::fmax(1.0, std::fabs(central)));
+    }
+  }
+  BOOST_TEST_MESSAGE("S^2: A_0 against central differences of dvm's steps " << worst);
+  BOOST_TEST(worst <= 1e-7);
+  // A_k^T J A_k = J at every step (n = 2, and n = 3 for the heavy top composed)
+  for (long long k = 0; k < A.rows; ++k) {
+    BOOST_TEST(A.at(k, 0) == h * static_cast<double>(k), boost::test_tools::tolerance(1e-15));
+    BOOST_TEST(symplectic_defect(A, k, 4) <= 1e-12);
+  }
+  const std::string top = dir + "/top.npy";
+  const Output t = dvm({"run", scene("heavy-top.toml"), "--no-output", "--quiet", "--linearize", top, "--set",
+                        "integrator.composition=\"suzuki5\"", "--set", "integrator.t_end=0.02"});
+  BOOST_TEST_REQUIRE(t.status == 0, t.err);
+  const NpyRows T = read_npy(top);
+  BOOST_TEST(T.rows == 4);
+  BOOST_TEST(T.cols == 37);
+  for (long long k = 0; k < T.rows; ++k) BOOST_TEST(symplectic_defect(T, k, 6) <= 1e-11);
+  // a control torque: B_k after A_k, named B[i,0]; the torque u about e3 moves the
+  // third angular momentum component by h u: dpi_3/du = h at every step
+  const std::string sat = dir + "/satellite.npy";
+  const Output u = dvm({"run", scene("satellite_control.toml"), "--no-output", "--quiet", "--linearize", sat});
+  BOOST_TEST_REQUIRE(u.status == 0, u.err);
+  const NpyRows S = read_npy(sat);
+  BOOST_TEST(S.rows == 200);
+  BOOST_TEST(S.cols == 43);
+  const Json names = parse_json(slurp(sat + ".json"));
+  BOOST_TEST(names.at("columns").at(37).get<std::string>() == "B[0,0]");
+  for (long long k = 0; k < S.rows; ++k) BOOST_TEST(S.at(k, 37 + 5) == 0.01, boost::test_tools::tolerance(1e-12));
 }

@@ -13,8 +13,12 @@
 #include "mechanics/manifold_hamiltonian.h"
 #include "mechanics/written_manifold.h"
 #include "mechanics/written_retraction.h"
+#include "solvers/manifold_composition.h"
+#include "solvers/manifold_step.h"
+#include "solvers/manifold_step_derivative.h"
 #include "solvers/runtime/problem.h"
 #include "solvers/runtime/run.h"
+#include "solvers/runtime/scene.h"
 
 using namespace dvm;
 
@@ -390,4 +394,203 @@ BOOST_AUTO_TEST_CASE(written_powers_of_the_sphere_refuse_what_the_chain_steps_do
   BOOST_CHECK_THROW(w->check_names(), std::invalid_argument);
   // the evaluator of one power refuses a text written on another
   BOOST_CHECK_THROW(WrittenManifoldLagrangian<SpherePower<3>>{chain_text(2)}, std::invalid_argument);
+}
+
+namespace {
+
+// The derivative of a manifold step (ManifoldStep::derivatives, ComposedPointStep's)
+// against central differences of the step in the canonical coordinates around its ends
+// (canonical_state, canonical_coordinates), each column from (q0, p0) moved by +-eps
+// along one coordinate; returns the largest difference relative to max(1, |entry|).
+template <class Step>
+double derivative_against_differences(const Step& step, double t, const typename Step::Point& q0,
+                                      const typename Step::Covector& p0, const Eigen::MatrixXd& A) {
+  using M = typename Step::M;
+  constexpr int n = M::dim;
+  typename Step::Point q1, qa;
+  typename Step::Covector p1, pa;
+  Vec<double, n> xi = Vec<double, n>::Zero();
+  BOOST_REQUIRE(step.step(t, q0, p0, xi, q1, p1).converged);
+  const Vec<double, n> pi0 = M::covector_to_local(q0, p0);
+  const double eps = 1e-5;
+  double worst = 0.0;
+  for (int j = 0; j < 2 * n; ++j) {
+    Vec<double, 2 * n> col[2];
+    for (int s = 0; s < 2; ++s) {
+      Vec<double, 2 * n> y = Vec<double, 2 * n>::Zero();
+      y.tail(n) = pi0;
+      y[j] += s == 0 ? eps : -eps;
+      canonical_state<M>(q0, Vec<double, n>(y.head(n)), Vec<double, n>(y.tail(n)), qa, pa);
+      Vec<double, n> guess = M::chart_inverse(qa, q1);
+      typename Step::Point qb;
+      typename Step::Covector pb;
+      BOOST_REQUIRE(step.step(t, qa, pa, guess, qb, pb).converged);
+      Vec<double, n> zeta, pi;
+      canonical_coordinates<M>(q1, qb, pb, zeta, pi);
+      col[s] << zeta, pi;
+    }
+    const Vec<double, 2 * n> central = (col[0] - col[1]) / (2 * eps);
+    for (int i = 0; i < 2 * n; ++i)
+      worst = std::fmax(worst, std::fabs(A(i, j) - central[i]) / std::fmax(1.0, std::fabs(central[i])));
+  }
+  return worst;
+}
+
+// max |A^T J A - J|, J = [0 I; -I 0]
+double symplectic_defect(const Eigen::MatrixXd& A) {
+  const Eigen::Index n = A.rows() / 2;
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  J.topRightCorner(n, n).setIdentity();
+  J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
+  return (A.transpose() * J * A - J).cwiseAbs().maxCoeff();
+}
+
+
+// One step from (q0, p0) at t, its derivative A against central differences (1e-7) and
+// symplectic (to 1e-12) or, with a damping force, clearly not; returns A.
+template <class Step>
+Eigen::MatrixXd check_step_derivative(const Step& step, double t, const typename Step::Point& q0,
+                                      const typename Step::Covector& p0, const std::string& label, bool symplectic) {
+  Vec<double, Step::n> xi = Vec<double, Step::n>::Zero();
+  typename Step::Point q1;
+  typename Step::Covector p1;
+  BOOST_REQUIRE(step.step(t, q0, p0, xi, q1, p1).converged);
+  Eigen::MatrixXd A;
+  BOOST_REQUIRE(step.derivatives(t, q0, p0, q1, A));
+  const double d = derivative_against_differences(step, t, q0, p0, A), s = symplectic_defect(A);
+  BOOST_TEST_MESSAGE(label << ": against central differences " << d << ", |A^T J A - J| " << s);
+  BOOST_TEST(d <= 1e-7, label);
+  if (symplectic)
+    BOOST_TEST(s <= 1e-12, label);
+  else
+    BOOST_TEST(s > 1e-4, label);
+  return A;
+}
+
+}  // namespace
+
+// The derivative of the position-momentum step on S^2 and SO(3) (ManifoldStep::derivatives,
+// the implicit function theorem on the step's equation in canonical coordinates):
+// against central differences of the step (1e-7), symplectic without a force (to 1e-12)
+// and not with a damping force, composed (the chain rule over the stages), and in the
+// control inputs (B against differences in the control's value).
+BOOST_AUTO_TEST_CASE(manifold_step_derivatives_match_central_differences) {
+  const double h = 0.05;
+  StepOptions opt;
+  opt.residual_tolerance = 1e-15;
+  // the spherical pendulum, midpoint-type projection map and the exp map at theta 0.3
+  {
+    const WrittenManifoldLagrangian<Sphere> L(pendulum(1.3, 0.9, 9.81));
+    const Vec<double, 3> q0 = Vec<double, 3>(0.6, -0.48, -0.64).normalized();
+    const Vec<double, 3> v0 = Vec<double, 3>(0.3, 1.1, 0.0) - Vec<double, 3>(0.3, 1.1, 0.0).dot(q0) * q0;
+    const Vec<double, 3> p0 = manifold_legendre(L, q0, v0);
+    for (const SphereMap& R : {SphereMap(RetractionKind::projection, 0.5, "sphere-projection"),
+                               SphereMap(RetractionKind::exp, 0.3, "sphere-exp")})
+      check_step_derivative(ManifoldStep<WrittenManifoldLagrangian<Sphere>, SphereMap>(L, R, h, opt), 0.0, q0, p0,
+                            "S^2 " + R.name() + " theta " + std::to_string(R.theta()), true);
+  }
+  // an asymmetric heavy top, the Cayley map (midpoint) and the exp map at theta 0.3; the
+  // triple jump of the Cayley step
+  const WrittenManifoldLagrangian<SO3> top_L(top(Vec<double, 3>(1.0, 2.0, 3.5), 1.0, 9.81, Vec<double, 3>(0.1, -0.2, 0.5)));
+  const Mat<double, 3, 3> R0 = SO3::exp(Vec<double, 3>(0.4, -0.3, 0.9));
+  const Vec<double, 3> w0(0.7, -1.2, 2.0);
+  const Vec<double, 3> pi0 = manifold_legendre(top_L, R0, w0);
+  using TopStep = ManifoldStep<WrittenManifoldLagrangian<SO3>, SO3Map>;
+  for (const SO3Map& R : {SO3Map(RetractionKind::cayley, 0.5, "so3-cayley"), SO3Map(RetractionKind::exp, 0.3, "so3-exp")})
+    check_step_derivative(TopStep(top_L, R, h, opt), 0.0, R0, pi0,
+                          "SO(3) " + R.name() + " theta " + std::to_string(R.theta()), true);
+  {
+    const SO3Map R(RetractionKind::cayley, 0.5, "so3-cayley");
+    auto make = [&](double hk) { return TopStep(top_L, R, hk, opt); };
+    check_step_derivative(ComposedPointStep<TopStep>(h, substeps(find_composition("triple-jump:4"), true), make, make),
+                          0.0, R0, pi0, "SO(3) triple jump", true);
+  }
+  // forced: a damped top driven by a control torque about its third axis, and a damped
+  // spherical pendulum pushed along x by a control; B against differences in u
+  const std::string top_text = R"toml(
+[system]
+space = "SO(3)"
+params = { I1 = 1.0, I2 = 2.0, I3 = 3.5, c = 0.4, k = 0.7 }
+lagrangian = "0.5*(I1*w1^2 + I2*w2^2 + I3*w3^2) - 9.81*(0.1*R31 - 0.2*R32 + 0.5*R33)"
+controls = { u = "k" }
+forces = { w1 = "-c*w1", w2 = "-c*w2 + 0.3*u*R33", w3 = "u*u - c*w3" }
+[initial]
+rotation = [1.0, 0.0, 0.0, 0.0]
+omega = [0.0, 0.0, 0.0]
+[integrator]
+map = "so3-cayley"
+step = 0.05
+t_end = 1.0
+)toml";
+  auto top_step = [&](double k, double theta) {
+    Scene s = load_scene_text(top_text, "derivative.toml", {"system.params.k=" + std::to_string(k)});
+    const auto signal = std::make_shared<const ControlSignal>(s.problem.written->controls);
+    const auto force = std::make_shared<const ManifoldForce<SO3>>(s.problem.written, signal);
+    return ManifoldStep<WrittenManifoldLagrangian<SO3>, SO3Map, ManifoldForce<SO3>>(
+        WrittenManifoldLagrangian<SO3>(s.problem.written), SO3Map(RetractionKind::cayley, theta, "so3-cayley"), h, opt,
+        force);
+  };
+  for (double theta : {0.5, 0.3}) {
+    BOOST_TEST_CONTEXT("forced top, theta " << theta) {
+      const double k = 0.7, e = 1e-5;
+      const auto step = top_step(k, theta);
+      BOOST_TEST(step.controls() == 1);
+      const Eigen::MatrixXd A0 = check_step_derivative(step, 0.3, R0, pi0, "forced top", false);
+      Vec<double, 3> xi = Vec<double, 3>::Zero();
+      Mat<double, 3, 3> R1;
+      Vec<double, 3> p1;
+      BOOST_REQUIRE(step.step(0.3, R0, pi0, xi, R1, p1).converged);
+      Eigen::MatrixXd A, B;
+      BOOST_REQUIRE(step.derivatives(0.3, R0, pi0, R1, A, &B));
+      BOOST_TEST((A - A0).cwiseAbs().maxCoeff() == 0.0);  // A with B as without
+      BOOST_TEST(B.rows() == 6);
+      BOOST_TEST(B.cols() == 1);
+      Vec<double, 6> col[2];
+      for (int s = 0; s < 2; ++s) {
+        const auto moved = top_step(s == 0 ? k + e : k - e, theta);
+        Vec<double, 3> x2 = xi;
+        Mat<double, 3, 3> Rb;
+        Vec<double, 3> pb;
+        BOOST_REQUIRE(moved.step(0.3, R0, pi0, x2, Rb, pb).converged);
+        Vec<double, 3> zeta, pi;
+        canonical_coordinates<SO3>(R1, Rb, pb, zeta, pi);
+        col[s] << zeta, pi;
+      }
+      const Vec<double, 6> central = (col[0] - col[1]) / (2 * e);
+      double worst = 0.0;
+      for (int i = 0; i < 6; ++i)
+        worst = std::fmax(worst, std::fabs(B(i, 0) - central[i]) / std::fmax(1.0, std::fabs(central[i])));
+      BOOST_TEST_MESSAGE("forced top theta " << theta << ": B against central differences " << worst << ", |B| "
+                                             << B.cwiseAbs().maxCoeff());
+      BOOST_TEST(worst <= 1e-7);
+      BOOST_TEST(B.cwiseAbs().maxCoeff() > 1e-3);
+    }
+  }
+  {
+    const std::string text = R"toml(
+[system]
+space = "S^2"
+coordinates = ["x", "y", "z"]
+params = { c = 0.3 }
+lagrangian = "0.5*(x_dot^2 + y_dot^2 + z_dot^2) - 9.81*z"
+forces = { x = "-c*x_dot + 0.2*t", y = "-c*y_dot", z = "-c*z_dot" }
+[initial]
+q = [0.0, 0.0, -1.0]
+v = [0.0, 0.0, 0.0]
+[integrator]
+map = "sphere-exp"
+step = 0.05
+t_end = 1.0
+)toml";
+    Scene s = load_scene_text(text, "derivative.toml", {});
+    const auto force = std::make_shared<const ManifoldForce<Sphere>>(s.problem.written);
+    using Step = ManifoldStep<WrittenManifoldLagrangian<Sphere>, SphereMap, ManifoldForce<Sphere>>;
+    const WrittenManifoldLagrangian<Sphere> L(s.problem.written);
+    const SphereMap R(RetractionKind::exp, 0.5, "sphere-exp");
+    auto make = [&](double hk) { return Step(L, R, hk, opt, force); };
+    const Vec<double, 3> q0 = Vec<double, 3>(0.6, -0.48, -0.64).normalized();
+    const Vec<double, 3> v0 = Vec<double, 3>(0.3, 1.1, 0.0) - Vec<double, 3>(0.3, 1.1, 0.0).dot(q0) * q0;
+    check_step_derivative(ComposedPointStep<Step>(h, substeps(find_composition("suzuki5"), true), make, make), 0.2, q0,
+                          manifold_legendre(L, q0, v0), "forced S^2 suzuki5", false);
+  }
 }
