@@ -5,7 +5,10 @@
 // and reported for a system: energy, invariants, columns, stored coordinates) and a
 // step type of solvers/ (any form, any space). execute() is one call of integrate()
 // (solvers/integrate.h: one loop for R^n and manifolds) with an observer that is a
-// template parameter, so the loop has no runtime dispatch. The factory functions
+// template parameter, so the loop has no runtime dispatch. Views whose steps each solve
+// an equation (run-time-sized systems, manifolds, the forms compiled once per size)
+// hold the step behind one virtual call (AnyRnStep, AnyPointStep), so that the loop is
+// compiled once per view, not once per step type. The factory functions
 // (make_rn_run, make_manifold_run, ...) read the method once and pick the step type:
 //
 //   form / method     R^n (fixed size)                    S^2, (S^2)^n, SO(3)
@@ -127,6 +130,13 @@ struct has_manifold_derivative<
 template <class S>
 constexpr bool gives_step_derivative_v = has_step_derivative<S>::value || has_manifold_derivative<S>::value;
 
+// A step whose derivative is known at run time only (AnyRnStep: bool gives_derivative()).
+template <class S, class = void>
+struct has_derivative_flag : std::false_type {};
+template <class S>
+struct has_derivative_flag<S, std::void_t<decltype(bool(std::declval<const S&>().gives_derivative()))>>
+    : std::true_type {};
+
 // The rows of OutputSpec::linearize: after step k -> k + 1, t_k and the step's Jacobian
 // A_k, row by row: on R^n from the step's derivative at (q_k, p_k, q_{k+1} - q_k), on S^2
 // and SO(3) from its derivative in the canonical coordinates around q_k and q_{k+1}
@@ -179,6 +189,9 @@ class StepDerivatives<Stepper, true> {
   StepDerivatives(const Recorder* rec, const Stepper& stepper, const Point& q0, const Covector& p0, std::int64_t steps)
       : stepper_(&stepper), q_(q0), p_(p0) {
     if (!rec || rec->spec().linearize.empty()) return;
+    if constexpr (has_derivative_flag<Stepper>::value)
+      if (!stepper.gives_derivative())
+        throw InputError(rec->spec().linearize_source + ": this run's step gives no derivative");
     OutputSpec spec;
     spec.npy = rec->spec().linearize;
     spec.npy_source = rec->spec().linearize_source;
@@ -247,6 +260,184 @@ class StepDerivatives<Stepper, true> {
   std::vector<double> row_;
   std::unique_ptr<Recorder> out_;
 };
+
+// ---- steps behind one virtual call ----------------------------------------------------
+// A step on R^n of Size coordinates (Eigen::Dynamic: run-time size) with its type
+// erased. The views that declare `static constexpr bool erase_steps = true` (those of the
+// systems of run-time size and of the kernels compiled once per size, whose steps solve
+// an implicit equation each step) run every such step through one StepperRun, so that
+// the run loop, the recorder's calls and the monitors are compiled once per view rather
+// than once per step type (stepper_run below). The indirect call is paid once a step.
+// Steps that take no starting guess (the explicit splitting) or count Newton steps of
+// their own are run as they are. The derivative of the step, and in its controls, are
+// forwarded where the step gives them and the run is linearizable (Lin); elsewhere
+// gives_derivative() is false and StepDerivatives refuses --linearize. Move-only: a step
+// may keep state across steps (its last increment, a kept Jacobian).
+template <class S>
+constexpr bool erasable_step_v =
+    (is_point_stepper<S>::value || takes_guess<S>::value) && !has_newton_steps<S>::value;
+
+template <int Size>
+class AnyRnStep {
+ public:
+  static constexpr int N = Size;
+  using V = Vec<double, N>;
+  using M = Eigen::MatrixXd;
+
+  template <bool Lin, class Step>
+  static AnyRnStep of(Step s) {
+    return AnyRnStep(std::make_unique<Model<Step, Lin>>(std::move(s)));
+  }
+  double step_size() const { return h_; }
+  StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const { return impl_->step(t, q0, p0, dq, dp); }
+  bool gives_derivative() const { return impl_->gives_derivative(); }
+  int controls() const { return impl_->controls(); }
+  bool derivative(double t, const V& q0, const V& p0, const V& dq, M& A) const {
+    return impl_->derivatives(t, q0, p0, dq, A, nullptr);
+  }
+  bool control_derivative(double t, const V& q0, const V& p0, const V& dq, M& B) const {
+    return impl_->control_derivative(t, q0, p0, dq, B);
+  }
+  bool derivatives(double t, const V& q0, const V& p0, const V& dq, M& A, M* B) const {
+    return impl_->derivatives(t, q0, p0, dq, A, B);
+  }
+
+ private:
+  struct Base {
+    virtual ~Base() = default;
+    virtual double step_size() const = 0;
+    virtual StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const = 0;
+    virtual bool gives_derivative() const = 0;
+    virtual int controls() const = 0;
+    // A, and B where B is not null (false: not given, or singular at the solution)
+    virtual bool derivatives(double t, const V& q0, const V& p0, const V& dq, M& A, M* B) const = 0;
+    virtual bool control_derivative(double t, const V& q0, const V& p0, const V& dq, M& B) const = 0;
+  };
+  template <class Step, bool Lin>
+  struct Model final : Base {
+    static_assert(!is_point_stepper<Step>::value && Step::N == Size && erasable_step_v<Step>,
+                  "AnyRnStep<N> holds a step on R^n of N coordinates");
+    static constexpr bool kDerivative = Lin && has_step_derivative<Step>::value;
+    static constexpr bool kControls = Lin && has_control_derivative<Step>::value;
+    explicit Model(Step step) : s(std::move(step)) {}
+    double step_size() const override { return s.step_size(); }
+    StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const override {
+      return s.step(t, q0, p0, dq, dp);
+    }
+    bool gives_derivative() const override { return kDerivative; }
+    int controls() const override {
+      if constexpr (kControls)
+        return s.controls();
+      else
+        return 0;
+    }
+    bool derivatives(double t, const V& q0, const V& p0, const V& dq, M& A, M* B) const override {
+      if constexpr (kDerivative) {
+        if constexpr (Lin && composition_detail::has_joint_derivatives<Step>::value)
+          if (B) return s.derivatives(t, q0, p0, dq, A, B);
+        if (!s.derivative(t, q0, p0, dq, A)) return false;
+        return !B || control_derivative(t, q0, p0, dq, *B);
+      } else {
+        return false;
+      }
+    }
+    bool control_derivative(double t, const V& q0, const V& p0, const V& dq, M& B) const override {
+      if constexpr (kControls)
+        return s.control_derivative(t, q0, p0, dq, B);
+      else
+        return false;
+    }
+    Step s;
+  };
+  explicit AnyRnStep(std::unique_ptr<Base> impl) : impl_(std::move(impl)), h_(impl_->step_size()) {}
+  std::unique_ptr<Base> impl_;
+  double h_;
+};
+
+// A step on a manifold (M, n, Point, Covector: solvers/integrate.h) with its type erased,
+// as AnyRnStep is on R^n: the derivative in canonical coordinates, and in the controls,
+// forwarded where the step gives it and the run is linearizable.
+template <class Mf, int Dim, class P, class C>
+class AnyPointStep {
+ public:
+  using M = Mf;
+  static constexpr int n = Dim;
+  using Point = P;
+  using Covector = C;
+  using Xi = Vec<double, n>;
+
+  template <bool Lin, class Step>
+  static AnyPointStep of(Step s) {
+    return AnyPointStep(std::make_unique<Model<Step, Lin>>(std::move(s)));
+  }
+  double step_size() const { return h_; }
+  StepSummary step(double t, const Point& q0, const Covector& p0, Xi& xi, Point& q1, Covector& p1) const {
+    return impl_->step(t, q0, p0, xi, q1, p1);
+  }
+  bool gives_derivative() const { return impl_->gives_derivative(); }
+  int controls() const { return impl_->controls(); }
+  bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
+                   Eigen::MatrixXd* B) const {
+    return impl_->derivatives(t, q0, p0, q1, A, B);
+  }
+
+ private:
+  struct Base {
+    virtual ~Base() = default;
+    virtual double step_size() const = 0;
+    virtual StepSummary step(double t, const Point& q0, const Covector& p0, Xi& xi, Point& q1, Covector& p1) const = 0;
+    virtual bool gives_derivative() const = 0;
+    virtual int controls() const = 0;
+    virtual bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
+                             Eigen::MatrixXd* B) const = 0;
+  };
+  template <class Step, bool Lin>
+  struct Model final : Base {
+    static_assert(std::is_same_v<typename Step::M, M> && Step::n == n && std::is_same_v<typename Step::Point, Point> &&
+                      std::is_same_v<typename Step::Covector, Covector> && erasable_step_v<Step>,
+                  "AnyPointStep holds a step on its manifold");
+    static constexpr bool kDerivative = Lin && has_manifold_derivative<Step>::value;
+    explicit Model(Step step) : s(std::move(step)) {}
+    double step_size() const override { return s.step_size(); }
+    StepSummary step(double t, const Point& q0, const Covector& p0, Xi& xi, Point& q1, Covector& p1) const override {
+      return s.step(t, q0, p0, xi, q1, p1);
+    }
+    bool gives_derivative() const override { return kDerivative; }
+    int controls() const override {
+      if constexpr (kDerivative)
+        return s.controls();
+      else
+        return 0;
+    }
+    bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
+                     Eigen::MatrixXd* B) const override {
+      if constexpr (kDerivative)
+        return s.derivatives(t, q0, p0, q1, A, B);
+      else
+        return false;
+    }
+    Step s;
+  };
+  explicit AnyPointStep(std::unique_ptr<Base> impl) : impl_(std::move(impl)), h_(impl_->step_size()) {}
+  std::unique_ptr<Base> impl_;
+  double h_;
+};
+
+// The erased type of a step: AnyRnStep<N> on R^n, AnyPointStep on a manifold.
+template <class S, bool = is_point_stepper<S>::value>
+struct AnyStepOf {
+  using type = AnyRnStep<S::N>;
+};
+template <class S>
+struct AnyStepOf<S, true> {
+  using type = AnyPointStep<typename S::M, S::n, typename S::Point, typename S::Covector>;
+};
+
+// Whether a view runs its steps erased (AnyRnStep, AnyPointStep).
+template <class View, class = void>
+struct view_erases_steps : std::false_type {};
+template <class View>
+struct view_erases_steps<View, std::void_t<decltype(View::erase_steps)>> : std::bool_constant<View::erase_steps> {};
 
 // Whether a view follows the steps (void after_step(k, t_k) const, after step k - 1 -> k
 // and with k = 0 before the first: the run-time-sized systems, whose tabulated controls
@@ -430,11 +621,20 @@ class StepperRun final : public Run {
 };
 
 // stepper_run<true>: a run that --linearize may reach (StepperRun's Linearizable).
+// The views that erase their steps (view_erases_steps) run them as AnyRnStep or
+// AnyPointStep.
 template <bool Linearizable = false, class View, class Stepper>
 std::unique_ptr<Run> stepper_run(const View& view, Stepper stepper, const typename View::Point& q0,
                                  const typename View::Covector& p0, const typename View::Covector& v0,
                                  const RunReport& base, std::int64_t steps) {
-  return std::make_unique<StepperRun<View, Stepper, Linearizable>>(view, std::move(stepper), q0, p0, v0, base, steps);
+  if constexpr (view_erases_steps<View>::value && erasable_step_v<Stepper>) {
+    using Any = typename AnyStepOf<Stepper>::type;
+    return std::make_unique<StepperRun<View, Any, Linearizable>>(view, Any::template of<Linearizable>(std::move(stepper)),
+                                                                  q0, p0, v0, base, steps);
+  } else {
+    return std::make_unique<StepperRun<View, Stepper, Linearizable>>(view, std::move(stepper), q0, p0, v0, base,
+                                                                      steps);
+  }
 }
 
 // ---- compositions: the map of each stage --------------------------------------------

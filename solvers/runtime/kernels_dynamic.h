@@ -157,6 +157,7 @@ template <class Sys, int K = Eigen::Dynamic>
 struct DynamicView {
   using Point = Vec<double, K>;
   using Covector = Vec<double, K>;
+  static constexpr bool erase_steps = true;  // (AnyRnStep: their steps solve an equation each step)
   Sys L;
   std::vector<std::string> names;  // coordinate names of the columns (empty: q0.., p0..)
   Vec<double, 2> sigma0 = Vec<double, 2>::Zero();  // the scale of d2L/dv2 at the initial state

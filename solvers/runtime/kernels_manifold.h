@@ -253,6 +253,7 @@ struct ManifoldView {
   using Point = typename Mf::template Point<double>;
   using Covector = typename Mf::template Tangent<double>;
   static constexpr int C = Covector::RowsAtCompileTime;
+  static constexpr bool erase_steps = true;  // (AnyPointStep: their steps solve an equation each step)
   S L;
   // With forces (system.forces) the momentum maps of L's symmetries are not conserved:
   // their columns are written, but they are not reported as invariants.

@@ -227,6 +227,7 @@ class ErasedRnView {
  public:
   using Point = Vec<double, N>;
   using Covector = Point;
+  static constexpr bool erase_steps = true;  // (AnyRnStep: their steps solve an equation each step)
 
   class Model {
    public:

@@ -7,7 +7,10 @@
 //
 // make_run resolves every choice of the problem and the method once, into one
 // instantiation of a templated kernel (solvers/runtime/kernels.h): the loop inside
-// execute() has no runtime dispatch and no virtual call per step. The kernel owns its
+// execute() has no runtime dispatch, and at most one virtual call per step (the step of
+// a run-time-sized or manifold system, or of a form compiled once per size, behind
+// AnyRnStep or AnyPointStep; the steps of the fixed-size systems' own kernels are
+// called directly). The kernel owns its
 // step object and workspace. Initial-value and boundary-value problems, every form,
 // every space, return the same report; numerical failures are reported in it
 // (status "failed", the step, time, residual and message), never thrown.
