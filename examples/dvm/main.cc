@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <algorithm>
+#include <array>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -795,26 +796,31 @@ std::string run_help() {
   wrap("@COMPOSITIONS@", compositions);
   fill("@STAGES_MAX@", std::to_string(dvm::kGalerkinStagesMax));
   h += "\nWhat each system runs (any other combination is refused with exit 2):\n";
-  char line[256];
-  std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", "system", "space", "forms", "comp.", "galerkin",
-                "boundary-value");
-  h += line;
+  // the columns as wide as their widest entry
+  std::vector<std::array<std::string, 6>> rows{{"system", "space", "forms", "comp.", "galerkin", "boundary-value"}};
   auto row = [&](const dvm::SystemEntry& e, const char* space = nullptr, const char* name = nullptr) {
     std::string forms;
     for (dvm::Form f : e.caps.forms) forms += (forms.empty() ? "" : ",") + std::string(dvm::to_string(f));
-    std::snprintf(line, sizeof line, "  %-18s %-7s %-38s %-5s %-8s %s\n", name ? name : e.name.c_str(),
-                  space ? space : dvm::to_string(e.space),
-                  forms.c_str(), e.caps.composition ? "yes" : "no", e.caps.galerkin ? "yes" : "no",
-                  e.caps.boundary_value ? "yes" : "no");
-    h += line;
+    rows.push_back({name ? name : e.name, space ? space : dvm::to_string(e.space), forms,
+                    e.caps.composition ? "yes" : "no", e.caps.galerkin ? "yes" : "no",
+                    e.caps.boundary_value ? "yes" : "no"});
   };
   for (const auto& e : dvm::system_registry()) row(e);
   for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation}) row(dvm::written_system_entry(sp));
   row(dvm::written_system_entry(dvm::Space::sphere, 2), "(S^2)^K");
-  row(dvm::written_system_entry(dvm::Space::euclidean, 1, true), nullptr, "lagrangian, forces");
-  row(dvm::written_system_entry(dvm::Space::euclidean, 1, false, true), nullptr, "lagrangian, constraints");
-  row(dvm::written_system_entry(dvm::Space::sphere, 1, false, true), nullptr, "lagrangian, constraints");
-  row(dvm::written_system_entry(dvm::Space::rotation, 1, false, true), nullptr, "lagrangian, constraints");
+  for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation})
+    row(dvm::written_system_entry(sp, 1, true), nullptr, "lagrangian, forces");
+  for (dvm::Space sp : {dvm::Space::euclidean, dvm::Space::sphere, dvm::Space::rotation})
+    row(dvm::written_system_entry(sp, 1, false, true), nullptr, "lagrangian, constraints");
+  std::array<std::size_t, 6> width{};
+  for (const auto& r : rows)
+    for (std::size_t c = 0; c < r.size(); ++c) width[c] = std::max(width[c], r[c].size());
+  for (const auto& r : rows) {
+    std::string out = " ";
+    for (std::size_t c = 0; c < r.size(); ++c)
+      out += " " + r[c] + (c + 1 < r.size() ? std::string(width[c] - r[c].size(), ' ') : "");
+    h += out + "\n";
+  }
   return h;
 }
 

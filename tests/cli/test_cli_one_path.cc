@@ -20,6 +20,7 @@
 #include <fstream>
 #include <map>
 #include <regex>
+#include <set>
 #include <sstream>
 #include <string>
 #include <utility>
@@ -1650,6 +1651,46 @@ BOOST_AUTO_TEST_CASE(run_help_lists_every_scene_key) {
     }
   }
   BOOST_TEST(keys >= 33);
+}
+
+// The table of what each system runs, at the end of `dvm run --help`: every row's
+// fields start under the header's column names, and the written Lagrangian has its
+// rows with forces and with constraints on each space that takes them.
+BOOST_AUTO_TEST_CASE(run_help_system_table_is_aligned) {
+  const auto ls = lines_of(dvm({"run", "--help"}).out);
+  std::size_t i = 0;
+  while (i < ls.size() && ls[i].rfind("What each system runs", 0) != 0) ++i;
+  BOOST_REQUIRE_LT(i + 1, ls.size());
+  const std::string header = ls[++i];
+  std::vector<std::size_t> at;
+  for (const char* c : {"system", "space", "forms", "comp.", "galerkin", "boundary-value"}) {
+    at.push_back(header.find(c));
+    BOOST_REQUIRE_NE(at.back(), std::string::npos);
+  }
+  int rows = 0;
+  std::set<std::string> written;
+  for (++i; i < ls.size() && !trim(ls[i]).empty(); ++i, ++rows) {
+    const std::string& r = ls[i];
+    BOOST_TEST_CONTEXT(r) {
+      for (std::size_t c = 0; c < at.size(); ++c) {
+        BOOST_REQUIRE_LT(at[c], r.size());
+        BOOST_TEST(r[at[c]] != ' ');                  // a field starts under its name
+        BOOST_TEST((at[c] == 0 || r[at[c] - 1] == ' '));  // and not inside another
+      }
+      for (std::size_t c = 3; c < at.size(); ++c) {
+        const std::string v = r.substr(at[c], r.find(' ', at[c]) - at[c]);
+        BOOST_TEST((v == "yes" || v == "no"));
+      }
+    }
+    if (r.rfind("  lagrangian, ", 0) == 0) written.insert(trim(r.substr(0, at[2])));
+  }
+  BOOST_TEST(rows >= 20);
+  for (const char* what : {"forces", "constraints"})
+    for (const char* space : {"R^n", "S^2", "SO(3)"}) {
+      std::string key = std::string("lagrangian, ") + what;
+      key += std::string(at[1] - 2 - key.size(), ' ') + space;
+      BOOST_TEST(written.count(key) == 1u, key);
+    }
 }
 
 // Retractions written in the embedding (map = "sphere-written", "so3-written"):
