@@ -48,6 +48,7 @@
 #pragma once
 
 #include <array>
+#include <memory>
 #include <optional>
 #include <string>
 #include <utility>
@@ -179,6 +180,37 @@ template <class System>
   }
 }
 
+// The virtual work of a force at the same nodes (the discrete Lagrange-d'Alembert
+// principle, as solvers/dynamic_galerkin_step.h on R^n): the force F_i = F(t_i, x_i, v_i)
+// evaluated at node i and held there, paired with the node's virtual displacement
+// (ManifoldForce::displacement) along the moving chart, is added to out[i], which then
+// holds dL/d(eps, eta, nu) + <F_i, d disp/d(eps, eta)>. Returns the force's power
+// sum_i b_i <F_i, v_i> (the step's work is h times it).
+template <class M, class Force>
+[[gnu::noinline]] double chart_force_work(const Force& force, const SeededCharts<M>& charts, int points,
+                                          const double* times, const double* b, const Vec<double, M::dim>* eta,
+                                          const Vec<double, M::dim>* nu, Vec<double, 3 * M::dim>* out) {
+  constexpr int n = M::dim;
+  using J3 = ceres::Jet<double, 3 * n>;
+  double power = 0.0;
+  for (int i = 0; i < points; ++i) {
+    Vec<J3, n> e, v;
+    for (int a = 0; a < n; ++a) {
+      e[a] = J3(eta[i][a], n + a);
+      v[a] = J3(nu[i][a], 2 * n + a);
+    }
+    const auto xv = charts.node.point_tangent(e, v);
+    const typename M::template Point<double> x = xv.first.unaryExpr([](const J3& j) { return j.a; });
+    const typename M::template Tangent<double> w = xv.second.unaryExpr([](const J3& j) { return j.a; });
+    Vec<double, Force::size> F;
+    force.value(times[i], x, w, F);
+    const Vec<J3, Force::size> d = Force::displacement(x, xv.first);
+    for (int k = 0; k < Force::size; ++k) out[i] += F[k] * d[k].v;
+    power += b[i] * F.dot(w);
+  }
+  return power;
+}
+
 // The Jacobian of the end coordinates Y_S(eps, xs) (MovingChart::end_coordinates) at
 // eps = 0: columns 0..dim-1 in eps, dim..2 dim-1 in xs.
 template <class M>
@@ -234,9 +266,19 @@ void set_bottom_value(T& t, double v) {
 // matrices of the stage system have run-time sizes in storage of the largest size
 // (no allocation), so that a system compiles one step for every s. The arithmetic that
 // costs (L and its derivatives at the nodes, the chart) has fixed sizes either way.
-template <class System>
+//
+// Force: a force on the manifold (ManifoldForce<M>: an embedded force on S^2, a body
+// torque on SO(3)) or NoForce. A forced step adds the discrete forces of the Lagrange-
+// d'Alembert principle by the same quadrature: at node i, time t + c_i h, the force is
+// held and paired with the node's virtual displacement (detail::chart_force_work), in
+// the equations for eps, the internal control points and p1 alike; the step reports
+// the force's work h sum_i b_i <F_i, v_i> at its last evaluation (StepSummary::work).
+// The step is then no longer symplectic, and the momentum maps change by the forces'
+// impulse.
+template <class System, class Force = NoForce>
 class ManifoldGalerkinStep {
  public:
+  static constexpr bool kForced = is_force_v<Force>;
   using M = typename System::Manifold;
   static constexpr int n = M::dim;
   static constexpr int max_SN = kGalerkinMaxStages * n;
@@ -248,9 +290,18 @@ class ManifoldGalerkinStep {
   using GV = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, max_SN + n, 1>;
   using JM = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, max_SN, max_SN>;
 
-  ManifoldGalerkinStep(System L, QuadratureKind kind, int stages, double h, StepOptions options = {})
-      : L_(std::move(L)), quad_(kind, checked_stages(stages)), S_(stages), SN_(stages * n), h_(h), options_(options) {
+  // force: required where Force is not NoForce (shared by the step's copies).
+  ManifoldGalerkinStep(System L, QuadratureKind kind, int stages, double h, StepOptions options = {},
+                       std::shared_ptr<const Force> force = nullptr)
+      : L_(std::move(L)),
+        quad_(kind, checked_stages(stages)),
+        S_(stages),
+        SN_(stages * n),
+        h_(h),
+        options_(options),
+        force_(std::move(force)) {
     if (!(h > 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be positive and finite");
+    if (kForced && !force_) throw std::invalid_argument("ManifoldGalerkinStep: a forced step needs its force");
     const int S = S_;
     for (int i = 0; i < quad_.points; ++i) {
       b_[i] = static_cast<double>(quad_.b[i]);
@@ -288,6 +339,13 @@ class ManifoldGalerkinStep {
   int order() const { return 2 * S_; }
   const System& lagrangian() const { return L_; }
   long jacobian_updates() const { return jacobian_updates_; }
+  // The controls the force reads (0 without a force).
+  int controls() const {
+    if constexpr (kForced)
+      return force_->controls();
+    else
+      return 0;
+  }
 
   // The quadrature of the action, A(eps, X), for any scalar (X: s n control-point
   // coordinates, of fixed or run-time size).
@@ -323,7 +381,7 @@ class ManifoldGalerkinStep {
 
   // One step: xi holds a guess of the chart coordinates of q1 on entry (spread
   // linearly over the control points) and them on return.
-  StepSummary step(double /*t*/, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
+  StepSummary step(double t, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1) const {
     const int S = S_;
     const V pi0 = M::covector_to_local(q0, p0);
     // starting guess: the previous step's curve extrapolated (error O(h^{S+1})) and
@@ -339,14 +397,14 @@ class ManifoldGalerkinStep {
       for (int j = 1; j <= S; ++j) X_.template segment<n>((j - 1) * n) = (static_cast<double>(j) / S) * xi;
     }
     have_prev_ = false;
-    Equation eq{*this, q0, pi0, max_abs(pi0)};
+    Equation eq{*this, t, q0, pi0, max_abs(pi0)};
     StepSummary sum;
     try {
       sum = newton_drive(eq, lu_, Refresh::contracting, options_, X_, R_, delta_, J_, kept_, start_);
       jacobian_updates_ += sum.jacobians;
       if (!sum.converged) return sum;
       V pi1;
-      residual(q0, pi0, X_, R_, pi1);  // p1 at the corrected nodes
+      sum.work = residual(t, q0, pi0, X_, R_, pi1);  // p1 at the corrected nodes
       xi = X_.template segment<n>((S - 1) * n);
       leave_chart<M>(q0, xi, pi1, sum, q1, p1);
       if (!sum.converged) return sum;
@@ -370,12 +428,14 @@ class ManifoldGalerkinStep {
   }
 
   // R = (p0 + dA/deps, dA/dX_1, .., dA/dX_{s-1}) at eps = 0 and pi1 = dA/dX_s, at the
-  // control points X.
-  void residual(const Point& q0, const V& pi0, const XV& X, XV& R, V& pi1) const {
-    action_gradient(q0, X, G_);
+  // control points X, with the forces' virtual work in each where the step has a force;
+  // returns the forces' work over the step (0 without).
+  double residual(double t, const Point& q0, const V& pi0, const XV& X, XV& R, V& pi1) const {
+    const double work = gradient(t, q0, X, G_);
     R = G_.head(SN_);
     R.template head<n>() += pi0;
     pi1 = G_.template tail<n>();
+    return work;
   }
 
   // The step equation for the driver: R(X) = 0, its scale |p0| + max|J| max|X|; the
@@ -384,15 +444,16 @@ class ManifoldGalerkinStep {
     using Vector = XV;
     using Matrix = JM;
     const ManifoldGalerkinStep& step;
+    double t;
     const Point& q0;
     const V& pi0;
     double pscale;
     void residual(const Vector& x, Vector& r) const {
       V pi1;
-      step.residual(q0, pi0, x, r, pi1);
+      step.residual(t, q0, pi0, x, r, pi1);
     }
     double jacobian(const Vector& x, Vector& r, Matrix& J) const {
-      const double Jmax = step.form_jacobian(q0, pi0, x, J);
+      const double Jmax = step.form_jacobian(t, q0, pi0, x, J);
       residual(x, r);
       return Jmax;
     }
@@ -425,6 +486,22 @@ class ManifoldGalerkinStep {
   void action_gradient(const Point& q0, const Eigen::Ref<const Eigen::VectorXd>& X, Eigen::Ref<Eigen::VectorXd> G) const {
     if (X.size() != SN_ || G.size() != n + SN_)
       throw std::invalid_argument("ManifoldGalerkinStep::action_gradient: X or G has the wrong size");
+    gradient_with<NoForce>(nullptr, 0.0, q0, X, G);
+  }
+
+ private:
+  // action_gradient with the forces' virtual work where the step has a force (their
+  // nodes at t + c_i h); returns their work over the step (0 without).
+  double gradient(double t, const Point& q0, const Eigen::Ref<const Eigen::VectorXd>& X,
+                  Eigen::Ref<Eigen::VectorXd> G) const {
+    if constexpr (kForced)
+      return gradient_with(force_.get(), t, q0, X, G);
+    else
+      return gradient_with<NoForce>(nullptr, t, q0, X, G);
+  }
+  template <class Fo>
+  double gradient_with(const Fo* force, double t, const Point& q0, const Eigen::Ref<const Eigen::VectorXd>& X,
+                       Eigen::Ref<Eigen::VectorXd> G) const {
     const int S = S_;
     if (!charts_ || !(charts_->q0 == q0)) charts_.emplace(q0);
     std::array<V, kGalerkinMaxStages + 2> eta, nu;
@@ -439,6 +516,18 @@ class ManifoldGalerkinStep {
     }
     std::array<Vec<double, 3 * n>, kGalerkinMaxStages + 2> dl;
     detail::chart_lagrangian_gradients(L_, *charts_, quad_.points, eta.data(), nu.data(), dl.data());
+    double work = 0.0;
+    if constexpr (is_force_v<Fo>) {
+      if (force) {
+        std::array<double, kGalerkinMaxStages + 2> times;
+        for (int i = 0; i < quad_.points; ++i) times[i] = t + static_cast<double>(quad_.c[i]) * h_;
+        work = h_ * detail::chart_force_work<M>(*force, *charts_, quad_.points, times.data(), b_.data(), eta.data(),
+                                                nu.data(), dl.data());
+      }
+    } else {
+      (void)force;
+      (void)t;
+    }
     // dA/deps through the chart (G's head) and dA/dY_j as if the Y_j were free
     G.setZero();
     for (int i = 0; i < quad_.points; ++i) {
@@ -453,9 +542,9 @@ class ManifoldGalerkinStep {
     const V gS = G.template tail<n>();
     G.template head<n>() += J.template leftCols<n>().transpose() * gS;
     G.template tail<n>() = J.template rightCols<n>().transpose() * gS;
+    return work;
   }
 
- private:
   // The Jacobian dR/dX at the current X_, inverted, by central differences of the
   // residual (each column from two residuals in Jets of the first order). The Jacobian
   // only steers the iteration: its error (relative ~1e-10) slows the contraction to a
@@ -463,16 +552,19 @@ class ManifoldGalerkinStep {
   // iteration's tolerance. (Nested Jets would give it exactly, at the price of L's
   // second derivatives compiled in a Jet type of its own.)
   // (Into J at the control points X; returns max|J_ij|, not finite where an entry is not.)
-  double form_jacobian(const Point& q0, const V& pi0, const XV& X, JM& J) const {
-    const double size = std::fmax(max_abs(X), 1e-300);
+  // The differences are relative to the control points' size, but not below 1e-8 (the
+  // chart coordinates are angles or of that scale): a step from rest under a force starts
+  // from X = 0, where relative differences would vanish.
+  double form_jacobian(double t, const Point& q0, const V& pi0, const XV& X, JM& J) const {
+    const double size = std::fmax(max_abs(X), 1e-8);
     XV Xk = X, Rp, Rm;
     V pi1;
     for (int k = 0; k < SN_; ++k) {
       const double dk = 6e-6 * std::fmax(std::fabs(X[k]), size);  // ~ cbrt(machine epsilon)
       Xk[k] = X[k] + dk;
-      residual(q0, pi0, Xk, Rp, pi1);
+      residual(t, q0, pi0, Xk, Rp, pi1);
       Xk[k] = X[k] - dk;
-      residual(q0, pi0, Xk, Rm, pi1);
+      residual(t, q0, pi0, Xk, Rm, pi1);
       Xk[k] = X[k];
       J.col(k) = (Rp - Rm) / (2.0 * dk);
     }
@@ -484,6 +576,7 @@ class ManifoldGalerkinStep {
   int S_, SN_;
   double h_;
   StepOptions options_;
+  std::shared_ptr<const Force> force_;
   std::array<double, kGalerkinMaxStages + 2> b_{};
   std::array<std::array<double, kGalerkinMaxStages + 1>, kGalerkinMaxStages + 2> A_{}, B_{};
   std::array<std::array<double, kGalerkinMaxStages + 1>, kGalerkinMaxStages + 1> E_{};

@@ -466,14 +466,25 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
   const bool forced = pr.forced();  // (a written Lagrangian on S^2 or SO(3) with system.forces)
-  if (forced && (me.galerkin || me.form != Form::lagrangian))  // (validate refuses it first)
-    throw InputError(pr.forces_where + ": forces on S^2 and SO(3) enter the lagrangian form of the maps");
+  if (forced && me.form != Form::lagrangian)  // (validate refuses it first)
+    throw InputError(pr.forces_where + ": forces on S^2 and SO(3) enter the lagrangian form of the maps and Galerkin");
   if (me.galerkin) {
-    if constexpr (Galerkin)
+    if constexpr (Galerkin) {
+      // system.forces: the forced Galerkin step (the discrete Lagrange-d'Alembert
+      // principle at its quadrature nodes)
+      if constexpr (std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>)
+        if (forced) {
+          const auto force = checked_force<Mf>(pr, q, v0, view);
+          base.forced = true;
+          return stepper_run(view,
+                             ManifoldGalerkinStep<S, ManifoldForce<Mf>>(L, me.quadrature, me.stages, h, opt, force), q,
+                             p, v0, base, pr.steps);
+        }
       return stepper_run(view, ManifoldGalerkinStep<S>(L, me.quadrature, me.stages, h, opt), q, p, v0, base,
                          pr.steps);
-    else
+    } else {
       throw InputError("integrator.method: unsupported");  // refused by validate()
+    }
   }
   const std::vector<Stage<Map>> stages = composition_stages(
       me, R, R.symmetric(), [](const Map& m) { return adjoint_map(m); },

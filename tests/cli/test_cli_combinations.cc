@@ -221,13 +221,14 @@ std::vector<SystemCaps> registry_systems() {
     out.push_back(c);
   }
   // written on S^2 and SO(3) with forces: the lagrangian form of the space's maps,
-  // composed or not (the forced ManifoldStep)
+  // composed or not (the forced ManifoldStep), and Galerkin (the forced
+  // ManifoldGalerkinStep)
   for (const char* space : {"S^2", "SO(3)"}) {
     SystemCaps c = w;
     c.space = space;
     c.name = "lagrangian with forces on " + c.space;
     c.forms = {"lagrangian"};
-    c.galerkin = false;
+    c.galerkin = true;
     c.written_maps = true;
     out.push_back(c);
   }

@@ -5,8 +5,8 @@
 // constrained step does not take refused with exit 2, naming the keys, nothing written;
 // Lagrangians that depend on time (Kapitza's pendulum, a damping Lagrangian against a
 // damping force); forces on S^2 and SO(3); constraints on S^2 and SO(3) against the
-// systems they reduce to, and their orders. The long runs (10^6 steps) are in
-// test_cli_constraints_long.cc.
+// systems they reduce to, and their orders; Galerkin with forces on S^2 and SO(3). The
+// long runs (10^6 steps) are in test_cli_constraints_long.cc.
 #define BOOST_TEST_MODULE cli_constraints
 #include <boost/test/unit_test.hpp>
 
@@ -417,6 +417,129 @@ BOOST_AUTO_TEST_CASE(forces_on_the_sphere_and_the_rotation_group) {
   }
 }
 
+// Galerkin with forces on S^2 and SO(3) (ManifoldGalerkinStep with its force: the force
+// held at each quadrature node, paired with the node's virtual displacement).
+//   - The constant torque about the symmetry axis (satellite_torque.toml): the angular
+//     momentum I3 w0 + T3 t exact (the quadrature of a constant torque is exact), the
+//     angle exact too (its increment h w(t_k + h/2) for the quadratic angle of a constant
+//     acceleration), the work T3 times the angle and the energy balance at round-off,
+//     for Gauss s = 1, 2 and Lobatto s = 2.
+//   - The rest-to-rest slew of satellite_control.toml, its torque read from a table.
+//   - The spherical body damped by -c w: errors of order 2s against pi(0) exp(-c t / I)
+//     (s = 1: 2, s = 2: 4).
+//   - On S^2, a damped and driven spherical pendulum: order 2s against a fine run of the
+//     map's forced step composed to order 8, and the energy balance of the same order.
+//   - A force that is zero gives the unforced Galerkin run to the bit.
+//   - Unforced, a start from rest (the first step's control points all 0, where the
+//     Jacobian's differences are not relative to them): the trajectory of the maps.
+BOOST_AUTO_TEST_CASE(galerkin_with_forces_on_the_sphere_and_the_rotation_group) {
+  for (const std::string& quad : {"gauss", "lobatto"})
+    for (int s = 1; s <= 2; ++s) {
+      if (quad == "lobatto" && s == 1) continue;
+      const Json r = run("satellite_torque.toml", {"integrator.method=\"galerkin\"", "integrator.quadrature=\"" + quad + "\"",
+                                                   "integrator.stages=" + std::to_string(s)});
+      const double T = 10.0, I3 = 1.0, T3 = 0.5, w0 = 1.0, angle = w0 * T + T3 * T * T / (2.0 * I3);
+      BOOST_TEST(r.at("forced").get<bool>());
+      BOOST_TEST(r.at("method").get<std::string>() == "galerkin");
+      const auto q = vec(r, "q_final"), p = vec(r, "p_final");
+      BOOST_TEST(std::fabs(p[2] - (I3 * w0 + T3 * T)) <= 1e-12, quad << " s = " << s);
+      BOOST_TEST(std::fabs(p[0]) + std::fabs(p[1]) <= 1e-14);
+      const double sign = q[0] * std::cos(angle / 2) >= 0.0 ? 1.0 : -1.0;
+      BOOST_TEST(std::fabs(sign * q[0] - std::cos(angle / 2)) <= 1e-11, quad << " s = " << s);
+      BOOST_TEST(std::fabs(sign * q[3] - std::sin(angle / 2)) <= 1e-11, quad << " s = " << s);
+      BOOST_TEST(std::fabs(r.at("work").get<double>() - T3 * angle) <= 1e-10, quad << " s = " << s);
+      BOOST_TEST(r.at("max_abs_energy_balance").get<double>() <= 1e-11, quad << " s = " << s);
+    }
+  {  // the rest-to-rest slew of satellite_control.toml (a torque from a table): turned by
+     // pi/2 about e3 and at rest again, as with the map
+    const Json r = run("satellite_control.toml", {"integrator.method=\"galerkin\"", "integrator.stages=2"});
+    const auto q = vec(r, "q_final"), p = vec(r, "p_final");
+    const double sign = q[0] >= 0.0 ? 1.0 : -1.0, c = std::sqrt(0.5);
+    BOOST_TEST(std::fabs(sign * q[0] - c) + std::fabs(q[1]) + std::fabs(q[2]) + std::fabs(sign * q[3] - c) <= 1e-12);
+    BOOST_TEST(std::fabs(p[0]) + std::fabs(p[1]) + std::fabs(p[2]) <= 1e-12);
+  }
+  {  // the damped spherical body: order 2s
+    const std::string ball = "[system]\nspace = \"SO(3)\"\nparams = { I = 2.0, c = 0.5 }\n"
+                             "lagrangian = \"0.5*I*(w1^2 + w2^2 + w3^2)\"\n"
+                             "forces = { w1 = \"-c*w1\", w2 = \"-c*w2\", w3 = \"-c*w3\" }\n"
+                             "[initial]\nrotation = [1.0, 0.0, 0.0, 0.0]\nomega = [0.3, -0.4, 1.2]\n"
+                             "[integrator]\nmethod = \"galerkin\"\nstep = 0.2\nt_end = 4.0\n";
+    const std::string path = write_scene("damped_ball_galerkin.toml", ball);
+    auto error = [&](int s, const std::string& h) {
+      const Output o = dvm({"run", path, "--json", "--no-output", "--set", "integrator.step=" + h, "--set",
+                            "integrator.stages=" + std::to_string(s)});
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      const auto p = vec(parse_json(o.out), "p_final");
+      const double e = std::exp(-0.5 * 4.0 / 2.0);
+      return std::fmax(std::fabs(p[0] - 0.6 * e), std::fmax(std::fabs(p[1] + 0.8 * e), std::fabs(p[2] - 2.4 * e)));
+    };
+    for (int s = 1; s <= 2; ++s) {
+      const double e1 = error(s, "0.2"), e2 = error(s, "0.1"), ratio = e1 / e2, expected = std::pow(2.0, 2 * s);
+      BOOST_TEST_MESSAGE("damped ball, Galerkin s = " << s << ": errors " << e1 << ", " << e2 << ", ratio " << ratio);
+      BOOST_TEST(std::fabs(ratio / expected - 1.0) <= 0.05, "s = " << s << ": ratio " << ratio);
+    }
+  }
+  {  // S^2: a damped, driven spherical pendulum, order 2s against a fine reference
+    const std::vector<std::string> forced = {
+        "system.forces={ x = \"-0.3*x_dot + 0.5*sin(3*t)\", y = \"-0.3*y_dot\", z = \"-0.3*z_dot*x\" }",
+        "integrator.t_end=2.0"};
+    auto with = [&](std::vector<std::string> extra) {
+      extra.insert(extra.begin(), forced.begin(), forced.end());
+      return run("spherical_pendulum_written.toml", extra);
+    };
+    const Json ref = with({"integrator.composition=\"kahan-li8\"", "integrator.step=0.002"});
+    const auto qr = vec(ref, "q_final");
+    for (int s = 1; s <= 2; ++s) {
+      double err[2], balance[2];
+      for (int k = 0; k < 2; ++k) {
+        const Json g = with({"integrator.method=\"galerkin\"", "integrator.stages=" + std::to_string(s),
+                             std::string("integrator.step=") + (k == 0 ? "0.04" : "0.02")});
+        const auto q = vec(g, "q_final");
+        err[k] = 0.0;
+        for (int i = 0; i < 3; ++i) err[k] = std::fmax(err[k], std::fabs(q[i] - qr[i]));
+        balance[k] = std::fabs(g.at("energy_balance_final").get<double>());
+        BOOST_TEST(std::fabs(g.at("work").get<double>() - ref.at("work").get<double>()) <= 1e-2);
+      }
+      const double expected = std::pow(2.0, 2 * s);
+      BOOST_TEST_MESSAGE("forced spherical pendulum, Galerkin s = " << s << ": errors " << err[0] << ", " << err[1]
+                                                                     << "; energy balance " << balance[0] << ", "
+                                                                     << balance[1]);
+      BOOST_TEST(std::fabs(err[0] / err[1] / expected - 1.0) <= 0.15, "s = " << s);
+      BOOST_TEST(balance[0] / balance[1] >= 0.8 * expected, "s = " << s);
+    }
+  }
+  {  // released from rest (X = 0 at the first step): the spherical pendulum and the heavy
+     // top, unforced, against the maps composed to order 8 at a fine step
+    struct Rest {
+      std::string scene, set;
+    };
+    for (const Rest& c : {Rest{"spherical_pendulum_written.toml", "initial.v=[0.0, 0.0, 0.0]"},
+                          Rest{"heavy_top_written.toml", "initial.omega=[0.0, 0.0, 0.0]"}}) {
+      const Json g = run(c.scene, {c.set, "integrator.method=\"galerkin\"", "integrator.stages=3",
+                                   "integrator.step=0.01", "integrator.t_end=1.0"});
+      const Json r = run(c.scene, {c.set, "integrator.composition=\"kahan-li8\"", "integrator.step=0.002",
+                                   "integrator.t_end=1.0"});
+      BOOST_TEST(g.at("status").get<std::string>() == "ok");
+      const auto a = vec(g, "q_final"), b = vec(r, "q_final");
+      double d = 0.0;
+      for (std::size_t i = 0; i < a.size(); ++i) d = std::fmax(d, std::fabs(a[i] - b[i]));
+      BOOST_TEST_MESSAGE(c.scene << " from rest, Galerkin s = 3 against kahan-li8: " << d);
+      BOOST_TEST(d <= 1e-9, c.scene);
+    }
+  }
+  {  // a zero force: the unforced run
+    const std::vector<std::string> g = {"integrator.method=\"galerkin\"", "integrator.stages=2", "integrator.t_end=1.0"};
+    const Json a = run("spherical_pendulum_written.toml", g);
+    auto gz = g;
+    gz.push_back("system.forces={ x = \"0*x_dot\" }");
+    const Json b = run("spherical_pendulum_written.toml", gz);
+    BOOST_TEST(b.at("forced").get<bool>());
+    BOOST_TEST(vec(a, "q_final") == vec(b, "q_final"));
+    BOOST_TEST(vec(a, "p_final") == vec(b, "p_final"));
+    BOOST_TEST(b.at("work").get<double>() == 0.0);
+  }
+}
+
 // Controls read by forces on S^2 and SO(3) (ManifoldForce with the run's ControlSignal):
 //   - a rest-to-rest slew (satellite_control.toml): a torque of pi/2 then -pi/2 from a
 //     table, held over each step, stops the body turned by pi/2 about e3, exact to
@@ -711,15 +834,17 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(K, {"system.invariants={ I = \"t\" }"}, {"system.invariants.I", "unknown name 't'"});
   refused("spherical_pendulum_written.toml", {"system.lagrangian=\"t*(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\""},
           {"system.lagrangian", "unknown name 't'", "a Lagrangian on S^2 or SO(3)"});
-  // forces on S^2 and SO(3): the lagrangian form of the maps only, keyed by a coordinate
-  // (S^2) or a body axis (SO(3)); none on (S^2)^K, nor controls
+  // forces on S^2 and SO(3): the lagrangian form of the maps and Galerkin only, keyed by
+  // a coordinate (S^2) or a body axis (SO(3)); none on (S^2)^K, nor controls
   const std::string T = "satellite_torque.toml", W = "spherical_pendulum_written.toml";
-  refused(T, {"integrator.method=galerkin"}, {"integrator.method", "lagrangian with forces on SO(3)"});
   refused(T, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian with forces on SO(3)"});
   refused(T, {"system.forces={ x = \"1\" }"}, {"system.forces.x", "not a body axis", "w1, w2, w3"});
   refused(T, {"system.forces={ w3 = \"pi3\" }"}, {"system.forces.w3", "unknown name 'pi3'"});
-  refused(W, {"system.forces={ x = \"-x_dot\" }", "integrator.method=galerkin"},
-          {"integrator.method", "lagrangian with forces on S^2"});
+  refused(W, {"system.forces={ x = \"-x_dot\" }", "integrator.form=hamiltonian"},
+          {"integrator.form", "lagrangian with forces on S^2"});
+  refused(W, {"system.forces={ x = \"-x_dot\" }", "problem.kind=\"boundary-value\"", "problem.q_final=[0.0, 0.0, 1.0]",
+              "problem.steps=10"},
+          {"problem.kind", "lagrangian with forces on S^2"});
   refused(W, {"system.forces={ q = \"1\" }"}, {"system.forces.q", "not a coordinate"});
   refused("spherical_double_pendulum_written.toml", {"system.forces={ x1 = \"u\" }", "system.controls={ u = \"t\" }"},
           {"system.controls", "on (S^2)^2 a written system is conservative"});
