@@ -149,6 +149,17 @@ struct SeededCharts {
   explicit SeededCharts(const typename M::template Point<double>& c)
       : q0(c), end(c, seeded_zero<J2>()), node(c, seeded_zero<J3>()) {}
 
+  // The point and tangent vector at chart coordinates (eta, nu), in the Jet of the
+  // directions (eps, eta, nu).
+  auto node_point_tangent(const Vec<double, n>& eta, const Vec<double, n>& nu) const {
+    Vec<J3, n> e, v;
+    for (int a = 0; a < n; ++a) {
+      e[a] = J3(eta[a], n + a);
+      v[a] = J3(nu[a], 2 * n + a);
+    }
+    return node.point_tangent(e, v);
+  }
+
  private:
   template <class J>
   static Vec<J, n> seeded_zero() {
@@ -167,15 +178,8 @@ template <class System>
                                                   const Vec<double, System::Manifold::dim>* eta,
                                                   const Vec<double, System::Manifold::dim>* nu,
                                                   Vec<double, 3 * System::Manifold::dim>* out) {
-  constexpr int n = System::Manifold::dim;
-  using J3 = ceres::Jet<double, 3 * n>;
   for (int i = 0; i < points; ++i) {
-    Vec<J3, n> e, v;
-    for (int a = 0; a < n; ++a) {
-      e[a] = J3(eta[i][a], n + a);
-      v[a] = J3(nu[i][a], 2 * n + a);
-    }
-    const auto xv = charts.node.point_tangent(e, v);
+    const auto xv = charts.node_point_tangent(eta[i], nu[i]);
     out[i] = L(xv.first, xv.second).v;
   }
 }
@@ -190,16 +194,12 @@ template <class M, class Force>
 [[gnu::noinline]] double chart_force_work(const Force& force, const SeededCharts<M>& charts, int points,
                                           const double* times, const double* b, const Vec<double, M::dim>* eta,
                                           const Vec<double, M::dim>* nu, Vec<double, 3 * M::dim>* out) {
-  constexpr int n = M::dim;
-  using J3 = ceres::Jet<double, 3 * n>;
+  using J3 = typename SeededCharts<M>::J3;
   double power = 0.0;
   for (int i = 0; i < points; ++i) {
-    Vec<J3, n> e, v;
-    for (int a = 0; a < n; ++a) {
-      e[a] = J3(eta[i][a], n + a);
-      v[a] = J3(nu[i][a], 2 * n + a);
-    }
-    const auto xv = charts.node.point_tangent(e, v);
+    // (the node again, as chart_lagrangian_gradients formed it: its chart costs little
+    // beside L, and the unforced step's function stays one per system)
+    const auto xv = charts.node_point_tangent(eta[i], nu[i]);
     const typename M::template Point<double> x = xv.first.unaryExpr([](const J3& j) { return j.a; });
     const typename M::template Tangent<double> w = xv.second.unaryExpr([](const J3& j) { return j.a; });
     Vec<double, Force::size> F;
