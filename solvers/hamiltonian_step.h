@@ -32,6 +32,16 @@
 // z1 - z0 = h X_H(z0 + theta (z1 - z0)), symplectic only at theta = 1/2 (where it is the
 // cotangent lift of the midpoint map, the implicit midpoint rule).
 //
+// With a force (Force, not NoForce; Marsden and West 2001, Sec. 3.2, in the Hamiltonian
+// form): a generalized force F(q, v) joins the vector field where it is sampled, as the
+// vertical lift of F at the velocity v = dH/dp there, so that the step is Eq. 5.1 for the
+// forced Hamilton equations q' = H_p, p' = -H_q + F:
+//   qdot - h dH/dp(q, p) = 0,   pdot + h dH/dq(q, p) - h F(q, dH/dp(q, p)) = 0.
+// Force is a callable F(q, v) for every scalar type the step evaluates (the time of
+// the sample is the force object's own); the summary reports the work h <F, dH/dp> at the
+// solution (the trapezoidal sample: the mean of the two ends'). The step on S^2 and SO(3)
+// gives it the manifold's force in the chart (solvers/manifold_hamiltonian_step.h).
+//
 // Unknowns are the increments (dq, dp) = (q1 - q0, p1 - p0), of size O(h). The
 // symplecticity of the computed map is measured by differentiating through the solve:
 // with F(y, x) = 0 the step equation in the initial point y = (q0, p0) and the
@@ -65,17 +75,18 @@ struct is_on_cotangent_bundle : std::false_type {};
 template <class M>
 struct is_on_cotangent_bundle<OnCotangentBundle<M>> : std::true_type {};
 
-template <class Ham, class Map>
+template <class Ham, class Map, class Force = NoForce>
 class HamiltonianStep {
  public:
   static constexpr int N = Ham::dim;
+  static constexpr bool kForced = is_force_v<Force>;
   using V = Vec<double, N>;
   using V2 = Vec<double, 2 * N>;
   using M2 = Mat<double, 2 * N, 2 * N>;
 
   HamiltonianStep(Ham H, Map R, double h, StepOptions options = {},
-                  VectorFieldSample sample = VectorFieldSample::base_point)
-      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), sample_(sample) {
+                  VectorFieldSample sample = VectorFieldSample::base_point, Force force = {})
+      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), sample_(sample), force_(std::move(force)) {
     // negative sizes are the backward substeps of compositions (solvers/composition.h)
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
   }
@@ -86,45 +97,29 @@ class HamiltonianStep {
   VectorFieldSample sample() const { return sample_; }
 
   // The residual of Eq. 5.1 at (q0, p0; q0 + dq, p0 + dp), for any scalar:
-  //   (qdot - h dH/dp(q, p),  pdot + h dH/dq(q, p))
+  //   (qdot - h dH/dp(q, p),  pdot + h dH/dq(q, p))   (with a force: pdot + h dH/dq - h F)
   // with (q, p; qdot, pdot) = (R_d^{T*})^{-1}(q0, p0; q1, p1).
   template <class T>
   Vec<T, 2 * N> residual(const Vec<T, N>& q0, const Vec<T, N>& p0, const Vec<T, N>& dq, const Vec<T, N>& dp) const {
     Vec<T, N> q, qdot, p, pdot;
-    if constexpr (is_on_cotangent_bundle<Map>::value) {
-      // (z, zdot) = R^{-1}(z0, z0 + dz) of the map given on T*Q
-      const TangentPoint<T, 2 * N> z = inverse_increment(R_.map, stack(q0, p0), stack(dq, dp));
-      q = z.x.template head<N>();
-      p = z.x.template tail<N>();
-      qdot = z.v.template head<N>();
-      pdot = z.v.template tail<N>();
-    } else {
-      // (q, qdot) = R_d^{-1}(q0, q0 + dq) without forming q1 - q0.
-      const TangentPoint<T, N> t = inverse_increment(R_, q0, dq);
-      Mat<T, 2 * N, 2 * N> J;
-      map_with_jacobian(R_, t.x, t.v, J);
-      // (pdot, p) = DR^T (-p0, p1), split as DR^T (-p0, p0) + DR^T (0, dp) so that maps
-      // whose x-columns of DR sum to zero (all theta maps) give pdot = dp exactly.
-      const Vec<T, 2 * N> a = J.transpose() * stack(Vec<T, N>(-p0), p0) +
-                              J.transpose() * stack(Vec<T, N>(Vec<T, N>::Constant(constant<T>(0.0))), dp);
-      q = t.x;
-      qdot = t.v;
-      pdot = a.template head<N>();
-      p = a.template tail<N>();
-    }
-    Vec<T, N> fq, fp;  // h X_H sampled as chosen
-    if (sample_ == VectorFieldSample::base_point) {
-      hamiltonian_vector_field(H_, q, p, fq, fp);
-    } else {
-      Vec<T, N> a0, b0, a1, b1;
-      hamiltonian_vector_field(H_, q0, p0, a0, b0);
-      hamiltonian_vector_field(H_, Vec<T, N>(q0 + dq), Vec<T, N>(p0 + dp), a1, b1);
-      fq = 0.5 * (a0 + a1);
-      fp = 0.5 * (b0 + b1);
-    }
+    inverse_lift(q0, p0, dq, dp, q, qdot, p, pdot);
+    Vec<T, N> fq, fp;
+    field(q0, p0, dq, dp, q, p, fq, fp);
     return stack(Vec<T, N>(qdot - h_ * fq), Vec<T, N>(pdot - h_ * fp));
   }
 
+  // The force's work over the step from (q0, p0) by the solved increments: h <F, dH/dp>
+  // where the field is sampled (0 without a force).
+  double work(const V& q0, const V& p0, const V& dq, const V& dp) const {
+    if constexpr (kForced) {
+      V q, qdot, p, pdot, fq, fp;
+      inverse_lift(q0, p0, dq, dp, q, qdot, p, pdot);
+      double w = 0.0;
+      field(q0, p0, dq, dp, q, p, fq, fp, &w);
+      return w;
+    }
+    return 0.0;
+  }
   struct Residual {
     const HamiltonianStep* step;
     V q0, p0;
@@ -147,6 +142,7 @@ class HamiltonianStep {
     Residual f{this, q0, p0};
     V fq, fp;
     hamiltonian_vector_field(H_, q0, p0, fq, fp);
+    if constexpr (kForced) fp += force_(q0, fq);  // (a start at rest driven by the force alone)
     const double s0 = std::fabs(h_) * std::fmax(max_abs(fq), max_abs(fp));
     V2 x = stack(dq, dp);
     const double x0 = std::fmax(max_abs(q0), max_abs(p0));
@@ -158,6 +154,8 @@ class HamiltonianStep {
     }
     dq = x.template head<N>();
     dp = x.template tail<N>();
+    if constexpr (kForced)
+      if (s.converged) s.work = work(q0, p0, dq, dp);
     return s;
   }
 
@@ -183,11 +181,67 @@ class HamiltonianStep {
   }
 
  private:
+  // (q, qdot, p, pdot) = (R_d^{T*})^{-1}(q0, p0; q0 + dq, p0 + dp).
+  template <class T>
+  void inverse_lift(const Vec<T, N>& q0, const Vec<T, N>& p0, const Vec<T, N>& dq, const Vec<T, N>& dp, Vec<T, N>& q,
+                    Vec<T, N>& qdot, Vec<T, N>& p, Vec<T, N>& pdot) const {
+    if constexpr (is_on_cotangent_bundle<Map>::value) {
+      // (z, zdot) = R^{-1}(z0, z0 + dz) of the map given on T*Q
+      const TangentPoint<T, 2 * N> z = inverse_increment(R_.map, stack(q0, p0), stack(dq, dp));
+      q = z.x.template head<N>();
+      p = z.x.template tail<N>();
+      qdot = z.v.template head<N>();
+      pdot = z.v.template tail<N>();
+    } else {
+      // (q, qdot) = R_d^{-1}(q0, q0 + dq) without forming q1 - q0.
+      const TangentPoint<T, N> t = inverse_increment(R_, q0, dq);
+      Mat<T, 2 * N, 2 * N> J;
+      map_with_jacobian(R_, t.x, t.v, J);
+      // (pdot, p) = DR^T (-p0, p1), split as DR^T (-p0, p0) + DR^T (0, dp) so that maps
+      // whose x-columns of DR sum to zero (all theta maps) give pdot = dp exactly.
+      const Vec<T, 2 * N> a = J.transpose() * stack(Vec<T, N>(-p0), p0) +
+                              J.transpose() * stack(Vec<T, N>(Vec<T, N>::Constant(constant<T>(0.0))), dp);
+      q = t.x;
+      qdot = t.v;
+      pdot = a.template head<N>();
+      p = a.template tail<N>();
+    }
+  }
+  // The vector field (fq, fp) = X_H (+ the force's vertical lift) sampled as chosen: at
+  // the base point (q, p), or the mean of the two ends'. work (where given, doubles):
+  // h <F, fq> there.
+  template <class T>
+  void field(const Vec<T, N>& q0, const Vec<T, N>& p0, const Vec<T, N>& dq, const Vec<T, N>& dp, const Vec<T, N>& q,
+             const Vec<T, N>& p, Vec<T, N>& fq, Vec<T, N>& fp, double* work = nullptr) const {
+    auto at = [&](const Vec<T, N>& x, const Vec<T, N>& y, Vec<T, N>& a, Vec<T, N>& b, double* w) {
+      hamiltonian_vector_field(H_, x, y, a, b);
+      if constexpr (kForced) {
+        const Vec<T, N> F = force_(x, a);
+        b += F;
+        if constexpr (std::is_same_v<T, double>)
+          if (w) *w = h_ * F.dot(a);
+      }
+      (void)w;
+    };
+    if (sample_ == VectorFieldSample::base_point) {
+      at(q, p, fq, fp, work);
+    } else {
+      Vec<T, N> a0, b0, a1, b1;
+      double w0 = 0.0, w1 = 0.0;
+      at(q0, p0, a0, b0, &w0);
+      at(Vec<T, N>(q0 + dq), Vec<T, N>(p0 + dp), a1, b1, &w1);
+      fq = 0.5 * (a0 + a1);
+      fp = 0.5 * (b0 + b1);
+      if (work) *work = 0.5 * (w0 + w1);
+    }
+  }
+
   Ham H_;
   Map R_;
   double h_;
   StepOptions options_;
   VectorFieldSample sample_;
+  Force force_;
 };
 
 // The canonical symplectic matrix J = [[0, I], [-I, 0]] on (q, p).

@@ -27,6 +27,9 @@
 // chart without cancellation; maps without one use Newton's method in the chart.
 #pragma once
 
+#include <memory>
+#include <type_traits>
+
 #include "mechanics/manifold_hamiltonian.h"
 #include "solvers/hamiltonian_step.h"
 #include "solvers/manifold_step.h"
@@ -108,39 +111,97 @@ class ClosedFormChartMap {
   Point c_;
 };
 
-template <class Ham, class Map>
+// A force on the manifold (ManifoldForce, mechanics/written_manifold.h) in the chart
+// centred at c, at time t: the chart components of the force at chart velocity nu,
+//   F_c(eta, nu) = D(eta)^T F(t, phi(eta), D(eta) nu),
+// the force pulled back by the chart as a stored covector p is (pi = D^T p). It pairs the
+// force with the virtual displacement as the lagrangian form does (ManifoldForce::
+// displacement): on S^2 the displacement of the embedded point, D delta-eta; on SO(3)
+// the body rotation vee(R^T delta R), which is again D delta-eta, since D maps chart
+// velocities to body angular velocities there.
+template <class Fo, class M>
+struct ChartForce {
+  static constexpr int n = M::dim;
+  static constexpr int S = M::template Tangent<double>::RowsAtCompileTime;
+  static_assert(Fo::size == S, "the force has the components of a stored covector");
+  const Fo* force = nullptr;
+  typename M::template Point<double> centre;
+  double t = 0.0;
+  template <class T>
+  Vec<T, n> operator()(const Vec<T, n>& eta, const Vec<T, n>& nu) const {
+    Mat<T, S, n> D;
+    const auto x = chart_with_differential<M, T>(centre, eta, D);
+    typename M::template Tangent<T> v;
+    for (int k = 0; k < S; ++k) {
+      T s = constant<T>(0.0);
+      for (int j = 0; j < n; ++j) s = s + D(k, j) * nu[j];
+      v[k] = s;
+    }
+    Vec<T, S> F;
+    force->value(t, x, v, F);
+    Vec<T, n> out;
+    for (int j = 0; j < n; ++j) {
+      T s = constant<T>(0.0);
+      for (int k = 0; k < S; ++k) s = s + D(k, j) * F[k];
+      out[j] = s;
+    }
+    return out;
+  }
+};
+
+// Force: NoForce, or a force on the manifold (ManifoldForce<M>): the chart step then
+// samples the forced Hamilton equations (solvers/hamiltonian_step.h) with the force in
+// the chart (ChartForce) at the time of the map's base point, t0 + theta h (as the
+// lagrangian form's ManifoldStep evaluates it at its node), and reports its work.
+template <class Ham, class Map, class Force = NoForce>
 class ManifoldHamiltonianStep {
  public:
   using M = typename Map::Manifold;
   static constexpr int n = M::dim;
+  static constexpr bool kForced = is_force_v<Force>;
   using Point = typename M::template Point<double>;
   using Covector = typename M::template Tangent<double>;
   using V = Vec<double, n>;
   using LocalH = decltype(chart_hamiltonian(std::declval<const Ham&>(), std::declval<const Point&>()));
   using LocalMap = ClosedFormChartMap<Map>;
-  using Local = HamiltonianStep<LocalH, LocalMap>;
+  using LocalForce = std::conditional_t<kForced, ChartForce<Force, M>, NoForce>;
+  using Local = HamiltonianStep<LocalH, LocalMap, LocalForce>;
   static_assert(std::is_same_v<typename Ham::Manifold, M>, "Hamiltonian and map live on different manifolds");
 
   ManifoldHamiltonianStep(Ham H, Map R, double h, StepOptions options = {},
-                          VectorFieldSample sample = VectorFieldSample::base_point)
-      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), sample_(sample) {
+                          VectorFieldSample sample = VectorFieldSample::base_point,
+                          std::shared_ptr<const Force> force = nullptr)
+      : H_(std::move(H)), R_(std::move(R)), h_(h), options_(options), sample_(sample), force_(std::move(force)) {
     // negative sizes are the backward substeps of compositions (solvers/manifold_composition.h)
     if (!(h != 0.0) || !std::isfinite(h)) throw std::invalid_argument("the time step h must be nonzero and finite");
+    if (kForced && !force_) throw std::invalid_argument("ManifoldHamiltonianStep: a forced step needs its force");
   }
   double step_size() const { return h_; }
   const Ham& hamiltonian() const { return H_; }
   const Map& map() const { return R_; }
+  // The controls the force reads (0 without a force).
+  int controls() const {
+    if constexpr (kForced)
+      return force_->controls();
+    else
+      return 0;
+  }
 
-  // The R^dim Hamiltonian step in the chart centred at c (it refers to this object's
-  // map, so it must not outlive it).
-  Local local_step(const Point& c) const {
-    return Local(chart_hamiltonian(H_, c), LocalMap(&R_, c), h_, options_, sample_);
+  // The R^dim Hamiltonian step in the chart centred at c, for the step that starts at
+  // time t (it refers to this object's map and force, so it must not outlive it).
+  Local local_step(const Point& c, double t = 0.0) const {
+    LocalForce f{};
+    if constexpr (kForced)
+      f = LocalForce{force_.get(), c, t + R_.theta() * h_};
+    else
+      (void)t;
+    return Local(chart_hamiltonian(H_, c), LocalMap(&R_, c), h_, options_, sample_, f);
   }
 
   // One step: xi holds the guess of the chart coordinates of q1 on entry and them on
   // return; dp (optional) returns the change of the chart momentum.
   StepSummary step(double t, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1, V* dp_out = nullptr) const {
-    const Local local = local_step(q0);
+    const Local local = local_step(q0, t);
     const V pi0 = M::covector_to_local(q0, p0);
     V dq = xi, dp = V::Zero();
     StepSummary s = local.step(t, V::Zero(), pi0, dq, dp);
@@ -157,6 +218,7 @@ class ManifoldHamiltonianStep {
   double h_;
   StepOptions options_;
   VectorFieldSample sample_;
+  std::shared_ptr<const Force> force_;
 };
 
 }  // namespace dvm

@@ -466,8 +466,6 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
 
   const bool forced = pr.forced();  // (a written Lagrangian on S^2 or SO(3) with system.forces)
-  if (forced && me.form != Form::lagrangian)  // (validate refuses it first)
-    throw InputError(pr.forces_where + ": forces on S^2 and SO(3) enter the lagrangian form of the maps and Galerkin");
   if (me.galerkin) {
     if constexpr (Galerkin) {
       // system.forces: the forced Galerkin step (the discrete Lagrange-d'Alembert
@@ -501,6 +499,19 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
   if (me.form == Form::hamiltonian) {
     if constexpr (Hamiltonian) {
       using H = decltype(hamiltonian_of(L));
+      // system.forces: the forced Hamilton equations sampled where Eq. 5.1 samples X_H
+      if constexpr (std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>)
+        if (forced) {
+          const auto force = checked_force<Mf>(pr, q, v0, view);
+          base.forced = true;
+          return composed(
+              [&](double hk, const Map& Rk) {
+                return ManifoldHamiltonianStep<H, Map, ManifoldForce<Mf>>(hamiltonian_of(L), Rk, hk, opt,
+                                                                         VectorFieldSample::base_point, force);
+              },
+              std::false_type{});
+        }
+      if (forced) throw InputError(pr.forces_where + ": forces are written on R^n, S^2 and SO(3)");
       return composed(
           [&](double hk, const Map& Rk) { return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), Rk, hk, opt); },
           std::false_type{});

@@ -459,11 +459,12 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
        "and composition; no hamiltonian form, Galerkin method or boundary values"),
       factories::written_sphere_power, "3 per factor"};
   // With forces (S^2 and SO(3)): the lagrangian form of the space's maps, composed or
-  // not (ManifoldStep with its force, solvers/manifold_step.h), and Galerkin
-  // (ManifoldGalerkinStep with its force, solvers/manifold_galerkin_step.h)
+  // not (ManifoldStep with its force, solvers/manifold_step.h), their hamiltonian form
+  // (ManifoldHamiltonianStep with its force, solvers/manifold_hamiltonian_step.h) and
+  // Galerkin (ManifoldGalerkinStep with its force, solvers/manifold_galerkin_step.h)
   auto forced_caps = [](const char* note) {
     SystemCapabilities c;
-    c.forms = {Form::lagrangian};
+    c.forms = {Form::lagrangian, Form::hamiltonian};
     c.galerkin = true;
     c.boundary_value = false;
     c.note = note;
@@ -472,19 +473,20 @@ const SystemEntry& written_system_entry(Space space, int factors, bool forced, b
   static const SystemEntry sphere_forced = {
       "lagrangian with forces on S^2", "written in the scene in x, x_dot, with a force in the embedding",
       Space::sphere, 3, {},
-      forced_caps("system.forces on S^2 enter the lagrangian form of the S^2 maps, composed or not, and Galerkin "
-                  "(the force at its quadrature nodes); the hamiltonian form and boundary values take none"),
+      forced_caps("system.forces on S^2 enter the lagrangian and hamiltonian forms of the S^2 maps, composed or "
+                  "not, and Galerkin (the force at its quadrature nodes); boundary values take none"),
       factories::written_sphere, ""};
   static const SystemEntry rotation_forced = {
       "lagrangian with forces on SO(3)", "written in the scene in R, w, with a body torque", Space::rotation, 3, {},
-      forced_caps("system.forces on SO(3) (a body torque) enter the lagrangian form of the SO(3) maps, composed or "
-                  "not, and Galerkin (the torque at its quadrature nodes); the hamiltonian form takes none"),
+      forced_caps("system.forces on SO(3) (a body torque) enter the lagrangian and hamiltonian forms of the SO(3) "
+                  "maps, composed or not, and Galerkin (the torque at its quadrature nodes)"),
       factories::written_rotation, ""};
   // With constraints (forces or not; S^2 and SO(3)): the lagrangian form of the space's
   // maps, composed or not (ConstrainedManifoldStep, solvers/manifold_constrained_step.h,
   // solved by the one Newton driver: no solver = "tiny")
   auto constrained_caps = [&](const char* note) {
     SystemCapabilities c = forced_caps(note);
+    c.forms = {Form::lagrangian};
     c.galerkin = false;
     c.tiny_solver = false;
     return c;

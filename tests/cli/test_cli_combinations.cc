@@ -110,10 +110,12 @@ const std::map<std::string, std::string>& heads() {
        "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
       {"lagrangian with forces on S^2",
        "[system]\nspace = \"S^2\"\nlagrangian = \"(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\"\n"
+       "hamiltonian = \"(p_x^2 + p_y^2 + p_z^2)/2 + z\"\n"
        "forces = { x = \"-0.3*x_dot + 0.5*cos(2*t)\", z = \"-0.2*z_dot\" }\n"
        "[initial]\nq = [0.6, 0.0, -0.8]\nv = [0.0, 0.5, 0.0]\n"},
       {"lagrangian with forces on SO(3)",
        "[system]\nspace = \"SO(3)\"\nlagrangian = \"(w1^2 + w2^2 + w3^2/2)/2 - R33\"\n"
+       "hamiltonian = \"(pi1^2 + pi2^2 + 2*pi3^2)/2 + R33\"\n"
        "forces = { w1 = \"-0.3*w1 + 0.5*cos(2*t)\", w3 = \"-0.2*w3*R33\" }\n[initial]\n"
        "rotation = [0.9689124217106447, 0.24740395925452294, 0.0, 0.0]\nomega = [0.0, 0.3, 5.0]\n"},
       {"lagrangian on (S^2)^2",
@@ -221,13 +223,13 @@ std::vector<SystemCaps> registry_systems() {
     out.push_back(c);
   }
   // written on S^2 and SO(3) with forces: the lagrangian form of the space's maps,
-  // composed or not (the forced ManifoldStep), and Galerkin (the forced
-  // ManifoldGalerkinStep)
+  // composed or not (the forced ManifoldStep), their hamiltonian form (the forced
+  // ManifoldHamiltonianStep) and Galerkin (the forced ManifoldGalerkinStep)
   for (const char* space : {"S^2", "SO(3)"}) {
     SystemCaps c = w;
     c.space = space;
     c.name = "lagrangian with forces on " + c.space;
-    c.forms = {"lagrangian"};
+    c.forms = {"lagrangian", "hamiltonian"};
     c.galerkin = true;
     c.written_maps = true;
     out.push_back(c);

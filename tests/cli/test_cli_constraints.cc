@@ -417,6 +417,19 @@ BOOST_AUTO_TEST_CASE(forces_on_the_sphere_and_the_rotation_group) {
   }
 }
 
+// The written spherical pendulum run with `sets` and with a force that is zero: the same
+// states to the bit, forced, and no work.
+static void zero_force_gives_the_unforced_run(const std::vector<std::string>& sets) {
+  const Json a = run("spherical_pendulum_written.toml", sets);
+  auto zero = sets;
+  zero.push_back("system.forces={ x = \"0*x_dot\" }");
+  const Json b = run("spherical_pendulum_written.toml", zero);
+  BOOST_TEST(b.at("forced").get<bool>());
+  BOOST_TEST(vec(a, "q_final") == vec(b, "q_final"));
+  BOOST_TEST(vec(a, "p_final") == vec(b, "p_final"));
+  BOOST_TEST(b.at("work").get<double>() == 0.0);
+}
+
 // Galerkin with forces on S^2 and SO(3) (ManifoldGalerkinStep with its force: the force
 // held at each quadrature node, paired with the node's virtual displacement).
 //   - The constant torque about the symmetry axis (satellite_torque.toml): the angular
@@ -527,17 +540,119 @@ BOOST_AUTO_TEST_CASE(galerkin_with_forces_on_the_sphere_and_the_rotation_group) 
       BOOST_TEST(d <= 1e-9, c.scene);
     }
   }
-  {  // a zero force: the unforced run
-    const std::vector<std::string> g = {"integrator.method=\"galerkin\"", "integrator.stages=2", "integrator.t_end=1.0"};
-    const Json a = run("spherical_pendulum_written.toml", g);
-    auto gz = g;
-    gz.push_back("system.forces={ x = \"0*x_dot\" }");
-    const Json b = run("spherical_pendulum_written.toml", gz);
-    BOOST_TEST(b.at("forced").get<bool>());
-    BOOST_TEST(vec(a, "q_final") == vec(b, "q_final"));
-    BOOST_TEST(vec(a, "p_final") == vec(b, "p_final"));
-    BOOST_TEST(b.at("work").get<double>() == 0.0);
+  // a zero force: the unforced run
+  zero_force_gives_the_unforced_run({"integrator.method=\"galerkin\"", "integrator.stages=2", "integrator.t_end=1.0"});
+}
+
+// The hamiltonian form with forces on S^2 and SO(3) (ManifoldHamiltonianStep with its
+// force: the forced Hamilton equations p' = -H_q + F sampled at the base point of
+// Eq. 5.1, the force pulled back by the chart, at time t0 + theta h):
+//   - a constant torque about a symmetric body's axis: the angular momentum, the angle,
+//     the work and the energy balance exact to round-off (the midpoint of a motion
+//     whose momentum is linear in t), and the rest-to-rest slew from a control table;
+//   - a damped spherical body against pi(0) exp(-c t / I): order 2, the balance at
+//     round-off (a quadratic H about a fixed axis);
+//   - the damped, driven heavy top against the lagrangian form composed to order 8 at a
+//     fine step: order 2 alone and 4 in the triple jump (a force read at t0, or not
+//     pulled back by the chart, gives order 1);
+//   - on S^2 the damped, driven spherical pendulum composed to order 8 against the
+//     lagrangian form composed alike: the trajectory and the work to 1e-11;
+//   - a force that is zero gives the unforced hamiltonian run to the bit.
+BOOST_AUTO_TEST_CASE(hamiltonian_form_with_forces_on_the_sphere_and_the_rotation_group) {
+  const std::string Hsat = "system.hamiltonian=\"0.5*(pi1^2/I1 + pi2^2/I2 + pi3^2/I3)\"";
+  const std::string ham = "integrator.form=\"hamiltonian\"";
+  auto distance = [](const Json& a, const Json& b, const char* key) {
+    const auto x = vec(a, key), y = vec(b, key);
+    double d = 0.0;
+    for (std::size_t i = 0; i < x.size(); ++i) d = std::fmax(d, std::fabs(x[i] - y[i]));
+    return d;
+  };
+  {
+    const Json r = run("satellite_torque.toml", {Hsat, ham});
+    const double T = 10.0, I3 = 1.0, T3 = 0.5, w0 = 1.0, angle = w0 * T + T3 * T * T / (2.0 * I3);
+    BOOST_TEST(r.at("forced").get<bool>());
+    BOOST_TEST(r.at("form").get<std::string>() == "hamiltonian");
+    const auto q = vec(r, "q_final"), p = vec(r, "p_final");
+    BOOST_TEST(std::fabs(p[2] - (I3 * w0 + T3 * T)) <= 1e-12);
+    BOOST_TEST(std::fabs(p[0]) + std::fabs(p[1]) <= 1e-14);
+    const double sign = q[0] * std::cos(angle / 2) >= 0.0 ? 1.0 : -1.0;
+    BOOST_TEST(std::fabs(sign * q[0] - std::cos(angle / 2)) <= 1e-11);
+    BOOST_TEST(std::fabs(sign * q[3] - std::sin(angle / 2)) <= 1e-11);
+    BOOST_TEST(std::fabs(r.at("work").get<double>() - T3 * angle) <= 1e-10);
+    BOOST_TEST(r.at("max_abs_energy_balance").get<double>() <= 1e-11);
   }
+  {  // the slew of satellite_control.toml: turned by pi/2 about e3 and at rest again
+    const Json r = run("satellite_control.toml", {Hsat, ham});
+    const auto q = vec(r, "q_final"), p = vec(r, "p_final");
+    const double sign = q[0] >= 0.0 ? 1.0 : -1.0, c = std::sqrt(0.5);
+    BOOST_TEST(std::fabs(sign * q[0] - c) + std::fabs(q[1]) + std::fabs(q[2]) + std::fabs(sign * q[3] - c) <= 1e-12);
+    BOOST_TEST(std::fabs(p[0]) + std::fabs(p[1]) + std::fabs(p[2]) <= 1e-12);
+    BOOST_TEST(r.at("max_abs_energy_balance").get<double>() <= 1e-12);
+  }
+  {  // the damped spherical body: order 2, the balance at round-off
+    const std::string ball = "[system]\nspace = \"SO(3)\"\nparams = { I = 2.0, c = 0.5 }\n"
+                             "lagrangian = \"0.5*I*(w1^2 + w2^2 + w3^2)\"\n"
+                             "hamiltonian = \"(pi1^2 + pi2^2 + pi3^2)/(2*I)\"\n"
+                             "forces = { w1 = \"-c*w1\", w2 = \"-c*w2\", w3 = \"-c*w3\" }\n"
+                             "[initial]\nrotation = [1.0, 0.0, 0.0, 0.0]\nomega = [0.3, -0.4, 1.2]\n"
+                             "[integrator]\nform = \"hamiltonian\"\nmap = \"so3-exp\"\nt_end = 4.0\n";
+    const std::string path = write_scene("damped_ball_hamiltonian.toml", ball);
+    double err[2];
+    for (int k = 0; k < 2; ++k) {
+      const Output o = dvm({"run", path, "--json", "--no-output", "--set", k == 0 ? "integrator.step=0.02" : "integrator.step=0.01"});
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      const Json r = parse_json(o.out);
+      const auto p = vec(r, "p_final");
+      const double e = std::exp(-0.5 * 4.0 / 2.0);
+      err[k] = std::fmax(std::fabs(p[0] - 0.6 * e), std::fmax(std::fabs(p[1] + 0.8 * e), std::fabs(p[2] - 2.4 * e)));
+      BOOST_TEST(r.at("max_abs_energy_balance").get<double>() <= 1e-12);  // (400 steps of round-off)
+      BOOST_TEST(r.at("work").get<double>() < -0.1);
+    }
+    BOOST_TEST_MESSAGE("damped ball, hamiltonian form: errors " << err[0] << ", " << err[1]);
+    BOOST_TEST(std::fabs(err[0] / err[1] - 4.0) <= 0.1);
+  }
+  {  // the damped, driven heavy top: orders 2 and 4 against a fine reference
+    const std::string top = damped_top_scene();
+    const std::string Htop = "system.hamiltonian=\"0.5*(pi1^2/I1 + pi2^2/I2 + pi3^2/I3) + m*g*R33\"";
+    auto at = [&](std::vector<std::string> sets) {
+      const Output o = dvm(with_sets({"run", top, "--json", "--no-output"}, sets));
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      return parse_json(o.out);
+    };
+    const Json ref = at({"integrator.composition=\"kahan-li8\"", "integrator.step=0.0025"});
+    struct Case {
+      std::string composition;
+      double order;
+    };
+    for (const Case& c : {Case{"none", 2.0}, Case{"triple-jump:4", 4.0}}) {
+      double err[2];
+      for (int k = 0; k < 2; ++k) {
+        const Json r = at({Htop, ham, "integrator.composition=\"" + c.composition + "\"",
+                           k == 0 ? "integrator.step=0.04" : "integrator.step=0.02"});
+        BOOST_TEST(r.at("forced").get<bool>());
+        err[k] = std::fmax(distance(r, ref, "q_final"), distance(r, ref, "p_final"));
+      }
+      const double ratio = err[0] / err[1], expected = std::pow(2.0, c.order);
+      BOOST_TEST_MESSAGE("damped driven top, hamiltonian form, " << c.composition << ": errors " << err[0] << ", "
+                                                                 << err[1] << ", ratio " << ratio);
+      BOOST_TEST(std::fabs(ratio / expected - 1.0) <= 0.15, c.composition << ": ratio " << ratio);
+    }
+  }
+  {  // S^2: the two forms composed to order 8 against each other
+    const std::vector<std::string> sets = {
+        "system.forces={ x = \"-0.3*x_dot + 0.5*sin(3*t)\", y = \"-0.3*y_dot\", z = \"-0.3*z_dot*x\" }",
+        "integrator.composition=\"kahan-li8\"", "integrator.t_end=5.0", "integrator.step=0.01"};
+    auto h = sets;
+    h.push_back(ham);
+    const Json a = run("spherical_pendulum_written.toml", h), b = run("spherical_pendulum_written.toml", sets);
+    BOOST_TEST_MESSAGE("forced spherical pendulum, hamiltonian against lagrangian form, kahan-li8: "
+                       << distance(a, b, "q_final") << ", work " << a.at("work").get<double>() - b.at("work").get<double>());
+    BOOST_TEST(distance(a, b, "q_final") <= 1e-11);
+    BOOST_TEST(std::fabs(a.at("work").get<double>() - b.at("work").get<double>()) <= 1e-11);
+    BOOST_TEST(std::fabs(a.at("work").get<double>()) > 1.0);
+    BOOST_TEST(a.at("max_abs_energy_balance").get<double>() <= 1e-11);
+  }
+  zero_force_gives_the_unforced_run({ham, "integrator.t_end=1.0"});  // a zero force: the unforced run
 }
 
 // Controls read by forces on S^2 and SO(3) (ManifoldForce with the run's ControlSignal):
@@ -834,13 +949,15 @@ BOOST_AUTO_TEST_CASE(bad_constraints_and_combinations_are_refused_naming_the_key
   refused(K, {"system.invariants={ I = \"t\" }"}, {"system.invariants.I", "unknown name 't'"});
   refused("spherical_pendulum_written.toml", {"system.lagrangian=\"t*(x_dot^2 + y_dot^2 + z_dot^2)/2 - z\""},
           {"system.lagrangian", "unknown name 't'", "a Lagrangian on S^2 or SO(3)"});
-  // forces on S^2 and SO(3): the lagrangian form of the maps and Galerkin only, keyed by
-  // a coordinate (S^2) or a body axis (SO(3)); none on (S^2)^K, nor controls
+  // forces on S^2 and SO(3): the lagrangian and hamiltonian forms of the maps and
+  // Galerkin (the hamiltonian form with the written H), keyed by a coordinate (S^2) or a
+  // body axis (SO(3)); none on (S^2)^K, nor controls
   const std::string T = "satellite_torque.toml", W = "spherical_pendulum_written.toml";
-  refused(T, {"integrator.form=hamiltonian"}, {"integrator.form", "lagrangian with forces on SO(3)"});
+  refused(T, {"integrator.form=hamiltonian"}, {"integrator.form", "system.hamiltonian", "this scene writes none"});
+  refused(T, {"integrator.form=sode1"}, {"integrator.form", "lagrangian with forces on SO(3)"});
   refused(T, {"system.forces={ x = \"1\" }"}, {"system.forces.x", "not a body axis", "w1, w2, w3"});
   refused(T, {"system.forces={ w3 = \"pi3\" }"}, {"system.forces.w3", "unknown name 'pi3'"});
-  refused(W, {"system.forces={ x = \"-x_dot\" }", "integrator.form=hamiltonian"},
+  refused(W, {"system.forces={ x = \"-x_dot\" }", "integrator.form=newmark"},
           {"integrator.form", "lagrangian with forces on S^2"});
   refused(W, {"system.forces={ x = \"-x_dot\" }", "problem.kind=\"boundary-value\"", "problem.q_final=[0.0, 0.0, 1.0]",
               "problem.steps=10"},
