@@ -277,15 +277,15 @@ class ManifoldForce {
     const int c = controls();
     if (c == 0) {
       std::array<T, entries + 1> a;
-      evaluate(t, x, v, a.data(), nullptr, F);
+      evaluate(t, x, v, a.data(), nullptr, 0, F);
     } else if (c <= kInlineControls) {
       std::array<T, entries + 1 + kInlineControls> a;
       std::array<double, kInlineControls> u;
-      evaluate(t, x, v, a.data(), u.data(), F);
+      evaluate(t, x, v, a.data(), u.data(), c, F);
     } else {
       std::vector<T> a(static_cast<std::size_t>(entries + 1 + c));
       std::vector<double> u(static_cast<std::size_t>(c));
-      evaluate(t, x, v, a.data(), u.data(), F);
+      evaluate(t, x, v, a.data(), u.data(), c, F);
     }
   }
 
@@ -340,12 +340,13 @@ class ManifoldForce {
   static constexpr int entries = std::is_same_v<M, SO3> ? 9 : 3;  // the point's stored numbers
   static constexpr int kInlineControls = 4;
 
-  // a: the first block (entries + 1 + controls()), u: room for the controls' values
+  // a: the first block (entries + 1 + c), u: room for the c = controls() values (passed,
+  // so that the compiler sees the block's size in each branch of value())
   template <class T>
-  void evaluate(double t, const P<T>& x, const V<T>& v, T* a, double* u, Vec<T, size>& F) const {
+  void evaluate(double t, const P<T>& x, const V<T>& v, T* a, double* u, int c, Vec<T, size>& F) const {
     for (int i = 0; i < entries; ++i) a[i] = x(i);
     a[entries] = constant<T>(t);
-    if (const int c = controls(); c > 0) {
+    if (c > 0) {
       controls_->values(t, u);
       for (int j = 0; j < c; ++j) a[entries + 1 + j] = constant<T>(u[j]);
     }
