@@ -95,6 +95,10 @@ class HamiltonianStep {
   const Ham& hamiltonian() const { return H_; }
   const Map& map() const { return R_; }
   VectorFieldSample sample() const { return sample_; }
+  // Newton's method with the Jacobian of the step's first iterate kept for its later
+  // iterations while they converge (solve_newton_kept), not formed at each: for a
+  // residual whose Jacobian costs many residuals (the chart step on S^2 and SO(3)).
+  void keep_jacobian_within_step(bool on) { kept_jacobian_ = on; }
 
   // The residual of Eq. 5.1 at (q0, p0; q0 + dq, p0 + dp), for any scalar:
   //   (qdot - h dH/dp(q, p),  pdot + h dH/dq(q, p))   (with a force: pdot + h dH/dq - h F)
@@ -148,7 +152,10 @@ class HamiltonianStep {
     const double x0 = std::fmax(max_abs(q0), max_abs(p0));
     StepSummary s;
     try {
-      s = solve_step_system<2 * N>(f, x, x0, options_, s0);
+      if (kept_jacobian_ && options_.solver == SolverKind::newton)
+        s = solve_newton_kept<2 * N>(f, x, x0, options_, s0);
+      else
+        s = solve_step_system<2 * N>(f, x, x0, options_, s0);
     } catch (const std::domain_error& e) {
       s.fail(e.what());
     }
@@ -242,6 +249,7 @@ class HamiltonianStep {
   StepOptions options_;
   VectorFieldSample sample_;
   Force force_;
+  bool kept_jacobian_ = false;
 };
 
 // The canonical symplectic matrix J = [[0, I], [-I, 0]] on (q, p).

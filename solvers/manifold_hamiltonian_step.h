@@ -195,7 +195,9 @@ class ManifoldHamiltonianStep {
       f = LocalForce{force_.get(), c, t + R_.theta() * h_};
     else
       (void)t;
-    return Local(chart_hamiltonian(H_, c), LocalMap(&R_, c), h_, options_, sample_, f);
+    Local local(chart_hamiltonian(H_, c), LocalMap(&R_, c), h_, options_, sample_, f);
+    local.keep_jacobian_within_step(true);  // (its Jacobian: the map's and H_c's in nested Jets)
+    return local;
   }
 
   // One step: xi holds the guess of the chart coordinates of q1 on entry and them on

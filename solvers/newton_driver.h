@@ -274,7 +274,9 @@ class FixedLU {
 // for the driver: the Jacobian from one level of Jets, the residual's scale
 // s0 + max|J| max|x| (s0: the size of the terms that make up F where they do not scale
 // with the unknowns, e.g. |p0|), the unknowns an increment of a point of size x0.
-template <int N, class F>
+// DoubleResidual: the residual alone (asked for with a kept Jacobian) from f on doubles,
+// else through the Jets.
+template <int N, class F, bool DoubleResidual = false>
 class JetEquation {
  public:
   using Vector = Vec<double, N>;
@@ -285,8 +287,12 @@ class JetEquation {
   // one at every iteration. It goes through the Jets, so that f is not instantiated on
   // doubles for nothing.)
   void residual(const Vector& x, Vector& r) const {
-    Matrix J;
-    jacobian(x, r, J);
+    if constexpr (DoubleResidual) {
+      f_(x.data(), r.data());
+    } else {
+      Matrix J;
+      jacobian(x, r, J);
+    }
   }
   double jacobian(const Vector& x, Vector& r, Matrix& J) const {
     using D = ceres::Jet<double, N>;
@@ -318,6 +324,20 @@ StepSummary solve_newton(const F& f, Vec<double, N>& x, double x0, const StepOpt
   Mat<double, N, N> J;
   DriverState state;
   return newton_drive_inlined(eq, la, Refresh::every_iteration, opt, x, r, dx, J, state, start);
+}
+
+// Newton's method whose Jacobian, formed at the first iterate, serves the later iterations
+// of the call while each shrinks the residual fourfold (Refresh::within_step; refreshed
+// otherwise), their residuals evaluated on doubles: for equations whose Jacobian costs
+// many residuals (nested Jets; the Hamiltonian step on S^2 and SO(3)).
+template <int N, class F>
+StepSummary solve_newton_kept(const F& f, Vec<double, N>& x, double x0, const StepOptions& opt, double s0) {
+  JetEquation<N, F, true> eq(f, s0, x0);
+  FixedLU<N> la;
+  Vec<double, N> r, dx, start;
+  Mat<double, N, N> J;
+  DriverState state;
+  return newton_drive_inlined(eq, la, Refresh::within_step, opt, x, r, dx, J, state, start);
 }
 
 // The solver StepOptions::solver names: solve_newton or solve_tiny (solvers/newton.h).
