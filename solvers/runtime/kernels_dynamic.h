@@ -417,10 +417,10 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   const double h = pr.step;
   const int n = L.dim();
   const std::string where = pr.written ? pr.written_where : pr.origin;
-  // --linearize (a written Lagrangian only: validate refuses it for n bodies) takes the
-  // theta step of run-time size or Galerkin, never the structured paths or the steps
-  // compiled for a size below: only those runs compile their steps' derivatives
-  constexpr bool linearizable = std::is_same_v<Sys, WrittenDynamic>;
+  // --linearize (a written Lagrangian, n bodies) takes the theta step of run-time size or
+  // Galerkin, never the structured paths or the steps compiled for a size below: only
+  // those runs compile their steps' derivatives
+  constexpr bool linearizable = std::is_same_v<Sys, WrittenDynamic> || std::is_same_v<Sys, NBodyDynamic>;
 
   // the initial state, with the velocity Hessian checked where it is used; a declared
   // separable system has d2L/dv2 = M, constant and positive definite (checked at sample

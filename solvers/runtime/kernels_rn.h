@@ -12,7 +12,9 @@
 // are not Gauss collocation, boundary values) runs the same step templates with
 // ErasedLagrangian<N> (mechanics/erased_lagrangian.h) and the view erased likewise
 // (ErasedRnView<N>): make_sized_run<N>, compiled once for each size the built-in
-// systems have (kernels_rn_sized.cc).
+// systems have (kernels_rn_sized.h). --linearize runs the run-time-sized steps that
+// give their derivative, on the system erased at run-time size (make_linearized_run,
+// compiled once: kernels_rn_linearized.cc).
 #pragma once
 
 #include <array>
@@ -23,6 +25,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "mechanics/erased_dynamic.h"
 #include "mechanics/erased_lagrangian.h"
 #include "mechanics/hamiltonian.h"
 #include "mechanics/legendre_lift.h"
@@ -222,6 +225,8 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
 // ---- the view with the system's type erased ------------------------------------------
 // The view of a fixed-size system for the kernels compiled once per size (make_sized_run):
 // RnView<S>'s functions behind one indirect call each (they run at most once a step).
+// ErasedRnView<Eigen::Dynamic> is the same view with run-time-sized points, for the
+// run-time-sized steps (make_linearized_run): each call converts them to S's size.
 template <int N>
 class ErasedRnView {
  public:
@@ -271,10 +276,10 @@ class ErasedRnView {
   };
 
   template <class S>
-  explicit ErasedRnView(RnView<S> v) : model_(std::make_shared<const ModelOf<S>>(std::move(v))) {}
+  explicit ErasedRnView(RnView<S> v) : n_(S::dim), model_(std::make_shared<const ModelOf<S>>(std::move(v))) {}
 
   std::vector<std::string> columns() const { return model_->columns(); }
-  int row_size() const { return 2 * N + 2; }
+  int row_size() const { return 2 * n_ + 2; }
   void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const {
     model_->fill_row(row, t, q, p, E);
   }
@@ -290,6 +295,7 @@ class ErasedRnView {
   }
 
  private:
+  int n_;  // the system's coordinates
   std::shared_ptr<const Model> model_;
 };
 
@@ -306,6 +312,15 @@ struct SizedStart {
 template <int N>
 std::unique_ptr<Run> make_sized_run(const ErasedLagrangian<N>& L, const ErasedRnView<N>& view, const Problem& pr,
                                     const Method& me, RunReport base, const SizedStart<N>* start);
+
+// --linearize (dvm run): the run-time-sized position-momentum step of the theta-family
+// maps, composed or not, and the Galerkin step, which give their derivative, on the
+// system L and its view, each erased (kernels_rn_linearized.cc, compiled once for every
+// built-in system: no fixed-size step compiles its derivative).
+std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,
+                                         const Problem& pr, const Method& me, RunReport base,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& p,
+                                         const Eigen::VectorXd& v0);
 
 // ---- the factory ---------------------------------------------------------------------
 // Whether the method is the position-momentum step of a theta map solved by Newton's
@@ -335,6 +350,10 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
   if (!std::isfinite(view.energy(q, p))) refuse_nonfinite_energy(pr);
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
+
+  if (me.linearize)
+    return make_linearized_run(ErasedDynamicLagrangian(FixedAsDynamic<S>(L)), ErasedRnView<Eigen::Dynamic>(view), pr,
+                               me, base, q, p, v0);
 
   if constexpr (is_separable_v<S>)
     if (collocation_applies(me))

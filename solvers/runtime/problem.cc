@@ -339,14 +339,20 @@ void validate(const Problem& pr, const Method& me) {
 
   // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative,
   // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative,
-  // ConstrainedGalerkinStep::derivative; on S^2 and SO(3) ManifoldStep::derivatives)
+  // ConstrainedGalerkinStep::derivative, the first and third also for the built-in
+  // systems of fixed size (make_linearized_run); on S^2 and SO(3) ManifoldStep::derivatives)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
-                             "theta-family maps and by Galerkin (constrained or not), for Lagrangians written on R^n, "
-                             "and by the position-momentum step of the maps of S^2 and SO(3) (forced or not, not "
-                             "constrained), for their built-in and written systems";
+                             "theta-family maps and by Galerkin, for the built-in systems of fixed size on R^n, for "
+                             "n bodies and for Lagrangians written on R^n (constrained or not), and by the position-momentum step "
+                             "of the maps of S^2 and SO(3) (forced or not, not constrained), for their built-in and "
+                             "written systems";
     if (sys.space == Space::euclidean) {
-      if (!pr.written) throw InputError(what + " (system.lagrangian), not the built-in system " + name);
+      if (!pr.written && !caps.linearize) throw InputError(what + ", not the built-in system " + name);
+      if (!me.galerkin && me.map && me.map->family == MapFamily::written)
+        throw InputError("integrator.map: " + what + ", not map = \"written\"");
+      if (me.solver == SolverKind::tiny)
+        throw InputError("integrator.solver: " + what + ", solved by Newton's method: not solver = \"tiny\"");
     } else {
       const bool chain = pr.written ? pr.written->factors > 1 : name == "spherical-chain";
       if (chain) throw InputError(what + ", not on (S^2)^K (" + (pr.written ? "system.space" : "system " + name) + ")");

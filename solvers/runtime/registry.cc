@@ -37,15 +37,20 @@ std::string join(const std::vector<std::string>& names) {
 const std::vector<Form> kAllForms = {Form::lagrangian, Form::hamiltonian, Form::sode1, Form::sode2, Form::newmark};
 
 // Built-in systems on R^n of fixed size: every form, map, composition, Galerkin and
-// boundary values.
-SystemCapabilities fixed_rn() { return {kAllForms, true, true, true, true, ""}; }
+// boundary values; --linearize (the run-time-sized steps that give their derivative,
+// make_linearized_run).
+SystemCapabilities fixed_rn() {
+  SystemCapabilities c{kAllForms, true, true, true, true, ""};
+  c.linearize = true;
+  return c;
+}
 
 // Systems whose size is known only at run time (N bodies, written Lagrangians); the
 // SODE and Newmark forms on separable ones (make_dynamic_run refuses the others), and
 // boundary values where `boundary_value` (a written Lagrangian: the run-time-sized
-// problem of the theta-family maps).
+// problem of the theta-family maps); --linearize.
 SystemCapabilities run_time_sized(bool boundary_value) {
-  return {kAllForms,
+  SystemCapabilities c{kAllForms,
           true,
           true,
           true,
@@ -58,6 +63,8 @@ SystemCapabilities run_time_sized(bool boundary_value) {
                            "\"tiny\" and written maps on the fixed-size systems",
           false,
           false};
+  c.linearize = true;
+  return c;
 }
 
 // Systems on S^2, (S^2)^K and SO(3): every map and composition of the space in the

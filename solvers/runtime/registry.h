@@ -140,6 +140,9 @@ struct SystemCapabilities {
   bool tiny_solver = true;         // solver = "tiny" (ceres::TinySolver) for its map-based steps
   bool written_maps = true;        // map = "written" (the fixed-size steps on R^n), "sphere-written" or
                                    // "so3-written" (S^2, (S^2)^K, SO(3))
+  bool linearize = false;          // dvm run --linearize on R^n (the built-in systems of fixed size,
+                                   // n bodies; a Lagrangian written on R^n takes it whatever its
+                                   // entry; on S^2 and SO(3) the rules of validate())
 };
 
 using RunFactory = std::unique_ptr<Run> (*)(const Problem&, const Method&);

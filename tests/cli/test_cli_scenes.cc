@@ -1230,22 +1230,27 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
       BOOST_TEST(!file_exists(path));
     }
   };
-  refused("pendulum.toml", {}, "not the built-in system pendulum");
+  // the built-in systems of fixed size on R^n: the run-time-sized steps, which give their
+  // derivative, on the built-in (make_linearized_run); below
+  refused("chain.toml", {}, "not the built-in system chain");
+  refused("pendulum.toml", {"--set", "integrator.solver=\"tiny\""}, "integrator.solver");
+  refused("pendulum_written_map.toml", {}, "integrator.map");
   refused("pendulum_written.toml",
           {"--set", "integrator.map=\"explicit-euler\"", "--set", "integrator.composition=\"blanes-moan4\""},
           "integrator.composition");
   // a composition: the chain rule over its substeps (ComposedStep::derivative); the
-  // triple jump of the midpoint on the pendulum is symplectic, det A_k = 1
-  {
+  // triple jump of the midpoint on the pendulum, written or built in, is symplectic,
+  // det A_k = 1
+  for (const std::string& name : {"pendulum_written.toml", "pendulum.toml"}) {
     const std::string path = dir + "/composed.npy";
-    const Output o = dvm({"run", scene("pendulum_written.toml"), "--no-output", "--quiet", "--linearize", path, "--set",
+    const Output o = dvm({"run", scene(name), "--no-output", "--quiet", "--linearize", path, "--set",
                           "integrator.composition=\"triple-jump:4\"", "--set", "integrator.t_end=0.1"});
     BOOST_TEST_REQUIRE(o.status == 0, o.err);
     const NpyRows a = read_npy(path);
     BOOST_TEST(a.rows == 10);
     BOOST_TEST(a.cols == 5);
     for (long long k = 0; k < a.rows; ++k)
-      BOOST_TEST(std::fabs(a.at(k, 1) * a.at(k, 4) - a.at(k, 2) * a.at(k, 3) - 1.0) <= 1e-12);
+      BOOST_TEST(std::fabs(a.at(k, 1) * a.at(k, 4) - a.at(k, 2) * a.at(k, 3) - 1.0) <= 1e-12, name);
   }
   // Galerkin (DynamicGalerkinStep::derivative), Gauss on a separable text (the Newton
   // step, not collocation, which gives none) and Lobatto: symplectic, det A_k = 1; with
@@ -1277,6 +1282,101 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
   refused("spherical_double_pendulum_written.toml", {}, "not on (S^2)^K");
   refused("spherical-chain.toml", {}, "not on (S^2)^K");
   refused("pendulum_written.toml", {"--npy", dir + "/refused.npy"}, "the same file as the run's rows");
+}
+
+// dvm run --linearize on the built-in systems of fixed size on R^n: the run-time-sized
+// steps on the built-in system erased (make_linearized_run). The run is the one without
+// --linearize (the same equation, solved to its tolerance); A_0 of the pendulum against
+// central differences of one-step runs (relative 1e-7), det A_k = 1; the double
+// pendulum's A_k symplectic and the same as its written twin's, whose Lagrangian is the
+// same text (the built-in's closed-form derivatives against the text's program); n
+// bodies and Kepler by Gauss Galerkin symplectic (compositions: the test above).
+BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
+  const std::string dir = temp_dir();
+  // the pendulum: one step of h = 0.01 from (q0 + dq, p0 + dp)
+  const double q0 = 2.0, p0 = 0.3;
+  auto state_after = [&](double dq, double dp, const std::string& t_end) {
+    std::ostringstream q, p;
+    q.precision(17);
+    p.precision(17);
+    q << "initial.q=[" << q0 + dq << "]";
+    p << "initial.p=[" << p0 + dp << "]";
+    const Output o = dvm({"run", scene("pendulum.toml"), "--json", "--no-output", "--set", "integrator.t_end=" + t_end,
+                          "--set", q.str(), "--set", p.str()});
+    BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+    std::vector<double> y = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
+    y.insert(y.end(), pf.begin(), pf.end());
+    return y;
+  };
+  const std::string path = dir + "/pendulum.npy";
+  const Output o = dvm({"run", scene("pendulum.toml"), "--json", "--no-output", "--linearize", path, "--set",
+                        "integrator.t_end=0.5", "--set", "initial.p=[0.3]"});
+  BOOST_TEST_REQUIRE(o.status == 0, o.err);
+  BOOST_TEST(json_string(o.out, "step_path") == "generic");
+  // the same run as without --linearize (the fixed-size step of the same equation)
+  const std::vector<double> plain = state_after(0.0, 0.0, "0.5");
+  const std::vector<double> qf = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
+  BOOST_TEST(std::fabs(qf[0] - plain[0]) <= 1e-12);
+  BOOST_TEST(std::fabs(pf[0] - plain[1]) <= 1e-12);
+  const NpyRows A = read_npy(path);
+  BOOST_TEST(A.rows == 50);
+  BOOST_TEST(A.cols == 5);
+  for (long long k = 0; k < A.rows; ++k)
+    BOOST_TEST(std::fabs(A.at(k, 1) * A.at(k, 4) - A.at(k, 2) * A.at(k, 3) - 1.0) <= 1e-13);
+  const double eps = 1e-5;
+  for (int j = 0; j < 2; ++j) {
+    const std::vector<double> a = state_after(j == 0 ? eps : 0.0, j == 1 ? eps : 0.0, "0.01"),
+                              b = state_after(j == 0 ? -eps : 0.0, j == 1 ? -eps : 0.0, "0.01");
+    for (int i = 0; i < 2; ++i) {
+      const double central = (a[static_cast<std::size_t>(i)] - b[static_cast<std::size_t>(i)]) / (2 * eps);
+      BOOST_TEST(std::fabs(A.at(0, 1 + 2 * i + j) - central) <= 1e-7 * std::fmax(1.0, std::fabs(central)),
+                 "A(" << i << "," << j << ") = " << A.at(0, 1 + 2 * i + j) << ", central differences " << central);
+    }
+  }
+  // the double pendulum against its written twin, step by step
+  const std::string builtin = dir + "/double.npy", written = dir + "/double_written.npy";
+  for (const auto& [scene_name, file] : {std::pair<std::string, std::string>{"double_pendulum.toml", builtin},
+                                         {"double_pendulum_written.toml", written}}) {
+    const Output d = dvm({"run", scene(scene_name), "--no-output", "--quiet", "--linearize", file, "--set",
+                          "integrator.t_end=0.2"});
+    BOOST_TEST_REQUIRE(d.status == 0, d.err);
+  }
+  const NpyRows B = read_npy(builtin), W = read_npy(written);
+  BOOST_TEST_REQUIRE(B.rows == 20);
+  BOOST_TEST_REQUIRE(W.rows == 20);
+  BOOST_TEST_REQUIRE(B.cols == 17);
+  double apart = 0.0;
+  for (long long k = 0; k < B.rows; ++k) {
+    BOOST_TEST(symplectic_defect(B, k, 4) <= 1e-12);
+    for (long long c = 0; c < B.cols; ++c) apart = std::fmax(apart, std::fabs(B.at(k, c) - W.at(k, c)));
+  }
+  BOOST_TEST(apart <= 1e-11, "built-in and written A_k apart by " << apart);
+  // n bodies (make_dynamic_run, the generic theta step where the structured one would
+  // run): three bodies in the plane z = 0, A_k symplectic (18 x 18)
+  {
+    const std::string nb = dir + "/nbody.npy";
+    const Output b = dvm({"run", scene("outer_solar_system.toml"), "--no-output", "--quiet", "--linearize", nb, "--set",
+                          "system.masses=[1.0, 0.5, 0.25]", "--set", "system.params.G=1.0", "--set",
+                          "initial.q=[0, 0, 0, 1, 0, 0, 0, 2, 0]", "--set", "initial.v=[0, 0, 0, 0, 1, 0, -0.7, 0, 0]",
+                          "--set", "integrator.step=0.01", "--set", "integrator.t_end=0.05"});
+    BOOST_TEST_REQUIRE(b.status == 0, b.err);
+    const NpyRows N = read_npy(nb);
+    BOOST_TEST_REQUIRE(N.rows == 5);
+    BOOST_TEST_REQUIRE(N.cols == 1 + 18 * 18);
+    for (long long r = 0; r < N.rows; ++r) BOOST_TEST(symplectic_defect(N, r, 18) <= 1e-12);
+  }
+  // Kepler by Gauss Galerkin (not collocation, which gives no derivative), the pendulum
+  // by the triple jump of the midpoint map: symplectic
+  {
+    const std::string k = dir + "/kepler.npy";
+    const Output g = dvm({"run", scene("kepler.toml"), "--no-output", "--quiet", "--linearize", k, "--set",
+                          "integrator.method=\"galerkin\"", "--set", "integrator.stages=2", "--set",
+                          "integrator.t_end=0.05"});
+    BOOST_TEST_REQUIRE(g.status == 0, g.err);
+    const NpyRows K = read_npy(k);
+    BOOST_TEST_REQUIRE(K.rows == 10);
+    for (long long r = 0; r < K.rows; ++r) BOOST_TEST(symplectic_defect(K, r, 4) <= 1e-12);
+  }
 }
 
 // dvm run --linearize on S^2 and SO(3): A_k in the canonical coordinates around q_k and

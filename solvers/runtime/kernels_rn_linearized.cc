@@ -1,0 +1,37 @@
+// dvm run --linearize on the built-in systems of fixed size on R^n
+// (make_linearized_run, declared in kernels_rn.h): the steps that give their derivative
+// by the implicit function theorem are the run-time-sized ones (DynamicThetaStep, alone
+// or composed, and DynamicGalerkinStep: solvers/dynamic_step.h,
+// solvers/dynamic_galerkin_step.h), which the Lagrangians written on R^n run with
+// --linearize too. Here they run on the built-in system through ErasedDynamicLagrangian
+// (its closed-form gradient, the Hessian by one Jet level through it: FixedAsDynamic),
+// and the built-in's own view (columns, invariants, exact solution) through
+// ErasedRnView<Eigen::Dynamic>: one instantiation serves every built-in system.
+#include "mechanics/erased_dynamic.h"
+#include "solvers/dynamic_galerkin_step.h"
+#include "solvers/dynamic_step.h"
+#include "solvers/runtime/kernels_rn.h"
+
+namespace dvm::kernels {
+
+std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,
+                                         const Problem& pr, const Method& me, RunReport base,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& p,
+                                         const Eigen::VectorXd& v0) {
+  using Sys = ErasedDynamicLagrangian;
+  const StepOptions opt = me.step_options();
+  const double h = pr.step;
+  base.step_path = StepPath::generic;
+  if (me.galerkin)
+    return stepper_run<true>(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base,
+                             pr.steps);
+  // the theta-family maps (validate refuses the others with --linearize); retraction-theta
+  // with the flat retraction x + v is the theta map itself, inverted in closed form here
+  if (!me.map || (me.map->family != MapFamily::theta && me.map->family != MapFamily::retraction_theta))
+    throw InputError("integrator.map: unsupported");  // refused by validate()
+  const ThetaMap R(me.theta, me.map->name);
+  auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt); };
+  return composable_run<true>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+}
+
+}  // namespace dvm::kernels
