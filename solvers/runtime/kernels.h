@@ -81,6 +81,26 @@ inline RnMap rn_map(const Method& m) {
   throw InputError("integrator.map: map \"" + e.name + "\" does not live on R^n");
 }
 
+// The theta of the method's map as a ThetaMap for the run-time-sized steps (kernels_dynamic.h,
+// make_linearized_run): retraction-theta with the flat retraction x + v is the same map,
+// inverted in closed form there.
+inline ThetaMap dynamic_theta_map(const Method& me) {
+  const MapEntry& e = *me.map;
+  switch (e.family) {
+    case MapFamily::theta:
+    case MapFamily::retraction_theta:
+      return ThetaMap(me.theta, e.name);
+    case MapFamily::written:
+      // (validate refuses it first: SystemCapabilities::written_maps, and --linearize)
+      throw InputError("integrator.map: the run-time-sized steps take the theta-family maps; map = \"written\" runs "
+                       "on the built-in systems of fixed size");
+    case MapFamily::sphere:
+    case MapFamily::rotation:
+      break;
+  }
+  throw InputError("integrator.map: map \"" + e.name + "\" does not live on R^n");
+}
+
 // The adjoint of a theta-family map is the same family at 1 - theta (Prop. 2.4), so the
 // adjoint stages of a composition reuse the basic method's step type.
 inline ThetaMap same_type_adjoint(const ThetaMap& R) { return R.adjoint(); }

@@ -341,24 +341,6 @@ auto compiled_or_not(const Make& make, const Problem& pr) {
   }
 }
 
-// The theta of the method's map as a ThetaMap (retraction-theta: the same map).
-inline ThetaMap dynamic_theta_map(const Method& me) {
-  const MapEntry& e = *me.map;
-  switch (e.family) {
-    case MapFamily::theta:
-    case MapFamily::retraction_theta:
-      return ThetaMap(me.theta, e.name);
-    case MapFamily::written:
-      // (validate refuses it first: SystemCapabilities::written_maps)
-      throw InputError("integrator.map: the run-time-sized steps take the theta-family maps; map = \"written\" runs "
-                       "on the built-in systems of fixed size");
-    case MapFamily::sphere:
-    case MapFamily::rotation:
-      break;
-  }
-  throw InputError("integrator.map: map \"" + e.name + "\" does not live on R^n");
-}
-
 // The force at the initial state (t = 0) is finite, or the run is refused.
 inline void require_finite_force(const WrittenForce& force, const Problem& pr, const Eigen::VectorXd& q,
                                  const Eigen::VectorXd& v) {

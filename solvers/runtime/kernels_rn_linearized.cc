@@ -25,11 +25,7 @@ std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const
   if (me.galerkin)
     return stepper_run<true>(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base,
                              pr.steps);
-  // the theta-family maps (validate refuses the others with --linearize); retraction-theta
-  // with the flat retraction x + v is the theta map itself, inverted in closed form here
-  if (!me.map || (me.map->family != MapFamily::theta && me.map->family != MapFamily::retraction_theta))
-    throw InputError("integrator.map: unsupported");  // refused by validate()
-  const ThetaMap R(me.theta, me.map->name);
+  const ThetaMap R = dynamic_theta_map(me);
   auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt); };
   return composable_run<true>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }
