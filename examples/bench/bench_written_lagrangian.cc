@@ -43,6 +43,7 @@
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
 #include "mechanics/chain.h"
+#include "mechanics/chain_dynamic.h"
 #include "mechanics/dynamic_system.h"
 #include "mechanics/written_dynamic.h"
 #include "solvers/chain_step.h"
@@ -274,21 +275,6 @@ void derivative_costs(const std::vector<std::pair<std::string, std::shared_ptr<W
 // the built-in system's closed-form force against a written text's, whose structure is
 // read off its terms (WrittenSeparable: the reverse gradient of the potential's tape).
 
-// The built-in FPU chain (mechanics/chain.h) of run-time size as a declared separable
-// system: L_q = -grad V by its bond loop, L_v = m v, v = p / m.
-struct ChainSeparable {
-  static constexpr Structure structure = Structure::separable;
-  FPUChain C;
-  mutable Eigen::VectorXd g;
-  int dim() const { return C.n; }
-  std::string name() const { return "chain"; }
-  void gradient(const DynIn& q, const DynIn& v, DynOut Lq, DynOut Lv) const {
-    C.gradient(q, g);
-    Lq = -g;
-    Lv = C.m * v;
-  }
-  void velocity(const DynIn&, const DynIn& p, DynOut v) const { v = p / C.m; }
-};
 
 template <class S, class V>
 Result measure_explicit(const S& L, const V& q0, const V& p0, double h, std::int64_t steps, int repeats) {
@@ -354,7 +340,7 @@ void explicit_chain(int repeats) {
     const WrittenDynamic W(written_chain(n));
     const Eigen::VectorXd q0 = first_mode(n), p0 = Eigen::VectorXd::Zero(n);
     const std::int64_t steps = 2000000 / n;
-    const Result a = measure_explicit(ChainSeparable{FPUChain(n, 1.0, 1.0, 0.25, 1.0, true), {}}, q0, p0, 0.05, steps,
+    const Result a = measure_explicit(ChainDynamic(FPUChain(n, 1.0, 1.0, 0.25, 1.0, true)), q0, p0, 0.05, steps,
                                       repeats);
     const Result b = measure_explicit(WrittenSeparable(W), q0, p0, 0.05, steps, repeats);
     const double per = b.ns_per_step / n;

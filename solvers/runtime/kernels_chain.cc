@@ -1,10 +1,16 @@
 // Run kernels of the FPU chain of any length (solvers/chain_step.h: the theta-family
-// maps, one tridiagonal Newton solve per step; compositions of that step).
+// maps, one tridiagonal Newton solve per step; compositions of that step). With
+// --linearize the chain runs the run-time-sized steps that give their derivative
+// (make_linearized_run, kernels_rn.h) on ChainDynamic (mechanics/chain_dynamic.h), its
+// Hessian dense: the same equations, solved by the dense Newton iteration.
 #include "mechanics/chain.h"
+#include "mechanics/chain_dynamic.h"
 #include "solvers/chain_step.h"
 #include "solvers/runtime/factories.h"
 #include "solvers/runtime/flat_state_view.h"
 #include "solvers/runtime/kernels.h"
+#include "solvers/runtime/kernels_dynamic.h"
+#include "solvers/runtime/kernels_rn.h"
 
 namespace dvm::factories {
 
@@ -56,6 +62,14 @@ std::unique_ptr<Run> chain(const Problem& pr, const Method& me) {
   }
   if (!std::isfinite(view.energy(q, p))) kernels::refuse_nonfinite_energy(pr);
   const RunReport base = kernels::base_report(pr, me, "chain");
+  if (me.linearize) {
+    if (C.n > kernels::kMaxDenseDynamicDim)
+      throw InputError(pr.origin + ": key 'system.params.n': got " + std::to_string(C.n) + "; --linearize runs the chain's step with dense " +
+                       std::to_string(C.n) + " x " + std::to_string(C.n) + " matrices, beyond the " +
+                       std::to_string(kernels::kMaxDenseDynamicDim) + " coordinates the run-time-sized dense steps take");
+    return kernels::make_linearized_run(ErasedDynamicLagrangian(ChainDynamic(C)),
+                                        kernels::ErasedRnView<Eigen::Dynamic>(view, C.n), pr, me, base, q, p, v0);
+  }
   const ThetaMap R = std::get<ThetaMap>(kernels::rn_map(me));
   const StepOptions opt = me.step_options();
   auto make = [&](double hk, const ThetaMap& Rk) { return ChainStep(C, Rk, hk, opt); };

@@ -226,7 +226,9 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
 // The view of a fixed-size system for the kernels compiled once per size (make_sized_run):
 // RnView<S>'s functions behind one indirect call each (they run at most once a step).
 // ErasedRnView<Eigen::Dynamic> is the same view with run-time-sized points, for the
-// run-time-sized steps (make_linearized_run): each call converts them to S's size.
+// run-time-sized steps (make_linearized_run): each call converts them to S's size. It
+// also holds a view of run-time-sized points of its own (the chain's), given with its
+// number of coordinates.
 template <int N>
 class ErasedRnView {
  public:
@@ -248,10 +250,10 @@ class ErasedRnView {
     virtual bool exact(double t, const Point& q0, const Covector& p0, std::vector<double>& q,
                        std::vector<double>& p) const = 0;
   };
-  template <class S>
+  template <class V>
   class ModelOf final : public Model {
    public:
-    explicit ModelOf(RnView<S> v) : v_(std::move(v)) {}
+    explicit ModelOf(V v) : v_(std::move(v)) {}
     std::vector<std::string> columns() const override { return v_.columns(); }
     void fill_row(double* row, double t, const Point& q, const Covector& p, double E) const override {
       v_.fill_row(row, t, q, p, E);
@@ -272,11 +274,17 @@ class ErasedRnView {
     }
 
    private:
-    RnView<S> v_;
+    V v_;
   };
 
   template <class S>
-  explicit ErasedRnView(RnView<S> v) : n_(S::dim), model_(std::make_shared<const ModelOf<S>>(std::move(v))) {}
+  explicit ErasedRnView(RnView<S> v) : n_(S::dim), model_(std::make_shared<const ModelOf<RnView<S>>>(std::move(v))) {}
+  // a view of n coordinates whose points are run-time sized (N = Eigen::Dynamic only)
+  template <class V>
+  ErasedRnView(V v, int n) : n_(n), model_(std::make_shared<const ModelOf<V>>(std::move(v))) {
+    static_assert(N == Eigen::Dynamic && std::is_same_v<typename V::Point, Eigen::VectorXd>,
+                  "ErasedRnView(view, n) takes a view of run-time-sized points");
+  }
 
   std::vector<std::string> columns() const { return model_->columns(); }
   int row_size() const { return 2 * n_ + 2; }

@@ -344,7 +344,7 @@ void validate(const Problem& pr, const Method& me) {
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
                              "theta-family maps and by Galerkin, for the built-in systems of fixed size on R^n, for "
-                             "n bodies and for Lagrangians written on R^n (constrained or not), and by the position-momentum step "
+                             "the chain (the theta-family maps), n bodies and Lagrangians written on R^n (constrained or not), and by the position-momentum step "
                              "of the maps of S^2 and SO(3) (forced or not, not constrained), for their built-in and "
                              "written systems";
     if (sys.space == Space::euclidean) {

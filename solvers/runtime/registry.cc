@@ -314,7 +314,8 @@ const std::vector<SystemEntry>& system_registry() {
         "the chain's step solves its tridiagonal equations by its own Newton iteration, for the theta-family maps in "
         "the lagrangian form only",
         false,
-        false},
+        false,
+        true},
        factories::chain,
        "params.n"},
       {"double-pendulum",

@@ -141,7 +141,7 @@ struct SystemCapabilities {
   bool written_maps = true;        // map = "written" (the fixed-size steps on R^n), "sphere-written" or
                                    // "so3-written" (S^2, (S^2)^K, SO(3))
   bool linearize = false;          // dvm run --linearize on R^n (the built-in systems of fixed size,
-                                   // n bodies; a Lagrangian written on R^n takes it whatever its
+                                   // the chain, n bodies; a Lagrangian written on R^n takes it whatever its
                                    // entry; on S^2 and SO(3) the rules of validate())
 };
 

@@ -1136,6 +1136,20 @@ double symplectic_defect(const NpyRows& a, long long k, int m) {
     }
   return d;
 }
+// A built-in system's A_k (2n x 2n) against its written twin's, every row: each
+// symplectic, and all of them the twin's to 1e-11.
+void check_against_written_twin(const NpyRows& B, const NpyRows& W, long long rows, int n) {
+  BOOST_TEST_REQUIRE(B.rows == rows);
+  BOOST_TEST_REQUIRE(W.rows == rows);
+  BOOST_TEST_REQUIRE(B.cols == 1 + 4 * n * n);
+  BOOST_TEST_REQUIRE(W.cols == B.cols);
+  double apart = 0.0;
+  for (long long k = 0; k < B.rows; ++k) {
+    BOOST_TEST(symplectic_defect(B, k, 2 * n) <= 1e-12);
+    for (long long c = 0; c < B.cols; ++c) apart = std::fmax(apart, std::fabs(B.at(k, c) - W.at(k, c)));
+  }
+  BOOST_TEST(apart <= 1e-11, "built-in and written A_k apart by " << apart);
+}
 }  // namespace
 
 // dvm run --linearize: the Jacobian of every step in a .npy file, row k = (t_k, A_k row
@@ -1232,7 +1246,9 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
   };
   // the built-in systems of fixed size on R^n: the run-time-sized steps, which give their
   // derivative, on the built-in (make_linearized_run); below
-  refused("chain.toml", {}, "not the built-in system chain");
+  refused("chain.toml",
+          {"--set", "system.params.n=5000", "--set", "initial.q=\"0.1*sin(i)\"", "--set", "initial.p=\"0\""},
+          "key 'system.params.n': got 5000");
   refused("pendulum.toml", {"--set", "integrator.solver=\"tiny\""}, "integrator.solver");
   refused("pendulum_written_map.toml", {}, "integrator.map");
   refused("pendulum_written.toml",
@@ -1341,16 +1357,7 @@ BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
                           "integrator.t_end=0.2"});
     BOOST_TEST_REQUIRE(d.status == 0, d.err);
   }
-  const NpyRows B = read_npy(builtin), W = read_npy(written);
-  BOOST_TEST_REQUIRE(B.rows == 20);
-  BOOST_TEST_REQUIRE(W.rows == 20);
-  BOOST_TEST_REQUIRE(B.cols == 17);
-  double apart = 0.0;
-  for (long long k = 0; k < B.rows; ++k) {
-    BOOST_TEST(symplectic_defect(B, k, 4) <= 1e-12);
-    for (long long c = 0; c < B.cols; ++c) apart = std::fmax(apart, std::fabs(B.at(k, c) - W.at(k, c)));
-  }
-  BOOST_TEST(apart <= 1e-11, "built-in and written A_k apart by " << apart);
+  check_against_written_twin(read_npy(builtin), read_npy(written), 20, 2);
   // n bodies (make_dynamic_run, the generic theta step where the structured one would
   // run): three bodies in the plane z = 0, A_k symplectic (18 x 18)
   {
@@ -1376,6 +1383,50 @@ BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
     const NpyRows K = read_npy(k);
     BOOST_TEST_REQUIRE(K.rows == 10);
     for (long long r = 0; r < K.rows; ++r) BOOST_TEST(symplectic_defect(K, r, 4) <= 1e-12);
+  }
+  // the chain (ChainDynamic: its Hessian dense in the generic theta step): the run where
+  // its tridiagonal step ends, and A_k equal to its written twin's, midpoint and the
+  // triple jump of it; free ends (total momentum conserved) too
+  for (const char* composition : {"none", "triple-jump"}) {
+    const std::vector<std::string> sets = {"--set", "system.params.n=6",
+                                           "--set", "integrator.map=\"midpoint\"",
+                                           "--set", "integrator.step=0.02",
+                                           "--set", "integrator.t_end=0.2",
+                                           "--set", std::string("integrator.composition=\"") + composition + "\"",
+                                           "--set", "initial.q=\"0.3*sin(pi*i/(n + 1)) + 0.1*cos(2*i)\"",
+                                           "--set", "initial.p=\"0.05*i/n\""};
+    std::vector<std::string> chain = sets;
+    for (const char* k : {"system.params.alpha=0.25", "system.params.beta=1.0"}) chain.insert(chain.end(), {"--set", k});
+    const std::string cb = dir + "/chain.npy", cw = dir + "/chain_written.npy";
+    const Output plain = run_json("chain.toml", chain);
+    std::vector<std::string> lin = chain, lin_written = sets;
+    lin.insert(lin.end(), {"--linearize", cb});
+    lin_written.insert(lin_written.end(), {"--linearize", cw});
+    const Output b = run_json("chain.toml", lin), w = run_json("fpu_chain_written.toml", lin_written);
+    BOOST_TEST_CONTEXT(composition << "\n" << plain.err << b.err << w.err) {
+      BOOST_TEST_REQUIRE(plain.status == 0);
+      BOOST_TEST_REQUIRE(b.status == 0);
+      BOOST_TEST_REQUIRE(w.status == 0);
+      BOOST_TEST(json_string(b.out, "step_path") == "generic");
+      BOOST_TEST(max_diff(json_array(b.out, "q_final"), json_array(plain.out, "q_final")) <= 1e-13);
+      BOOST_TEST(max_diff(json_array(b.out, "p_final"), json_array(plain.out, "p_final")) <= 1e-13);
+      check_against_written_twin(read_npy(cb), read_npy(cw), 10, 6);
+    }
+  }
+  {
+    const std::string free_ends = dir + "/chain_free.npy";
+    const Output f = run_json("chain.toml", {"--set", "system.params.fixed=0", "--set", "integrator.t_end=0.1",
+                                             "--set", "initial.p=[0.1, 0, 0, 0, 0, 0, 0, -0.3]", "--linearize",
+                                             free_ends});
+    BOOST_TEST_REQUIRE(f.status == 0, f.err);
+    const NpyRows F = read_npy(free_ends);
+    BOOST_TEST_REQUIRE(F.rows == 10);
+    for (long long r = 0; r < F.rows; ++r) BOOST_TEST(symplectic_defect(F, r, 16) <= 1e-12);
+    // total momentum (-0.2) kept by the generic step
+    const std::vector<double> pf = json_array(f.out, "p_final");
+    double total = 0.0;
+    for (double x : pf) total += x;
+    BOOST_TEST(std::fabs(total + 0.2) <= 1e-13);
   }
 }
 
