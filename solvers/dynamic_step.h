@@ -601,6 +601,30 @@ class HamiltonianThetaEquation {
     out.bottomRows(n) = h_ * Hqp_;
     if constexpr (kForced) out.bottomRows(n).noalias() -= h_ * (Fv_ * Hpp_);
   }
+  // dF/dQ (2n x n) at the point of the last jacobian(): [-h H_pq; h H_qq - h (F_q + F_v H_pq)]
+  // (J's first n columns are I + theta dF/dQ). With momentum_columns, the columns of q0
+  // and p0, which move Q and P by the identity (the step's derivative).
+  void position_columns(Matrix& out) const {
+    const Eigen::Index n = x_.size();
+    out.resize(2 * n, n);
+    out.topRows(n) = -h_ * Hqp_.transpose();
+    out.bottomRows(n) = h_ * Hqq_;
+    if constexpr (kForced) out.bottomRows(n).noalias() -= h_ * (Fq_ + Fv_ * Hqp_.transpose());
+  }
+  // dF/du (2n x c) at the point of the last jacobian(), the force's control inputs u held
+  // over the step: [0; -h F_u(t, Q, V)]. Evaluates the force's Jacobian again.
+  void control_columns(Matrix& out) const {
+    const Eigen::Index n = x_.size();
+    if constexpr (kForced) {
+      Vector F(n);
+      Matrix Fq(n, n), Fv(n, n), Fu;
+      force_->jacobian(t_, x_, Hp_, F, Fq, Fv, &Fu);
+      out.setZero(2 * n, Fu.cols());
+      out.bottomRows(n) = -h_ * Fu;
+    } else {
+      out.resize(2 * n, 0);
+    }
+  }
 
  private:
   void at(const Vector& y) {
@@ -673,6 +697,39 @@ class DynamicHamiltonianThetaStep {
     return DynamicHamiltonianThetaStep(H_, R_.adjoint(), h_, options_, on_bundle_, force_);
   }
 
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const {
+    if constexpr (kForced) return force_->controls();
+    return 0;
+  }
+
+  // The derivative A = d(q1, p1)/d(q0, p0) (2n x 2n, the coordinates then the momenta)
+  // of the step at its solution, by the implicit function theorem on its equation
+  // F(y; q0, p0) = 0, y = (dq, dp) (no finite differences). Q = q0 + theta dq and
+  // P = p0 + b dp move with q0 and p0 by the identity, so with G = [dF/dQ  dF/dP]
+  // (HamiltonianThetaEquation::position_columns, momentum_columns) the driver's Jacobian
+  // is F_y = I + [theta dF/dQ  b dF/dP], and
+  //   dy/d(q0, p0) = -F_y^{-1} G,   A = I + dy/d(q0, p0).
+  // The interface passes dq alone (as to the lagrangian form's steps), so dp is found
+  // again by solving the step from (q0, p0) with dq as the guess, in the step's own
+  // workspace (so, as step(), not from two threads at once). The cotangent lift of the
+  // theta map is symplectic (paper Sec. 5.3), so A^T J A = J up to round-off for an
+  // unforced H; on T*Q itself (on_bundle) only at theta = 1/2. Returns false where the
+  // solve fails or F_y is singular. Allocates.
+  bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return differentiate(t0, q0, p0, dq, &A, nullptr);
+  }
+  // B = d(q1, p1)/du (2n x c) in the force's control inputs, held over the step:
+  // -F_y^{-1} [0; -h F_u].
+  template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
+  bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    return differentiate(t0, q0, p0, dq, nullptr, &B);
+  }
+  // A and, where B is not null, B from one solve and one factorisation.
+  bool derivatives(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    return differentiate(t0, q0, p0, dq, &A, B);
+  }
+
   // One step from (q0, p0); (dq, dp) hold the starting guess on entry and the
   // increments on return.
   StepSummary step(double t, const V& q0, const V& p0, V& dq, V& dp) const {
@@ -696,6 +753,40 @@ class DynamicHamiltonianThetaStep {
   }
 
  private:
+  bool differentiate(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd* A, Eigen::MatrixXd* B) const {
+    const int n = H_.dim();
+    if (q0.size() != n || p0.size() != n || dq.size() != n)
+      throw std::invalid_argument("DynamicHamiltonianThetaStep::derivative: a state of " + std::to_string(q0.size()) +
+                                  " coordinates (p0 " + std::to_string(p0.size()) + ", dq " +
+                                  std::to_string(dq.size()) + "); the system has " + std::to_string(n));
+    using M = Eigen::MatrixXd;
+    V d = dq, e = V::Zero(n);
+    if (!step(t0, q0, p0, d, e).converged) return false;
+    Work& w = *work_;
+    w.y.head(n) = d;
+    w.y.tail(n) = e;
+    w.eq.begin(q0, p0, t0);
+    if (!std::isfinite(w.eq.jacobian(w.y, w.r, w.J))) return false;
+    const Eigen::FullPivLU<M> lu(w.J);
+    if (!lu.isInvertible()) return false;
+    M cols;
+    if (A) {
+      M G(2 * n, 2 * n);
+      w.eq.position_columns(cols);
+      G.leftCols(n) = cols;
+      w.eq.momentum_columns(cols);
+      G.rightCols(n) = cols;
+      *A = M::Identity(2 * n, 2 * n) - lu.solve(G);
+      if (!A->allFinite()) return false;
+    }
+    if (B) {
+      w.eq.control_columns(cols);
+      *B = cols.cols() > 0 ? M(-lu.solve(cols)) : M(2 * n, 0);
+      if (!B->allFinite()) return false;
+    }
+    return true;
+  }
+
   struct Work {
     Work(const Ham& H, double theta, double h, bool on_bundle, const Force* f)
         : force(f ? std::make_unique<Force>(*f) : nullptr), eq(H, theta, h, on_bundle, force.get()) {

@@ -548,7 +548,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
         auto run_with = [&](const auto& H) {
           using Step = DynamicHamiltonianThetaStep<std::decay_t<decltype(H)>, WrittenForce>;
           auto make = [&](double hk, const ThetaMap& Rk) { return Step(H, Rk, hk, opt, on_bundle, force); };
-          return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+          return composable_run<linearizable>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
         };
         if (hamiltonian) {
           const auto H =
@@ -661,7 +661,7 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
     auto run_with = [&](const auto& H) {
       using Step = DynamicHamiltonianThetaStep<std::decay_t<decltype(H)>>;
       auto make = [&](double hk, const ThetaMap& Rk) { return Step(H, Rk, hk, opt, on_bundle); };
-      return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+      return composable_run<linearizable>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
     };
     if constexpr (std::is_same_v<Sys, WrittenDynamic>)
       if (hamiltonian) {

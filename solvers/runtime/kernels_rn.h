@@ -322,7 +322,8 @@ std::unique_ptr<Run> make_sized_run(const ErasedLagrangian<N>& L, const ErasedRn
                                     const Method& me, RunReport base, const SizedStart<N>* start);
 
 // --linearize (dvm run): the run-time-sized position-momentum step of the theta-family
-// maps, composed or not, and the Galerkin step, which give their derivative, on the
+// maps and their hamiltonian form, composed or not, and the Galerkin step, which give
+// their derivative, on the
 // system L and its view, each erased (kernels_rn_linearized.cc, compiled once for every
 // built-in system: no fixed-size step compiles its derivative).
 std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,

@@ -1,7 +1,8 @@
 // dvm run --linearize on the built-in systems of fixed size on R^n
 // (make_linearized_run, declared in kernels_rn.h): the steps that give their derivative
-// by the implicit function theorem are the run-time-sized ones (DynamicThetaStep, alone
-// or composed, and DynamicGalerkinStep: solvers/dynamic_step.h,
+// by the implicit function theorem are the run-time-sized ones (DynamicThetaStep and,
+// in the hamiltonian form, DynamicHamiltonianThetaStep of H from L by the Legendre
+// transform, alone or composed, and DynamicGalerkinStep: solvers/dynamic_step.h,
 // solvers/dynamic_galerkin_step.h), which the Lagrangians written on R^n run with
 // --linearize too. Here they run on the built-in system through ErasedDynamicLagrangian
 // (its closed-form gradient, the Hessian by one Jet level through it: FixedAsDynamic),
@@ -26,6 +27,14 @@ std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const
     return stepper_run<true>(view, DynamicGalerkinStep<Sys>(L, me.quadrature, me.stages, h, opt), q, p, v0, base,
                              pr.steps);
   const ThetaMap R = dynamic_theta_map(me);
+  if (me.form == Form::hamiltonian) {
+    // H from L by the Legendre transform; lift = "none": the theta map on T*Q itself
+    using Step = DynamicHamiltonianThetaStep<LegendreDynamicHamiltonian<Sys>>;
+    const LegendreDynamicHamiltonian<Sys> H(L);
+    const bool on_bundle = me.effective_lift() == Lift::none;
+    auto make = [&](double hk, const ThetaMap& Rk) { return Step(H, Rk, hk, opt, on_bundle); };
+    return composable_run<true>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+  }
   auto make = [&](double hk, const ThetaMap& Rk) { return DynamicThetaStep<Sys>(L, Rk, hk, opt); };
   return composable_run<true>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
 }

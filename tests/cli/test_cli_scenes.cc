@@ -1289,7 +1289,9 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
     for (long long k = 0; k < b.rows; ++k)
       BOOST_TEST(b.at(k, 1) * b.at(k, 4) - b.at(k, 2) * b.at(k, 3) < 1.0 - 1e-4, quadrature);
   }
-  refused("pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
+  refused("pendulum_written.toml", {"--set", "integrator.form=sode1"}, "not integrator.form = \"sode1\"");
+  refused("pendulum_cartesian.toml", {"--set", "integrator.form=hamiltonian"},
+          "not integrator.form = \"hamiltonian\" with constraints");
   // on S^2 and SO(3): the lagrangian form of the maps, forced or not, not constrained,
   // not Galerkin, not on (S^2)^K (linearize_on_the_sphere_and_the_rotation_group below)
   refused("spherical_pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
@@ -1305,8 +1307,9 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
 // --linearize (the same equation, solved to its tolerance); A_0 of the pendulum against
 // central differences of one-step runs (relative 1e-7), det A_k = 1; the double
 // pendulum's A_k symplectic and the same as its written twin's, whose Lagrangian is the
-// same text (the built-in's closed-form derivatives against the text's program); n
-// bodies and Kepler by Gauss Galerkin symplectic (compositions: the test above).
+// same text (the built-in's closed-form derivatives against the text's program), in the
+// lagrangian and the hamiltonian form; n bodies and Kepler by Gauss Galerkin symplectic
+// (compositions: the test above).
 BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
   const std::string dir = temp_dir();
   // the pendulum: one step of h = 0.01 from (q0 + dq, p0 + dp)
@@ -1358,6 +1361,31 @@ BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
     BOOST_TEST_REQUIRE(d.status == 0, d.err);
   }
   check_against_written_twin(read_npy(builtin), read_npy(written), 20, 2);
+  // the hamiltonian form (DynamicHamiltonianThetaStep of H from L by the Legendre
+  // transform): the run where the fixed-size Hamiltonian step's run ends, and A_k equal to
+  // the written twin's, for the cotangent lift of the midpoint map, its triple jump and
+  // the midpoint map on T*Q (lift none)
+  for (const auto& [composition, lift] : {std::pair<std::string, std::string>{"none", "cotangent"},
+                                          {"triple-jump", "cotangent"},
+                                          {"none", "none"}}) {
+    const std::vector<std::string> sets = {"--set", "integrator.form=\"hamiltonian\"", "--set",
+                                           "integrator.lift=\"" + lift + "\"", "--set",
+                                           "integrator.composition=\"" + composition + "\"", "--set",
+                                           "integrator.t_end=0.2"};
+    std::vector<std::string> lin_builtin = sets, lin_written = sets;
+    lin_builtin.insert(lin_builtin.end(), {"--linearize", builtin});
+    lin_written.insert(lin_written.end(), {"--linearize", written});
+    const Output plain = run_json("double_pendulum.toml", sets), b = run_json("double_pendulum.toml", lin_builtin),
+                 w = run_json("double_pendulum_written.toml", lin_written);
+    BOOST_TEST_CONTEXT(composition << ", lift " << lift << "\n" << plain.err << b.err << w.err) {
+      BOOST_TEST_REQUIRE(plain.status == 0);
+      BOOST_TEST_REQUIRE(b.status == 0);
+      BOOST_TEST_REQUIRE(w.status == 0);
+      BOOST_TEST(max_diff(json_array(b.out, "q_final"), json_array(plain.out, "q_final")) <= 1e-12);
+      BOOST_TEST(max_diff(json_array(b.out, "p_final"), json_array(plain.out, "p_final")) <= 1e-12);
+      check_against_written_twin(read_npy(builtin), read_npy(written), 20, 2);
+    }
+  }
   // n bodies (make_dynamic_run, the generic theta step where the structured one would
   // run): three bodies in the plane z = 0, A_k symplectic (18 x 18)
   {

@@ -678,8 +678,8 @@ BOOST_AUTO_TEST_CASE(the_fixed_size_step_is_the_run_time_sized_one) {
 
 // Control inputs (WrittenForce with a ControlSignal): the derivative B = d(q1, p1)/du of a
 // step in a control held over it, against central differences in the tabulated value
-// u_k (relative 1e-7), for the unconstrained theta step (a cart-pole pushed along x), the
-// constrained one and constrained Lobatto Galerkin s = 2 (the Cartesian pendulum pushed
+// u_k (relative 1e-7), for the unconstrained theta step (a cart-pole pushed along x) and
+// its Hamiltonian form, the constrained one and constrained Lobatto Galerkin s = 2 (the Cartesian pendulum pushed
 // sideways); the signal's step index picks u_k.
 BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
   auto with_control = [](std::shared_ptr<WrittenSystem> s, std::vector<double> table) {
@@ -699,6 +699,7 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
     const Eigen::Index n = q0.size();
     auto advance = [&](VectorXd& dq, VectorXd& dp) {
       dq = VectorXd::Zero(n);
+      dp = VectorXd::Zero(n);  // (the starting guess of the Hamiltonian step)
       const StepSummary r = S.step(0.1, q0, p0, dq, dp);
       BOOST_REQUIRE_MESSAGE(r.converged, r.message);
     };
@@ -715,7 +716,7 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
       auto sig = std::make_shared<ControlSignal>(t);
       sig->set_step(1);
       const auto Su = make(std::make_shared<WrittenForce>(s, sig));
-      VectorXd d = VectorXd::Zero(n), e(n);
+      VectorXd d = VectorXd::Zero(n), e = VectorXd::Zero(n);
       BOOST_REQUIRE(Su.step(0.1, q0, p0, d, e).converged);
       VectorXd z(2 * n);
       z << q0 + d, p0 + e;
@@ -739,6 +740,11 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
   check([&](std::shared_ptr<WrittenForce> f) {
     return DynamicThetaStep<WrittenDynamic, Eigen::Dynamic, WrittenForce>(WrittenDynamic(cartpole), ThetaMap(0.3), 0.01,
                                                                           {}, false, f);
+  }, cartpole, q, p);
+  // the Hamiltonian theta step of the same cart-pole (H from L by the Legendre transform)
+  check([&](std::shared_ptr<WrittenForce> f) {
+    using H = LegendreDynamicHamiltonian<WrittenDynamic>;
+    return DynamicHamiltonianThetaStep<H, WrittenForce>(H(WrittenDynamic(cartpole)), ThetaMap(0.3), 0.01, {}, false, f);
   }, cartpole, q, p);
   const State c = cartesian_state(0.7, 0.4);
   check([&](std::shared_ptr<WrittenForce> f) {

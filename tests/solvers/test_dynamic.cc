@@ -652,6 +652,34 @@ BOOST_AUTO_TEST_CASE(the_adjoint_step_undoes_the_step_backwards) {
 // of the step itself, and symplectic: the written pendulum (n = 1), the written double
 // pendulum and Kepler (n = 2), for the midpoint and an asymmetric theta map.
 namespace {
+// The Jacobian of flow(q, p) -> (q1, p1) at (q0, p0) by central differences, column by
+// column (error ~ eps^2 from truncation, ~1e-16/eps from the solves, each converged to
+// round-off).
+template <class Flow>
+MatrixXd central_differences(const Flow& flow, const VectorXd& q0, const VectorXd& p0, double eps = 1e-5) {
+  const Eigen::Index n = q0.size();
+  MatrixXd C(2 * n, 2 * n);
+  for (Eigen::Index j = 0; j < 2 * n; ++j) {
+    VectorXd qa = q0, pa = p0, qb = q0, pb = p0;
+    if (j < n) {
+      qa[j] += eps;
+      qb[j] -= eps;
+    } else {
+      pa[j - n] += eps;
+      pb[j - n] -= eps;
+    }
+    C.col(j) = (flow(qa, pa) - flow(qb, pb)) / (2.0 * eps);
+  }
+  return C;
+}
+// max |A^T J A - J|
+double symplectic_defect_of(const MatrixXd& A) {
+  const Eigen::Index n = A.rows() / 2;
+  MatrixXd J = MatrixXd::Zero(2 * n, 2 * n);
+  J.topRightCorner(n, n) = MatrixXd::Identity(n, n);
+  J.bottomLeftCorner(n, n) = -MatrixXd::Identity(n, n);
+  return (A.transpose() * J * A - J).cwiseAbs().maxCoeff();
+}
 // With a force (and a step starting at t0 != 0, which a time-dependent force reads) the
 // step is not symplectic: A^T J A = J is then asserted to fail, by more than the
 // tolerance it holds to without one.
@@ -676,28 +704,10 @@ void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0,
       BOOST_TEST_REQUIRE(S.derivative(t0, q0, dq, A));
       BOOST_TEST(A.rows() == 2 * n);
       BOOST_TEST(A.cols() == 2 * n);
-      // central differences, column by column (error ~ eps^2 from truncation, ~1e-16/eps
-      // from the solves, each converged to round-off)
-      const double eps = 1e-5;
-      MatrixXd C(2 * n, 2 * n);
-      for (int j = 0; j < 2 * n; ++j) {
-        VectorXd qa = q0, pa = p0, qb = q0, pb = p0;
-        if (j < n) {
-          qa[j] += eps;
-          qb[j] -= eps;
-        } else {
-          pa[j - n] += eps;
-          pb[j - n] -= eps;
-        }
-        C.col(j) = (flow(qa, pa) - flow(qb, pb)) / (2.0 * eps);
-      }
+      const MatrixXd C = central_differences(flow, q0, p0);
       const double size = std::max(1.0, A.cwiseAbs().maxCoeff());
       BOOST_TEST((A - C).cwiseAbs().maxCoeff() <= 1e-7 * size);
-      // A^T J A = J
-      MatrixXd J = MatrixXd::Zero(2 * n, 2 * n);
-      J.topRightCorner(n, n) = MatrixXd::Identity(n, n);
-      J.bottomLeftCorner(n, n) = -MatrixXd::Identity(n, n);
-      const double defect = (A.transpose() * J * A - J).cwiseAbs().maxCoeff();
+      const double defect = symplectic_defect_of(A);
       if (force)
         BOOST_TEST(defect > 1e-6 * size * size);
       else
@@ -709,6 +719,72 @@ void check_step_derivative(const Sys& L, const VectorXd& q0, const VectorXd& p0,
   }
 }
 }  // namespace
+
+// The Hamiltonian theta step's derivative (DynamicHamiltonianThetaStep::derivative) against
+// central differences of the step (relative 1e-7): H from L by the Legendre transform, for
+// the cotangent lift of the theta map (symplectic: A^T J A = J to 1e-12) and the theta map
+// on T*Q itself (lift none: symplectic at theta = 1/2 only, so asserted to fail elsewhere),
+// and with a force (not symplectic). The double pendulum's H_qp is not zero, so a
+// transposed block in dF/dQ would show.
+namespace {
+template <class Ham, class Force = NoForce>
+void check_hamiltonian_step_derivative(const Ham& H, const VectorXd& q0, const VectorXd& p0, double h,
+                                       std::shared_ptr<const Force> force = nullptr, double t0 = 0.0) {
+  const int n = H.dim();
+  for (const auto& [theta, on_bundle] : {std::pair(0.5, false), std::pair(0.3, false), std::pair(0.5, true),
+                                         std::pair(0.3, true)}) {
+    BOOST_TEST_CONTEXT(H.name() << ", theta = " << theta << (on_bundle ? ", on T*Q" : ", cotangent lift")
+                                << (force ? ", forced" : "")) {
+      const DynamicHamiltonianThetaStep<Ham, Force> S(H, ThetaMap(theta), h, {}, on_bundle, force);
+      auto flow = [&](const VectorXd& q, const VectorXd& p) {
+        VectorXd dq = VectorXd::Zero(n), dp = VectorXd::Zero(n);
+        BOOST_TEST_REQUIRE(S.step(t0, q, p, dq, dp).converged);
+        VectorXd y(2 * n);
+        y << q + dq, p + dp;
+        return y;
+      };
+      const VectorXd y1 = flow(q0, p0);
+      const VectorXd dq = y1.head(n) - q0;
+      MatrixXd A;
+      BOOST_TEST_REQUIRE(S.derivative(t0, q0, p0, dq, A));
+      BOOST_TEST(A.rows() == 2 * n);
+      BOOST_TEST(A.cols() == 2 * n);
+      const MatrixXd C = central_differences(flow, q0, p0);
+      const double size = std::max(1.0, A.cwiseAbs().maxCoeff());
+      BOOST_TEST((A - C).cwiseAbs().maxCoeff() <= 1e-7 * size);
+      const double defect = symplectic_defect_of(A);
+      BOOST_TEST_MESSAGE("symplectic defect " << defect);
+      if (force || (on_bundle && theta != 0.5))
+        BOOST_TEST(defect > 1e-6 * size * size);
+      else
+        BOOST_TEST(defect <= 1e-12 * size * size);
+      BOOST_TEST(A.bottomLeftCorner(n, n).cwiseAbs().maxCoeff() > 1e-3);
+      // A and B (none without a force) from one differentiation
+      MatrixXd A2, B;
+      BOOST_TEST_REQUIRE(S.derivatives(t0, q0, p0, dq, A2, &B));
+      BOOST_TEST((A2 - A).cwiseAbs().maxCoeff() <= 1e-13 * size);
+      BOOST_TEST(B.rows() == 2 * n);
+      BOOST_TEST(B.cols() == S.controls());
+    }
+  }
+}
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_hamiltonian_step_derivative_by_the_implicit_function_theorem) {
+  VectorXd q2(2), p2(2);
+  q2 << 0.5, 0.3;
+  p2 << 0.2, -0.1;
+  using Dp = FixedAsDynamic<DoublePendulum>;
+  check_hamiltonian_step_derivative(LegendreDynamicHamiltonian<Dp>(Dp(kPendulum2)), q2, p2, 0.02);
+  Vec<double, 2> qk, pk;
+  verification::kepler_initial(0.6, qk, pk);
+  using Kp = FixedAsDynamic<Kepler>;
+  check_hamiltonian_step_derivative(LegendreDynamicHamiltonian<Kp>(Kp(kKepler)), VectorXd(qk), VectorXd(pk), 0.01);
+  // a double pendulum damped at its second joint and driven at its first, from t0 = 1.3
+  const auto damped2 = with_forces(written_double_pendulum(), {{0, "sin(2*t)*cos(b)"}, {1, "-0.5*(b_dot - a_dot)"}});
+  check_hamiltonian_step_derivative(LegendreDynamicHamiltonian<WrittenDynamic>(WrittenDynamic(damped2)), q2, p2, 0.02,
+                                    std::make_shared<const WrittenForce>(damped2), 1.3);
+}
 
 // The SODE and Newmark steps of a separable system of run-time size (DynamicSodeStep)
 // against the fixed-size steps of the same forms (SodeStep through the tangent lift of
