@@ -63,10 +63,8 @@ std::unique_ptr<Run> chain(const Problem& pr, const Method& me) {
   if (!std::isfinite(view.energy(q, p))) kernels::refuse_nonfinite_energy(pr);
   const RunReport base = kernels::base_report(pr, me, "chain");
   if (me.linearize) {
-    if (C.n > kernels::kMaxDenseDynamicDim)
-      throw InputError(pr.origin + ": key 'system.params.n': got " + std::to_string(C.n) + "; --linearize runs the chain's step with dense " +
-                       std::to_string(C.n) + " x " + std::to_string(C.n) + " matrices, beyond the " +
-                       std::to_string(kernels::kMaxDenseDynamicDim) + " coordinates the run-time-sized dense steps take");
+    kernels::require_dense_size(C.n, pr.origin + ": key 'system.params.n': got " + std::to_string(C.n) +
+                                         "; with --linearize the chain's step");
     return kernels::make_linearized_run(ErasedDynamicLagrangian(ChainDynamic(C)),
                                         kernels::ErasedRnView<Eigen::Dynamic>(view, C.n), pr, me, base, q, p, v0);
   }

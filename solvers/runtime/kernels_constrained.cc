@@ -39,14 +39,13 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
   // couple most coordinates: the dense step below, within its limit)
   if (!me.galerkin && !hamiltonian && me.use_structure && L.separable() && n >= kSparseConstrainedMinDim)
     if (auto run = make_sparse_constrained_run(L, pr, me, view, q, p, v0, base, con, force)) return run;
-  if (n > kMaxDenseDynamicDim)
-    throw InputError((me.galerkin    ? std::string("integrator.method: method = \"galerkin\"")
+  require_dense_size(n,
+                     (me.galerkin    ? std::string("integrator.method: method = \"galerkin\"")
                       : hamiltonian ? std::string("integrator.form: form = \"hamiltonian\"")
                                     : "integrator.map: map = \"" + me.map->name + "\"") +
-                     " with system.constraints needs dense " + std::to_string(n) + " x " + std::to_string(n) +
-                     " matrices, beyond the " + std::to_string(kMaxDenseDynamicDim) +
-                     " coordinates the run-time-sized dense steps take (the sparse constrained step takes a "
-                     "separable Lagrangian of any size whose potential's Hessian is sparse: a theta map)");
+                         " with system.constraints",
+                     " (the sparse constrained step takes a separable Lagrangian of any size whose potential's "
+                     "Hessian is sparse: a theta map)");
   base.step_path = StepPath::generic;
   const MomentumMap momentum = L.separable()               ? MomentumMap::constant
                                : L.parts().split.quadratic ? MomentumMap::linear

@@ -309,6 +309,14 @@ constexpr int kStructuredNewtonMinDim = 3;
 // the velocity Hessian); beyond this many coordinates they are refused rather than
 // left to run out of memory or time.
 constexpr int kMaxDenseDynamicDim = 4096;
+// Refuses (InputError, exit 2) n coordinates beyond kMaxDenseDynamicDim for `what` (the
+// key and value that ask for the dense step), `otherwise` appended (what would run).
+inline void require_dense_size(int n, const std::string& what, const std::string& otherwise = "") {
+  if (n > kMaxDenseDynamicDim)
+    throw InputError(what + " needs dense " + std::to_string(n) + " x " + std::to_string(n) + " matrices, beyond the " +
+                     std::to_string(kMaxDenseDynamicDim) + " coordinates the run-time-sized dense steps take" +
+                     otherwise);
+}
 
 // From this many coordinates the position-momentum step of a Lagrangian that is not
 // separable keeps its Jacobian across steps (simplified Newton, Refresh::across_steps of solvers/newton_driver.h).
@@ -413,11 +421,9 @@ std::unique_ptr<Run> make_dynamic_run(const Sys& L, const Problem& pr, const Met
   const V q = Eigen::Map<const V>(pr.q.data(), n);
   V p(n), v0(n);
   auto dense_limit = [&](const std::string& what) {
-    if (n > kMaxDenseDynamicDim)
-      throw InputError(what + " needs dense " + std::to_string(n) + " x " + std::to_string(n) + " matrices, beyond the " +
-                       std::to_string(kMaxDenseDynamicDim) +
-                       " coordinates the run-time-sized dense steps take; on a separable system "
-                       "map = \"explicit-euler\" or \"adjoint-euler\", composed or not, steps without them");
+    require_dense_size(n, what,
+                       "; on a separable system map = \"explicit-euler\" or \"adjoint-euler\", composed or not, steps "
+                       "without them");
   };
   if (pr.boundary_value) {
     // a written Lagrangian, with a map of the theta family (validate refuses n bodies,
