@@ -200,6 +200,21 @@ class ManifoldHamiltonianStep {
     return local;
   }
 
+  // The derivative of the step (q0, p0) -> (q1, p1) at its solution, in the canonical
+  // coordinates (eta, pi) around q0 before the step and around q1 after it (those of
+  // ManifoldStep::derivatives, solvers/manifold_step.h): A (2 dim x 2 dim), by the
+  // implicit function theorem through the chart step's solve (HamiltonianStep::jacobian
+  // in the chart centred at q0, solved again from (q0, p0)) followed by the change of
+  // canonical coordinates from the chart at q0 to the chart at q1 at the end point.
+  // Unforced steps only (a forced step's derivative is not written: validate refuses
+  // --linearize there); B, where given, is 2 dim x 0. Defined in
+  // solvers/manifold_hamiltonian_step_derivative.h, instantiated where a file
+  // differentiates (runtime/kernels_manifold_derivatives.cc), so that a file compiling
+  // the step alone does not compile its derivative. False where the solve fails or a
+  // Jacobian is singular.
+  bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
+                   Eigen::MatrixXd* B) const;
+
   // One step: xi holds the guess of the chart coordinates of q1 on entry and them on
   // return; dp (optional) returns the change of the chart momentum.
   StepSummary step(double t, const Point& q0, const Covector& p0, V& xi, Point& q1, Covector& p1, V* dp_out = nullptr) const {

@@ -488,7 +488,8 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
       me, R, R.symmetric(), [](const Map& m) { return adjoint_map(m); },
       [&](double th) { return at_theta(R, th); });
   // runs of the lagrangian form on S^2 and SO(3) may write their steps' derivatives
-  // (--linearize: ManifoldStep::derivatives), not on (S^2)^K (validate refuses it)
+  // (--linearize: ManifoldStep::derivatives), and those of the unforced hamiltonian form
+  // (ManifoldHamiltonianStep::derivatives), not on (S^2)^K (validate refuses it)
   constexpr bool Linearizable = std::is_same_v<Mf, Sphere> || std::is_same_v<Mf, SO3>;
   auto composed = [&](auto make, auto linearizable) -> std::unique_ptr<Run> {
     using Step = decltype(make(h, R));
@@ -514,7 +515,7 @@ std::unique_ptr<Run> make_manifold_run(const S& L, const Map& R, const Problem& 
       if (forced) throw InputError(pr.forces_where + ": forces are written on R^n, S^2 and SO(3)");
       return composed(
           [&](double hk, const Map& Rk) { return ManifoldHamiltonianStep<H, Map>(hamiltonian_of(L), Rk, hk, opt); },
-          std::false_type{});
+          std::integral_constant<bool, Linearizable>{});
     } else {
       throw InputError("integrator.form: unsupported");  // refused by validate()
     }

@@ -341,14 +341,15 @@ void validate(const Problem& pr, const Method& me) {
   // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative,
   // ConstrainedGalerkinStep::derivative, DynamicHamiltonianThetaStep::derivative, the
   // first, third and fifth also for the built-in systems of fixed size
-  // (make_linearized_run); on S^2 and SO(3) ManifoldStep::derivatives)
+  // (make_linearized_run); on S^2 and SO(3) ManifoldStep::derivatives and
+  // ManifoldHamiltonianStep::derivatives)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
                              "theta-family maps, by their hamiltonian form and by Galerkin, for the built-in systems "
                              "of fixed size on R^n, for the chain (the theta-family maps), n bodies and Lagrangians "
                              "written on R^n (constrained or not; the hamiltonian form unconstrained), and by the "
-                             "position-momentum step of the maps of S^2 and SO(3) (forced or not, not constrained), "
-                             "for their built-in and written systems";
+                             "position-momentum step of the maps of S^2 and SO(3) (forced or not, not constrained) "
+                             "and their hamiltonian form (not forced), for their built-in and written systems";
     if (sys.space == Space::euclidean) {
       if (!pr.written && !caps.linearize) throw InputError(what + ", not the built-in system " + name);
       if (!me.galerkin && me.map && me.map->family == MapFamily::written)
@@ -363,12 +364,14 @@ void validate(const Problem& pr, const Method& me) {
       if (pr.constrained()) throw InputError(pr.constraints_where + ": " + what);
     }
     if (pr.boundary_value) throw InputError(what + "; problem.kind = \"boundary-value\" takes no steps");
-    const bool hamiltonian_on_rn = me.form == Form::hamiltonian && sys.space == Space::euclidean && !me.galerkin;
-    if (me.form != Form::lagrangian && !hamiltonian_on_rn)
-      throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"" +
-                       (sys.space == Space::euclidean ? "" : " on " + std::string(to_string(sys.space))));
-    if (hamiltonian_on_rn && pr.constrained())
+    const bool hamiltonian = me.form == Form::hamiltonian && !me.galerkin;
+    if (me.form != Form::lagrangian && !hamiltonian)
+      throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"");
+    if (hamiltonian && pr.constrained())
       throw InputError(pr.constraints_where + ": " + what + "; not integrator.form = \"hamiltonian\" with constraints");
+    if (hamiltonian && sys.space != Space::euclidean && pr.forced())
+      throw InputError(pr.forces_where + ": " + what + "; not integrator.form = \"hamiltonian\" with forces on " +
+                       std::string(to_string(sys.space)));
     if (me.composition != "none" && me.scheme().kind == CompositionKind::rkn_splitting)
       throw InputError("integrator.composition: --linearize differentiates theta steps and their compositions; a "
                        "splitting into kicks and drifts (\"" + me.composition + "\") gives no derivative");

@@ -1292,9 +1292,13 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
   refused("pendulum_written.toml", {"--set", "integrator.form=sode1"}, "not integrator.form = \"sode1\"");
   refused("pendulum_cartesian.toml", {"--set", "integrator.form=hamiltonian"},
           "not integrator.form = \"hamiltonian\" with constraints");
-  // on S^2 and SO(3): the lagrangian form of the maps, forced or not, not constrained,
-  // not Galerkin, not on (S^2)^K (linearize_on_the_sphere_and_the_rotation_group below)
-  refused("spherical_pendulum_written.toml", {"--set", "integrator.form=hamiltonian"}, "integrator.form");
+  // on S^2 and SO(3): the lagrangian form of the maps, forced or not, and their
+  // hamiltonian form unforced; not constrained, not Galerkin, not on (S^2)^K
+  // (linearize_on_the_sphere_and_the_rotation_group below)
+  refused("spherical_pendulum_written.toml", {"--set", "integrator.form=sode1"}, "integrator.form");
+  refused("spherical_pendulum_written.toml",
+          {"--set", "integrator.form=hamiltonian", "--set", "system.forces={ x = \"-0.1*x_dot\" }"},
+          "not integrator.form = \"hamiltonian\" with forces on S^2");
   refused("spherical-pendulum-galerkin.toml", {}, "not integrator.method = \"galerkin\" on S^2");
   refused("bead_on_rotating_hoop.toml", {}, "system.constraints");
   refused("spherical_double_pendulum_written.toml", {}, "not on (S^2)^K");
@@ -1333,10 +1337,10 @@ BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
   BOOST_TEST_REQUIRE(o.status == 0, o.err);
   BOOST_TEST(json_string(o.out, "step_path") == "generic");
   // the same run as without --linearize (the fixed-size step of the same equation)
-  const std::vector<double> plain = state_after(0.0, 0.0, "0.5");
-  const std::vector<double> qf = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
-  BOOST_TEST(std::fabs(qf[0] - plain[0]) <= 1e-12);
-  BOOST_TEST(std::fabs(pf[0] - plain[1]) <= 1e-12);
+  const std::vector<double> pendulum_end = state_after(0.0, 0.0, "0.5");
+  const std::vector<double> pendulum_q = json_array(o.out, "q_final"), pendulum_p = json_array(o.out, "p_final");
+  BOOST_TEST(std::fabs(pendulum_q[0] - pendulum_end[0]) <= 1e-12);
+  BOOST_TEST(std::fabs(pendulum_p[0] - pendulum_end[1]) <= 1e-12);
   const NpyRows A = read_npy(path);
   BOOST_TEST(A.rows == 50);
   BOOST_TEST(A.cols == 5);
@@ -1464,7 +1468,8 @@ BOOST_AUTO_TEST_CASE(linearize_the_built_in_systems_on_rn) {
 // momentum's components pi_j = <p, d chart/d eta_j>), as `dvm run --help` states them.
 // A_0 of the written spherical pendulum against central differences of one-step runs of
 // dvm, moved in those coordinates (1e-7); A_k symplectic at every step on S^2 and for the
-// heavy top composed; the satellite's control adds B_k (6 x 1).
+// heavy top composed; the lagrangian and the hamiltonian form; the satellite's control
+// adds B_k (6 x 1).
 BOOST_AUTO_TEST_CASE(linearize_on_the_sphere_and_the_rotation_group) {
   const std::string dir = temp_dir();
   using V3 = std::array<double, 3>;
@@ -1490,84 +1495,92 @@ BOOST_AUTO_TEST_CASE(linearize_on_the_sphere_and_the_rotation_group) {
     return s.str();
   };
   const double h = 0.005;
-  auto step_from = [&](const V3& q, const V3& p) {
-    const Output o = dvm({"run", scene("spherical_pendulum_written.toml"), "--json", "--no-output", "--set",
-                          "integrator.t_end=0.005", "--set", "initial.q=" + list(q), "--set", "initial.v=" + list(p)});
-    BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
-    const std::vector<double> qf = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
-    BOOST_REQUIRE(qf.size() == 3 && pf.size() == 3);
-    return std::pair<V3, V3>{V3{qf[0], qf[1], qf[2]}, V3{pf[0], pf[1], pf[2]}};
-  };
-  // the scene's start: q = (0.6, 0, -0.8), v = (0, 1.5, 0); m = l = 1, so p = v (the
-  // runs below give the momentum as initial.v)
-  const V3 c{0.6, 0.0, -0.8}, p0{0.0, 1.5, 0.0};
-  const auto E0 = basis(c);
-  const double pi0[2] = {dot(p0, E0[0]), dot(p0, E0[1])};
-  const auto [c1, p1] = step_from(c, p0);
-  const auto E1 = basis(c1);
-  const std::string path = dir + "/sphere.npy";
-  const Output o = dvm({"run", scene("spherical_pendulum_written.toml"), "--no-output", "--quiet", "--linearize", path,
-                        "--set", "integrator.t_end=0.05"});
-  BOOST_TEST_REQUIRE(o.status == 0, o.err);
-  const NpyRows A = read_npy(path);
-  BOOST_TEST(A.rows == 10);
-  BOOST_TEST(A.cols == 17);
-  const double eps = 1e-5;
-  double worst = 0.0;
-  for (int j = 0; j < 4; ++j) {
-    double col[2][4];
-    for (int s = 0; s < 2; ++s) {
-      double eta[2] = {0, 0}, pi[2] = {pi0[0], pi0[1]};
-      (j < 2 ? eta : pi)[j % 2] += s == 0 ? eps : -eps;
-      // the state (q, p) with canonical coordinates (eta, pi) around c
-      V3 y;
-      for (int i = 0; i < 3; ++i) y[i] = c[i] + E0[0][i] * eta[0] + E0[1][i] * eta[1];
-      const double ny = std::sqrt(dot(y, y));
-      V3 q;
-      for (int i = 0; i < 3; ++i) q[i] = y[i] / ny;
-      // p tangent at q with p . e_j = |y| pi_j (d chart/d eta_j = (e_j - (q . e_j) q)/|y|):
-      // p = |y| (pi_1 f1 + pi_2 f2) with (f1, f2) dual to (e1, e2) in the tangent plane
-      V3 t1, t2;
-      for (int i = 0; i < 3; ++i) {
-        t1[i] = E0[0][i] - dot(q, E0[0]) * q[i];
-        t2[i] = E0[1][i] - dot(q, E0[1]) * q[i];
+  // the lagrangian form (ManifoldStep::derivatives) and the hamiltonian form
+  // (ManifoldHamiltonianStep::derivatives)
+  for (const std::string form : {"lagrangian", "hamiltonian"}) {
+    BOOST_TEST_CONTEXT("integrator.form = " << form) {
+      const std::string form_set = "integrator.form=\"" + form + "\"";
+      auto step_from = [&](const V3& q, const V3& p) {
+        const Output o = dvm({"run", scene("spherical_pendulum_written.toml"), "--json", "--no-output", "--set",
+                              "integrator.t_end=0.005", "--set", "initial.q=" + list(q), "--set",
+                              "initial.v=" + list(p), "--set", form_set});
+        BOOST_REQUIRE_MESSAGE(o.status == 0, o.err);
+        const std::vector<double> qf = json_array(o.out, "q_final"), pf = json_array(o.out, "p_final");
+        BOOST_REQUIRE(qf.size() == 3 && pf.size() == 3);
+        return std::pair<V3, V3>{V3{qf[0], qf[1], qf[2]}, V3{pf[0], pf[1], pf[2]}};
+      };
+      // the scene's start: q = (0.6, 0, -0.8), v = (0, 1.5, 0); m = l = 1, so p = v (the
+      // runs below give the momentum as initial.v)
+      const V3 c{0.6, 0.0, -0.8}, p0{0.0, 1.5, 0.0};
+      const auto E0 = basis(c);
+      const double pi0[2] = {dot(p0, E0[0]), dot(p0, E0[1])};
+      const auto [c1, p1] = step_from(c, p0);
+      const auto E1 = basis(c1);
+      const std::string path = dir + "/sphere.npy";
+      const Output o = dvm({"run", scene("spherical_pendulum_written.toml"), "--no-output", "--quiet", "--linearize",
+                            path, "--set", "integrator.t_end=0.05", "--set", form_set});
+      BOOST_TEST_REQUIRE(o.status == 0, o.err);
+      const NpyRows A = read_npy(path);
+      BOOST_TEST(A.rows == 10);
+      BOOST_TEST(A.cols == 17);
+      const double eps = 1e-5;
+      double worst = 0.0;
+      for (int j = 0; j < 4; ++j) {
+        double col[2][4];
+        for (int s = 0; s < 2; ++s) {
+          double eta[2] = {0, 0}, pi[2] = {pi0[0], pi0[1]};
+          (j < 2 ? eta : pi)[j % 2] += s == 0 ? eps : -eps;
+          // the state (q, p) with canonical coordinates (eta, pi) around c
+          V3 y;
+          for (int i = 0; i < 3; ++i) y[i] = c[i] + E0[0][i] * eta[0] + E0[1][i] * eta[1];
+          const double ny = std::sqrt(dot(y, y));
+          V3 q;
+          for (int i = 0; i < 3; ++i) q[i] = y[i] / ny;
+          // p tangent at q with p . e_j = |y| pi_j (d chart/d eta_j = (e_j - (q . e_j) q)/|y|):
+          // p = |y| (pi_1 f1 + pi_2 f2) with (f1, f2) dual to (e1, e2) in the tangent plane
+          V3 t1, t2;
+          for (int i = 0; i < 3; ++i) {
+            t1[i] = E0[0][i] - dot(q, E0[0]) * q[i];
+            t2[i] = E0[1][i] - dot(q, E0[1]) * q[i];
+          }
+          const double g11 = dot(t1, E0[0]), g12 = dot(t2, E0[0]), g21 = dot(t1, E0[1]), g22 = dot(t2, E0[1]);
+          const double det = g11 * g22 - g12 * g21;
+          const double a1 = (g22 * pi[0] - g12 * pi[1]) / det * ny, a2 = (-g21 * pi[0] + g11 * pi[1]) / det * ny;
+          V3 p;
+          for (int i = 0; i < 3; ++i) p[i] = a1 * t1[i] + a2 * t2[i];
+          const auto [qe, pe] = step_from(q, p);
+          // its end in the canonical coordinates around c1: zeta = E1^T (qe/(c1.qe) - c1),
+          // pi_j = (c1 . qe) pe . e_j(c1)
+          const double d = dot(c1, qe);
+          for (int k = 0; k < 2; ++k) {
+            double z = 0.0;
+            for (int i = 0; i < 3; ++i) z += E1[k][i] * (qe[i] / d - c1[i]);
+            col[s][k] = z;
+            col[s][2 + k] = d * dot(pe, E1[k]);
+          }
+        }
+        for (int i = 0; i < 4; ++i) {
+          const double central = (col[0][i] - col[1][i]) / (2 * eps);
+          worst = std::fmax(worst, std::fabs(A.at(0, 1 + 4 * i + j) - central) / std::fmax(1.0, std::fabs(central)));
+        }
       }
-      const double g11 = dot(t1, E0[0]), g12 = dot(t2, E0[0]), g21 = dot(t1, E0[1]), g22 = dot(t2, E0[1]);
-      const double det = g11 * g22 - g12 * g21;
-      const double a1 = (g22 * pi[0] - g12 * pi[1]) / det * ny, a2 = (-g21 * pi[0] + g11 * pi[1]) / det * ny;
-      V3 p;
-      for (int i = 0; i < 3; ++i) p[i] = a1 * t1[i] + a2 * t2[i];
-      const auto [qe, pe] = step_from(q, p);
-      // its end in the canonical coordinates around c1: zeta = E1^T (qe/(c1.qe) - c1),
-      // pi_j = (c1 . qe) pe . e_j(c1)
-      const double d = dot(c1, qe);
-      for (int k = 0; k < 2; ++k) {
-        double z = 0.0;
-        for (int i = 0; i < 3; ++i) z += E1[k][i] * (qe[i] / d - c1[i]);
-        col[s][k] = z;
-        col[s][2 + k] = d * dot(pe, E1[k]);
+      BOOST_TEST_MESSAGE("S^2: A_0 against central differences of dvm's steps " << worst);
+      BOOST_TEST(worst <= 1e-7);
+      // A_k^T J A_k = J at every step (n = 2, and n = 3 for the heavy top composed)
+      for (long long k = 0; k < A.rows; ++k) {
+        BOOST_TEST(A.at(k, 0) == h * static_cast<double>(k), boost::test_tools::tolerance(1e-15));
+        BOOST_TEST(symplectic_defect(A, k, 4) <= 1e-12);
       }
-    }
-    for (int i = 0; i < 4; ++i) {
-      const double central = (col[0][i] - col[1][i]) / (2 * eps);
-      worst = std::fmax(worst, std::fabs(A.at(0, 1 + 4 * i + j) - central) / std::fmax(1.0, std::fabs(central)));
+      const std::string top = dir + "/top.npy";
+      const Output t = dvm({"run", scene("heavy-top.toml"), "--no-output", "--quiet", "--linearize", top, "--set",
+                            "integrator.composition=\"suzuki5\"", "--set", "integrator.t_end=0.02", "--set", form_set});
+      BOOST_TEST_REQUIRE(t.status == 0, t.err);
+      const NpyRows T = read_npy(top);
+      BOOST_TEST(T.rows == 4);
+      BOOST_TEST(T.cols == 37);
+      for (long long k = 0; k < T.rows; ++k) BOOST_TEST(symplectic_defect(T, k, 6) <= 1e-11);
     }
   }
-  BOOST_TEST_MESSAGE("S^2: A_0 against central differences of dvm's steps " << worst);
-  BOOST_TEST(worst <= 1e-7);
-  // A_k^T J A_k = J at every step (n = 2, and n = 3 for the heavy top composed)
-  for (long long k = 0; k < A.rows; ++k) {
-    BOOST_TEST(A.at(k, 0) == h * static_cast<double>(k), boost::test_tools::tolerance(1e-15));
-    BOOST_TEST(symplectic_defect(A, k, 4) <= 1e-12);
-  }
-  const std::string top = dir + "/top.npy";
-  const Output t = dvm({"run", scene("heavy-top.toml"), "--no-output", "--quiet", "--linearize", top, "--set",
-                        "integrator.composition=\"suzuki5\"", "--set", "integrator.t_end=0.02"});
-  BOOST_TEST_REQUIRE(t.status == 0, t.err);
-  const NpyRows T = read_npy(top);
-  BOOST_TEST(T.rows == 4);
-  BOOST_TEST(T.cols == 37);
-  for (long long k = 0; k < T.rows; ++k) BOOST_TEST(symplectic_defect(T, k, 6) <= 1e-11);
   // a control torque: B_k after A_k, named B[i,0]; the torque u about e3 moves the
   // third angular momentum component by h u: dpi_3/du = h at every step
   const std::string sat = dir + "/satellite.npy";

@@ -1,13 +1,15 @@
 // The Hamiltonian step of Eq. 5.1 on S^2 and SO(3) (solvers/manifold_hamiltonian_step.h):
 // symplectic in a chart to round-off (and a non-symplectic variant that the check
 // catches), independent of the chart it is solved in, on the manifold, conserving
-// the momentum maps of the symmetries (discrete Noether), with measured orders.
+// the momentum maps of the symmetries (discrete Noether), with measured orders; its
+// derivative in canonical coordinates (solvers/manifold_hamiltonian_step_derivative.h).
 #define BOOST_TEST_MODULE manifold_hamiltonian
 #include <boost/test/unit_test.hpp>
 
 #include <array>
 
 #include "solvers/manifold_hamiltonian_step.h"
+#include "solvers/manifold_hamiltonian_step_derivative.h"
 #include "tests/verification/common.h"
 
 using namespace dvm;
@@ -253,4 +255,82 @@ BOOST_AUTO_TEST_CASE(measured_orders_on_the_spherical_pendulum) {
     BOOST_TEST_MESSAGE(R.name() << ": order " << order << " (errors " << errs[0] << " ... " << errs.back() << ")");
     BOOST_TEST_CONTEXT(R.name()) { BOOST_TEST(std::fabs(order - R.order()) <= 0.1); }
   }
+}
+
+// ManifoldHamiltonianStep::derivatives against central differences of the step itself
+// in the canonical coordinates (eta, pi) around q0 before it and around q1 after it
+// (canonical_state, canonical_coordinates: solvers/manifold_step.h), relative 1e-7,
+// and symplectic (1e-12), for every map of S^2 and SO(3) on the spherical pendulum and
+// the heavy top. The end's change of charts matters: the derivative in the chart
+// centred at q0 alone (the chart step's Jacobian) is asserted to differ.
+namespace {
+template <class Step>
+void check_manifold_hamiltonian_derivative(const Step& S, const typename Step::Point& q0,
+                                           const typename Step::Covector& p0) {
+  using M = typename Step::M;
+  constexpr int n = Step::n;
+  using V = Vec<double, n>;
+  auto one_step = [&](const typename Step::Point& q, const typename Step::Covector& p, typename Step::Point& q1,
+                      typename Step::Covector& p1) {
+    V xi = V::Zero();
+    const StepSummary s = S.step(0.0, q, p, xi, q1, p1);
+    BOOST_REQUIRE_MESSAGE(s.converged, s.message);
+  };
+  typename Step::Point c1;
+  typename Step::Covector p1;
+  one_step(q0, p0, c1, p1);
+  Eigen::MatrixXd A, B;
+  BOOST_REQUIRE(S.derivatives(0.0, q0, p0, c1, A, &B));
+  BOOST_TEST(A.rows() == 2 * n);
+  BOOST_TEST(B.cols() == 0);
+  V eta0, pi0;
+  canonical_coordinates<M>(q0, q0, p0, eta0, pi0);
+  const double eps = 1e-6;
+  Eigen::MatrixXd C(2 * n, 2 * n);
+  for (int j = 0; j < 2 * n; ++j) {
+    Vec<double, 2 * n> end[2];
+    for (int side = 0; side < 2; ++side) {
+      V eta = eta0, pi = pi0;
+      (j < n ? eta : pi)[j % n] += side == 0 ? eps : -eps;
+      typename Step::Point q, qe;
+      typename Step::Covector p, pe;
+      canonical_state<M>(q0, eta, pi, q, p);
+      one_step(q, p, qe, pe);
+      V zeta, pie;
+      canonical_coordinates<M>(c1, qe, pe, zeta, pie);
+      end[side] << zeta, pie;
+    }
+    C.col(j) = (end[0] - end[1]) / (2 * eps);
+  }
+  const double size = std::fmax(1.0, A.cwiseAbs().maxCoeff());
+  const double err = (A - C).cwiseAbs().maxCoeff() / size;
+  BOOST_TEST_MESSAGE("against central differences " << err);
+  BOOST_TEST(err <= 1e-7);
+  Eigen::MatrixXd J = Eigen::MatrixXd::Zero(2 * n, 2 * n);
+  J.topRightCorner(n, n) = Eigen::MatrixXd::Identity(n, n);
+  J.bottomLeftCorner(n, n) = -Eigen::MatrixXd::Identity(n, n);
+  BOOST_TEST((A.transpose() * J * A - J).cwiseAbs().maxCoeff() <= 1e-12 * size * size);
+  // the chart step's Jacobian (both ends around q0) is not the derivative
+  const auto local = S.local_step(q0);
+  V dq = M::chart_inverse(q0, c1), dp = V::Zero();
+  BOOST_REQUIRE(local.step(0.0, V::Zero(), pi0, dq, dp).converged);
+  BOOST_TEST((Eigen::MatrixXd(local.jacobian(V::Zero(), pi0, dq, dp)) - C).cwiseAbs().maxCoeff() > 1e-4 * size);
+}
+}  // namespace
+
+BOOST_AUTO_TEST_CASE(the_derivative_in_canonical_coordinates_is_the_linearisation) {
+  const SphericalPendulum P(1.0, 1.0, 9.81);
+  for (const SphereMap& R : sphere_maps)
+    BOOST_TEST_CONTEXT(R.name()) {
+      check_manifold_hamiltonian_derivative(
+          ManifoldHamiltonianStep<SphericalPendulumHamiltonian, SphereMap>(hamiltonian_of(P), R, 0.1), pendulum_point(),
+          pendulum_momentum());
+    }
+  const HeavyTop top(V3(1.0, 1.2, 0.5), 1.0, 9.81, V3(0.1, 0.0, 0.5));
+  for (const SO3Map& R : so3_maps)
+    BOOST_TEST_CONTEXT(R.name()) {
+      check_manifold_hamiltonian_derivative(
+          ManifoldHamiltonianStep<HeavyTopHamiltonian, SO3Map>(hamiltonian_of(top), R, 0.05),
+          M3(SO3::exp(V3(0.3, -0.7, 1.1))), V3(0.4, -1.0, 2.0));
+    }
 }
