@@ -203,8 +203,8 @@ class ManifoldHamiltonianStep {
   // The derivative of the step (q0, p0) -> (q1, p1) at its solution, in the canonical
   // coordinates (eta, pi) around q0 before the step and around q1 after it (those of
   // ManifoldStep::derivatives, solvers/manifold_step.h): A (2 dim x 2 dim), by the
-  // implicit function theorem through the chart step's solve (HamiltonianStep::jacobian
-  // in the chart centred at q0, solved again from (q0, p0)) followed by the change of
+  // implicit function theorem through the chart step's solve (in the chart centred at
+  // q0, solved again from (q0, p0)) followed by the change of
   // canonical coordinates from the chart at q0 to the chart at q1 at the end point.
   // Unforced steps only (a forced step's derivative is not written: validate refuses
   // --linearize there); B, where given, is 2 dim x 0. Defined in

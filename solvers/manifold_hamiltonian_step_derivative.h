@@ -15,8 +15,8 @@ namespace dvm {
 // (eta, pi) around q0 at both of its ends: the Hamiltonian and the map are written in the
 // chart centred at q0 and its cotangent lift, and the step is the same in any chart
 // (naturality, that header's comment), so its Jacobian Mc = d(eta1, pi1)/d(eta0, pi0)
-// (HamiltonianStep::jacobian, the implicit function theorem on Eq. 5.1 in the chart) is
-// the step's derivative in those coordinates around q0. The coordinates around q1 of
+// (the implicit function theorem on Eq. 5.1 in the chart, as HamiltonianStep::jacobian)
+// is the step's derivative in those coordinates around q0. The coordinates around q1 of
 // the end point follow by the cotangent lift of the change of charts
 // phi(eta) = chart^{-1}(q1, chart(q0, eta)):
 //   zeta = phi(eta),   pi' = Dphi(eta)^{-T} pi,
@@ -38,7 +38,27 @@ bool ManifoldHamiltonianStep<Ham, Map, Force>::derivatives(double t, const Point
     const V pi0 = M::covector_to_local(q0, p0);
     V xi = M::chart_inverse(q0, q1), dp = V::Zero();
     if (!local.step(t, V::Zero(), pi0, xi, dp).converged) return false;
-    const Mat<double, 2 * n, 2 * n> Mc = local.jacobian(V::Zero(), pi0, xi, dp);
+    // Mc = I - F_y^{-1} F_x, F_y and F_x the derivatives of the chart step's residual in
+    // the increments y = (dq, dp) and in the start x = (eta0, pi0), each by one pass in
+    // the Jets of 2 dim directions that Newton's method evaluates the residual in (no
+    // scalar type of more directions is compiled for the chart Hamiltonian and map)
+    using J2 = ceres::Jet<double, 2 * n>;
+    auto pass = [&](bool start) {
+      Vec<J2, n> e0, p, dq, dpi;
+      for (int i = 0; i < n; ++i) {
+        e0[i] = start ? seed<double, 2 * n>(0.0, i) : J2(0.0);
+        p[i] = start ? seed<double, 2 * n>(pi0[i], n + i) : J2(pi0[i]);
+        dq[i] = start ? J2(xi[i]) : seed<double, 2 * n>(xi[i], i);
+        dpi[i] = start ? J2(dp[i]) : seed<double, 2 * n>(dp[i], n + i);
+      }
+      const Vec<J2, 2 * n> F = local.residual(e0, p, dq, dpi);
+      Mat<double, 2 * n, 2 * n> D;
+      for (int i = 0; i < 2 * n; ++i) D.row(i) = F[i].v.transpose();
+      return D;
+    };
+    const Eigen::FullPivLU<Mat<double, 2 * n, 2 * n>> Fy(pass(false));
+    if (!Fy.isInvertible()) return false;
+    const Mat<double, 2 * n, 2 * n> Mc = Mat<double, 2 * n, 2 * n>::Identity() - Fy.solve(pass(true));
     // the change of charts at eta = xi, in nested Jets: Dphi (inner) and its second
     // derivatives (inner and outer)
     Vec<D, n> eta;

@@ -4,6 +4,7 @@
 // m g = 0: its Lagrangian and Hamiltonian are the top's minus a zero term, the same
 // numbers to the bit; the run is reported as the rigid body's (its columns, energy and
 // spatial angular momentum).
+#include "solvers/manifold_hamiltonian_step_derivative.h"
 #include "solvers/runtime/factories.h"
 #include "solvers/runtime/kernels_manifold.h"
 
@@ -36,3 +37,12 @@ std::unique_ptr<Run> written_rotation(const Problem& pr, const Method& me) {
 }
 
 }  // namespace dvm::factories
+
+namespace dvm {
+
+// the derivative of the unforced Hamiltonian step (dvm run --linearize), here where the
+// step itself is compiled
+template bool ManifoldHamiltonianStep<kernels::BuiltinOrWrittenHamiltonian<HeavyTop>, SO3Map>::derivatives(
+    double, const Point&, const Covector&, const Point&, Eigen::MatrixXd&, Eigen::MatrixXd*) const;
+
+}  // namespace dvm

@@ -1,5 +1,6 @@
 // Run kernels of the systems on S^2: the spherical pendulum and Lagrangians written on
 // S^2, through one set of steps (BuiltinOrWritten, solvers/runtime/kernels_manifold.h).
+#include "solvers/manifold_hamiltonian_step_derivative.h"
 #include "solvers/runtime/factories.h"
 #include "solvers/runtime/kernels_manifold.h"
 
@@ -23,3 +24,12 @@ std::unique_ptr<Run> written_sphere(const Problem& pr, const Method& me) {
 }
 
 }  // namespace dvm::factories
+
+namespace dvm {
+
+// the derivative of the unforced Hamiltonian step (dvm run --linearize), here where the
+// step itself is compiled
+template bool ManifoldHamiltonianStep<kernels::BuiltinOrWrittenHamiltonian<SphericalPendulum>, SphereMap>::derivatives(
+    double, const Point&, const Covector&, const Point&, Eigen::MatrixXd&, Eigen::MatrixXd*) const;
+
+}  // namespace dvm
