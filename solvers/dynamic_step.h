@@ -713,7 +713,7 @@ class DynamicHamiltonianThetaStep {
   // The interface passes dq alone (as to the lagrangian form's steps), so dp is found
   // again by solving the step from (q0, p0) with dq as the guess, in the step's own
   // workspace (so, as step(), not from two threads at once). The cotangent lift of the
-  // theta map is symplectic (paper Sec. 5.3), so A^T J A = J up to round-off for an
+  // theta map is symplectic (paper Sec. 5.1), so A^T J A = J up to round-off for an
   // unforced H; on T*Q itself (on_bundle) only at theta = 1/2. Returns false where the
   // solve fails or F_y is singular. Allocates.
   bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {

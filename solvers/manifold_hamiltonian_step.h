@@ -208,10 +208,10 @@ class ManifoldHamiltonianStep {
   // canonical coordinates from the chart at q0 to the chart at q1 at the end point.
   // Unforced steps only (a forced step's derivative is not written: validate refuses
   // --linearize there); B, where given, is 2 dim x 0. Defined in
-  // solvers/manifold_hamiltonian_step_derivative.h, instantiated where a file
-  // differentiates (runtime/kernels_manifold_derivatives.cc), so that a file compiling
-  // the step alone does not compile its derivative. False where the solve fails or a
-  // Jacobian is singular.
+  // solvers/manifold_hamiltonian_step_derivative.h, which only the files that
+  // differentiate include (the runtime's kernels_sphere.cc and kernels_rotation.cc, where
+  // the step is compiled too, instantiate it). False where the solve fails or a Jacobian
+  // is singular.
   bool derivatives(double t, const Point& q0, const Covector& p0, const Point& q1, Eigen::MatrixXd& A,
                    Eigen::MatrixXd* B) const;
 

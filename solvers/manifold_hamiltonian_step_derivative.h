@@ -1,7 +1,8 @@
 // The derivative of the Hamiltonian step on S^2 and SO(3) (ManifoldHamiltonianStep::
 // derivatives, declared in solvers/manifold_hamiltonian_step.h): included by the files
-// that differentiate steps (the tests; solvers/runtime/kernels_manifold_derivatives.cc,
-// which instantiates it for the runtime's steps), not by those that only take them.
+// that differentiate steps (the tests; solvers/runtime/kernels_sphere.cc and
+// kernels_rotation.cc, which instantiate it for the runtime's steps beside the steps
+// themselves), not by those that only take them.
 #pragma once
 
 #include <Eigen/Core>
@@ -52,9 +53,9 @@ bool ManifoldHamiltonianStep<Ham, Map, Force>::derivatives(double t, const Point
         dpi[i] = start ? J2(dp[i]) : seed<double, 2 * n>(dp[i], n + i);
       }
       const Vec<J2, 2 * n> F = local.residual(e0, p, dq, dpi);
-      Mat<double, 2 * n, 2 * n> D;
-      for (int i = 0; i < 2 * n; ++i) D.row(i) = F[i].v.transpose();
-      return D;
+      Mat<double, 2 * n, 2 * n> jac;
+      for (int i = 0; i < 2 * n; ++i) jac.row(i) = F[i].v.transpose();
+      return jac;
     };
     const Eigen::FullPivLU<Mat<double, 2 * n, 2 * n>> Fy(pass(false));
     if (!Fy.isInvertible()) return false;
