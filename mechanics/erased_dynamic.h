@@ -3,7 +3,7 @@
 // through one type, so that a run-time-sized step is compiled once for all of them
 // rather than once per system. The runtime steps the built-in systems of R^n this way
 // where a run needs a step that only the run-time-sized family has (the derivative of
-// the step, `dvm run --linearize`: solvers/runtime/kernels_rn_linearized.cc).
+// the step, `dvm run --linearize`: solvers/runtime/kernels_rn_run_time.cc).
 //
 // Each evaluation (value, gradient, Hessian, the inverse Legendre map) is one indirect
 // call; a step evaluates L a few times per Newton iteration, so the call is paid that

@@ -23,6 +23,7 @@
 #include <string>
 
 #include "examples/bench/hand_written.h"
+#include "examples/bench/step_timing.h"
 #include "mechanics/systems.h"
 #include "solvers/integrate.h"
 #include "solvers/position_momentum_step.h"
@@ -101,21 +102,7 @@ Result odeint_verlet(const Pendulum& P, double h, std::int64_t steps) {
 int main(int argc, char** argv) {
   std::int64_t steps = 2000000;
   int repeats = 5;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--steps" && i + 1 < argc)
-      steps = std::atoll(argv[++i]);
-    else if (a == "--repeats" && i + 1 < argc)
-      repeats = std::atoi(argv[++i]);
-    else {
-      std::fprintf(stderr, "usage: bench_midpoint_step [--steps N] [--repeats R]\n");
-      return 2;
-    }
-  }
-  if (steps < 1 || repeats < 1) {
-    std::fprintf(stderr, "bench_midpoint_step: steps and repeats must be positive\n");
-    return 2;
-  }
+  dvm::bench::parse_steps_and_repeats(argc, argv, "bench_midpoint_step", steps, repeats);
   const Pendulum P(1.0, 1.0, 1.0);
   const double h = 0.01;
   const Result hand = best_of(repeats, steps, [&] { return hand_written(P, h, steps); });

@@ -39,6 +39,7 @@
 #include <string>
 #include <vector>
 
+#include "examples/bench/step_timing.h"
 #include "mechanics/systems.h"
 #include "mechanics/systems_classic.h"
 #include "mechanics/written_lagrangian.h"
@@ -57,39 +58,9 @@
 #include "solvers/splitting_step.h"
 
 using namespace dvm;
+using namespace dvm::bench;
 
 namespace {
-
-struct Result {
-  double ns_per_step = INFINITY;
-  std::vector<double> state;
-};
-
-// The best of `repeats` runs of `steps` steps of `step` from (q0, p0) with velocity v0:
-// ns per step and the final state; a failed run ends the program with status 3.
-template <class Step, class V>
-Result time_steps(const Step& step, const V& q0, const V& p0, const V& v0, std::int64_t steps, int repeats,
-                  const std::string& what) {
-  Result best;
-  for (int r = 0; r < repeats; ++r) {
-    V q = q0, p = p0;
-    const auto t0 = std::chrono::steady_clock::now();
-    const RunSummary run = integrate(step, 0.0, q, p, v0, steps, [](auto&&...) {});
-    const double ns = std::chrono::duration<double, std::nano>(std::chrono::steady_clock::now() - t0).count() /
-                      static_cast<double>(steps);
-    if (run.failed) {
-      std::fprintf(stderr, "%s: run failed at step %lld: %s\n", what.c_str(), static_cast<long long>(run.failed_step),
-                   run.failure.message.c_str());
-      std::exit(3);
-    }
-    if (ns < best.ns_per_step) {
-      best.ns_per_step = ns;
-      best.state.assign(q.data(), q.data() + q.size());
-      best.state.insert(best.state.end(), p.data(), p.data() + p.size());
-    }
-  }
-  return best;
-}
 
 template <class System>
 Result measure(const System& L, const Vec<double, System::dim>& q0, const Vec<double, System::dim>& p0, double h,
@@ -106,13 +77,6 @@ Result measure_dynamic(const std::shared_ptr<WrittenSystem>& text, const Eigen::
   const DynamicThetaStep<WrittenDynamic> S(L, ThetaMap::midpoint(), h);
   const Eigen::VectorXd v0 = legendre_inverse(L, q0, p0);
   return time_steps(S, q0, p0, v0, steps, repeats, "written, run-time sized");
-}
-
-// The largest difference between two final states (q, p).
-double state_diff(const Result& a, const Result& b) {
-  double m = 0;
-  for (std::size_t i = 0; i < a.state.size(); ++i) m = std::fmax(m, std::fabs(a.state[i] - b.state[i]));
-  return m;
 }
 
 // A run through the runtime API as `dvm run` runs a scene: the built-in `system` with
@@ -401,21 +365,7 @@ void implicit_chain(int repeats) {
 int main(int argc, char** argv) {
   std::int64_t steps = 200000;
   int repeats = 5;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    if (a == "--steps" && i + 1 < argc)
-      steps = std::atoll(argv[++i]);
-    else if (a == "--repeats" && i + 1 < argc)
-      repeats = std::atoi(argv[++i]);
-    else {
-      std::fprintf(stderr, "usage: bench_written_lagrangian [--steps N] [--repeats R]\n");
-      return 2;
-    }
-  }
-  if (steps < 1 || repeats < 1) {
-    std::fprintf(stderr, "bench_written_lagrangian: steps and repeats must be positive\n");
-    return 2;
-  }
+  parse_steps_and_repeats(argc, argv, "bench_written_lagrangian", steps, repeats);
   compare("pendulum (m = l = g = 1), q0 = 2, p0 = 0", Pendulum(1.0, 1.0, 1.0), "pendulum",
           {{"m", 1.0}, {"l", 1.0}, {"g", 1.0}},
           written({"theta"}, {{"m", 1.0}, {"l", 1.0}, {"g", 1.0}}, "0.5*m*l^2*theta_dot^2 + m*g*l*cos(theta)"),

@@ -82,7 +82,7 @@ inline RnMap rn_map(const Method& m) {
 }
 
 // The theta of the method's map as a ThetaMap for the run-time-sized steps (kernels_dynamic.h,
-// make_linearized_run): retraction-theta with the flat retraction x + v is the same map,
+// make_run_time_sized_run): retraction-theta with the flat retraction x + v is the same map,
 // inverted in closed form there.
 inline ThetaMap dynamic_theta_map(const Method& me) {
   const MapEntry& e = *me.map;

@@ -1,7 +1,7 @@
 // Run kernels of the FPU chain of any length (solvers/chain_step.h: the theta-family
 // maps, one tridiagonal Newton solve per step; compositions of that step). With
 // --linearize the chain runs the run-time-sized steps that give their derivative
-// (make_linearized_run, kernels_rn.h) on ChainDynamic (mechanics/chain_dynamic.h), its
+// (make_run_time_sized_run, kernels_rn.h) on ChainDynamic (mechanics/chain_dynamic.h), its
 // Hessian dense: the same equations, solved by the dense Newton iteration.
 #include "mechanics/chain.h"
 #include "mechanics/chain_dynamic.h"
@@ -65,7 +65,7 @@ std::unique_ptr<Run> chain(const Problem& pr, const Method& me) {
   if (me.linearize) {
     kernels::require_dense_size(C.n, pr.origin + ": key 'system.params.n': got " + std::to_string(C.n) +
                                          "; with --linearize the chain's step");
-    return kernels::make_linearized_run(ErasedDynamicLagrangian(ChainDynamic(C)),
+    return kernels::make_run_time_sized_run(ErasedDynamicLagrangian(ChainDynamic(C)),
                                         kernels::ErasedRnView<Eigen::Dynamic>(view, C.n), pr, me, base, q, p, v0);
   }
   const ThetaMap R = std::get<ThetaMap>(kernels::rn_map(me));

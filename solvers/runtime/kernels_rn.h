@@ -7,14 +7,19 @@
 // with S itself, the steps a benchmark shows to pay for it (the position-momentum step
 // of the theta maps by Newton's method, alone and composed; on a separable S the kicks
 // and drifts of the Euler maps, Newton on the structured equation from 3 coordinates,
-// and Gauss collocation). Every other choice of the method (the hamiltonian, sode and
+// and Gauss collocation). The hamiltonian form of the theta maps by Newton's method
+// runs, from two coordinates on, the run-time-sized step on the system erased at
+// run-time size (make_run_time_sized_run, compiled once: kernels_rn_run_time.cc): H's
+// Hessian blocks from L's in closed form cost less than the fixed-size step's nested
+// Jets from two coordinates on, and about the same on one (bench_hamiltonian_form
+// measures both). Every other choice of the method (the hamiltonian form on one
+// coordinate, by TinySolver or of retraction-theta and written maps; the sode and
 // newmark forms, maps inverted by Newton's method, TinySolver, Galerkin methods that
 // are not Gauss collocation, boundary values) runs the same step templates with
 // ErasedLagrangian<N> (mechanics/erased_lagrangian.h) and the view erased likewise
 // (ErasedRnView<N>): make_sized_run<N>, compiled once for each size the built-in
 // systems have (kernels_rn_sized.h). --linearize runs the run-time-sized steps that
-// give their derivative, on the system erased at run-time size (make_linearized_run,
-// compiled once: kernels_rn_linearized.cc).
+// give their derivative, through make_run_time_sized_run.
 #pragma once
 
 #include <array>
@@ -226,7 +231,7 @@ void initial_state(const Problem& pr, const S& L, Vec<double, S::dim>& q, Vec<do
 // The view of a fixed-size system for the kernels compiled once per size (make_sized_run):
 // RnView<S>'s functions behind one indirect call each (they run at most once a step).
 // ErasedRnView<Eigen::Dynamic> is the same view with run-time-sized points, for the
-// run-time-sized steps (make_linearized_run): each call converts them to S's size. It
+// run-time-sized steps (make_run_time_sized_run): each call converts them to S's size. It
 // also holds a view of run-time-sized points of its own (the chain's), given with its
 // number of coordinates.
 template <int N>
@@ -321,12 +326,13 @@ template <int N>
 std::unique_ptr<Run> make_sized_run(const ErasedLagrangian<N>& L, const ErasedRnView<N>& view, const Problem& pr,
                                     const Method& me, RunReport base, const SizedStart<N>* start);
 
-// --linearize (dvm run): the run-time-sized position-momentum step of the theta-family
-// maps and their hamiltonian form, composed or not, and the Galerkin step, which give
-// their derivative, on the
-// system L and its view, each erased (kernels_rn_linearized.cc, compiled once for every
-// built-in system: no fixed-size step compiles its derivative).
-std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,
+// The run-time-sized steps on the system L and its view, each erased
+// (kernels_rn_run_time.cc, compiled once for every built-in system): the
+// position-momentum step of the theta-family maps and their hamiltonian form, composed
+// or not, and the Galerkin step. They give their derivative (--linearize: no fixed-size
+// step compiles one), and run the hamiltonian form of the theta maps by Newton's
+// method (hamiltonian_theta_path).
+std::unique_ptr<Run> make_run_time_sized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,
                                          const Problem& pr, const Method& me, RunReport base,
                                          const Eigen::VectorXd& q, const Eigen::VectorXd& p,
                                          const Eigen::VectorXd& v0);
@@ -336,6 +342,15 @@ std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const
 // method (composed or not): the path make_rn_run compiles for each system.
 inline bool theta_newton_path(const Method& me) {
   return !me.galerkin && me.form == Form::lagrangian && me.map && me.map->family == MapFamily::theta &&
+         me.solver == SolverKind::newton;
+}
+
+// Whether the method is the hamiltonian form of a theta map (composed or not, lift
+// cotangent or none) solved by Newton's method on a system of N coordinates: the path
+// make_rn_run gives to the run-time-sized step from two coordinates on (the rule of the
+// header comment).
+inline bool hamiltonian_theta_path(const Method& me, int N) {
+  return N >= 2 && !me.galerkin && me.form == Form::hamiltonian && me.map && me.map->family == MapFamily::theta &&
          me.solver == SolverKind::newton;
 }
 
@@ -360,8 +375,8 @@ std::unique_ptr<Run> make_rn_run(const S& L, const Problem& pr, const Method& me
   report_structure(base, L, q, v0, pr);
   require_splitting_structure(base, me, pr);
 
-  if (me.linearize)
-    return make_linearized_run(ErasedDynamicLagrangian(FixedAsDynamic<S>(L)), ErasedRnView<Eigen::Dynamic>(view), pr,
+  if (me.linearize || hamiltonian_theta_path(me, N))
+    return make_run_time_sized_run(ErasedDynamicLagrangian(FixedAsDynamic<S>(L)), ErasedRnView<Eigen::Dynamic>(view), pr,
                                me, base, q, p, v0);
 
   if constexpr (is_separable_v<S>)

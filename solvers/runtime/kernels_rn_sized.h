@@ -7,7 +7,9 @@
 //   lagrangian        PositionMomentumStep<L, Map> for the maps inverted by Newton's
 //                     method (retraction-theta, written) and for TinySolver
 //   hamiltonian       HamiltonianStep<LegendreHamiltonian<L>, Map>, or on the cotangent
-//                     bundle itself (lift none, the theta maps)
+//                     bundle itself (lift none, the theta maps): of one coordinate, by
+//                     TinySolver, of retraction-theta and written maps (the theta maps
+//                     by Newton's method from two coordinates are make_rn_run's)
 //   sode1 / sode2     SodeStep<L, tangent lift of Map>, or of the Legendre lift
 //   newmark           NewmarkStep<L>
 //   galerkin          GalerkinStep<L> (Gauss collocation of a separable system is

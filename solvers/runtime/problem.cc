@@ -341,7 +341,7 @@ void validate(const Problem& pr, const Method& me) {
   // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative,
   // ConstrainedGalerkinStep::derivative, DynamicHamiltonianThetaStep::derivative, the
   // first, third and fifth also for the built-in systems of fixed size
-  // (make_linearized_run); on S^2 and SO(3) ManifoldStep::derivatives and
+  // (make_run_time_sized_run); on S^2 and SO(3) ManifoldStep::derivatives and
   // ManifoldHamiltonianStep::derivatives)
   if (me.linearize) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "

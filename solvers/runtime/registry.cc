@@ -38,7 +38,7 @@ const std::vector<Form> kAllForms = {Form::lagrangian, Form::hamiltonian, Form::
 
 // Built-in systems on R^n of fixed size: every form, map, composition, Galerkin and
 // boundary values; --linearize (the run-time-sized steps that give their derivative,
-// make_linearized_run).
+// make_run_time_sized_run).
 SystemCapabilities fixed_rn() {
   SystemCapabilities c{kAllForms, true, true, true, true, ""};
   c.linearize = true;

@@ -1,10 +1,11 @@
-// dvm run --linearize on the built-in systems of fixed size on R^n
-// (make_linearized_run, declared in kernels_rn.h): the steps that give their derivative
-// by the implicit function theorem are the run-time-sized ones (DynamicThetaStep and,
-// in the hamiltonian form, DynamicHamiltonianThetaStep of H from L by the Legendre
-// transform, alone or composed, and DynamicGalerkinStep: solvers/dynamic_step.h,
-// solvers/dynamic_galerkin_step.h), which the Lagrangians written on R^n run with
-// --linearize too. Here they run on the built-in system through ErasedDynamicLagrangian
+// The run-time-sized steps of the built-in systems of fixed size on R^n
+// (make_run_time_sized_run, declared in kernels_rn.h): DynamicThetaStep and, in the
+// hamiltonian form, DynamicHamiltonianThetaStep of H from L by the Legendre transform,
+// alone or composed, and DynamicGalerkinStep (solvers/dynamic_step.h,
+// solvers/dynamic_galerkin_step.h), the steps the Lagrangians written on R^n run too.
+// They give their derivative by the implicit function theorem (--linearize), and the
+// hamiltonian one is the faster step of the hamiltonian form from two coordinates on
+// (kernels_rn.h). Here they run on the built-in system through ErasedDynamicLagrangian
 // (its closed-form gradient, the Hessian by one Jet level through it: FixedAsDynamic),
 // and the built-in's own view (columns, invariants, exact solution) through
 // ErasedRnView<Eigen::Dynamic>: one instantiation serves every built-in system.
@@ -15,7 +16,7 @@
 
 namespace dvm::kernels {
 
-std::unique_ptr<Run> make_linearized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,
+std::unique_ptr<Run> make_run_time_sized_run(const ErasedDynamicLagrangian& L, const ErasedRnView<Eigen::Dynamic>& view,
                                          const Problem& pr, const Method& me, RunReport base,
                                          const Eigen::VectorXd& q, const Eigen::VectorXd& p,
                                          const Eigen::VectorXd& v0) {
