@@ -167,10 +167,10 @@ test: test-deps
 	cmake --build $(TEST_BUILD) -j $(JOBS)
 	cd $(TEST_BUILD) && ctest --output-on-failure -j $(JOBS)
 
-# bench_chain, bench_nbody, bench_sphere_chain, bench_constrained and bench_hamiltonian_form are
+# bench_chain, bench_nbody, bench_sphere_chain, bench_constrained and bench_run_time_size are
 # built too and run by hand (examples/bench/README.md)
 BENCH_PROGRAMS := bench_midpoint_step bench_written_lagrangian bench_ratios bench_galerkin_kepler bench_chain bench_nbody \
-  bench_sphere_chain bench_constrained bench_hamiltonian_form bench_sweep
+  bench_sphere_chain bench_constrained bench_run_time_size bench_sweep
 bench: deps
 	$(call configure,ON)
 	cmake --build $(BUILD) -j $(JOBS) --target $(BENCH_PROGRAMS) dvm

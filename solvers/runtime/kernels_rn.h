@@ -11,15 +11,16 @@
 // runs, from two coordinates on, the run-time-sized step on the system erased at
 // run-time size (make_run_time_sized_run, compiled once: kernels_rn_run_time.cc): H's
 // Hessian blocks from L's in closed form cost less than the fixed-size step's nested
-// Jets from two coordinates on, and about the same on one (bench_hamiltonian_form
-// measures both). Every other choice of the method (the hamiltonian form on one
-// coordinate, by TinySolver or of retraction-theta and written maps; the sode and
-// newmark forms, maps inverted by Newton's method, TinySolver, Galerkin methods that
-// are not Gauss collocation, boundary values) runs the same step templates with
-// ErasedLagrangian<N> (mechanics/erased_lagrangian.h) and the view erased likewise
-// (ErasedRnView<N>): make_sized_run<N>, compiled once for each size the built-in
-// systems have (kernels_rn_sized.h). --linearize runs the run-time-sized steps that
-// give their derivative, through make_run_time_sized_run.
+// Jets from two coordinates on, and about the same on one (bench_run_time_size
+// measures both, and Galerkin both ways, where the fixed-size step is the faster).
+// Every other choice of the method (the hamiltonian form on one coordinate, by
+// TinySolver or of retraction-theta and written maps; the sode and newmark forms, maps
+// inverted by Newton's method, TinySolver, Galerkin methods that are not Gauss
+// collocation, boundary values) runs the same step templates with ErasedLagrangian<N>
+// (mechanics/erased_lagrangian.h) and the view erased likewise (ErasedRnView<N>):
+// make_sized_run<N>, compiled once for each size the built-in systems have
+// (kernels_rn_sized.h). --linearize runs the run-time-sized steps that give their
+// derivative, through make_run_time_sized_run.
 #pragma once
 
 #include <array>
