@@ -710,9 +710,11 @@ class DynamicHamiltonianThetaStep {
   // (HamiltonianThetaEquation::position_columns, momentum_columns) the driver's Jacobian
   // is F_y = I + [theta dF/dQ  b dF/dP], and
   //   dy/d(q0, p0) = -F_y^{-1} G,   A = I + dy/d(q0, p0).
-  // The interface passes dq alone (as to the lagrangian form's steps), so dp is found
-  // again by solving the step from (q0, p0) with dq as the guess, in the step's own
-  // workspace (so, as step(), not from two threads at once). The cotangent lift of the
+  // The interface passes dq alone (as to the lagrangian form's steps): dp is the one of
+  // this step's last solve where that solve was from the same (t0, q0, p0) to the same
+  // dq (a run differentiates the step it has just taken), else found again by solving
+  // the step from (q0, p0) with dq as the guess; in the step's own workspace (so, as
+  // step(), not from two threads at once). The cotangent lift of the
   // theta map is symplectic (paper Sec. 5.1), so A^T J A = J up to round-off for an
   // unforced H; on T*Q itself (on_bundle) only at theta = 1/2. Returns false where the
   // solve fails or F_y is singular. Allocates.
@@ -740,6 +742,7 @@ class DynamicHamiltonianThetaStep {
     Work& w = *work_;
     w.y.head(n) = dq;
     w.y.tail(n) = dp;
+    w.last.solved = false;
     try {
       w.eq.begin(q0, p0, t);
       s = newton_drive(w.eq, w.lu, Refresh::every_iteration, options_, w.y, w.r, w.dx, w.J, w.state, w.start);
@@ -749,6 +752,7 @@ class DynamicHamiltonianThetaStep {
     }
     dq = w.y.head(n);
     dp = w.y.tail(n);
+    if (s.converged) w.last.remember(t, q0, p0, w.y);
     return s;
   }
 
@@ -760,9 +764,12 @@ class DynamicHamiltonianThetaStep {
                                   " coordinates (p0 " + std::to_string(p0.size()) + ", dq " +
                                   std::to_string(dq.size()) + "); the system has " + std::to_string(n));
     using M = Eigen::MatrixXd;
-    V d = dq, e = V::Zero(n);
-    if (!step(t0, q0, p0, d, e).converged) return false;
     Work& w = *work_;
+    V d = dq, e = V::Zero(n);
+    if (w.last.is(t0, q0, p0, dq))
+      e = w.last.y.tail(n);
+    else if (!step(t0, q0, p0, d, e).converged)
+      return false;
     w.y.head(n) = d;
     w.y.tail(n) = e;
     w.eq.begin(q0, p0, t0);
@@ -804,6 +811,19 @@ class DynamicHamiltonianThetaStep {
     Eigen::MatrixXd J;
     DenseLU lu;
     DriverState state;
+    // the last converged solve: from (t, q0, p0) to y = (dq, dp)
+    struct LastSolve {
+      bool solved = false;
+      double t = 0.0;
+      Eigen::VectorXd q0, p0, y;
+      void remember(double t_, const V& q, const V& p, const Eigen::VectorXd& y_) {
+        t = t_, q0 = q, p0 = p, y = y_;
+        solved = true;
+      }
+      bool is(double t_, const V& q, const V& p, const V& dq) const {
+        return solved && t == t_ && q0 == q && p0 == p && y.head(dq.size()) == dq;
+      }
+    } last;
   };
 
   Ham H_;

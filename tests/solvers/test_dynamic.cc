@@ -745,6 +745,8 @@ void check_hamiltonian_step_derivative(const Ham& H, const VectorXd& q0, const V
       };
       const VectorXd y1 = flow(q0, p0);
       const VectorXd dq = y1.head(n) - q0;
+      // A at the step just taken (dp from its solve), A2 below after other solves (dp
+      // found again by solving the step)
       MatrixXd A;
       BOOST_TEST_REQUIRE(S.derivative(t0, q0, p0, dq, A));
       BOOST_TEST(A.rows() == 2 * n);
@@ -759,7 +761,8 @@ void check_hamiltonian_step_derivative(const Ham& H, const VectorXd& q0, const V
       else
         BOOST_TEST(defect <= 1e-12 * size * size);
       BOOST_TEST(A.bottomLeftCorner(n, n).cwiseAbs().maxCoeff() > 1e-3);
-      // A and B (none without a force) from one differentiation
+      // A and B (none without a force) from one differentiation, after the central
+      // differences' solves
       MatrixXd A2, B;
       BOOST_TEST_REQUIRE(S.derivatives(t0, q0, p0, dq, A2, &B));
       BOOST_TEST((A2 - A).cwiseAbs().maxCoeff() <= 1e-13 * size);
