@@ -122,6 +122,27 @@ class ConstrainedHamiltonianThetaEquation {
   }
   double end_time() const { return t1_; }
 
+  // For the step's derivative, at the solution y after jacobian(y, ...): s (lambda =
+  // s x, the multipliers), G0 = Dg(t0, q0), and the residual's columns in q0, p0 and the
+  // force's control inputs ((2n + m) x (2n + c)). Q = q0 + theta dq moves with q0 by the
+  // identity; P = p0 - G0^T lambda + (1 - theta) dp with p0 by the identity and with q0
+  // by -H_lambda (the constraints' Hessians at (t0, q0) contracted with lambda); the
+  // constraint rows s_g g(t1, q0 + dq) with q0 as with dq.
+  double multiplier_scale() const { return s_; }
+  const Matrix& start_gradients() const { return G0_; }
+  void start_columns(const Matrix& H_lambda, Matrix& C) {
+    const Eigen::Index n = n_, m = m_;
+    Matrix Qc, Uc;
+    eq_.position_columns(Qc);
+    eq_.control_columns(Uc);
+    C.setZero(2 * n + m, 2 * n + Uc.cols());
+    C.topLeftCorner(2 * n, n) = Qc;
+    C.topLeftCorner(2 * n, n).noalias() -= Pc_ * H_lambda;
+    C.block(0, n, 2 * n, n) = Pc_;
+    C.bottomLeftCorner(m, n) = sr_ * G1_;
+    if (Uc.cols() > 0) C.topRightCorner(2 * n, Uc.cols()) = Uc;
+  }
+
  private:
   // (dq, dp) for the unconstrained equation, q1, and its start momentum p0 - s G0^T x
   void split(const Vector& y) {
@@ -209,10 +230,44 @@ class ConstrainedHamiltonianThetaStep {
   const StepOptions& options() const { return options_; }
   int dim() const { return L_.dim(); }
   int constraints() const { return con_->count(); }
+  // The force's control inputs (WrittenForce::controls()), 0 without a force.
+  int controls() const {
+    if constexpr (kForced) return force_->controls();
+    return 0;
+  }
 
   // The constrained step of the adjoint map (1 - theta).
   ConstrainedHamiltonianThetaStep adjoint() const {
     return ConstrainedHamiltonianThetaStep(H_, L_, R_.adjoint(), h_, con_, options_, momentum_, force_);
+  }
+
+  // The derivative of the step (q0, p0) -> (q1, p1) at the increment dq that step()
+  // solved for from (q0, p0) at time t0, by the implicit function theorem on its two
+  // equations (no finite differences); A (2n x 2n) as DynamicThetaStep::derivative gives
+  // it, coordinates before momenta. The step is solved again from (q0, p0) with dq as
+  // the guess, for dp, the multipliers and the projection's mu and v1. Equation 1,
+  // F(y; q0, p0) = 0 in y = (dq, dp, lambda / s), gives dy/d(q0, p0) = -F_y^{-1} C, F_y
+  // the driver's Jacobian and C the columns of ConstrainedHamiltonianThetaEquation::
+  // start_columns; then q1 = q0 + dq, p1~ = p0 - G0^T lambda + dp (whose derivative in
+  // q0 has -H_lambda too), and equation 2 at (q1, p1~) as
+  // constrained_detail::right_transform_derivative differentiates it. Without forces
+  // the step is symplectic on the constraint's cotangent bundle, as the constrained
+  // position-momentum step (A^T J A = J on the vectors tangent to it). Returns false
+  // where the solve fails, a matrix is singular or a value is not finite. Allocates;
+  // not from two threads at once (it uses the step's workspace).
+  bool derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A) const {
+    return differentiate(t0, q0, p0, dq, A, nullptr);
+  }
+  // B = d(q1, p1)/du (2n x c) in the force's control inputs u (held over the step): the
+  // columns of the same solves for u, which enters through F at the node.
+  template <class Fo = Force, std::enable_if_t<is_force_v<Fo>, int> = 0>
+  bool control_derivative(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& B) const {
+    Eigen::MatrixXd A;
+    return differentiate(t0, q0, p0, dq, A, &B);
+  }
+  // A and, where B is not null, B from one differentiation.
+  bool derivatives(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    return differentiate(t0, q0, p0, dq, A, B);
   }
 
   // One step from (q0, p0) at time t; dq holds the starting guess on entry and q1 - q0
@@ -245,6 +300,45 @@ class ConstrainedHamiltonianThetaStep {
   }
 
  private:
+  bool differentiate(double t0, const V& q0, const V& p0, const V& dq, Eigen::MatrixXd& A, Eigen::MatrixXd* B) const {
+    const int n = L_.dim(), m = con_->count();
+    if (q0.size() != n || p0.size() != n || dq.size() != n)
+      throw std::invalid_argument("ConstrainedHamiltonianThetaStep::derivative: a state of " +
+                                  std::to_string(q0.size()) + " coordinates; the system has " + std::to_string(n));
+    using M = Eigen::MatrixXd;
+    V d = dq, e(n);
+    if (!step(t0, q0, p0, d, e).converged) return false;
+    // step() left (q0, p0) in w.q0, w.p0, the solution in w.y, and the projection's
+    // q1, v1, mu and G1 = Dg(t1, q1)
+    Work& w = *work_;
+    w.eq.begin(w.q0, w.p0, t0);
+    if (!std::isfinite(w.eq.jacobian(w.y, w.r, w.J))) return false;
+    const double s = w.eq.multiplier_scale();
+    const V lambda = s * w.y.tail(m);
+    std::vector<M> H0;
+    M Gqt0;
+    w.con->second_derivatives(t0, w.q0, H0, Gqt0);
+    M Hl = M::Zero(n, n);
+    for (int i = 0; i < m; ++i) Hl += lambda[i] * H0[static_cast<std::size_t>(i)];
+    M C;
+    w.eq.start_columns(Hl, C);
+    const Eigen::PartialPivLU<M> lu(w.J);
+    if (!constrained_detail::lu_invertible(lu)) return false;
+    const M Y = -lu.solve(C);  // d(dq, dp, lambda / s) / d(q0, p0, u)
+    M dq1 = Y.topRows(n);
+    dq1.leftCols(n) += M::Identity(n, n);
+    // p1~ = p0 - G0^T lambda + dp, lambda = s x
+    M dpt = Y.middleRows(n, n);
+    dpt.noalias() -= s * (w.eq.start_gradients().transpose() * Y.bottomRows(m));
+    dpt.leftCols(n) -= Hl;
+    dpt.block(0, n, n, n) += M::Identity(n, n);
+    M dp1;
+    if (!constrained_detail::right_transform_derivative<Eigen::Dynamic, Eigen::Dynamic, Eigen::Dynamic>(
+            L_, *w.con, w.eq.end_time(), w.q1, w.v1, w.projection.mu, w.projection.G, dq1, dpt, dp1))
+      return false;
+    return dynamic_detail::assemble_derivative(n, dq1, dp1, A, B);
+  }
+
   using Eq = ConstrainedHamiltonianThetaEquation<Ham, Con, Force>;
   struct Work {
     Work(const Ham& H, const Con& c, double theta, double h, const Force* f, int n)

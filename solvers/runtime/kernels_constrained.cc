@@ -67,7 +67,7 @@ std::unique_ptr<Run> make_constrained_run(const WrittenDynamic& L, const Problem
         using Force = std::remove_const_t<typename decltype(fo)::element_type>;
         using Step = ConstrainedHamiltonianThetaStep<std::decay_t<decltype(H)>, WrittenDynamic, WrittenConstraints, Force>;
         auto make = [&](double hk, const ThetaMap& Rk) { return Step(H, L, Rk, hk, con, opt, momentum, fo); };
-        return composable_run(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
+        return composable_run<true>(view, me, h, rn_stages(me, R), make, q, p, v0, base, pr.steps);
       };
       return force ? with_force(force) : with_force(std::shared_ptr<const NoForce>());
     };

@@ -339,7 +339,8 @@ void validate(const Problem& pr, const Method& me) {
 
   // dvm run --linearize: the steps that give their derivative (DynamicThetaStep::derivative,
   // ConstrainedThetaStep::derivative, DynamicGalerkinStep::derivative,
-  // ConstrainedGalerkinStep::derivative, DynamicHamiltonianThetaStep::derivative, the
+  // ConstrainedGalerkinStep::derivative, DynamicHamiltonianThetaStep::derivative,
+  // ConstrainedHamiltonianThetaStep::derivative, the
   // first, third and fifth also for the built-in systems of fixed size
   // (make_run_time_sized_run); on S^2 and SO(3) ManifoldStep::derivatives and
   // ManifoldHamiltonianStep::derivatives)
@@ -347,7 +348,7 @@ void validate(const Problem& pr, const Method& me) {
     const std::string what = "--linearize: the derivative of each step is given by the position-momentum step of the "
                              "theta-family maps, by their hamiltonian form and by Galerkin, for the built-in systems "
                              "of fixed size on R^n, for the chain (the theta-family maps), n bodies and Lagrangians "
-                             "written on R^n (constrained or not; the hamiltonian form unconstrained), and by the "
+                             "written on R^n (constrained or not), and by the "
                              "position-momentum step of the maps of S^2 and SO(3) (forced or not, not constrained) "
                              "and their hamiltonian form (not forced), for their built-in and written systems";
     if (sys.space == Space::euclidean) {
@@ -367,8 +368,6 @@ void validate(const Problem& pr, const Method& me) {
     const bool hamiltonian = me.form == Form::hamiltonian && !me.galerkin;
     if (me.form != Form::lagrangian && !hamiltonian)
       throw InputError(what + ", not integrator.form = \"" + std::string(to_string(me.form)) + "\"");
-    if (hamiltonian && pr.constrained())
-      throw InputError(pr.constraints_where + ": " + what + "; not integrator.form = \"hamiltonian\" with constraints");
     if (hamiltonian && sys.space != Space::euclidean && pr.forced())
       throw InputError(pr.forces_where + ": " + what + "; not integrator.form = \"hamiltonian\" with forces on " +
                        std::string(to_string(sys.space)));

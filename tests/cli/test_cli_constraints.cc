@@ -1176,7 +1176,8 @@ BOOST_AUTO_TEST_CASE(the_sode_forms_refuse_a_lagrangian_in_t_without_a_constant_
 // checks it against central differences), 1 + (2n)^2 columns a row. A_k maps onto the
 // constraint's cotangent bundle: with the first rows of A_k and the last of A_{k-1} it
 // is symplectic there, (A_k A_{k-1})^T J (A_k A_{k-1}) = A_{k-1}^T J A_{k-1}; the same
-// for the triple jump of the constrained midpoint and for Lobatto Galerkin s = 3.
+// for the triple jump of the constrained midpoint, for Lobatto Galerkin s = 3 and for the
+// hamiltonian form, whose A_k is the lagrangian form's here (a separable L).
 BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
   const std::string npy = temp_dir() + "/constrained_A.npy";
   const Output o = dvm({"run", scene("pendulum_cartesian.toml"), "--no-output", "--quiet", "--linearize", npy, "--set",
@@ -1228,6 +1229,37 @@ BOOST_AUTO_TEST_CASE(linearize_gives_the_constrained_steps_jacobians) {
     const Eigen::Matrix4d P = A(k - 1), Q = A(k);
     const Eigen::Matrix4d before = P.transpose() * J * P, after = P.transpose() * Q.transpose() * J * Q * P;
     BOOST_TEST((after - before).cwiseAbs().maxCoeff() <= 1e-12 * before.cwiseAbs().maxCoeff());
+  }
+  // the hamiltonian form (ConstrainedHamiltonianThetaStep::derivative): on this separable
+  // Lagrangian the constrained Hamiltonian step is the position-momentum step's map, so
+  // the same A_k to the solvers' tolerance, and the same property; plain and composed
+  for (const std::string composition : {"none", "triple-jump:4"}) {
+    auto values = [&](const std::string& form) {
+      const Output r = dvm({"run", scene("pendulum_cartesian.toml"), "--no-output", "--quiet", "--linearize", npy,
+                            "--set", "integrator.t_end=0.05", "--set", "integrator.form=\"" + form + "\"", "--set",
+                            "integrator.composition=\"" + composition + "\""});
+      BOOST_TEST_REQUIRE(r.status == 0, r.err);
+      const std::string b = slurp(npy);
+      BOOST_TEST_REQUIRE(b.size() == composed.size());
+      std::vector<double> out(v.size());
+      std::memcpy(out.data(), b.data() + 10 + header_len, out.size() * sizeof(double));
+      return out;
+    };
+    const std::vector<double> lagrangian = values("lagrangian"), hamiltonian = values("hamiltonian");
+    double scale = 0.0, diff = 0.0;
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      scale = std::fmax(scale, std::fabs(lagrangian[i]));
+      diff = std::fmax(diff, std::fabs(lagrangian[i] - hamiltonian[i]));
+    }
+    BOOST_TEST_MESSAGE("hamiltonian form, composition " << composition << ": A_k against the lagrangian form's "
+                                                        << diff / scale);
+    BOOST_TEST(diff <= 1e-10 * scale, composition);
+    v = hamiltonian;
+    for (int k = 1; k < 5; ++k) {
+      const Eigen::Matrix4d P = A(k - 1), Q = A(k);
+      const Eigen::Matrix4d before = P.transpose() * J * P, after = P.transpose() * Q.transpose() * J * Q * P;
+      BOOST_TEST((after - before).cwiseAbs().maxCoeff() <= 1e-12 * before.cwiseAbs().maxCoeff(), composition);
+    }
   }
 }
 

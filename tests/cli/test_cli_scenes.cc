@@ -1290,8 +1290,6 @@ BOOST_AUTO_TEST_CASE(linearize_writes_the_derivative_of_every_step) {
       BOOST_TEST(b.at(k, 1) * b.at(k, 4) - b.at(k, 2) * b.at(k, 3) < 1.0 - 1e-4, quadrature);
   }
   refused("pendulum_written.toml", {"--set", "integrator.form=sode1"}, "not integrator.form = \"sode1\"");
-  refused("pendulum_cartesian.toml", {"--set", "integrator.form=hamiltonian"},
-          "not integrator.form = \"hamiltonian\" with constraints");
   // on S^2 and SO(3): the lagrangian form of the maps, forced or not, and their
   // hamiltonian form unforced; not constrained, not Galerkin, not on (S^2)^K
   // (linearize_on_the_sphere_and_the_rotation_group below)

@@ -24,6 +24,7 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 #include <boost/test/unit_test.hpp>
 
 #include <cmath>
+#include <tuple>
 #include <vector>
 
 #include "mechanics/dynamic_system.h"
@@ -625,6 +626,37 @@ BOOST_AUTO_TEST_CASE(the_derivative_of_the_constrained_step_is_its_linearisation
     moving_support_state(t0, q, p);
     BOOST_TEST_CONTEXT("moving support with damping") { check(S, t0, q, p, false); }
   }
+  // the hamiltonian form (ConstrainedHamiltonianThetaStep::derivative), the same checks:
+  // the Cartesian double pendulum (separable: the same map as the position-momentum
+  // step, and its constraints curved, so that their Hessians enter), a pendulum in polar
+  // coordinates held on r^2 = l^2 (L not separable: its mass matrix depends on r), and
+  // the damped pendulum on the moving support
+  using HL = LegendreDynamicHamiltonian<WrittenDynamic>;
+  const auto polar = system_of({"r", "a"}, "m*(r_dot^2 + r^2*a_dot^2)/2 + m*g*r*cos(a)", {"r^2 - l^2"});
+  VectorXd qp(2), pp(2);
+  qp << kL, 1.2;
+  pp << 0.0, kM * kL * kL * 0.5;
+  for (double theta : {0.3, 0.5}) {
+    for (const auto& [name, sys, q0, p0] : {std::tuple{"double pendulum", pendulum2, q2, p2},
+                                            std::tuple{"polar pendulum", polar, qp, pp}}) {
+      BOOST_TEST_CONTEXT("hamiltonian form, " << name << ", theta " << theta) {
+        const WrittenDynamic L(sys);
+        const ConstrainedHamiltonianThetaStep<HL, WrittenDynamic, WrittenConstraints> S(
+            HL(L), L, ThetaMap(theta), 0.01, std::make_shared<WrittenConstraints>(sys));
+        check(S, 0.0, q0, p0, true);
+      }
+    }
+  }
+  {
+    const WrittenDynamic L(moving);
+    const ConstrainedHamiltonianThetaStep<HL, WrittenDynamic, WrittenConstraints, WrittenForce> S(
+        HL(L), L, ThetaMap(0.3), 0.01, std::make_shared<WrittenConstraints>(moving), {}, MomentumMap::constant,
+        std::make_shared<WrittenForce>(moving));
+    VectorXd q, p;
+    const double t0 = 0.4;
+    moving_support_state(t0, q, p);
+    BOOST_TEST_CONTEXT("hamiltonian form, moving support with damping") { check(S, t0, q, p, false); }
+  }
 }
 
 // The step compiled for its size (ConstrainedThetaStep<..., 2, 1>, what the runtime takes
@@ -751,6 +783,12 @@ BOOST_AUTO_TEST_CASE(the_derivative_in_the_controls_is_the_linearisation_in_u) {
     return ConstrainedThetaStep<WrittenDynamic, WrittenConstraints, WrittenForce>(
         WrittenDynamic(pushed), ThetaMap(0.3), 0.01, std::make_shared<WrittenConstraints>(pushed), {},
         MomentumMap::general, f);
+  }, pushed, c.q, c.p);
+  check([&](std::shared_ptr<WrittenForce> f) {
+    using H = LegendreDynamicHamiltonian<WrittenDynamic>;
+    const WrittenDynamic L(pushed);
+    return ConstrainedHamiltonianThetaStep<H, WrittenDynamic, WrittenConstraints, WrittenForce>(
+        H(L), L, ThetaMap(0.3), 0.01, std::make_shared<WrittenConstraints>(pushed), {}, MomentumMap::general, f);
   }, pushed, c.q, c.p);
   check([&](std::shared_ptr<WrittenForce> f) {
     return ConstrainedGalerkinStep<WrittenDynamic, WrittenConstraints, WrittenForce>(
