@@ -62,6 +62,7 @@
 #include <Eigen/Core>
 #include <Eigen/LU>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -710,11 +711,11 @@ class DynamicHamiltonianThetaStep {
   // (HamiltonianThetaEquation::position_columns, momentum_columns) the driver's Jacobian
   // is F_y = I + [theta dF/dQ  b dF/dP], and
   //   dy/d(q0, p0) = -F_y^{-1} G,   A = I + dy/d(q0, p0).
-  // The interface passes dq alone (as to the lagrangian form's steps): dp is the one of
-  // this step's last solve where that solve was from the same (t0, q0, p0) to the same
-  // dq (a run differentiates the step it has just taken), else found again by solving
-  // the step from (q0, p0) with dq as the guess; in the step's own workspace (so, as
-  // step(), not from two threads at once). The cotangent lift of the
+  // The interface passes dq alone (as to the lagrangian form's steps): (dq, dp) are this
+  // step's last solve's where that solve was from the same (t0, q0, p0) to dq up to
+  // round-off (a run differentiates the step it has just taken, dq = q1 - q0), else
+  // found again by solving the step from (q0, p0) with dq as the guess; in the step's
+  // own workspace (so, as step(), not from two threads at once). The cotangent lift of the
   // theta map is symplectic (paper Sec. 5.1), so A^T J A = J up to round-off for an
   // unforced H; on T*Q itself (on_bundle) only at theta = 1/2. Returns false where the
   // solve fails or F_y is singular. Allocates.
@@ -767,7 +768,7 @@ class DynamicHamiltonianThetaStep {
     Work& w = *work_;
     V d = dq, e = V::Zero(n);
     if (w.last.is(t0, q0, p0, dq))
-      e = w.last.y.tail(n);
+      d = w.last.y.head(n), e = w.last.y.tail(n);
     else if (!step(t0, q0, p0, d, e).converged)
       return false;
     w.y.head(n) = d;
@@ -820,8 +821,14 @@ class DynamicHamiltonianThetaStep {
         t = t_, q0 = q, p0 = p, y = y_;
         solved = true;
       }
+      // whether it was from (t_, q, p) to dq, which a run passes as q1 - q0: the solve's
+      // dq to the round-off of forming q1 (a compensated sum) and subtracting q0
       bool is(double t_, const V& q, const V& p, const V& dq) const {
-        return solved && t == t_ && q0 == q && p0 == p && y.head(dq.size()) == dq;
+        if (!solved || t != t_ || q0 != q || p0 != p) return false;
+        const double eps = std::numeric_limits<double>::epsilon();
+        for (Eigen::Index i = 0; i < dq.size(); ++i)
+          if (!(std::fabs(dq[i] - y[i]) <= 8 * eps * (std::fabs(q[i]) + std::fabs(y[i])))) return false;
+        return true;
       }
     } last;
   };
